@@ -1,0 +1,140 @@
+// DirectionKf: the linear Kalman filter shared by both halves of the parallel KF (paper 000).
+//
+// Notation (paper 000, J. K. Lee 2016; readings in docs ESTIMATORS.md section 2)
+//   S        sensor (body) frame; every vector in this filter is expressed in S.
+//   u        unit direction of a world reference seen in S:  KF1: u = sZ (world up),
+//            KF2: u = sX' (direction of the local magnetic field, dip included).
+//   e        additive perturbation of the measurement:       KF1: e = sa (external acceleration,
+//            m/s^2), KF2: e = sd (magnetic disturbance, uT).
+//   k        reference magnitude: KF1 k = g (m/s^2), KF2 k = m (field magnitude, uT).
+//   s        measurement: KF1 s_A (accelerometer), KF2 s_M (magnetometer).    (1a), (1b)
+//   w        gyro signal s_G at k-1 (rad/s), h = dt (s).
+//   x = [u; e],   z = s = k u + e + n                                       (4), (8), (3a), (3b)
+//   F = [[I - h[w x], 0], [0, c I]]                                          (7a), (11a)
+//   Q = blkdiag(h^2 sigma_G^2 [u x][u x]^T,  c^2/3 |e_{k-1}|^2 I + sigma_s^2 I)  (7c-e), (11c-e)
+//   H = [k I | I],  M = sigma_s^2 I                                          (7f,h), (11f,h)
+// Options beyond the paper (all off in the paper configuration): exact rotation of u by
+// exp(-h w) instead of (I - h[w x]) (first order, grows |u|), renormalisation of u after each
+// step, c given at a reference rate and converted to the actual step (c^(rate * h)), and an extra
+// gyro-error process noise (bias drift) on u.
+#pragma once
+
+#include "poise/core/attitude.h"
+
+#include <Eigen/Core>
+
+#include <cmath>
+
+namespace poise {
+
+/// Parameters of one DirectionKf. Units depend on the instance (see the notation block).
+struct DirectionKfParams {
+  double sigma_gyro_rps = 0.05 * kRadPerDeg;  ///< sigma_G: gyro noise std, rad/s (Table 1: 0.05 deg/s)
+  double sigma_meas = 0.04;    ///< sigma_A or sigma_M: measurement noise std (m/s^2 or uT)
+  double c = 0.1;              ///< c_a or c_d: first-order Markov coefficient of e, in [0, 1)
+  /// When > 0, `c` is the coefficient per step at this rate (Hz) and the step coefficient is
+  /// c^(c_rate_hz * h) (the paper's 0.1 is given at 100 Hz). 0 = use `c` per step as printed.
+  double c_rate_hz = 0.0;
+  bool exact_rotation = false;  ///< propagate u with exp(-h w) (exact) instead of I - h[w x]
+  bool renormalize = false;     ///< renormalise u to unit length after each step
+  /// Additional gyro error std (rad/s, e.g. residual bias) added to sigma_G in Q11 as
+  /// h^2 (sigma_G^2 + sigma_bias^2) [u x][u x]^T. 0 = paper.
+  double sigma_gyro_extra_rps = 0.0;
+};
+
+/// The 6-state linear KF of the notation block. Pure math: the caller validates inputs.
+class DirectionKf {
+ public:
+  using Matrix6 = Eigen::Matrix<double, 6, 6>;
+
+  DirectionKf() = default;
+  explicit DirectionKf(const DirectionKfParams& p) : p_(p) {}
+
+  void set_params(const DirectionKfParams& p) { p_ = p; }
+  [[nodiscard]] const DirectionKfParams& params() const { return p_; }
+
+  /// Starts at direction `u` (normalised) with e = 0 and covariance diag(var_u I, var_e I).
+  void reset(const Eigen::Vector3d& u, double var_u, double var_e) {
+    u_ = u.normalized();
+    e_.setZero();
+    p_mat_.setZero();
+    p_mat_.topLeftCorner<3, 3>().diagonal().setConstant(var_u);
+    p_mat_.bottomRightCorner<3, 3>().diagonal().setConstant(var_e);
+  }
+
+  /// Time update over h with gyro w (rad/s, already bias-corrected by the caller if wanted).
+  void predict(const Eigen::Vector3d& w_rps, double h_s) {
+    Eigen::Matrix3d a;
+    if (p_.exact_rotation) {
+      a = rot_exp(-h_s * w_rps);  // u_k = R(h w)^T u_{k-1}
+    } else {
+      a = Eigen::Matrix3d::Identity() - h_s * skew(w_rps);  // (5a), (7a)
+    }
+    const double c = step_c(h_s);
+    const Eigen::Matrix3d su = skew(u_);
+    const double sg2 = p_.sigma_gyro_rps * p_.sigma_gyro_rps +
+                       p_.sigma_gyro_extra_rps * p_.sigma_gyro_extra_rps;
+    const Eigen::Matrix3d q11 = (h_s * h_s * sg2) * (su * su.transpose());  // (7d), (11d)
+    const double q22 = c * c / 3.0 * e_.squaredNorm() + p_.sigma_meas * p_.sigma_meas;  // (7e), (11e)
+
+    u_ = a * u_;  // (5a), (9a)
+    e_ *= c;      // (5b), (9b)
+
+    const Eigen::Matrix3d p11 = p_mat_.topLeftCorner<3, 3>();
+    const Eigen::Matrix3d p12 = p_mat_.topRightCorner<3, 3>();
+    p_mat_.topLeftCorner<3, 3>().noalias() = a * p11 * a.transpose();
+    p_mat_.topLeftCorner<3, 3>() += q11;
+    p_mat_.topRightCorner<3, 3>().noalias() = c * (a * p12);
+    p_mat_.bottomLeftCorner<3, 3>() = p_mat_.topRightCorner<3, 3>().transpose();
+    p_mat_.bottomRightCorner<3, 3>() *= c * c;
+    p_mat_.bottomRightCorner<3, 3>().diagonal().array() += q22;
+  }
+
+  /// Measurement update with z = k u + e + n (H = [k I | I], M = sigma^2 I). `extra_var` is added
+  /// to M (0 for the paper). Returns the innovation z - H x (before the update).
+  Eigen::Vector3d correct(const Eigen::Vector3d& z, double k, double extra_var = 0.0) {
+    const Eigen::Vector3d innov = z - k * u_ - e_;
+    const Eigen::Matrix3d p11 = p_mat_.topLeftCorner<3, 3>();
+    const Eigen::Matrix3d p12 = p_mat_.topRightCorner<3, 3>();
+    const Eigen::Matrix3d p22 = p_mat_.bottomRightCorner<3, 3>();
+    // P H^T = [k P11 + P12; k P21 + P22]
+    Eigen::Matrix<double, 6, 3> pht;
+    pht.topRows<3>() = k * p11 + p12;
+    pht.bottomRows<3>() = k * p12.transpose() + p22;
+    Eigen::Matrix3d s = k * pht.topRows<3>() + pht.bottomRows<3>();  // H P H^T
+    s.diagonal().array() += p_.sigma_meas * p_.sigma_meas + extra_var;  // + M  (7h), (11h)
+    const Eigen::Matrix3d s_inv = s.inverse();
+    const Eigen::Matrix<double, 6, 3> kg = pht * s_inv;
+    u_ += kg.topRows<3>() * innov;
+    e_ += kg.bottomRows<3>() * innov;
+    p_mat_.noalias() -= kg * pht.transpose();  // P - K H P
+    p_mat_ = 0.5 * (p_mat_ + p_mat_.transpose()).eval();
+    if (p_.renormalize) {
+      u_.normalize();
+    }
+    return innov;
+  }
+
+  [[nodiscard]] const Eigen::Vector3d& u() const { return u_; }
+  [[nodiscard]] const Eigen::Vector3d& e() const { return e_; }
+  [[nodiscard]] const Matrix6& covariance() const { return p_mat_; }
+  /// Replaces u (e.g. after an external correction); the caller keeps it unit if it wants.
+  void set_u(const Eigen::Vector3d& u) { u_ = u; }
+  void set_e(const Eigen::Vector3d& e) { e_ = e; }
+
+  /// The Markov coefficient for a step of h seconds.
+  [[nodiscard]] double step_c(double h_s) const {
+    if (p_.c_rate_hz > 0.0 && p_.c > 0.0) {
+      return std::pow(p_.c, p_.c_rate_hz * h_s);
+    }
+    return p_.c;
+  }
+
+ private:
+  DirectionKfParams p_;
+  Eigen::Vector3d u_{0.0, 0.0, 1.0};
+  Eigen::Vector3d e_{0.0, 0.0, 0.0};
+  Matrix6 p_mat_ = Matrix6::Identity();
+};
+
+}  // namespace poise
