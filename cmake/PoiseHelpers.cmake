@@ -50,7 +50,7 @@ function(poise_add_test name)
   add_executable(${name} ${A_SOURCES})
   target_link_libraries(${name} PRIVATE ${A_DEPS} poise_testing GTest::gtest GTest::gmock GTest::gtest_main)
   poise_target_warnings(${name})
-  set(props TIMEOUT ${A_TIMEOUT} ENVIRONMENT "POISE_SHARED_DIR=${POISE_SHARED_DIR};POISE_SOURCE_DIR=${PROJECT_SOURCE_DIR};POISE_BINARY_DIR=${PROJECT_BINARY_DIR}")
+  set(props TIMEOUT ${A_TIMEOUT} ENVIRONMENT "POISE_DDS_PROFILE=poise_loopback;POISE_SHARED_DIR=${POISE_SHARED_DIR};POISE_SOURCE_DIR=${PROJECT_SOURCE_DIR};POISE_BINARY_DIR=${PROJECT_BINARY_DIR}")
   if(A_LABELS)
     list(APPEND props LABELS "${A_LABELS}")
   endif()
@@ -84,7 +84,7 @@ function(poise_finalize_cli)
 #include <CLI/CLI.hpp>
 namespace poise::cli {
 ${decls}
-void register_all_modules(CLI::App& app) {
+void register_all_modules([[maybe_unused]] CLI::App& app) {
 ${calls}}
 }  // namespace poise::cli
 ")

@@ -1,0 +1,158 @@
+#include "poise/dds/participant.h"
+
+#include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <set>
+#include <thread>
+
+namespace poise::dds {
+namespace detail {
+extern const char* const kEmbeddedProfiles;
+}
+
+namespace fdds = eprosima::fastdds::dds;
+using eprosima::fastrtps::types::ReturnCode_t;
+
+namespace {
+std::string env_or(const char* name, const std::string& fallback) {
+  const char* value = std::getenv(name);
+  return (value != nullptr && *value != '\0') ? std::string(value) : fallback;
+}
+}  // namespace
+
+void load_profiles(const std::string& qos_file) {
+  static std::mutex mutex;
+  static std::set<std::string> loaded;
+  const std::string file = qos_file.empty() ? env_or("POISE_QOS_FILE", "") : qos_file;
+  std::lock_guard<std::mutex> lock(mutex);
+  if (loaded.count(file) != 0) {
+    return;
+  }
+  auto* factory = fdds::DomainParticipantFactory::get_instance();
+  if (file.empty()) {
+    const char* xml = detail::kEmbeddedProfiles;
+    if (factory->load_XML_profiles_string(xml, std::strlen(xml)) != ReturnCode_t::RETCODE_OK) {
+      throw DdsError("the built-in QoS profiles failed to load (a build defect)");
+    }
+  } else {
+    if (!std::ifstream(file).good()) {
+      throw DdsError("QoS profiles file '" + file + "' cannot be read (check POISE_QOS_FILE)");
+    }
+    if (factory->load_XML_profiles_file(file) != ReturnCode_t::RETCODE_OK) {
+      throw DdsError("QoS profiles file '" + file + "' is not a valid Fast DDS XML profiles file");
+    }
+  }
+  loaded.insert(file);
+}
+
+std::string resolve_participant_profile(const ParticipantOptions& options) {
+  return options.profile.empty() ? env_or("POISE_DDS_PROFILE", "poise_default") : options.profile;
+}
+
+Participant::Participant(const ParticipantOptions& options) : domain_(options.domain) {
+  load_profiles(options.qos_file);
+  auto* factory = fdds::DomainParticipantFactory::get_instance();
+  const std::string profile = resolve_participant_profile(options);
+  fdds::DomainParticipantQos qos;
+  if (factory->get_participant_qos_from_profile(profile, qos) != ReturnCode_t::RETCODE_OK) {
+    throw DdsError("no participant profile '" + profile +
+                   "' in the QoS profiles (known: poise_default, poise_udp, poise_loopback)");
+  }
+  qos.name(options.name);
+  participant_ = factory->create_participant(static_cast<fdds::DomainId_t>(options.domain), qos);
+  if (participant_ == nullptr) {
+    throw DdsError("cannot create a DDS participant on domain " + std::to_string(options.domain) +
+                   " with profile '" + profile + "'");
+  }
+  publisher_ = participant_->create_publisher(fdds::PUBLISHER_QOS_DEFAULT);
+  subscriber_ = participant_->create_subscriber(fdds::SUBSCRIBER_QOS_DEFAULT);
+  if (publisher_ == nullptr || subscriber_ == nullptr) {
+    participant_->delete_contained_entities();
+    factory->delete_participant(participant_);
+    throw DdsError("cannot create the DDS publisher/subscriber");
+  }
+}
+
+Participant::~Participant() {
+  if (participant_ != nullptr) {
+    participant_->delete_contained_entities();
+    fdds::DomainParticipantFactory::get_instance()->delete_participant(participant_);
+  }
+}
+
+fdds::Topic* Participant::topic(const std::string& name, const fdds::TypeSupport& type) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  const auto found = topics_.find(name);
+  if (found != topics_.end()) {
+    if (found->second->get_type_name() != type.get_type_name()) {
+      throw DdsError("topic '" + name + "' is already used with type " +
+                     found->second->get_type_name() + ", not " + type.get_type_name());
+    }
+    return found->second;
+  }
+  fdds::TypeSupport registered = participant_->find_type(type.get_type_name());
+  if (registered.empty()) {
+    fdds::TypeSupport copy = type;
+    if (copy.register_type(participant_) != ReturnCode_t::RETCODE_OK) {
+      throw DdsError("cannot register DDS type " + type.get_type_name());
+    }
+  }
+  fdds::Topic* topic = participant_->create_topic(name, type.get_type_name(), fdds::TOPIC_QOS_DEFAULT);
+  if (topic == nullptr) {
+    throw DdsError("cannot create DDS topic '" + name + "' (type " + type.get_type_name() + ")");
+  }
+  topics_[name] = topic;
+  return topic;
+}
+
+namespace detail {
+
+fdds::DataWriter* create_writer(Participant& participant, fdds::Topic* topic, QosKind kind,
+                                fdds::DataWriterListener* listener) {
+  fdds::DataWriter* writer = participant.publisher()->create_datawriter_with_profile(
+      topic, profile_name(kind), listener, fdds::StatusMask::publication_matched());
+  if (writer == nullptr) {
+    throw DdsError("cannot create a DDS writer on '" + topic->get_name() + "' with profile '" +
+                   profile_name(kind) + "'");
+  }
+  return writer;
+}
+
+fdds::DataReader* create_reader(Participant& participant, fdds::Topic* topic, QosKind kind,
+                                fdds::DataReaderListener* listener) {
+  fdds::DataReader* reader = participant.subscriber()->create_datareader_with_profile(
+      topic, profile_name(kind), listener,
+      fdds::StatusMask::data_available() << fdds::StatusMask::subscription_matched());
+  if (reader == nullptr) {
+    throw DdsError("cannot create a DDS reader on '" + topic->get_name() + "' with profile '" +
+                   profile_name(kind) + "'");
+  }
+  return reader;
+}
+
+void MatchCounter::on_publication_matched(fdds::DataWriter* /*writer*/,
+                                          const fdds::PublicationMatchedStatus& info) {
+  matched_.store(info.current_count);
+}
+
+void MatchCounter::on_subscription_matched(fdds::DataReader* /*reader*/,
+                                           const fdds::SubscriptionMatchedStatus& info) {
+  matched_.store(info.current_count);
+}
+
+bool wait_matched(const MatchCounter& counter, int count, std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (counter.matched() < count) {
+    if (std::chrono::steady_clock::now() >= deadline) {
+      return false;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return true;
+}
+
+}  // namespace detail
+}  // namespace poise::dds
