@@ -1,0 +1,109 @@
+// The serial IMU driver core: bytes + arrival time in, calibrated host-stamped samples out.
+// Pure (no I/O, no clock reads, no threads): the port reader feeds it, tests and the fuzzer too.
+#pragma once
+
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <string>
+#include <string_view>
+
+#include "poise/core/types.h"
+#include "poise/imu/calibration.h"
+#include "poise/imu/framer.h"
+#include "poise/imu/protocol.h"
+#include "poise/imu/timing.h"
+
+namespace poise::imu {
+
+struct DriverParams {
+  Limits limits;
+  RawScale raw;
+  SequenceParams sequence;
+  ClockSyncParams clock;
+  /// Serial throughput in bytes/s (baud / 10 for 8N1) used to move each line's arrival back by its
+  /// transmission time before clock estimation; 0 disables (pseudo-terminals, USB-native boards).
+  double link_bytes_per_s = 0.0;
+  /// Time from sampling to the first byte on the wire (firmware formatting), s; >= 0.
+  double sensor_latency_s = 0.0;
+};
+
+/// Everything about one accepted sample that is not in ImuSample.
+struct SampleInfo {
+  RawSample raw;            ///< parsed, uncalibrated, sensor axes (for calibration tools)
+  int64_t sensor_ns = 0;    ///< unwrapped sensor clock
+  int64_t arrival_ns = 0;   ///< host time the line's last byte was read
+};
+
+/// Counters since construction (never reset by reconnects).
+struct DriverStats {
+  uint64_t bytes = 0;        ///< bytes fed
+  uint64_t lines = 0;        ///< candidate '$' lines framed
+  uint64_t samples = 0;      ///< samples published
+  uint64_t info_lines = 0;   ///< '#' firmware messages
+  RejectCounts rejects{};    ///< per RejectReason
+  uint64_t seq_gap_drops = 0;  ///< lines lost according to sequence gaps
+  uint64_t sensor_restarts = 0;  ///< seq jumps treated as a sensor restart (resync)
+  uint64_t disconnects = 0;  ///< reset() calls (port lost)
+  uint64_t clock_resets = 0;
+  int64_t clock_offset_ns = 0;  ///< stamp - sensor time of the last sample
+  double clock_drift_ppm = 0.0;
+  bool clock_valid = false;
+  std::string last_info;     ///< last '#' message from the firmware
+  [[nodiscard]] uint64_t rejected_total() const;
+};
+
+using SampleSink = std::function<void(const ImuSample&, const SampleInfo&)>;
+
+class ImuDriver : private FrameSink {
+ public:
+  ImuDriver(const DriverParams& params, const Calibration& calibration, SampleSink sink);
+  /// Feeds bytes read at host time `arrival_ns` (CLOCK_MONOTONIC ns, read by the caller).
+  void feed(const char* data, std::size_t size, int64_t arrival_ns);
+  void feed(std::string_view data, int64_t arrival_ns) { feed(data.data(), data.size(), arrival_ns); }
+  /// The byte stream broke (unplug, reconnect): drops a partial line, restarts sequence and clock
+  /// tracking (an Arduino resets when its port is opened).
+  void reset();
+  [[nodiscard]] const DriverStats& stats() const { return stats_; }
+  void set_link_bytes_per_s(double v) { params_.link_bytes_per_s = v; }
+  [[nodiscard]] const DriverParams& params() const { return params_; }
+
+ private:
+  void on_line(std::string_view line) override;
+  void on_info(std::string_view text) override;
+  void on_reject(RejectReason reason, std::size_t bytes) override;
+
+  DriverParams params_;
+  Calibration calibration_;
+  SampleSink sink_;
+  LineParser parser_;
+  LineFramer framer_;
+  SequenceTracker sequence_;
+  TimeUnwrapper time_;
+  ClockSync clock_;
+  int64_t arrival_ns_ = 0;
+  int64_t last_sensor_ns_ = 0;
+  DriverStats stats_;
+};
+
+/// Sample rate and latency (arrival - stamp) over a sliding window of host time (pure).
+class RateLatencyMeter {
+ public:
+  explicit RateLatencyMeter(double window_s = 2.0) : window_ns_(static_cast<int64_t>(window_s * 1e9)) {}
+  void add(int64_t stamp_ns, int64_t arrival_ns);
+  struct Summary {
+    double rate_hz = 0;
+    double latency_p50_ms = 0;
+    double latency_p99_ms = 0;
+    double latency_max_ms = 0;
+    std::size_t count = 0;
+  };
+  /// Summary of the samples that arrived within the window before `now_ns`.
+  [[nodiscard]] Summary summarize(int64_t now_ns);
+
+ private:
+  int64_t window_ns_;
+  std::deque<std::pair<int64_t, int64_t>> items_;  // (arrival, latency)
+};
+
+}  // namespace poise::imu

@@ -1,0 +1,106 @@
+// Sequence tracking and sensor-clock handling (pure: time is an input, no clock reads).
+//
+// Clock model: a sample sampled at sensor time s (unwrapped, ns) reaches the host at
+//   a = s + o + r * (s - s0) + delay,   delay >= 0,
+// with o the clock offset, r the relative drift (host rate / sensor rate - 1) and `delay` the
+// transport latency (USB polling, scheduling). The minimum delay is reached often, so the lower
+// envelope of d = a - s over the recent past is the line o + r (s - s0). ClockSync keeps the minima
+// of d over blocks of sensor time, builds their lower convex hull and takes the hull edge under the
+// block points' mean time: the supporting line that minimises the mean gap to the points. The
+// stamp is s + o + r (s - s0) on the host clock (sampling time, not arrival time).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <deque>
+#include <optional>
+
+namespace poise::imu {
+
+/// Sequence-number checks with uint32 wrap-around.
+struct SequenceParams {
+  uint32_t reorder_window = 64;     ///< a seq this far behind the last one is out-of-order; further
+                                    ///< behind means the sensor restarted (resync)
+  uint32_t max_forward_gap = 100000;  ///< a larger forward jump is a restart, not lost lines
+};
+
+class SequenceTracker {
+ public:
+  enum class Verdict { kFirst, kNext, kDuplicate, kOutOfOrder, kRestart };
+  explicit SequenceTracker(const SequenceParams& p = {}) : params_(p) {}
+  /// Classifies `seq` against the last committed one; `gap` = lines missing before it (kNext).
+  [[nodiscard]] Verdict check(uint32_t seq, uint32_t* gap) const;
+  void commit(uint32_t seq) {
+    last_ = seq;
+    has_last_ = true;
+  }
+  void reset() { has_last_ = false; }
+  [[nodiscard]] bool has_last() const { return has_last_; }
+
+ private:
+  SequenceParams params_;
+  uint32_t last_ = 0;
+  bool has_last_ = false;
+};
+
+/// Unwraps the uint32 microsecond counter into int64 nanoseconds.
+class TimeUnwrapper {
+ public:
+  /// The unwrapped time of `t_us` relative to the last committed one (signed 31-bit step).
+  [[nodiscard]] int64_t peek_ns(uint32_t t_us) const;
+  void commit(uint32_t t_us);
+  void reset() { has_last_ = false; }
+  [[nodiscard]] bool has_last() const { return has_last_; }
+
+ private:
+  uint32_t last_ = 0;
+  int64_t last_us_ = 0;
+  bool has_last_ = false;
+};
+
+struct ClockSyncParams {
+  double block_s = 0.5;        ///< envelope block length (sensor time), s. Longer: smoother, slower
+  int window_blocks = 60;      ///< blocks kept (window = block_s * window_blocks), >= 2
+  double max_drift_ppm = 20000.0;  ///< |drift| clamp (ceramic resonators reach 5000 ppm)
+  double reset_threshold_s = 1.0;  ///< a block whose minimum departs the envelope by more than
+                                   ///< this (or any point below it by more) restarts the estimate
+};
+
+class ClockSync {
+ public:
+  explicit ClockSync(const ClockSyncParams& p = {});
+  /// Feeds one sample (sensor time, host arrival time; both ns) and returns its host-clock stamp.
+  /// Stamps are causal (<= arrival) and strictly increasing.
+  int64_t update(int64_t sensor_ns, int64_t arrival_ns);
+  void reset();
+  /// Offset o(s) = stamp - sensor time at the last sample, ns.
+  [[nodiscard]] int64_t offset_ns() const { return last_offset_ns_; }
+  [[nodiscard]] double drift_ppm() const { return slope_ * 1e6; }
+  [[nodiscard]] bool valid() const { return initialized_; }
+  [[nodiscard]] uint64_t resets() const { return resets_; }
+
+ private:
+  struct Point {
+    double t;  // sensor time since t0_, ns
+    double d;  // arrival - sensor, ns, relative to d0_
+  };
+  void refit();
+  [[nodiscard]] double envelope(double t) const { return intercept_ + slope_ * t; }
+
+  ClockSyncParams params_;
+  bool initialized_ = false;
+  int64_t t0_ = 0;
+  int64_t d0_ = 0;
+  std::deque<Point> blocks_;
+  Point current_{0, 0};
+  double block_start_ = 0;
+  bool has_current_ = false;
+  double slope_ = 0;
+  double intercept_ = 0;
+  int64_t last_stamp_ = 0;
+  bool has_stamp_ = false;  // kept across reset(): stamps stay increasing over reconnects
+  int64_t last_offset_ns_ = 0;
+  uint64_t resets_ = 0;
+};
+
+}  // namespace poise::imu

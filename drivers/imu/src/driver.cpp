@@ -1,0 +1,138 @@
+#include "poise/imu/driver.h"
+
+#include <algorithm>
+#include <cmath>
+#include <utility>
+#include <vector>
+
+namespace poise::imu {
+
+uint64_t DriverStats::rejected_total() const {
+  uint64_t n = 0;
+  for (const uint64_t c : rejects) n += c;
+  return n;
+}
+
+ImuDriver::ImuDriver(const DriverParams& params, const Calibration& calibration, SampleSink sink)
+    : params_(params),
+      calibration_(calibration),
+      sink_(std::move(sink)),
+      parser_(params.limits, params.raw),
+      sequence_(params.sequence),
+      clock_(params.clock) {}
+
+void ImuDriver::feed(const char* data, std::size_t size, int64_t arrival_ns) {
+  stats_.bytes += size;
+  arrival_ns_ = arrival_ns;
+  framer_.feed(data, size, *this);
+}
+
+void ImuDriver::reset() {
+  framer_.reset(*this);
+  sequence_.reset();
+  time_.reset();
+  clock_.reset();
+  ++stats_.disconnects;
+}
+
+void ImuDriver::on_info(std::string_view text) {
+  ++stats_.info_lines;
+  stats_.last_info.assign(text.data(), text.size());
+}
+
+void ImuDriver::on_reject(RejectReason reason, std::size_t /*bytes*/) {
+  ++stats_.rejects[static_cast<std::size_t>(reason)];
+}
+
+void ImuDriver::on_line(std::string_view line) {
+  ++stats_.lines;
+  const ParseResult r = parser_.parse(line);
+  if (!r.ok) {
+    on_reject(r.reason, line.size());
+    return;
+  }
+  const RawSample& raw = r.sample;
+  uint32_t gap = 0;
+  SequenceTracker::Verdict verdict = sequence_.check(raw.seq, &gap);
+  switch (verdict) {
+    case SequenceTracker::Verdict::kDuplicate:
+      on_reject(RejectReason::kDuplicateSeq, line.size());
+      return;
+    case SequenceTracker::Verdict::kOutOfOrder:
+      on_reject(RejectReason::kOutOfOrderSeq, line.size());
+      return;
+    case SequenceTracker::Verdict::kRestart:
+      // The sensor restarted (or its counter jumped): resynchronise on this sample.
+      ++stats_.sensor_restarts;
+      sequence_.reset();
+      time_.reset();
+      clock_.reset();
+      verdict = SequenceTracker::Verdict::kFirst;
+      gap = 0;
+      break;
+    case SequenceTracker::Verdict::kFirst:
+    case SequenceTracker::Verdict::kNext:
+      break;
+  }
+  const int64_t sensor_ns = time_.peek_ns(raw.t_us);
+  if (verdict == SequenceTracker::Verdict::kNext && time_.has_last() &&
+      sensor_ns <= last_sensor_ns_) {
+    on_reject(RejectReason::kTimeNotMonotonic, line.size());
+    return;
+  }
+  sequence_.commit(raw.seq);
+  time_.commit(raw.t_us);
+  last_sensor_ns_ = sensor_ns;
+  stats_.seq_gap_drops += gap;
+
+  // Arrival of the line's first byte at best: remove its transmission time ("\r\n" included).
+  double correction_ns = params_.sensor_latency_s * 1e9;
+  if (params_.link_bytes_per_s > 0) {
+    correction_ns += static_cast<double>(line.size() + 1) / params_.link_bytes_per_s * 1e9;
+  }
+  const int64_t arrival_first_byte = arrival_ns_ - static_cast<int64_t>(std::llround(correction_ns));
+  ImuSample s;
+  calibration_.apply(raw, &s);
+  s.stamp_ns = clock_.update(sensor_ns, arrival_first_byte);
+  stats_.clock_offset_ns = clock_.offset_ns();
+  stats_.clock_drift_ppm = clock_.drift_ppm();
+  stats_.clock_valid = clock_.valid();
+  stats_.clock_resets = clock_.resets();
+  ++stats_.samples;
+  if (sink_) {
+    SampleInfo info;
+    info.raw = raw;
+    info.sensor_ns = sensor_ns;
+    info.arrival_ns = arrival_ns_;
+    sink_(s, info);
+  }
+}
+
+void RateLatencyMeter::add(int64_t stamp_ns, int64_t arrival_ns) {
+  items_.emplace_back(arrival_ns, arrival_ns - stamp_ns);
+}
+
+RateLatencyMeter::Summary RateLatencyMeter::summarize(int64_t now_ns) {
+  while (!items_.empty() && items_.front().first < now_ns - window_ns_) items_.pop_front();
+  Summary s;
+  s.count = items_.size();
+  if (items_.empty()) return s;
+  const int64_t span_ns = items_.back().first - items_.front().first;
+  if (items_.size() >= 2 && span_ns > 0) {
+    s.rate_hz = static_cast<double>(items_.size() - 1) / (static_cast<double>(span_ns) * 1e-9);
+  }
+  std::vector<int64_t> lat;
+  lat.reserve(items_.size());
+  for (const auto& it : items_) lat.push_back(it.second);
+  std::sort(lat.begin(), lat.end());
+  const auto pct = [&lat](double q) {
+    const auto i = static_cast<std::size_t>(q * static_cast<double>(lat.size() - 1) + 0.5);
+    return static_cast<double>(lat[std::min(i, lat.size() - 1)]) * 1e-6;
+  };
+  s.latency_p50_ms = pct(0.5);
+  s.latency_p99_ms = pct(0.99);
+  s.latency_max_ms = static_cast<double>(lat.back()) * 1e-6;
+  return s;
+}
+
+}  // namespace poise::imu
