@@ -1,0 +1,74 @@
+#!/usr/bin/env bash
+# Installs what poise needs on Debian 12 (only what is missing), then configures and builds it in
+# Release. Idempotent and fast when everything is already there.
+#
+#   tools/setup.sh [--build-dir DIR] [--no-build] [--sanitize] [--jobs N]
+#
+# Needs root (or sudo) only when packages are missing.
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+root="$(cd "$here/.." && pwd)"
+build_dir="$root/build"
+do_build=1
+sanitize=OFF
+jobs="$(nproc 2>/dev/null || echo 2)"
+
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --build-dir) build_dir="$2"; shift 2 ;;
+    --no-build) do_build=0; shift ;;
+    --sanitize) sanitize=ON; shift ;;
+    --jobs) jobs="$2"; shift 2 ;;
+    -h|--help) sed -n '2,9p' "$0"; exit 0 ;;
+    *) echo "setup.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
+  esac
+done
+
+# Debian 12 packages. Build: compiler, CMake, Ninja, Fast DDS + generator, Eigen, OpenCV,
+# AprilTag, yaml-cpp, CLI11, HDF5, zstd. Tests: GoogleTest, Cyclone DDS (interop), iproute2
+# (network namespaces), openssl (DDS Security), clang (fuzzing), Node.js + npm (MCAP validators).
+packages=(
+  build-essential cmake ninja-build pkg-config
+  libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools
+  libeigen3-dev libopencv-dev libapriltag-dev libyaml-cpp-dev libcli11-dev libhdf5-dev libzstd-dev
+  libgtest-dev libgmock-dev cyclonedds-dev cyclonedds-tools
+  iproute2 iputils-ping openssl clang
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+# Node.js/npm may come from Debian or be preinstalled elsewhere: check the commands.
+if ! command -v node >/dev/null 2>&1; then missing+=(nodejs); fi
+if ! command -v npm >/dev/null 2>&1; then missing+=(npm); fi
+
+if [ ${#missing[@]} -gt 0 ]; then
+  echo "setup: installing ${#missing[@]} missing package(s): ${missing[*]}" >&2
+  sudo_cmd=()
+  if [ "$(id -u)" -ne 0 ]; then
+    command -v sudo >/dev/null 2>&1 || { echo "setup: need root or sudo to install packages" >&2; exit 1; }
+    sudo_cmd=(sudo)
+  fi
+  export DEBIAN_FRONTEND=noninteractive
+  "${sudo_cmd[@]}" apt-get update -qq
+  "${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  echo "setup: packages installed" >&2
+else
+  echo "setup: all packages present" >&2
+fi
+
+[ "$do_build" -eq 1 ] || exit 0
+
+generator=()
+if [ ! -f "$build_dir/CMakeCache.txt" ]; then
+  generator=(-G Ninja)
+fi
+cmake -S "$root" -B "$build_dir" "${generator[@]}" -DCMAKE_BUILD_TYPE=Release \
+  -DPOISE_SANITIZE="$sanitize" >/dev/null
+echo "setup: building in $build_dir ($jobs jobs)" >&2
+cmake --build "$build_dir" -j "$jobs"
+echo "setup: done; the poise binary is $build_dir/bin/poise" >&2
