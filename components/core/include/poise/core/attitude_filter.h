@@ -1,0 +1,32 @@
+// AttitudeFilter: the small interface every attitude estimator offers to evaluation and
+// benchmarking (`poise eval broad`, `poise bench filters`). Filters implement it in an adapter
+// beside their own class; the eval library keeps a table of named factories that other
+// libraries extend (see poise/eval/filter_registry.h).
+#pragma once
+
+#include "poise/core/types.h"
+
+#include <Eigen/Geometry>
+
+#include <cstdint>
+#include <map>
+#include <string>
+
+namespace poise {
+
+class AttitudeFilter {
+ public:
+  virtual ~AttitudeFilter() = default;
+  /// Feeds one IMU sample (stamps must increase). Returns false when the sample was rejected
+  /// (bad data); the state is then untouched and the rejection counted.
+  virtual bool update(const ImuSample& sample) = 0;
+  /// Current attitude, q_world_body, world ENU (identity until initialised).
+  [[nodiscard]] virtual Eigen::Quaterniond q_world_body() const = 0;
+  [[nodiscard]] virtual bool initialized() const = 0;
+  /// Back to the state before the first sample (parameters kept).
+  virtual void reset() = 0;
+  /// Rejection counters by reason (for reports); empty when the filter keeps none.
+  [[nodiscard]] virtual std::map<std::string, uint64_t> rejections() const { return {}; }
+};
+
+}  // namespace poise

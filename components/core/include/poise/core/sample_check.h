@@ -1,0 +1,134 @@
+// Input validation shared by the estimator cores: bad data is rejected and counted by reason,
+// never propagated into a state (STYLE.md habit 10).
+#pragma once
+
+#include "poise/core/types.h"
+
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <map>
+#include <string>
+
+namespace poise {
+
+enum class RejectReason : uint8_t {
+  kNonFiniteGyro = 0,
+  kNonFiniteAccel,
+  kNonFiniteMag,
+  kZeroAccel,        ///< |accel| below the minimum norm
+  kZeroMag,          ///< |mag| below the minimum norm
+  kNonMonotonicStamp,
+  kTimeGap,          ///< dt above the maximum (the filter re-anchors time, state kept)
+  kMissingGyro,
+  kMissingAccel,
+  kCount
+};
+
+inline const char* to_string(RejectReason r) {
+  switch (r) {
+    case RejectReason::kNonFiniteGyro: return "non_finite_gyro";
+    case RejectReason::kNonFiniteAccel: return "non_finite_accel";
+    case RejectReason::kNonFiniteMag: return "non_finite_mag";
+    case RejectReason::kZeroAccel: return "zero_accel";
+    case RejectReason::kZeroMag: return "zero_mag";
+    case RejectReason::kNonMonotonicStamp: return "non_monotonic_stamp";
+    case RejectReason::kTimeGap: return "time_gap";
+    case RejectReason::kMissingGyro: return "missing_gyro";
+    case RejectReason::kMissingAccel: return "missing_accel";
+    case RejectReason::kCount: break;
+  }
+  return "unknown";
+}
+
+/// Counters per reason.
+struct RejectCounters {
+  std::array<uint64_t, static_cast<size_t>(RejectReason::kCount)> by_reason{};
+  void add(RejectReason r) { ++by_reason[static_cast<size_t>(r)]; }
+  [[nodiscard]] uint64_t count(RejectReason r) const { return by_reason[static_cast<size_t>(r)]; }
+  [[nodiscard]] uint64_t total() const {
+    uint64_t t = 0;
+    for (auto c : by_reason) {
+      t += c;
+    }
+    return t;
+  }
+  [[nodiscard]] std::map<std::string, uint64_t> to_map() const {
+    std::map<std::string, uint64_t> m;
+    for (size_t i = 0; i < by_reason.size(); ++i) {
+      if (by_reason[i] != 0) {
+        m[to_string(static_cast<RejectReason>(i))] = by_reason[i];
+      }
+    }
+    return m;
+  }
+};
+
+/// Limits for check_imu_sample().
+struct SampleLimits {
+  double min_accel_norm_mps2 = 0.5;  ///< below: "zero" accelerometer (free fall is not usable)
+  double min_mag_norm_ut = 1.0;      ///< below: "zero" magnetometer
+  double max_dt_s = 0.5;             ///< larger gaps re-anchor time instead of integrating
+};
+
+/// Result of validating one sample against the previous accepted stamp.
+struct SampleCheck {
+  bool accept = false;      ///< gyro + accel usable and dt valid
+  bool mag_ok = false;      ///< magnetometer usable (only meaningful when accept)
+  bool reanchor = false;    ///< time gap: restart time from this stamp, do not integrate
+  double dt_s = 0.0;        ///< > 0 when accept and not the first sample
+};
+
+/// Validates `s`; counts every problem found in `counters`. `last_stamp_ns` < 0 means "no
+/// previous sample". Non-monotonic stamps are rejected; a gap above max_dt_s is rejected
+/// (counted) with reanchor = true so the caller can restart time at this stamp.
+inline SampleCheck check_imu_sample(const ImuSample& s, int64_t last_stamp_ns,
+                                    const SampleLimits& lim, RejectCounters& counters) {
+  SampleCheck out;
+  if (!s.has_gyro) {
+    counters.add(RejectReason::kMissingGyro);
+    return out;
+  }
+  if (!s.has_accel) {
+    counters.add(RejectReason::kMissingAccel);
+    return out;
+  }
+  if (!s.gyro_rps.allFinite()) {
+    counters.add(RejectReason::kNonFiniteGyro);
+    return out;
+  }
+  if (!s.accel_mps2.allFinite()) {
+    counters.add(RejectReason::kNonFiniteAccel);
+    return out;
+  }
+  if (!(s.accel_mps2.norm() >= lim.min_accel_norm_mps2)) {
+    counters.add(RejectReason::kZeroAccel);
+    return out;
+  }
+  if (last_stamp_ns >= 0) {
+    if (s.stamp_ns <= last_stamp_ns) {
+      counters.add(RejectReason::kNonMonotonicStamp);
+      return out;
+    }
+    out.dt_s = static_cast<double>(s.stamp_ns - last_stamp_ns) * 1e-9;
+    if (out.dt_s > lim.max_dt_s) {
+      counters.add(RejectReason::kTimeGap);
+      out.reanchor = true;
+      out.dt_s = 0.0;
+      return out;
+    }
+  }
+  out.accept = true;
+  if (s.has_mag) {
+    if (!s.mag_ut.allFinite()) {
+      counters.add(RejectReason::kNonFiniteMag);
+    } else if (!(s.mag_ut.norm() >= lim.min_mag_norm_ut)) {
+      counters.add(RejectReason::kZeroMag);
+    } else {
+      out.mag_ok = true;
+    }
+  }
+  return out;
+}
+
+}  // namespace poise

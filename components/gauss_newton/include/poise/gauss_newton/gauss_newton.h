@@ -1,0 +1,94 @@
+// Gauss-Newton orientation from one accelerometer + magnetometer sample: the "G-N" baseline of
+// paper 000 (its reference [5]) and the IMU quaternion input of the selective EKF (paper 002 eq. 2).
+//
+// Notation (ESTIMATORS.md section 3)
+//   q        q_world_body (ENU world), the unknown.
+//   a_n, m_n measured accelerometer and magnetometer, normalised (body frame).
+//   u, r     world references: u = e_z (up), r = [0, cos(dip), -sin(dip)] (magnetic north, ENU).
+//   e(q)     = [a_n - R(q)^T u ; w_m (m_n - R(q)^T r)]       (6-vector residual)
+//   q_{i+1}  = q_i - (J^T J)^-1 J^T e                         (paper 002 eq. 2)
+// We parametrise the step multiplicatively, q_{i+1} = q_i exp(delta), so J = d e / d delta =
+// -[ [R^T u x] ; w_m [R^T r x] ] (6x3) instead of the 6x4 quaternion Jacobian: the same
+// Gauss-Newton iteration without the singular norm direction of the 4-parameter form.
+// Iterations start from the previous estimate and stop after max_iterations or when |delta| <
+// tolerance_rad. No disturbance compensation (that is why it is the baseline).
+// The dip is configured or learnt as the mean measured angle over the first startup_samples.
+#pragma once
+
+#include "poise/core/attitude.h"
+#include "poise/core/attitude_filter.h"
+#include "poise/core/sample_check.h"
+#include "poise/core/types.h"
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <string>
+
+namespace poise {
+
+struct GaussNewtonParams {
+  int max_iterations = 5;          ///< per sample (>= 1)
+  double tolerance_rad = 1e-7;     ///< stop when the step is smaller, rad
+  double mag_weight = 1.0;         ///< w_m: weight of the magnetometer rows (1 = paper)
+  double dip_deg = std::nan("");   ///< NaN: learn at start-up; else the configured dip, deg
+  int startup_samples = 50;        ///< samples averaged to learn the dip
+  SampleLimits limits;             ///< input validation
+};
+
+/// Loads GaussNewtonParams from a YAML file (keys as the fields; unknown keys are an error).
+/// Throws std::runtime_error with a message naming the file and the key.
+GaussNewtonParams load_gauss_newton_params(const std::string& path);
+
+struct GaussNewtonResult {
+  Eigen::Quaterniond q_world_body = Eigen::Quaterniond::Identity();
+  int iterations = 0;       ///< iterations run for the last sample
+  double residual = 0.0;    ///< |e| after the last iteration (unit-vector units)
+};
+
+class GaussNewton {
+ public:
+  explicit GaussNewton(const GaussNewtonParams& params = {});
+
+  /// Solves from a normalised accel/mag pair, starting at `q_start`. Pure function of the inputs.
+  [[nodiscard]] GaussNewtonResult solve(const Eigen::Vector3d& accel, const Eigen::Vector3d& mag,
+                                        const Eigen::Quaterniond& q_start, double dip_rad) const;
+
+  /// Processes one sample (validated, rejected and counted when bad). Needs a magnetometer.
+  bool update(const ImuSample& s);
+
+  [[nodiscard]] const GaussNewtonResult& result() const { return result_; }
+  [[nodiscard]] bool initialized() const { return initialized_; }
+  [[nodiscard]] double dip_rad() const { return dip_rad_; }
+  [[nodiscard]] const RejectCounters& rejections() const { return rejections_; }
+  void reset();
+
+ private:
+  GaussNewtonParams p_;
+  GaussNewtonResult result_;
+  bool initialized_ = false;
+  double dip_rad_ = 0.0;
+  double dip_sum_rad_ = 0.0;
+  int dip_n_ = 0;
+  int64_t last_stamp_ns_ = -1;
+  RejectCounters rejections_;
+};
+
+/// AttitudeFilter adapter.
+class GaussNewtonFilter : public AttitudeFilter {
+ public:
+  explicit GaussNewtonFilter(const GaussNewtonParams& p = {}) : gn_(p) {}
+  bool update(const ImuSample& s) override { return gn_.update(s); }
+  [[nodiscard]] Eigen::Quaterniond q_world_body() const override { return gn_.result().q_world_body; }
+  [[nodiscard]] bool initialized() const override { return gn_.initialized(); }
+  void reset() override { gn_.reset(); }
+  [[nodiscard]] std::map<std::string, uint64_t> rejections() const override {
+    return gn_.rejections().to_map();
+  }
+  [[nodiscard]] const GaussNewton& core() const { return gn_; }
+
+ private:
+  GaussNewton gn_;
+};
+
+}  // namespace poise

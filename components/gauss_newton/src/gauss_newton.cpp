@@ -1,0 +1,142 @@
+#include "poise/gauss_newton/gauss_newton.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <stdexcept>
+
+namespace poise {
+
+GaussNewton::GaussNewton(const GaussNewtonParams& params) : p_(params) {
+  if (p_.max_iterations < 1 || !(p_.tolerance_rad >= 0.0) || !(p_.mag_weight > 0.0) ||
+      p_.startup_samples < 1) {
+    throw std::invalid_argument(
+        "GaussNewtonParams: need max_iterations >= 1, tolerance_rad >= 0, mag_weight > 0, "
+        "startup_samples >= 1");
+  }
+  reset();
+}
+
+void GaussNewton::reset() {
+  result_ = GaussNewtonResult{};
+  initialized_ = false;
+  dip_sum_rad_ = 0.0;
+  dip_n_ = 0;
+  dip_rad_ = std::isfinite(p_.dip_deg) ? p_.dip_deg * kRadPerDeg : 0.0;
+  last_stamp_ns_ = -1;
+  rejections_ = RejectCounters{};
+}
+
+GaussNewtonResult GaussNewton::solve(const Eigen::Vector3d& accel, const Eigen::Vector3d& mag,
+                                     const Eigen::Quaterniond& q_start, double dip_rad) const {
+  const Eigen::Vector3d a = accel.normalized();
+  const Eigen::Vector3d m = mag.normalized();
+  const Eigen::Vector3d u = Eigen::Vector3d::UnitZ();
+  const Eigen::Vector3d r(0.0, std::cos(dip_rad), -std::sin(dip_rad));
+  const double w = p_.mag_weight;
+  GaussNewtonResult out;
+  Eigen::Quaterniond q = q_start.normalized();
+  Eigen::Matrix<double, 6, 1> e;
+  Eigen::Matrix<double, 6, 3> j;
+  for (int it = 0; it < p_.max_iterations; ++it) {
+    const Eigen::Matrix3d rt = q.toRotationMatrix().transpose();
+    const Eigen::Vector3d pu = rt * u;
+    const Eigen::Vector3d pr = rt * r;
+    e.head<3>() = a - pu;
+    e.tail<3>() = w * (m - pr);
+    // R(q exp d)^T v = exp(-d) R^T v ~ R^T v + [R^T v x] d  =>  J = -[[pu x]; w [pr x]]
+    j.topRows<3>() = -skew(pu);
+    j.bottomRows<3>() = -w * skew(pr);
+    const Eigen::Matrix3d jtj = j.transpose() * j;
+    const Eigen::Vector3d delta = -jtj.ldlt().solve(j.transpose() * e);  // (2)
+    if (!delta.allFinite()) {
+      break;
+    }
+    q = (q * quat_exp(delta)).normalized();
+    out.iterations = it + 1;
+    if (delta.norm() < p_.tolerance_rad) {
+      break;
+    }
+  }
+  const Eigen::Matrix3d rt = q.toRotationMatrix().transpose();
+  e.head<3>() = a - rt * u;
+  e.tail<3>() = w * (m - rt * r);
+  out.residual = e.norm();
+  out.q_world_body = quat_canonical(q);
+  return out;
+}
+
+bool GaussNewton::update(const ImuSample& s) {
+  const SampleCheck c = check_imu_sample(s, last_stamp_ns_, p_.limits, rejections_);
+  if (c.reanchor) {
+    last_stamp_ns_ = s.stamp_ns;
+  }
+  if (!c.accept || !c.mag_ok) {
+    return false;
+  }
+  last_stamp_ns_ = s.stamp_ns;
+  if (!std::isfinite(p_.dip_deg) && dip_n_ < p_.startup_samples) {
+    // measured dip = angle(a, m) - 90 deg
+    dip_sum_rad_ += angle_between_vectors(s.accel_mps2, s.mag_ut) - 0.5 * kPi;
+    ++dip_n_;
+    dip_rad_ = dip_sum_rad_ / dip_n_;
+  }
+  Eigen::Quaterniond start = result_.q_world_body;
+  if (!initialized_) {
+    // Closed-form start (TRIAD): body axes of world up and horizontal north.
+    Eigen::Matrix3d r_body_world;
+    if (body_world_axes_from_up_forward(s.accel_mps2, s.mag_ut, r_body_world)) {
+      // columns: north (x_NWU), west (y_NWU), up in body  ->  R_world_body for NWU, then ENU.
+      start = quat_enu_nwu() * Eigen::Quaterniond(Eigen::Matrix3d(r_body_world.transpose()));
+    }
+  }
+  result_ = solve(s.accel_mps2, s.mag_ut, start, dip_rad_);
+  initialized_ = true;
+  return true;
+}
+
+GaussNewtonParams load_gauss_newton_params(const std::string& path) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const std::exception& e) {
+    throw std::runtime_error("cannot read Gauss-Newton config '" + path + "': " + e.what());
+  }
+  GaussNewtonParams p;
+  if (root["gauss_newton"]) {
+    root = root["gauss_newton"];
+  }
+  for (const auto& kv : root) {
+    const std::string key = kv.first.as<std::string>();
+    try {
+      if (key == "max_iterations") {
+        p.max_iterations = kv.second.as<int>();
+      } else if (key == "tolerance_rad") {
+        p.tolerance_rad = kv.second.as<double>();
+      } else if (key == "mag_weight") {
+        p.mag_weight = kv.second.as<double>();
+      } else if (key == "dip_deg") {
+        p.dip_deg = kv.second.IsNull() ? std::nan("") : kv.second.as<double>();
+      } else if (key == "startup_samples") {
+        p.startup_samples = kv.second.as<int>();
+      } else {
+        throw std::runtime_error("unknown key");
+      }
+    } catch (const std::exception& e) {
+      throw std::runtime_error(path + ": key '" + key + "': " + e.what() +
+                               " (keys: max_iterations, tolerance_rad, mag_weight, dip_deg, "
+                               "startup_samples)");
+    }
+  }
+  if (p.max_iterations < 1 || p.max_iterations > 100) {
+    throw std::runtime_error(path + ": max_iterations must be in [1, 100]");
+  }
+  if (!(p.mag_weight > 0.0)) {
+    throw std::runtime_error(path + ": mag_weight must be > 0");
+  }
+  if (std::isfinite(p.dip_deg) && std::abs(p.dip_deg) > 90.0) {
+    throw std::runtime_error(path + ": dip_deg must be in [-90, 90]");
+  }
+  return p;
+}
+
+}  // namespace poise
