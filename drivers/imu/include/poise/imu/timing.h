@@ -70,7 +70,8 @@ class ClockSync {
  public:
   explicit ClockSync(const ClockSyncParams& p = {});
   /// Feeds one sample (sensor time, host arrival time; both ns) and returns its host-clock stamp.
-  /// Stamps are causal (<= arrival) and strictly increasing.
+  /// Stamps are strictly increasing and causal (<= arrival), except that samples clamped to the
+  /// same arrival (several lines in one read before the offset is known) are spread by 1 ns.
   int64_t update(int64_t sensor_ns, int64_t arrival_ns);
   void reset();
   /// Offset o(s) = stamp - sensor time at the last sample, ns.
