@@ -1,0 +1,241 @@
+// Helpers for the recorder tests: poise messages with known values, their CDR bytes, the expected
+// values as JSON for the independent node validator (validator/validate.mjs), and running it.
+#pragma once
+
+#include "poise/testing/testing.h"
+
+#include <poise/msg/estimatesPubSubTypes.h>
+#include <poise/msg/imuPubSubTypes.h>
+
+#include <fastdds/rtps/common/SerializedPayload.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <fcntl.h>
+#include <fstream>
+#include <string>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <vector>
+
+namespace poise::record::testing {
+
+inline msg::Vector3 vec3(double x, double y, double z) {
+  msg::Vector3 v;
+  v.x(x);
+  v.y(y);
+  v.z(z);
+  return v;
+}
+
+/// An IMU sample whose every field derives from I (distinct, exactly representable values).
+inline msg::ImuSample make_imu(uint32_t i, int64_t stamp_ns) {
+  msg::ImuSample m;
+  m.header().stamp_ns(stamp_ns);
+  m.header().seq(i);
+  m.header().frame_id("body");
+  m.sensor_id("imu0");
+  m.accel_mps2(vec3(0.125 * i, -0.25 * i, 9.8125));
+  m.gyro_rps(vec3(0.001953125 * i, -0.5, 0.75));
+  m.mag_ut(vec3(20.5, -3.25 * i, 40.0));
+  m.pressure_pa(101325.0 + i);
+  m.temperature_c(21.5);
+  m.valid().accel(true);
+  m.valid().gyro(true);
+  m.valid().mag(i % 2 == 0);
+  m.valid().pressure(true);
+  m.valid().temperature(false);
+  return m;
+}
+
+inline msg::AttitudeEstimate make_attitude(uint32_t i, int64_t stamp_ns) {
+  msg::AttitudeEstimate m;
+  m.header().stamp_ns(stamp_ns);
+  m.header().seq(i);
+  m.header().frame_id("world");
+  m.sensor_id("imu0");
+  m.filter_id("parallel_kf");
+  m.q_world_body().w(1.0);
+  m.q_world_body().x(0.0625 * i);
+  m.q_world_body().y(-0.5);
+  m.q_world_body().z(0.25);
+  m.yaw_rad(0.5 * i);
+  for (size_t k = 0; k < 9; ++k) {
+    m.attitude_covariance()[k] = 0.001 * static_cast<double>(k + i);
+  }
+  m.mag_trusted(i % 3 == 0);
+  m.sources_fused(7);
+  return m;
+}
+
+inline std::string num(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof(buf), "%.17g", v);
+  return buf;
+}
+inline std::string vec_json(const msg::Vector3& v) {
+  return "{\"x\":" + num(v.x()) + ",\"y\":" + num(v.y()) + ",\"z\":" + num(v.z()) + "}";
+}
+inline std::string header_json(const msg::Header& h) {
+  return "{\"stamp_ns\":\"" + std::to_string(h.stamp_ns()) + "\",\"seq\":" +
+         std::to_string(h.seq()) + ",\"frame_id\":\"" + h.frame_id().to_string() + "\"}";
+}
+inline const char* b(bool v) { return v ? "true" : "false"; }
+
+inline std::string to_json(const msg::ImuSample& m) {
+  return "{\"header\":" + header_json(m.header()) + ",\"sensor_id\":\"" + m.sensor_id().to_string() +
+         "\",\"accel_mps2\":" + vec_json(m.accel_mps2()) + ",\"gyro_rps\":" +
+         vec_json(m.gyro_rps()) + ",\"mag_ut\":" + vec_json(m.mag_ut()) + ",\"pressure_pa\":" +
+         num(m.pressure_pa()) + ",\"temperature_c\":" + num(m.temperature_c()) +
+         ",\"valid\":{\"accel\":" + b(m.valid().accel()) + ",\"gyro\":" + b(m.valid().gyro()) +
+         ",\"mag\":" + b(m.valid().mag()) + ",\"pressure\":" + b(m.valid().pressure()) +
+         ",\"temperature\":" + b(m.valid().temperature()) + "}}";
+}
+
+inline std::string to_json(const msg::AttitudeEstimate& m) {
+  std::string cov = "[";
+  for (size_t k = 0; k < 9; ++k) {
+    cov += (k > 0 ? "," : "") + num(m.attitude_covariance()[k]);
+  }
+  cov += "]";
+  const auto& q = m.q_world_body();
+  return "{\"header\":" + header_json(m.header()) + ",\"sensor_id\":\"" + m.sensor_id().to_string() +
+         "\",\"filter_id\":\"" + m.filter_id().to_string() + "\",\"q_world_body\":{\"w\":" + num(q.w()) +
+         ",\"x\":" + num(q.x()) + ",\"y\":" + num(q.y()) + ",\"z\":" + num(q.z()) +
+         "},\"yaw_rad\":" + num(m.yaw_rad()) + ",\"attitude_covariance\":" + cov +
+         ",\"mag_trusted\":" + b(m.mag_trusted()) + ",\"sources_fused\":" +
+         std::to_string(m.sources_fused()) + "}";
+}
+
+/// The full serialized payload (encapsulation header included), as DDS puts it on the wire.
+template <class PubSubType, class Message>
+std::vector<uint8_t> serialize(const Message& message) {
+  PubSubType type;
+  eprosima::fastrtps::rtps::SerializedPayload_t payload(
+      type.getSerializedSizeProvider(const_cast<Message*>(&message))());
+  if (!type.serialize(const_cast<Message*>(&message), &payload)) {
+    return {};
+  }
+  return std::vector<uint8_t>(payload.data, payload.data + payload.length);
+}
+
+/// One expected message for validate.mjs.
+struct ExpectedValue {
+  std::string topic;
+  uint32_t sequence = 0;
+  std::string value_json;
+  std::string log_time;      ///< "" = not checked
+  std::string publish_time;  ///< "" = not checked
+};
+
+/// Writes FILE.expected.json for validate.mjs. CHANNELS_JSON is the "channels" object text.
+inline void write_expected(const std::string& mcap_path, int64_t messages, int min_chunks,
+                           const std::string& channels_json,
+                           const std::vector<ExpectedValue>& values) {
+  const std::string path = mcap_path.substr(0, mcap_path.size() - 5) + ".expected.json";
+  std::ofstream out(path);
+  out << "{\n";
+  if (messages >= 0) {
+    out << "\"messages\": " << messages << ",\n";
+  }
+  out << "\"min_chunks\": " << min_chunks << ",\n\"channels\": " << channels_json
+      << ",\n\"values\": [\n";
+  for (size_t i = 0; i < values.size(); ++i) {
+    const ExpectedValue& v = values[i];
+    out << "{\"topic\":\"" << v.topic << "\",\"sequence\":" << v.sequence;
+    if (!v.log_time.empty()) {
+      out << ",\"log_time\":\"" << v.log_time << "\"";
+    }
+    if (!v.publish_time.empty()) {
+      out << ",\"publish_time\":\"" << v.publish_time << "\"";
+    }
+    out << ",\"value\":" << v.value_json << "}" << (i + 1 < values.size() ? ",\n" : "\n");
+  }
+  out << "]}\n";
+}
+
+/// A fresh directory for validator cases under the build tree.
+inline std::string cases_dir(const std::string& name) {
+  const std::string dir = std::string(POISE_RECORD_VALIDATOR_DIR) + "/cases-" + name;
+  const std::string cmd = "rm -rf '" + dir + "' && mkdir -p '" + dir + "'";
+  if (std::system(cmd.c_str()) != 0) {
+    return "";
+  }
+  return dir;
+}
+
+inline std::string find_on_path(const std::string& exe) {
+  const char* path = std::getenv("PATH");
+  std::string p = path != nullptr ? path : "/usr/bin:/bin";
+  size_t start = 0;
+  while (start <= p.size()) {
+    const size_t end = p.find(':', start);
+    const std::string dir = p.substr(start, end == std::string::npos ? std::string::npos : end - start);
+    const std::string candidate = (dir.empty() ? "." : dir) + "/" + exe;
+    if (::access(candidate.c_str(), X_OK) == 0) {
+      return candidate;
+    }
+    if (end == std::string::npos) {
+      break;
+    }
+    start = end + 1;
+  }
+  return "";
+}
+
+struct NodeValidation {
+  std::string skip_reason;  ///< non-empty: could not run (no node/npm, install failed)
+  int exit_code = -1;
+  std::string output;
+};
+
+/// Installs the validator's npm packages into the build tree once (under a lock), then runs
+/// validate.mjs on DIR.
+inline NodeValidation run_node_validator(const std::string& dir) {
+  using namespace std::chrono_literals;
+  NodeValidation result;
+  const std::string node = find_on_path("node");
+  const std::string npm = find_on_path("npm");
+  if (node.empty() || npm.empty()) {
+    result.skip_reason = "node/npm not found on PATH: the independent MCAP validator cannot run "
+                         "(install nodejs and npm)";
+    return result;
+  }
+  const std::string vdir = POISE_RECORD_VALIDATOR_DIR;
+  const int lock = ::open((vdir + "/.install.lock").c_str(), O_CREAT | O_RDWR, 0644);
+  if (lock >= 0) {
+    ::flock(lock, LOCK_EX);
+  }
+  bool installed = true;
+  for (const char* pkg : {"@mcap/core", "@mcap/nodejs", "@foxglove/omgidl-parser",
+                          "@foxglove/omgidl-serialization", "@foxglove/crc", "fzstd"}) {
+    struct stat st {};
+    if (::stat((vdir + "/node_modules/" + pkg + "/package.json").c_str(), &st) != 0) {
+      installed = false;
+    }
+  }
+  if (!installed) {
+    const auto install = poise::testing::run(
+        {npm, "install", "--prefix", vdir, "--no-audit", "--no-fund", "--loglevel=error"}, 180s);
+    if (install.exit_code != 0) {
+      result.skip_reason = "npm install of the validator packages failed (exit " +
+                           std::to_string(install.exit_code) + ", offline?): " +
+                           install.output.substr(0, 600);
+    }
+  }
+  if (lock >= 0) {
+    ::flock(lock, LOCK_UN);
+    ::close(lock);
+  }
+  if (!result.skip_reason.empty()) {
+    return result;
+  }
+  const auto run = poise::testing::run({node, vdir + "/validate.mjs", dir}, 120s);
+  result.exit_code = run.exit_code;
+  result.output = run.output;
+  return result;
+}
+
+}  // namespace poise::record::testing
