@@ -7,6 +7,9 @@
 #include <exception>
 #include <iostream>
 
+namespace poise::runtime {
+void register_all_components();
+}
 namespace poise::cli {
 void register_all_modules(CLI::App& app);
 }
@@ -16,6 +19,7 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   app.set_version_flag("--version", "poise 0.1.0");
   try {
+    poise::runtime::register_all_components();
     poise::cli::register_all_modules(app);
   } catch (const std::exception& e) {
     std::cerr << "poise: internal error while registering commands: " << e.what() << "\n";

@@ -1,0 +1,95 @@
+// Components: DDS nodes around estimators and drivers, composable in one host process
+// (`poise run HOST.yaml`) or run alone (`poise <component> ...`, one process per component).
+//
+// A component type registers a factory in the ComponentRegistry (from a module listed in CMake
+// with poise_add_component_module). The host owns one DDS participant shared by its components.
+#pragma once
+
+#include "poise/dds/participant.h"
+#include "poise/dds/topics.h"
+
+#include <yaml-cpp/yaml.h>
+
+#include <functional>
+#include <map>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace poise::runtime {
+
+/// A configuration error (host file, component parameters); the message says what to fix.
+class ConfigError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// One component instance as described by a host file or the command line.
+struct ComponentSpec {
+  std::string type;     ///< registry key, e.g. "parallel_kf"
+  std::string name;     ///< instance name: the sensor_id of what it publishes (default: type)
+  YAML::Node params;    ///< parameters: the `config` file's content merged with inline `params`
+  std::string origin;   ///< where the spec came from, for error messages
+};
+
+/// What a component gets from its host.
+struct HostContext {
+  dds::Participant& participant;
+  dds::TopicNames topics;
+};
+
+/// A running component. Construction creates its DDS entities (and throws on failure);
+/// start() begins work; stop() ends it (idempotent); the destructor releases everything.
+class Component {
+ public:
+  virtual ~Component() = default;
+  virtual void start() {}
+  virtual void stop() {}
+  /// One line of live status (rates, counts) for the host's periodic print; empty for none.
+  [[nodiscard]] virtual std::string status() const { return {}; }
+};
+
+using ComponentFactory =
+    std::function<std::unique_ptr<Component>(const ComponentSpec& spec, HostContext& host)>;
+
+struct ComponentType {
+  std::string name;         ///< registry key and host-file `type`
+  std::string description;  ///< one line for --help
+  ComponentFactory create;
+  /// Generate `poise <name with dashes>` to run it alone. False for drivers that have their own
+  /// dedicated command (e.g. `poise imu`).
+  bool standalone_command = true;
+};
+
+class ComponentRegistry {
+ public:
+  static ComponentRegistry& instance();
+  void add(ComponentType type);
+  [[nodiscard]] const ComponentType* find(const std::string& name) const;
+  [[nodiscard]] std::vector<std::string> names() const;
+  [[nodiscard]] const std::map<std::string, ComponentType>& types() const { return types_; }
+
+ private:
+  std::map<std::string, ComponentType> types_;
+};
+
+/// Reads a typed parameter with a default; throws ConfigError naming the key and the component
+/// when the value has the wrong type.
+template <typename T>
+T param(const ComponentSpec& spec, const std::string& key, const T& fallback) {
+  if (!spec.params || !spec.params[key]) {
+    return fallback;
+  }
+  try {
+    return spec.params[key].as<T>();
+  } catch (const YAML::Exception&) {
+    throw ConfigError(spec.origin + ": parameter '" + key + "' of component '" + spec.name +
+                      "' has the wrong type");
+  }
+}
+
+/// Rejects parameters a component does not know (catches typos instead of ignoring them).
+void check_known_params(const ComponentSpec& spec, const std::vector<std::string>& known);
+
+}  // namespace poise::runtime

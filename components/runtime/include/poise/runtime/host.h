@@ -1,0 +1,66 @@
+// Host files (`poise run HOST.yaml`): which components run in one process, their parameters,
+// topic names, domain and QoS.
+//
+//   domain: 0                      # optional; --domain overrides; default $POISE_DOMAIN or 0
+//   participant_profile: poise_default   # optional (poise_default | poise_udp | poise_loopback)
+//   qos_file: ../qos/poise_profiles.xml  # optional; relative paths are relative to this file
+//   topics: {imu: imu, attitude_prefix: attitude/}   # optional overrides of the default names
+//   components:
+//     - type: parallel_kf          # a registered component type (`poise run --list`)
+//       name: pkf                  # optional instance name (default: type)
+//       config: ../filters/parallel_kf.yaml   # optional parameter file (YAML map)
+//       params: {filter: default}  # optional inline parameters, override the config file
+#pragma once
+
+#include "poise/runtime/component.h"
+
+#include <atomic>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace poise::runtime {
+
+struct HostSpec {
+  std::optional<int> domain;
+  std::string participant_profile;
+  std::string qos_file;
+  dds::TopicNames topics;
+  std::vector<ComponentSpec> components;
+  std::string path;  ///< the host file
+};
+
+/// Parses and validates a host file; throws ConfigError with the file, the key and what to do.
+HostSpec load_host_file(const std::string& path);
+/// The same from YAML text (`base_dir` resolves relative paths).
+HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std::string& base_dir);
+
+/// Applies a `topics:` map onto names; throws ConfigError on unknown keys.
+void apply_topic_overrides(const YAML::Node& map, const std::string& origin, dds::TopicNames& names);
+
+/// Loads a YAML parameter file as a map (ConfigError if missing or not a map).
+YAML::Node load_param_file(const std::string& path);
+
+/// Runs components in one process until `stop` becomes true (or a component fails).
+class Host {
+ public:
+  Host(const HostSpec& spec, int domain);
+  ~Host();
+  Host(const Host&) = delete;
+  Host& operator=(const Host&) = delete;
+
+  void start();
+  void stop();
+  /// One status line per component.
+  [[nodiscard]] std::vector<std::string> status() const;
+  [[nodiscard]] dds::Participant& participant() { return *participant_; }
+
+ private:
+  std::unique_ptr<dds::Participant> participant_;
+  std::unique_ptr<HostContext> context_;
+  std::vector<std::string> names_;
+  std::vector<std::unique_ptr<Component>> components_;
+  bool started_ = false;
+};
+
+}  // namespace poise::runtime

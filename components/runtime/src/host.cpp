@@ -1,0 +1,228 @@
+#include "poise/runtime/host.h"
+
+#include <filesystem>
+#include <set>
+
+namespace poise::runtime {
+namespace fs = std::filesystem;
+
+namespace {
+std::string resolve(const std::string& base_dir, const std::string& path) {
+  if (path.empty() || fs::path(path).is_absolute()) {
+    return path;
+  }
+  return (fs::path(base_dir) / path).lexically_normal().string();
+}
+
+void check_keys(const YAML::Node& map, const std::set<std::string>& known, const std::string& where) {
+  for (const auto& entry : map) {
+    const auto key = entry.first.as<std::string>();
+    if (known.count(key) == 0) {
+      std::string list;
+      for (const auto& k : known) {
+        list += (list.empty() ? "" : ", ") + k;
+      }
+      throw ConfigError(where + ": unknown key '" + key + "' (known: " + list + ")");
+    }
+  }
+}
+
+/// Copies `overlay`'s entries onto `base` (a fresh map), key by key.
+YAML::Node merge(const YAML::Node& base, const YAML::Node& overlay) {
+  YAML::Node out(YAML::NodeType::Map);
+  for (const auto* node : {&base, &overlay}) {
+    if (*node && node->IsMap()) {
+      for (const auto& entry : *node) {
+        out[entry.first.as<std::string>()] = YAML::Clone(entry.second);
+      }
+    }
+  }
+  return out;
+}
+}  // namespace
+
+YAML::Node load_param_file(const std::string& path) {
+  if (!fs::exists(path)) {
+    throw ConfigError("parameter file '" + path + "' does not exist");
+  }
+  YAML::Node node;
+  try {
+    node = YAML::LoadFile(path);
+  } catch (const YAML::Exception& e) {
+    throw ConfigError("parameter file '" + path + "' is not valid YAML: " + e.what());
+  }
+  if (node.IsNull()) {
+    return YAML::Node(YAML::NodeType::Map);
+  }
+  if (!node.IsMap()) {
+    throw ConfigError("parameter file '" + path + "' must be a YAML map of parameters");
+  }
+  return node;
+}
+
+void apply_topic_overrides(const YAML::Node& map, const std::string& origin, dds::TopicNames& names) {
+  if (!map) {
+    return;
+  }
+  if (!map.IsMap()) {
+    throw ConfigError(origin + ": 'topics' must be a map of name overrides");
+  }
+  std::map<std::string, std::string*> fields{
+      {"imu", &names.imu},
+      {"tag_detections", &names.tag_detections},
+      {"vision_pose", &names.vision_pose},
+      {"attitude_prefix", &names.attitude_prefix},
+      {"pose_prefix", &names.pose_prefix},
+      {"altitude", &names.altitude},
+      {"vehicle_input", &names.vehicle_input},
+      {"diagnostics", &names.diagnostics},
+  };
+  for (const auto& entry : map) {
+    const auto key = entry.first.as<std::string>();
+    const auto it = fields.find(key);
+    if (it == fields.end()) {
+      throw ConfigError(origin + ": unknown topic '" + key +
+                        "' (known: imu, tag_detections, vision_pose, attitude_prefix, "
+                        "pose_prefix, altitude, vehicle_input, diagnostics)");
+    }
+    const auto value = entry.second.as<std::string>();
+    if (value.empty()) {
+      throw ConfigError(origin + ": topic '" + key + "' must not be empty");
+    }
+    *it->second = value;
+  }
+}
+
+HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std::string& base_dir) {
+  if (!root || !root.IsMap()) {
+    throw ConfigError(origin + ": a host file is a YAML map with a 'components' list");
+  }
+  check_keys(root, {"domain", "participant_profile", "qos_file", "topics", "components"}, origin);
+  HostSpec spec;
+  spec.path = origin;
+  try {
+    if (root["domain"]) {
+      const int domain = root["domain"].as<int>();
+      if (domain < 0 || domain > 232) {
+        throw ConfigError(origin + ": domain must be 0-232");
+      }
+      spec.domain = domain;
+    }
+    if (root["participant_profile"]) {
+      spec.participant_profile = root["participant_profile"].as<std::string>();
+    }
+    if (root["qos_file"]) {
+      spec.qos_file = resolve(base_dir, root["qos_file"].as<std::string>());
+    }
+  } catch (const YAML::Exception& e) {
+    throw ConfigError(origin + ": " + e.what());
+  }
+  apply_topic_overrides(root["topics"], origin, spec.topics);
+
+  const YAML::Node list = root["components"];
+  if (!list || !list.IsSequence() || list.size() == 0) {
+    throw ConfigError(origin + ": 'components' must be a non-empty list");
+  }
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const YAML::Node entry = list[i];
+    const std::string where = origin + ": components[" + std::to_string(i) + "]";
+    if (!entry.IsMap() || !entry["type"]) {
+      throw ConfigError(where + ": each component needs a 'type'");
+    }
+    check_keys(entry, {"type", "name", "config", "params"}, where);
+    ComponentSpec c;
+    c.type = entry["type"].as<std::string>();
+    c.name = entry["name"] ? entry["name"].as<std::string>() : c.type;
+    c.origin = where + " (" + c.name + ")";
+    YAML::Node from_file;
+    if (entry["config"]) {
+      from_file = load_param_file(resolve(base_dir, entry["config"].as<std::string>()));
+    }
+    if (entry["params"] && !entry["params"].IsMap()) {
+      throw ConfigError(where + ": 'params' must be a map");
+    }
+    c.params = merge(from_file, entry["params"]);
+    if (!names.insert(c.name).second) {
+      throw ConfigError(where + ": two components are named '" + c.name + "' (names must be unique)");
+    }
+    spec.components.push_back(std::move(c));
+  }
+  return spec;
+}
+
+HostSpec load_host_file(const std::string& path) {
+  if (!fs::exists(path)) {
+    throw ConfigError("host file '" + path + "' does not exist");
+  }
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const YAML::Exception& e) {
+    throw ConfigError("host file '" + path + "' is not valid YAML: " + e.what());
+  }
+  return parse_host(root, path, fs::path(path).parent_path().string());
+}
+
+Host::Host(const HostSpec& spec, int domain) {
+  const auto& registry = ComponentRegistry::instance();
+  for (const auto& c : spec.components) {  // fail before creating any DDS entity
+    if (registry.find(c.type) == nullptr) {
+      std::string list;
+      for (const auto& n : registry.names()) {
+        list += (list.empty() ? "" : ", ") + n;
+      }
+      throw ConfigError(c.origin + ": unknown component type '" + c.type + "' (known: " + list + ")");
+    }
+  }
+  dds::ParticipantOptions options;
+  options.domain = domain;
+  options.profile = spec.participant_profile;
+  options.qos_file = spec.qos_file;
+  options.name = "poise:" + (spec.components.size() == 1 ? spec.components.front().name
+                                                          : std::string("host"));
+  participant_ = std::make_unique<dds::Participant>(options);
+  context_ = std::make_unique<HostContext>(HostContext{*participant_, spec.topics});
+  for (const auto& c : spec.components) {
+    components_.push_back(registry.find(c.type)->create(c, *context_));
+    names_.push_back(c.name);
+  }
+}
+
+Host::~Host() {
+  stop();
+  // Destroy in reverse order of creation (later components may read earlier ones' topics).
+  while (!components_.empty()) {
+    components_.pop_back();
+  }
+}
+
+void Host::start() {
+  for (auto& c : components_) {
+    c->start();
+  }
+  started_ = true;
+}
+
+void Host::stop() {
+  if (!started_) {
+    return;
+  }
+  for (auto it = components_.rbegin(); it != components_.rend(); ++it) {
+    (*it)->stop();
+  }
+  started_ = false;
+}
+
+std::vector<std::string> Host::status() const {
+  std::vector<std::string> lines;
+  for (std::size_t i = 0; i < components_.size(); ++i) {
+    const std::string s = components_[i]->status();
+    if (!s.empty()) {
+      lines.push_back(names_[i] + ": " + s);
+    }
+  }
+  return lines;
+}
+
+}  // namespace poise::runtime

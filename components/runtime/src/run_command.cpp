@@ -1,0 +1,162 @@
+// `poise run HOST.yaml` and the generated `poise <component>` commands.
+#include "poise/cli/common.h"
+#include "poise/runtime/host.h"
+
+#include <chrono>
+#include <cstdio>
+#include <memory>
+#include <sstream>
+#include <thread>
+
+namespace poise::cli {
+namespace {
+
+struct RunOptions {
+  int domain = 0;
+  CLI::Option* domain_option = nullptr;
+  double duration_s = 0.0;  // 0 = until SIGINT/SIGTERM
+  double status_period_s = 2.0;
+  bool quiet = false;
+};
+
+/// Runs a host until a signal, the duration, or a failure; prints status periodically.
+void run_host(const runtime::HostSpec& spec, const RunOptions& options) {
+  const int domain = (options.domain_option != nullptr && options.domain_option->count() > 0)
+                         ? options.domain
+                         : spec.domain.value_or(options.domain);
+  install_stop_handlers();
+  runtime::Host host(spec, domain);
+  host.start();
+  if (!options.quiet) {
+    std::fprintf(stderr, "poise: %zu component(s) running on domain %d (Ctrl-C stops)\n",
+                 spec.components.size(), domain);
+  }
+  const auto start = std::chrono::steady_clock::now();
+  auto next_status = start + std::chrono::duration<double>(options.status_period_s);
+  while (!stop_requested()) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    const auto now = std::chrono::steady_clock::now();
+    if (options.duration_s > 0.0 &&
+        std::chrono::duration<double>(now - start).count() >= options.duration_s) {
+      break;
+    }
+    if (!options.quiet && now >= next_status) {
+      for (const auto& line : host.status()) {
+        std::fprintf(stderr, "  %s\n", line.c_str());
+      }
+      next_status += std::chrono::duration<double>(options.status_period_s);
+    }
+  }
+  host.stop();
+  if (!options.quiet) {
+    std::fprintf(stderr, "poise: stopped cleanly\n");
+  }
+}
+
+void add_run_options(CLI::App* sub, RunOptions& options) {
+  options.domain_option = add_domain_option(sub, &options.domain);
+  sub->add_option("--duration", options.duration_s, "Stop after this many seconds (0: run until Ctrl-C)")
+      ->check(CLI::NonNegativeNumber);
+  sub->add_option("--status-period", options.status_period_s, "Seconds between status lines")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  sub->add_flag("--quiet", options.quiet, "No status output");
+}
+
+std::string dashed(std::string name) {
+  for (char& c : name) {
+    if (c == '_') {
+      c = '-';
+    }
+  }
+  return name;
+}
+
+/// Parses `key=value` into a YAML scalar/sequence (the value is read as YAML: 1.5, true, [1,2]).
+void set_param(YAML::Node& params, const std::string& assignment) {
+  const auto eq = assignment.find('=');
+  if (eq == std::string::npos || eq == 0) {
+    throw Error("--set expects key=value, got '" + assignment + "'", kUsageExitCode);
+  }
+  try {
+    params[assignment.substr(0, eq)] = YAML::Load(assignment.substr(eq + 1));
+  } catch (const YAML::Exception& e) {
+    throw Error("--set " + assignment + ": " + e.what(), kUsageExitCode);
+  }
+}
+
+}  // namespace
+
+void register_run_commands(CLI::App& app) {
+  auto options = std::make_shared<RunOptions>();
+  auto host_path = std::make_shared<std::string>();
+  auto list = std::make_shared<bool>(false);
+  CLI::App* run = app.add_subcommand(
+      "run", "Run drivers and components in one process from a host file (see config/hosts/)");
+  run->add_option("host", *host_path, "Host file (YAML)");
+  run->add_flag("--list", *list, "List the component types and exit");
+  add_run_options(run, *options);
+  run->callback([options, host_path, list] {
+    if (*list) {
+      for (const auto& [name, type] : runtime::ComponentRegistry::instance().types()) {
+        std::printf("%-18s %s\n", name.c_str(), type.description.c_str());
+      }
+      return;
+    }
+    if (host_path->empty()) {
+      throw Error("poise run needs a host file (e.g. config/hosts/robot.yaml)", kUsageExitCode);
+    }
+    run_host(runtime::load_host_file(*host_path), *options);
+  });
+
+  // One `poise <component>` command per component type, to run it alone (one process each).
+  for (const auto& [type_name, type] : runtime::ComponentRegistry::instance().types()) {
+    if (!type.standalone_command) {
+      continue;
+    }
+    struct Standalone {
+      RunOptions run;
+      std::string name;
+      std::string config;
+      std::string profile;
+      std::vector<std::string> sets;
+      std::vector<std::string> topics;
+    };
+    auto s = std::make_shared<Standalone>();
+    CLI::App* sub = app.add_subcommand(dashed(type_name), type.description + " (runs alone)");
+    sub->add_option("--name", s->name, "Instance name (sensor_id of its outputs; default: " +
+                                            type_name + ")");
+    sub->add_option("--config", s->config, "Parameter file (YAML map)")->check(CLI::ExistingFile);
+    sub->add_option("--set", s->sets, "Parameter override key=value (repeatable)");
+    sub->add_option("--topic", s->topics, "Topic name override key=name, e.g. imu=imu2 (repeatable)");
+    sub->add_option("--profile", s->profile, "Participant profile (poise_default, poise_udp, poise_loopback)");
+    add_run_options(sub, s->run);
+    const std::string key = type_name;
+    sub->callback([s, key] {
+      runtime::HostSpec spec;
+      spec.participant_profile = s->profile;
+      runtime::ComponentSpec c;
+      c.type = key;
+      c.name = s->name.empty() ? key : s->name;
+      c.origin = "poise " + dashed(key);
+      c.params = s->config.empty() ? YAML::Node(YAML::NodeType::Map)
+                                   : runtime::load_param_file(s->config);
+      for (const auto& assignment : s->sets) {
+        set_param(c.params, assignment);
+      }
+      YAML::Node topics(YAML::NodeType::Map);
+      for (const auto& t : s->topics) {
+        const auto eq = t.find('=');
+        if (eq == std::string::npos) {
+          throw Error("--topic expects key=name, got '" + t + "'", kUsageExitCode);
+        }
+        topics[t.substr(0, eq)] = t.substr(eq + 1);
+      }
+      runtime::apply_topic_overrides(topics, c.origin, spec.topics);
+      spec.components.push_back(c);
+      run_host(spec, s->run);
+    });
+  }
+}
+
+}  // namespace poise::cli

@@ -1,0 +1,141 @@
+// Host files are validated with clear errors; a Host constructs, starts and stops its components.
+#include "poise/runtime/host.h"
+#include "poise/testing/testing.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+namespace poise::runtime {
+namespace {
+
+HostSpec parse(const std::string& yaml) { return parse_host(YAML::Load(yaml), "test.yaml", "/cfg"); }
+
+std::string error_of(const std::string& yaml) {
+  try {
+    parse(yaml);
+  } catch (const ConfigError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(HostFile, ParsesComponentsTopicsAndDomain) {
+  const HostSpec spec = parse(R"(
+domain: 12
+participant_profile: poise_udp
+topics: {imu: imu_left, attitude_prefix: "est/"}
+components:
+  - type: parallel_kf
+  - type: gauss_newton
+    name: gn
+    params: {max_iterations: 5}
+)");
+  EXPECT_EQ(spec.domain, 12);
+  EXPECT_EQ(spec.participant_profile, "poise_udp");
+  EXPECT_EQ(spec.topics.imu, "imu_left");
+  EXPECT_EQ(spec.topics.attitude("gn"), "est/gn");
+  EXPECT_EQ(spec.topics.altitude, "altitude") << "defaults stay for names not overridden";
+  ASSERT_EQ(spec.components.size(), 2U);
+  EXPECT_EQ(spec.components[0].name, "parallel_kf") << "the name defaults to the type";
+  EXPECT_EQ(spec.components[1].name, "gn");
+  EXPECT_EQ(spec.components[1].params["max_iterations"].as<int>(), 5);
+}
+
+TEST(HostFile, ErrorsNameTheProblem) {
+  EXPECT_NE(error_of("components: []").find("non-empty"), std::string::npos);
+  EXPECT_NE(error_of("domian: 3\ncomponents: [{type: a}]").find("unknown key 'domian'"),
+            std::string::npos);
+  EXPECT_NE(error_of("domain: 300\ncomponents: [{type: a}]").find("0-232"), std::string::npos);
+  EXPECT_NE(error_of("components: [{type: a}, {type: a}]").find("named 'a'"), std::string::npos);
+  EXPECT_NE(error_of("components: [{name: x}]").find("'type'"), std::string::npos);
+  EXPECT_NE(error_of("topics: {imus: x}\ncomponents: [{type: a}]").find("unknown topic 'imus'"),
+            std::string::npos);
+  EXPECT_NE(error_of("components: [{type: a, config: missing.yaml}]").find("/cfg/missing.yaml"),
+            std::string::npos)
+      << "relative config paths resolve against the host file's directory";
+}
+
+TEST(HostFile, InlineParamsOverrideTheConfigFile) {
+  const auto dir = std::filesystem::temp_directory_path() / ("poise_host_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  std::ofstream(dir / "p.yaml") << "a: 1\nb: 2\n";
+  std::ofstream(dir / "host.yaml") << "components:\n  - type: t\n    config: p.yaml\n    params: {b: 3}\n";
+  const HostSpec spec = load_host_file((dir / "host.yaml").string());
+  EXPECT_EQ(spec.components[0].params["a"].as<int>(), 1);
+  EXPECT_EQ(spec.components[0].params["b"].as<int>(), 3);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(HostFile, MissingFileIsAClearError) {
+  EXPECT_THROW(load_host_file("/nonexistent/host.yaml"), ConfigError);
+}
+
+TEST(ComponentParams, UnknownAndMistypedParametersAreRejected) {
+  ComponentSpec spec;
+  spec.type = "t";
+  spec.name = "n";
+  spec.origin = "test";
+  spec.params = YAML::Load("{rate: fast, good: 1}");
+  EXPECT_THROW(param<double>(spec, "rate", 1.0), ConfigError);
+  EXPECT_EQ(param<int>(spec, "good", 0), 1);
+  EXPECT_EQ(param<int>(spec, "absent", 7), 7);
+  EXPECT_THROW(check_known_params(spec, {"rate"}), ConfigError);
+  EXPECT_NO_THROW(check_known_params(spec, {"rate", "good"}));
+}
+
+/// A component that records its lifecycle.
+struct Lifecycle {
+  int created = 0;
+  int started = 0;
+  int stopped = 0;
+  int destroyed = 0;
+};
+
+class Probe : public Component {
+ public:
+  explicit Probe(Lifecycle& l) : l_(l) { ++l_.created; }
+  ~Probe() override { ++l_.destroyed; }
+  void start() override { ++l_.started; }
+  void stop() override { ++l_.stopped; }
+  [[nodiscard]] std::string status() const override { return "ok"; }
+
+ private:
+  Lifecycle& l_;
+};
+
+TEST(Host, RunsComponentsThroughTheirLifecycle) {
+  static Lifecycle lifecycle;
+  if (ComponentRegistry::instance().find("test_probe") == nullptr) {
+    ComponentRegistry::instance().add({"test_probe", "lifecycle probe",
+                                       [](const ComponentSpec&, HostContext&) {
+                                         return std::make_unique<Probe>(lifecycle);
+                                       }});
+  }
+  testing::DomainLease domain;
+  const HostSpec spec = parse("components: [{type: test_probe, name: a}, {type: test_probe, name: b}]");
+  {
+    Host host(spec, domain.id());
+    EXPECT_EQ(lifecycle.created, 2);
+    host.start();
+    EXPECT_EQ(lifecycle.started, 2);
+    EXPECT_EQ(host.status(), (std::vector<std::string>{"a: ok", "b: ok"}));
+    host.stop();
+    EXPECT_EQ(lifecycle.stopped, 2);
+  }
+  EXPECT_EQ(lifecycle.destroyed, 2);
+}
+
+TEST(Host, UnknownComponentTypeListsTheKnownOnes) {
+  testing::DomainLease domain;
+  try {
+    Host host(parse("components: [{type: no_such_thing}]"), domain.id());
+    FAIL() << "expected ConfigError";
+  } catch (const ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("unknown component type 'no_such_thing'"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace poise::runtime
