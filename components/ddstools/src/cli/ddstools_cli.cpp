@@ -1,0 +1,421 @@
+// `poise topics`, `poise echo` and the hidden test publisher `poise dds-test-pub`.
+#include "poise/cli/common.h"
+#include "poise/dds/participant.h"
+#include "poise/dds/topics.h"
+#include "poise/ddstools/cdr.h"
+#include "poise/ddstools/observer.h"
+
+#include <poise/msg/diagnosticsPubSubTypes.h>
+#include <poise/msg/estimatesPubSubTypes.h>
+#include <poise/msg/imuPubSubTypes.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <cstdio>
+#include <deque>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <set>
+#include <thread>
+
+namespace poise::cli {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+using ddstools::TopicObserver;
+
+std::string hex(const std::vector<std::uint8_t>& bytes) {
+  static const char* const kDigits = "0123456789abcdef";
+  std::string out;
+  out.reserve(bytes.size() * 2);
+  for (const std::uint8_t b : bytes) {
+    out += kDigits[b >> 4];
+    out += kDigits[b & 0xF];
+  }
+  return out;
+}
+
+std::string json_string(const std::string& s) {
+  ddstools::Value v;
+  v.kind = ddstools::Value::Kind::kString;
+  v.s = s;
+  return ddstools::to_json(v);
+}
+
+const ddstools::TypeTable& type_table() {
+  try {
+    return ddstools::TypeTable::builtin();
+  } catch (const ddstools::SchemaError& e) {
+    throw Error(std::string("cannot load the IDL types: ") + e.what() +
+                " (check POISE_IDL_DIR, or unset it to use the built-in types)");
+  }
+}
+
+ddstools::ObserverOptions observer_options(int domain, const char* name) {
+  ddstools::ObserverOptions o;
+  o.domain = domain;
+  o.name = name;
+  return o;
+}
+
+// ---------------------------------------------------------------------------------------------
+// poise echo
+
+struct EchoOptions {
+  std::string topic;
+  int domain = 0;
+  int count = 0;
+  bool json = false;
+  double timeout_s = 10.0;
+};
+
+struct Received {
+  poise::dds::RawSample sample;
+  std::int64_t source_timestamp_ns = 0;
+};
+
+void run_echo(const EchoOptions& o) {
+  install_stop_handlers();
+  const ddstools::TypeTable& table = type_table();
+  TopicObserver observer(observer_options(o.domain, "poise-echo"));
+  std::fprintf(stderr, "poise echo: waiting up to %.1f s for a writer of '%s' on domain %d\n",
+               o.timeout_s, o.topic.c_str(), o.domain);
+  const auto writer = observer.wait_for_writer(
+      o.topic, std::chrono::milliseconds(static_cast<std::int64_t>(o.timeout_s * 1000.0)),
+      [] { return stop_requested(); });
+  if (!writer) {
+    if (stop_requested()) {
+      return;
+    }
+    std::string known;
+    for (const auto& w : observer.writers()) {
+      known += (known.empty() ? "" : ", ") + w.topic;
+    }
+    throw Error("no writer of topic '" + o.topic + "' on domain " + std::to_string(o.domain) +
+                " within " + std::to_string(o.timeout_s) + " s (" +
+                (known.empty() ? std::string("no writers seen at all: is the publisher running on "
+                                             "this domain and DDS profile?")
+                               : "topics seen: " + known) +
+                ")");
+  }
+  const bool decodable = table.find_struct(writer->type) != nullptr;
+  std::fprintf(stderr, "poise echo: '%s' has type %s%s\n", o.topic.c_str(), writer->type.c_str(),
+               decodable ? "" : " (not a known IDL type: printing raw bytes as hex)");
+
+  std::mutex mutex;
+  std::condition_variable cv;
+  std::deque<Received> queue;
+  constexpr std::size_t kMaxQueued = 10000;  // a slow terminal drops samples rather than memory
+  observer.subscribe(*writer, &table,
+                     [&](const poise::dds::RawSample& s, const eprosima::fastdds::dds::SampleInfo& info) {
+                       std::lock_guard<std::mutex> lock(mutex);
+                       if (queue.size() < kMaxQueued) {
+                         queue.push_back({s, info.source_timestamp.to_ns()});
+                       }
+                       cv.notify_one();
+                     });
+
+  int printed = 0;
+  int failed = 0;
+  while (!stop_requested() && (o.count == 0 || printed < o.count)) {
+    Received r;
+    {
+      std::unique_lock<std::mutex> lock(mutex);
+      cv.wait_for(lock, std::chrono::milliseconds(100), [&queue] { return !queue.empty(); });
+      if (queue.empty()) {
+        continue;
+      }
+      r = std::move(queue.front());
+      queue.pop_front();
+    }
+    std::string body;
+    bool ok = true;
+    std::string error;
+    if (decodable) {
+      try {
+        const ddstools::Value v = ddstools::decode(table, writer->type, r.sample.data);
+        body = o.json ? ddstools::to_json(v) : ddstools::to_text(v);
+      } catch (const ddstools::DecodeError& e) {
+        ok = false;
+        error = e.what();
+      }
+    }
+    if (!ok) {
+      ++failed;
+      std::fprintf(stderr, "poise echo: sample of %zu bytes not decoded: %s\n",
+                   r.sample.data.size(), error.c_str());
+      continue;
+    }
+    ++printed;
+    if (o.json) {
+      std::string line = "{\"topic\":" + json_string(o.topic) + ",\"type\":" +
+                         json_string(writer->type) +
+                         ",\"size\":" + std::to_string(r.sample.data.size()) +
+                         ",\"source_timestamp_ns\":" + std::to_string(r.source_timestamp_ns);
+      line += decodable ? ",\"data\":" + body : ",\"data\":null,\"hex\":\"" + hex(r.sample.data) + "\"";
+      line += "}\n";
+      std::fputs(line.c_str(), stdout);
+    } else {
+      std::printf("--- %s [%s] #%d, %zu bytes\n", o.topic.c_str(), writer->type.c_str(), printed,
+                  r.sample.data.size());
+      std::fputs(decodable ? body.c_str() : (hex(r.sample.data) + "\n").c_str(), stdout);
+    }
+    std::fflush(stdout);
+  }
+  if (failed > 0) {
+    std::fprintf(stderr, "poise echo: %d sample(s) could not be decoded\n", failed);
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// poise topics
+
+struct TopicsOptions {
+  int domain = 0;
+  double duration_s = 2.0;
+  bool json = false;
+};
+
+struct TopicStats {
+  std::mutex mutex;
+  std::uint64_t samples = 0;
+  std::uint64_t bytes = 0;
+  Clock::time_point first;
+  Clock::time_point last;
+};
+
+std::string fixed(double v, int decimals) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*f", decimals, v);
+  return buf;
+}
+
+void run_topics(const TopicsOptions& o) {
+  install_stop_handlers();
+  const ddstools::TypeTable& table = type_table();
+  TopicObserver observer(observer_options(o.domain, "poise-topics"));
+  std::fprintf(stderr, "poise topics: sampling domain %d for %.1f s\n", o.domain, o.duration_s);
+  std::map<std::string, std::shared_ptr<TopicStats>> stats;  // by topic
+  const auto start = Clock::now();
+  const auto end = start + std::chrono::duration_cast<Clock::duration>(
+                               std::chrono::duration<double>(o.duration_s));
+  while (Clock::now() < end && !stop_requested()) {
+    for (const auto& w : observer.writers()) {
+      if (stats.count(w.topic) != 0) {
+        continue;
+      }
+      auto s = std::make_shared<TopicStats>();
+      stats[w.topic] = s;
+      try {
+        observer.subscribe(w, &table,
+                           [s](const poise::dds::RawSample& sample,
+                               const eprosima::fastdds::dds::SampleInfo& /*info*/) {
+                             const auto now = Clock::now();
+                             std::lock_guard<std::mutex> lock(s->mutex);
+                             if (s->samples == 0) {
+                               s->first = now;
+                             }
+                             s->last = now;
+                             ++s->samples;
+                             s->bytes += sample.data.size();
+                           });
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "poise topics: cannot sample '%s': %s\n", w.topic.c_str(), e.what());
+      }
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+
+  struct Row {
+    std::string topic;
+    std::set<std::string> types;
+    int writers = 0;
+    std::uint64_t samples = 0;
+    double rate_hz = 0.0;
+    double bytes_per_s = 0.0;
+  };
+  std::map<std::string, Row> rows;
+  for (const auto& w : observer.writers()) {
+    Row& r = rows[w.topic];
+    r.topic = w.topic;
+    r.types.insert(w.type);
+    ++r.writers;
+  }
+  for (auto& [topic, r] : rows) {
+    const auto it = stats.find(topic);
+    if (it == stats.end()) {
+      continue;
+    }
+    std::lock_guard<std::mutex> lock(it->second->mutex);
+    const TopicStats& s = *it->second;
+    r.samples = s.samples;
+    const double span_s = std::chrono::duration<double>(s.last - s.first).count();
+    if (s.samples >= 2 && span_s > 0.0) {
+      // Rate over the sampled span: (n - 1) intervals; bytes/s from the mean sample size.
+      r.rate_hz = static_cast<double>(s.samples - 1) / span_s;
+      r.bytes_per_s = r.rate_hz * static_cast<double>(s.bytes) / static_cast<double>(s.samples);
+    }
+  }
+
+  const auto join = [](const std::set<std::string>& types) {
+    std::string out;
+    for (const auto& t : types) {
+      out += (out.empty() ? "" : ",") + t;
+    }
+    return out;
+  };
+  if (o.json) {
+    std::string out = "{\"domain\":" + std::to_string(o.domain) +
+                      ",\"duration_s\":" + fixed(o.duration_s, 3) + ",\"topics\":[";
+    bool first = true;
+    for (const auto& [topic, r] : rows) {
+      out += first ? "" : ",";
+      first = false;
+      out += "{\"topic\":" + json_string(topic) + ",\"type\":" + json_string(join(r.types)) +
+             ",\"writers\":" + std::to_string(r.writers) +
+             ",\"samples\":" + std::to_string(r.samples) + ",\"rate_hz\":" + fixed(r.rate_hz, 3) +
+             ",\"bytes_per_s\":" + fixed(r.bytes_per_s, 1) + "}";
+    }
+    out += "]}\n";
+    std::fputs(out.c_str(), stdout);
+  } else {
+    std::size_t topic_w = 5;
+    std::size_t type_w = 4;
+    for (const auto& [topic, r] : rows) {
+      topic_w = std::max(topic_w, topic.size());
+      type_w = std::max(type_w, join(r.types).size());
+    }
+    std::printf("%-*s  %-*s  %7s  %9s  %11s\n", static_cast<int>(topic_w), "TOPIC",
+                static_cast<int>(type_w), "TYPE", "WRITERS", "RATE_HZ", "BYTES_PER_S");
+    for (const auto& [topic, r] : rows) {
+      std::printf("%-*s  %-*s  %7d  %9s  %11s\n", static_cast<int>(topic_w), topic.c_str(),
+                  static_cast<int>(type_w), join(r.types).c_str(), r.writers,
+                  fixed(r.rate_hz, 1).c_str(), fixed(r.bytes_per_s, 0).c_str());
+    }
+    if (rows.empty()) {
+      std::printf("(no writers discovered on domain %d)\n", o.domain);
+    }
+  }
+  std::fflush(stdout);
+}
+
+// ---------------------------------------------------------------------------------------------
+// poise dds-test-pub (hidden): deterministic samples from the generated type support, for tests.
+
+struct TestPubOptions {
+  std::string type = "imu";
+  std::string topic;
+  std::string sensor_id = "imu0";
+  int domain = 0;
+  int count = 100;
+  double rate_hz = 50.0;
+  double wait_readers_s = 0.0;
+};
+
+template <class PubSubType, class Fill>
+void publish(const TestPubOptions& o, const std::string& default_topic, Fill fill) {
+  poise::dds::ParticipantOptions popts;
+  popts.domain = o.domain;
+  popts.name = "poise-dds-test-pub";
+  poise::dds::Participant participant(popts);
+  const std::string topic = o.topic.empty() ? default_topic : o.topic;
+  poise::dds::Writer<PubSubType> writer(participant, topic);
+  if (o.wait_readers_s > 0.0 &&
+      !writer.wait_for_readers(1, std::chrono::milliseconds(
+                                      static_cast<std::int64_t>(o.wait_readers_s * 1000.0)))) {
+    throw Error("no reader of '" + topic + "' matched within " + std::to_string(o.wait_readers_s) +
+                " s");
+  }
+  const auto period = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(1.0 / o.rate_hz));
+  auto next = Clock::now();
+  for (int i = 0; i < o.count && !stop_requested(); ++i) {
+    typename PubSubType::type msg;
+    msg.header().stamp_ns(1000000000LL + 1000000LL * i);
+    msg.header().seq(static_cast<std::uint32_t>(i));
+    msg.sensor_id(o.sensor_id);
+    fill(msg, i);
+    writer.write(msg);
+    next += period;
+    std::this_thread::sleep_until(next);
+  }
+}
+
+void run_test_pub(const TestPubOptions& o) {
+  install_stop_handlers();
+  if (o.type == "imu") {
+    publish<poise::msg::ImuSamplePubSubType>(o, "imu", [](poise::msg::ImuSample& m, int i) {
+      m.header().frame_id("body");
+      m.accel_mps2().z(9.81);
+      m.gyro_rps().x(0.001 * i);
+      m.valid().accel(true);
+      m.valid().gyro(true);
+    });
+  } else if (o.type == "diagnostics") {
+    publish<poise::msg::FilterDiagnosticsPubSubType>(
+        o, "diagnostics", [](poise::msg::FilterDiagnostics& m, int i) {
+          m.component_name("dds_test_pub");
+          poise::msg::Counter c;
+          c.name("published");
+          c.value(static_cast<std::uint64_t>(i));
+          m.counters({c});
+        });
+  } else if (o.type == "attitude") {
+    publish<poise::msg::AttitudeEstimatePubSubType>(
+        o, "attitude/test", [](poise::msg::AttitudeEstimate& m, int i) {
+          m.filter_id("test");
+          m.q_world_body().w(1.0);
+          m.yaw_rad(0.01 * i);
+        });
+  }
+}
+
+}  // namespace
+
+void register_ddstools_commands(CLI::App& app) {
+  auto echo = std::make_shared<EchoOptions>();
+  CLI::App* e = app.add_subcommand(
+      "echo", "Print the samples of a DDS topic, decoded with the IDL types (--json: one object per line)");
+  e->add_option("topic", echo->topic, "Topic name, e.g. imu, attitude/parallel_kf")->required();
+  add_domain_option(e, &echo->domain);
+  e->add_option("--count", echo->count, "Exit after this many samples (0: until Ctrl-C)")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  e->add_flag("--json", echo->json, "One JSON object per sample and line");
+  e->add_option("--timeout", echo->timeout_s, "Seconds to wait for a writer of the topic")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  e->callback([echo] { run_echo(*echo); });
+
+  auto topics = std::make_shared<TopicsOptions>();
+  CLI::App* t = app.add_subcommand(
+      "topics", "List the topics with writers on a domain, with type, writer count, rate and bandwidth");
+  add_domain_option(t, &topics->domain);
+  t->add_option("--duration", topics->duration_s, "Seconds to discover and sample")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  t->add_flag("--json", topics->json, "One JSON document instead of a table");
+  t->callback([topics] { run_topics(*topics); });
+
+  auto pub = std::make_shared<TestPubOptions>();
+  CLI::App* p = app.add_subcommand("dds-test-pub", "Publish deterministic test samples (for tests)");
+  p->group("");  // hidden from --help
+  p->add_option("--type", pub->type, "imu | diagnostics | attitude")
+      ->check(CLI::IsMember({"imu", "diagnostics", "attitude"}))
+      ->capture_default_str();
+  p->add_option("--topic", pub->topic, "Topic name (default: imu, diagnostics, attitude/test)");
+  p->add_option("--sensor-id", pub->sensor_id, "sensor_id of every sample")->capture_default_str();
+  add_domain_option(p, &pub->domain);
+  p->add_option("--count", pub->count, "Samples to publish")->check(CLI::PositiveNumber);
+  p->add_option("--rate", pub->rate_hz, "Samples per second")->check(CLI::Range(0.1, 10000.0));
+  p->add_option("--wait-readers", pub->wait_readers_s,
+                "Wait up to this many seconds for a reader before publishing (0: do not wait)")
+      ->check(CLI::NonNegativeNumber);
+  p->callback([pub] { run_test_pub(*pub); });
+}
+
+}  // namespace poise::cli

@@ -1,0 +1,162 @@
+// `poise echo` and `poise topics` across processes: a `poise dds-test-pub` child publishes with the
+// generated type support on an exclusive loopback-only domain; echo/topics run as a second process.
+// Every wait is bounded (child timeouts); failures print the children's output.
+#include "poise/testing/testing.h"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <csignal>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+using poise::testing::Child;
+using poise::testing::DomainLease;
+using poise::testing::run;
+using std::chrono::milliseconds;
+
+constexpr milliseconds kCommandTimeout{20000};  // bound on each CLI run (discovery included)
+const std::vector<std::string> kEnv = {"POISE_DDS_PROFILE=poise_loopback"};
+
+std::vector<std::string> lines_of(const std::string& text) {
+  std::vector<std::string> out;
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line)) {
+    out.push_back(line);
+  }
+  return out;
+}
+
+// A publisher child that runs well past the test's needs; killed by ~Child.
+std::unique_ptr<Child> publisher(int domain, const std::string& type, double rate_hz) {
+  return std::make_unique<Child>(
+      std::vector<std::string>{poise::testing::bin("poise"), "dds-test-pub", "--type", type,
+                               "--domain", std::to_string(domain), "--count", "100000", "--rate",
+                               std::to_string(rate_hz)},
+      kEnv);
+}
+
+TEST(Echo, GivenABestEffortImuPublisherWhenEchoedAsJsonThenCountDecodedSamplesArePrinted) {
+  DomainLease lease;
+  auto pub = publisher(lease.id(), "imu", 100.0);
+  const auto r = run({poise::testing::bin("poise"), "echo", "imu", "--json", "--count", "3",
+                      "--domain", std::to_string(lease.id()), "--timeout", "15"},
+                     kCommandTimeout, kEnv);
+  ASSERT_EQ(r.exit_code, 0) << r.output << "\npublisher:\n" << pub->output();
+  std::vector<std::string> samples;
+  for (const auto& line : lines_of(r.output)) {
+    if (!line.empty() && line[0] == '{') {
+      samples.push_back(line);
+    }
+  }
+  ASSERT_EQ(samples.size(), 3U) << r.output;
+  const std::regex shape(
+      R"re(^\{"topic":"imu","type":"poise::msg::ImuSample","size":\d+,"source_timestamp_ns":\d+,)re"
+      R"re("data":\{"header":\{"stamp_ns":(\d+),"seq":(\d+),"frame_id":"body"\},"sensor_id":"imu0",)re"
+      R"re("accel_mps2":\{"x":0,"y":0,"z":9\.81\},.*"valid":\{"accel":true,"gyro":true,"mag":false,)re"
+      R"re("pressure":false,"temperature":false\}\}\}$)re");
+  long last_seq = -1;
+  for (const auto& s : samples) {
+    std::smatch m;
+    ASSERT_TRUE(std::regex_match(s, m, shape)) << s;
+    const long seq = std::stol(m[2]);
+    EXPECT_GT(seq, last_seq) << "samples in publication order";
+    EXPECT_EQ(std::stoll(m[1]), 1000000000LL + 1000000LL * seq) << "stamp_ns of seq " << seq;
+    last_seq = seq;
+  }
+}
+
+TEST(Echo, GivenAReliableDiagnosticsPublisherWhenEchoedAsTextThenTheSampleIsReadable) {
+  DomainLease lease;
+  auto pub = publisher(lease.id(), "diagnostics", 50.0);
+  const auto r = run({poise::testing::bin("poise"), "echo", "diagnostics", "--count", "1",
+                      "--domain", std::to_string(lease.id()), "--timeout", "15"},
+                     kCommandTimeout, kEnv);
+  ASSERT_EQ(r.exit_code, 0) << r.output << "\npublisher:\n" << pub->output();
+  EXPECT_NE(r.output.find("--- diagnostics [poise::msg::FilterDiagnostics] #1, "), std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("\nsensor_id: \"imu0\"\ncomponent_name: \"dds_test_pub\"\nsources: []\n"
+                          "counters:\n  - name: \"published\"\n    value: "),
+            std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("--- diagnostics [poise::msg::FilterDiagnostics] #2"), std::string::npos);
+}
+
+TEST(Echo, GivenNoWriterWhenEchoedThenItGivesUpAfterTheTimeoutWithExitCode1) {
+  DomainLease lease;
+  const auto r = run({poise::testing::bin("poise"), "echo", "imu", "--domain",
+                      std::to_string(lease.id()), "--timeout", "1"},
+                     kCommandTimeout, kEnv);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("no writer of topic 'imu' on domain " + std::to_string(lease.id())),
+            std::string::npos)
+      << r.output;
+}
+
+TEST(Echo, GivenBadOptionsWhenRunThenUsageAndExitCode2) {
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"echo"}, {"echo", "imu", "--count", "-1"},
+        {"echo", "imu", "--timeout", "0"}, {"echo", "imu", "--domain", "999"},
+        {"topics", "--duration", "0"}, {"topics", "--bogus"}}) {
+    std::vector<std::string> argv = {poise::testing::bin("poise")};
+    argv.insert(argv.end(), args.begin(), args.end());
+    const auto r = run(argv, kCommandTimeout, kEnv);
+    EXPECT_EQ(r.exit_code, 2) << args.front() << " " << (args.size() > 1 ? args[1] : "") << "\n"
+                              << r.output;
+  }
+  const auto help = run({poise::testing::bin("poise"), "echo", "--help"}, kCommandTimeout, kEnv);
+  EXPECT_EQ(help.exit_code, 0);
+  EXPECT_NE(help.output.find("--count"), std::string::npos) << help.output;
+}
+
+TEST(Topics, GivenTwoPublishersWhenListedThenEachTopicHasItsTypeWriterAndRate) {
+  DomainLease lease;
+  auto imu = publisher(lease.id(), "imu", 100.0);
+  auto diag = publisher(lease.id(), "diagnostics", 20.0);
+  const auto r = run({poise::testing::bin("poise"), "topics", "--json", "--duration", "3",
+                      "--domain", std::to_string(lease.id())},
+                     kCommandTimeout, kEnv);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const std::regex imu_row(
+      R"re(\{"topic":"imu","type":"poise::msg::ImuSample","writers":1,"samples":(\d+),"rate_hz":([0-9.]+),"bytes_per_s":([0-9.]+)\})re");
+  const std::regex diag_row(
+      R"re(\{"topic":"diagnostics","type":"poise::msg::FilterDiagnostics","writers":1,"samples":(\d+),"rate_hz":([0-9.]+),"bytes_per_s":([0-9.]+)\})re");
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(r.output, m, imu_row)) << r.output << imu->output();
+  // The publisher paces itself at 100 Hz; the band only guards against gross miscounting (e.g.
+  // counting bytes as samples or a wrong time base) on a loaded machine.
+  const double imu_rate = std::stod(m[2]);
+  EXPECT_GT(imu_rate, 30.0) << r.output;
+  EXPECT_LT(imu_rate, 200.0) << r.output;
+  const double imu_bytes_per_s = std::stod(m[3]);
+  // An ImuSample with sensor_id "imu0" and frame_id "body" serializes to 137 bytes (4 encapsulation + 133).
+  EXPECT_NEAR(imu_bytes_per_s / imu_rate, 137.0, 0.5) << r.output;
+  ASSERT_TRUE(std::regex_search(r.output, m, diag_row)) << r.output << diag->output();
+  EXPECT_GT(std::stod(m[2]), 5.0) << r.output;
+  EXPECT_LT(std::stod(m[2]), 40.0) << r.output;
+
+  const auto table = run({poise::testing::bin("poise"), "topics", "--duration", "1", "--domain",
+                          std::to_string(lease.id())},
+                         kCommandTimeout, kEnv);
+  ASSERT_EQ(table.exit_code, 0) << table.output;
+  EXPECT_NE(table.output.find("TOPIC"), std::string::npos) << table.output;
+  EXPECT_TRUE(std::regex_search(table.output,
+                                std::regex(R"(\nimu +poise::msg::ImuSample +1 +[0-9.]+ +[0-9]+\n)")))
+      << table.output;
+}
+
+TEST(Topics, GivenAnEmptyDomainWhenListedThenItSaysSoAndSucceeds) {
+  DomainLease lease;
+  const auto r = run({poise::testing::bin("poise"), "topics", "--json", "--duration", "0.5",
+                      "--domain", std::to_string(lease.id())},
+                     kCommandTimeout, kEnv);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("\"topics\":[]"), std::string::npos) << r.output;
+}
+
+}  // namespace
