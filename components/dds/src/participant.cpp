@@ -48,6 +48,52 @@ void load_profiles(const std::string& qos_file) {
   loaded.insert(file);
 }
 
+std::optional<SecurityConfig> security_from_env() {
+  const std::string dir = env_or("POISE_SECURITY_DIR", "");
+  if (dir.empty()) {
+    return std::nullopt;
+  }
+  const std::string identity = env_or("POISE_SECURITY_IDENTITY", "");
+  if (identity.empty()) {
+    throw DdsError("POISE_SECURITY_DIR is set but POISE_SECURITY_IDENTITY is not: set it to the "
+                   "identity (host name) to use from " + dir);
+  }
+  return SecurityConfig{dir, identity};
+}
+
+std::vector<std::pair<std::string, std::string>> security_properties(const SecurityConfig& config) {
+  if (config.identity.empty() || config.identity.find('/') != std::string::npos) {
+    throw DdsError("invalid security identity '" + config.identity + "' (a host name from " +
+                   config.dir + ")");
+  }
+  const std::string ca = config.dir + "/ca.pem";
+  const std::string governance = config.dir + "/governance.p7s";
+  const std::string id_dir = config.dir + "/" + config.identity;
+  const std::string cert = id_dir + "/cert.pem";
+  const std::string key = id_dir + "/key.pem";
+  const std::string permissions = id_dir + "/permissions.p7s";
+  for (const std::string& file : {ca, governance, cert, key, permissions}) {
+    if (!std::ifstream(file).good()) {
+      throw DdsError("DDS Security file '" + file + "' is missing or unreadable (create the " +
+                     "directory with tools/security/make_security.sh; identity '" +
+                     config.identity + "')");
+    }
+  }
+  const std::string auth = "dds.sec.auth.builtin.PKI-DH.";
+  const std::string access = "dds.sec.access.builtin.Access-Permissions.";
+  return {
+      {"dds.sec.auth.plugin", "builtin.PKI-DH"},
+      {auth + "identity_ca", "file://" + ca},
+      {auth + "identity_certificate", "file://" + cert},
+      {auth + "private_key", "file://" + key},
+      {"dds.sec.access.plugin", "builtin.Access-Permissions"},
+      {access + "permissions_ca", "file://" + ca},
+      {access + "governance", "file://" + governance},
+      {access + "permissions", "file://" + permissions},
+      {"dds.sec.crypto.plugin", "builtin.AES-GCM-GMAC"},
+  };
+}
+
 std::string resolve_participant_profile(const ParticipantOptions& options) {
   return options.profile.empty() ? env_or("POISE_DDS_PROFILE", "poise_default") : options.profile;
 }
@@ -62,10 +108,21 @@ Participant::Participant(const ParticipantOptions& options) : domain_(options.do
                    "' in the QoS profiles (known: poise_default, poise_udp, poise_loopback)");
   }
   qos.name(options.name);
+  const std::optional<SecurityConfig> security = security_from_env();
+  if (security) {
+    for (const auto& [name, value] : security_properties(*security)) {
+      qos.properties().properties().emplace_back(name, value);
+    }
+  }
   participant_ = factory->create_participant(static_cast<fdds::DomainId_t>(options.domain), qos);
   if (participant_ == nullptr) {
     throw DdsError("cannot create a DDS participant on domain " + std::to_string(options.domain) +
-                   " with profile '" + profile + "'");
+                   " with profile '" + profile + "'" +
+                   (security ? " and DDS Security identity '" + security->identity + "' of " +
+                                   security->dir + " (check the certificates, the signed "
+                                   "governance/permissions and that the permissions grant this "
+                                   "domain)"
+                             : std::string()));
   }
   publisher_ = participant_->create_publisher(fdds::PUBLISHER_QOS_DEFAULT);
   subscriber_ = participant_->create_subscriber(fdds::SUBSCRIBER_QOS_DEFAULT);

@@ -22,8 +22,11 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
 #include <string>
+#include <utility>
+#include <vector>
 
 namespace poise::dds {
 
@@ -43,6 +46,23 @@ struct ParticipantOptions {
   /// Participant name shown to discovery tools.
   std::string name = "poise";
 };
+
+/// DDS Security (authentication PKI-DH, access control Access-Permissions, crypto AES-GCM-GMAC) for
+/// one identity of a directory made by tools/security/make_security.sh (docs/NETWORK.md):
+///   DIR/ca.pem, DIR/governance.p7s, DIR/IDENTITY/{cert.pem,key.pem,permissions.p7s}.
+struct SecurityConfig {
+  std::string dir;
+  std::string identity;
+};
+
+/// Security from the environment: $POISE_SECURITY_DIR and $POISE_SECURITY_IDENTITY. nullopt when
+/// POISE_SECURITY_DIR is unset or empty (security off). Throws DdsError if the identity is missing.
+/// Every Participant applies it, so any poise process can be made secure without code changes.
+std::optional<SecurityConfig> security_from_env();
+
+/// The Fast DDS participant properties (dds.sec.*) for `config`, with file:// URIs. Throws
+/// DdsError naming the first file that is missing or unreadable.
+std::vector<std::pair<std::string, std::string>> security_properties(const SecurityConfig& config);
 
 /// Loads the QoS profiles (once per process and file). Throws DdsError if the file is unreadable
 /// or invalid. Called by Participant; call it yourself only to fail early.
