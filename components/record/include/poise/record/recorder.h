@@ -1,0 +1,85 @@
+// `poise record`: subscribes to topics (discovered on the domain) with the raw type and writes
+// their serialized payloads to MCAP without deserializing.
+//  - channel: topic, message encoding "cdr", schema "omgidl" (flattened IDL of the DDS type),
+//    metadata = the topic's QoS as discovered (reliability, durability) + the poise QoS profile;
+//  - log_time = reception (log clock, default CLOCK_REALTIME ns); publish_time = Header.stamp_ns
+//    read from the payload (bytes 4-11), or the writer's source timestamp when it has none;
+//  - sequence = the DDS writer's sample sequence number (low 32 bits): gaps reveal losses.
+#pragma once
+
+#include "poise/record/mcap.h"
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <ostream>
+#include <string>
+#include <vector>
+
+namespace poise::record {
+
+struct RecorderOptions {
+  std::string output;               ///< FILE.mcap (with a split size: FILE_000.mcap, ...)
+  std::vector<std::string> topics;  ///< topics to record (ignored with `all`)
+  bool all = false;                 ///< record every topic of a known poise type
+  int domain = 0;
+  std::string participant_profile;  ///< "" = $POISE_DDS_PROFILE / poise_default
+  double duration_s = 0.0;          ///< stop after this long (0 = until stopped)
+  uint64_t split_size_bytes = 0;    ///< start a new file past this size (0 = one file)
+  WriterOptions writer;             ///< chunking, compression
+  size_t max_queue_messages = 1'000'000;  ///< beyond this, incoming samples are dropped (counted)
+  std::function<bool()> should_stop;      ///< polled every 100 ms
+  std::function<int64_t()> log_clock;     ///< log time (ns); default CLOCK_REALTIME
+  std::ostream* log = nullptr;            ///< progress and warnings (stderr when null)
+};
+
+struct TopicStats {
+  std::string type;
+  uint64_t received = 0;  ///< samples handed to the recorder by DDS
+  uint64_t written = 0;   ///< messages given to the MCAP writer
+  uint64_t gaps = 0;      ///< samples missing according to writer sequence numbers
+};
+
+struct RecorderStats {
+  std::map<std::string, TopicStats> topics;
+  uint64_t received = 0;
+  uint64_t written = 0;
+  uint64_t dropped_queue_full = 0;
+  uint64_t sequence_gaps = 0;
+  std::vector<std::string> files;
+  double elapsed_s = 0.0;
+  std::string error;  ///< non-empty when recording stopped on a write error
+};
+
+class Recorder {
+ public:
+  explicit Recorder(RecorderOptions options);
+  ~Recorder();
+  Recorder(const Recorder&) = delete;
+  Recorder& operator=(const Recorder&) = delete;
+
+  /// Records until should_stop(), the duration, request_stop() or a write error. Files are
+  /// always finalised. Throws poise::dds::DdsError / WriteError on setup failures.
+  RecorderStats run();
+  /// Asks run() to finish (thread-safe).
+  void request_stop() { stop_.store(true); }
+  /// Number of topics subscribed so far (thread-safe).
+  [[nodiscard]] int subscribed() const { return subscribed_.load(); }
+  /// Messages written so far (thread-safe).
+  [[nodiscard]] uint64_t written() const { return written_.load(); }
+
+ private:
+  struct Impl;
+  RecorderOptions options_;
+  std::unique_ptr<Impl> impl_;
+  std::atomic<bool> stop_{false};
+  std::atomic<int> subscribed_{0};
+  std::atomic<uint64_t> written_{0};
+};
+
+/// FILE.mcap -> FILE_<index>.mcap (3 digits) for split recordings.
+std::string split_file_name(const std::string& output, int index);
+
+}  // namespace poise::record

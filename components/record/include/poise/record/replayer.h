@@ -1,0 +1,34 @@
+// `poise replay`: republishes a recording over DDS, payloads byte for byte (raw type under the
+// recorded type name), with the recorded timing scaled by a rate (see replay_schedule.h).
+#pragma once
+
+#include "poise/record/replay_schedule.h"
+
+#include <ostream>
+#include <string>
+
+namespace poise::record {
+
+struct ReplayOptions {
+  std::string input;
+  ScheduleOptions schedule;
+  int domain = 0;
+  std::string participant_profile;  ///< "" = $POISE_DDS_PROFILE / poise_default
+  /// Before publishing, wait up to this long for every topic to have a subscriber.
+  double wait_for_subscribers_s = 1.0;
+  ReplayClock clock = ReplayClock::steady();
+  std::ostream* log = nullptr;  ///< stderr when null
+};
+
+struct ReplayStats {
+  ScheduleStats schedule;
+  uint64_t write_failures = 0;  ///< DDS refused the sample (e.g. larger than the type allows)
+  std::vector<std::string> file_problems;  ///< what the reader recovered (empty if complete)
+  bool complete = true;
+};
+
+/// Opens the file (ReadError if it is not MCAP), creates one writer per selected channel and
+/// replays. Throws poise::dds::DdsError on DDS setup failures.
+ReplayStats replay(const ReplayOptions& options);
+
+}  // namespace poise::record

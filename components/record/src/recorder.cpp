@@ -1,0 +1,426 @@
+#include "poise/record/recorder.h"
+
+#include "poise/dds/participant.h"
+#include "poise/dds/topics.h"
+#include "poise/record/idl_schema.h"
+#include "poise/record/raw_type.h"
+
+#include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/dds/domain/DomainParticipantListener.hpp>
+#include <fastdds/dds/subscriber/qos/DataReaderQos.hpp>
+#include <fastdds/rtps/writer/WriterDiscoveryInfo.h>
+#include <fastrtps/rtps/builtin/data/WriterProxyData.h>
+
+#include <chrono>
+#include <condition_variable>
+#include <algorithm>
+#include <deque>
+#include <iostream>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <sstream>
+
+namespace poise::record {
+
+namespace fdds = eprosima::fastdds::dds;
+using eprosima::fastrtps::types::ReturnCode_t;
+
+std::string split_file_name(const std::string& output, int index) {
+  std::string stem = output;
+  if (stem.size() > 5 && stem.compare(stem.size() - 5, 5, ".mcap") == 0) {
+    stem.resize(stem.size() - 5);
+  }
+  char suffix[16];
+  std::snprintf(suffix, sizeof(suffix), "_%03d.mcap", index);
+  return stem + suffix;
+}
+
+namespace {
+
+int64_t realtime_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(
+             std::chrono::system_clock::now().time_since_epoch())
+      .count();
+}
+
+const char* reliability_name(fdds::ReliabilityQosPolicyKind kind) {
+  return kind == fdds::RELIABLE_RELIABILITY_QOS ? "RELIABLE" : "BEST_EFFORT";
+}
+
+const char* durability_name(fdds::DurabilityQosPolicyKind kind) {
+  switch (kind) {
+    case fdds::VOLATILE_DURABILITY_QOS: return "VOLATILE";
+    case fdds::TRANSIENT_LOCAL_DURABILITY_QOS: return "TRANSIENT_LOCAL";
+    case fdds::TRANSIENT_DURABILITY_QOS: return "TRANSIENT";
+    case fdds::PERSISTENT_DURABILITY_QOS: return "PERSISTENT";
+  }
+  return "VOLATILE";
+}
+
+}  // namespace
+
+struct Recorder::Impl : public fdds::DomainParticipantListener {
+  struct Discovered {
+    std::string topic;
+    std::string type;
+    fdds::ReliabilityQosPolicyKind reliability;
+    fdds::DurabilityQosPolicyKind durability;
+  };
+  struct Pending {
+    size_t sub;
+    uint32_t sequence;
+    int64_t log_ns;
+    int64_t publish_ns;
+    std::vector<uint8_t> bytes;
+  };
+  struct Sub;
+  class SubListener : public fdds::DataReaderListener {
+   public:
+    SubListener(Impl* impl, size_t index) : impl_(impl), index_(index) {}
+    void on_data_available(fdds::DataReader* reader) override {
+      RawSample sample;
+      fdds::SampleInfo info;
+      while (reader->take_next_sample(&sample, &info) == ReturnCode_t::RETCODE_OK) {
+        if (!info.valid_data) {
+          continue;
+        }
+        Pending p;
+        p.sub = index_;
+        p.log_ns = impl_->log_now();
+        const uint64_t seq = info.sample_identity.sequence_number().to64long();
+        p.sequence = static_cast<uint32_t>(seq & 0xFFFFFFFFu);
+        int64_t stamp = 0;
+        if (!header_stamp_ns(sample.bytes.data(), sample.bytes.size(), &stamp) || stamp <= 0) {
+          stamp = info.source_timestamp.to_ns();
+        }
+        p.publish_ns = stamp;
+        p.bytes = std::move(sample.bytes);
+        impl_->push(std::move(p), info.sample_identity.writer_guid(), seq);
+      }
+    }
+
+   private:
+    Impl* impl_;
+    size_t index_;
+  };
+  struct Sub {
+    std::string topic;
+    std::string type;
+    std::string schema_text;
+    std::map<std::string, std::string> metadata;
+    uint16_t channel = 0;  // in the current file
+    fdds::Topic* dds_topic = nullptr;
+    fdds::DataReader* reader = nullptr;
+    std::unique_ptr<SubListener> listener;
+  };
+
+  Recorder& owner;
+  RecorderOptions& opt;
+  std::ostream& log;
+  fdds::DomainParticipant* participant = nullptr;
+  fdds::Subscriber* subscriber = nullptr;
+
+  std::mutex mutex;
+  std::condition_variable cv;
+  std::deque<Discovered> discovered;
+  std::deque<Pending> queue;
+  std::map<std::pair<eprosima::fastrtps::rtps::GUID_t, size_t>, uint64_t> last_seq;
+  RecorderStats stats;  // received/gaps/dropped under mutex
+
+  std::vector<std::unique_ptr<Sub>> subs;  // main thread only (listeners hold indices)
+  std::map<std::string, size_t> by_topic;
+  std::set<std::string> warned;
+  std::unique_ptr<McapWriter> writer;
+  std::map<std::string, uint16_t> schema_ids;  // current file
+  int file_index = 0;
+
+  Impl(Recorder& o, RecorderOptions& options)
+      : owner(o), opt(options), log(options.log != nullptr ? *options.log : std::cerr) {}
+
+  int64_t log_now() const { return opt.log_clock ? opt.log_clock() : realtime_ns(); }
+
+  void on_publisher_discovery(fdds::DomainParticipant* /*participant*/,
+                              eprosima::fastrtps::rtps::WriterDiscoveryInfo&& info) override {
+    if (info.status != eprosima::fastrtps::rtps::WriterDiscoveryInfo::DISCOVERED_WRITER) {
+      return;
+    }
+    Discovered d;
+    d.topic = info.info.topicName().to_string();
+    d.type = info.info.typeName().to_string();
+    d.reliability = info.info.m_qos.m_reliability.kind;
+    d.durability = info.info.m_qos.m_durability.kind;
+    std::lock_guard<std::mutex> lock(mutex);
+    discovered.push_back(std::move(d));
+    cv.notify_one();
+  }
+
+  void push(Pending&& p, const eprosima::fastrtps::rtps::GUID_t& writer_guid, uint64_t seq) {
+    std::lock_guard<std::mutex> lock(mutex);
+    TopicStats& t = stats.topics[subs_topic_name(p.sub)];
+    ++t.received;
+    ++stats.received;
+    uint64_t& last = last_seq[{writer_guid, p.sub}];
+    if (last != 0 && seq > last + 1) {
+      t.gaps += seq - last - 1;
+      stats.sequence_gaps += seq - last - 1;
+    }
+    last = std::max(last, seq);
+    if (queue.size() >= opt.max_queue_messages) {
+      ++stats.dropped_queue_full;
+      return;
+    }
+    queue.push_back(std::move(p));
+    cv.notify_one();
+  }
+
+  // Topic names are copied at subscription time so listener threads never touch `subs`.
+  std::vector<std::string> topic_names;  // guarded by mutex
+  const std::string& subs_topic_name(size_t index) const { return topic_names[index]; }
+
+  void warn_once(const std::string& key, const std::string& text) {
+    if (warned.insert(key).second) {
+      log << "poise record: " << text << "\n";
+    }
+  }
+
+  void create_participant() {
+    dds::ParticipantOptions popt;
+    popt.domain = opt.domain;
+    popt.profile = opt.participant_profile;
+    popt.name = "poise record";
+    dds::load_profiles(popt.qos_file);
+    auto* factory = fdds::DomainParticipantFactory::get_instance();
+    const std::string profile = dds::resolve_participant_profile(popt);
+    fdds::DomainParticipantQos qos;
+    if (factory->get_participant_qos_from_profile(profile, qos) != ReturnCode_t::RETCODE_OK) {
+      throw dds::DdsError("no participant profile '" + profile + "' in the QoS profiles");
+    }
+    qos.name(popt.name);
+    participant = factory->create_participant(static_cast<fdds::DomainId_t>(opt.domain), qos,
+                                              this, fdds::StatusMask::none());
+    if (participant == nullptr) {
+      throw dds::DdsError("cannot create a DDS participant on domain " +
+                          std::to_string(opt.domain) + " with profile '" + profile + "'");
+    }
+    subscriber = participant->create_subscriber(fdds::SUBSCRIBER_QOS_DEFAULT);
+    if (subscriber == nullptr) {
+      throw dds::DdsError("cannot create a DDS subscriber");
+    }
+  }
+
+  void destroy_participant() {
+    if (participant == nullptr) {
+      return;
+    }
+    participant->set_listener(nullptr);
+    participant->delete_contained_entities();
+    fdds::DomainParticipantFactory::get_instance()->delete_participant(participant);
+    participant = nullptr;
+  }
+
+  std::string current_path() const {
+    return opt.split_size_bytes > 0 ? split_file_name(opt.output, file_index) : opt.output;
+  }
+
+  void register_channel(Sub& s) {
+    auto found = schema_ids.find(s.type);
+    if (found == schema_ids.end()) {
+      const uint16_t id = writer->add_schema(
+          s.type, "omgidl", std::vector<uint8_t>(s.schema_text.begin(), s.schema_text.end()));
+      found = schema_ids.emplace(s.type, id).first;
+    }
+    s.channel = writer->add_channel(found->second, s.topic, "cdr", s.metadata);
+  }
+
+  void open_file() {
+    const std::string path = current_path();
+    try {
+      writer = std::make_unique<McapWriter>(open_file_sink(path), opt.writer);
+    } catch (const IoError& e) {
+      throw WriteError(e.what());
+    }
+    schema_ids.clear();
+    stats.files.push_back(path);
+    for (auto& s : subs) {
+      register_channel(*s);
+    }
+  }
+
+  void subscribe(const Discovered& d) {
+    const bool wanted = opt.all || std::find(opt.topics.begin(), opt.topics.end(), d.topic) !=
+                                       opt.topics.end();
+    if (!wanted) {
+      return;
+    }
+    const auto existing = by_topic.find(d.topic);
+    if (existing != by_topic.end()) {
+      if (subs[existing->second]->type != d.type) {
+        warn_once("type:" + d.topic + d.type,
+                  "topic '" + d.topic + "' is also published with type " + d.type +
+                      "; recording only " + subs[existing->second]->type);
+      }
+      return;
+    }
+    std::unique_ptr<fdds::TopicDataType> generated = make_generated_type(d.type);
+    const std::optional<std::string> idl = flattened_idl(d.type);
+    if (!generated || !idl) {
+      warn_once("unknown:" + d.topic,
+                "topic '" + d.topic + "' has type " + d.type +
+                    " which is not a poise IDL type: not recorded");
+      return;
+    }
+    auto s = std::make_unique<Sub>();
+    s->topic = d.topic;
+    s->type = d.type;
+    s->schema_text = *idl;
+    const dds::QosKind kind = dds::default_qos_for_topic(d.topic);
+    s->metadata = {{"dds_type", d.type},
+                   {"reliability", reliability_name(d.reliability)},
+                   {"durability", durability_name(d.durability)},
+                   {"qos_profile", dds::profile_name(kind)},
+                   {"publish_time", "header.stamp_ns"}};
+    fdds::TypeSupport type(new RawPubSubType(d.type, std::move(generated)));
+    if (participant->find_type(d.type).empty() &&
+        type.register_type(participant) != ReturnCode_t::RETCODE_OK) {
+      throw dds::DdsError("cannot register the raw type " + d.type);
+    }
+    s->dds_topic = participant->create_topic(d.topic, d.type, fdds::TOPIC_QOS_DEFAULT);
+    if (s->dds_topic == nullptr) {
+      throw dds::DdsError("cannot create topic '" + d.topic + "'");
+    }
+    fdds::DataReaderQos qos = subscriber->get_default_datareader_qos();
+    subscriber->get_datareader_qos_from_profile(dds::profile_name(kind), qos);
+    // Match the discovered writer: a reliable reader does not match a best-effort writer, and a
+    // transient-local reader gets the writer's history.
+    qos.reliability().kind = d.reliability == fdds::RELIABLE_RELIABILITY_QOS
+                                 ? fdds::RELIABLE_RELIABILITY_QOS
+                                 : fdds::BEST_EFFORT_RELIABILITY_QOS;
+    qos.durability().kind = (d.durability == fdds::TRANSIENT_LOCAL_DURABILITY_QOS &&
+                             d.reliability == fdds::RELIABLE_RELIABILITY_QOS)
+                                ? fdds::TRANSIENT_LOCAL_DURABILITY_QOS
+                                : fdds::VOLATILE_DURABILITY_QOS;
+    const size_t index = subs.size();
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      topic_names.push_back(d.topic);
+      stats.topics[d.topic].type = d.type;
+    }
+    s->listener = std::make_unique<SubListener>(this, index);
+    register_channel(*s);
+    subs.push_back(std::move(s));
+    by_topic[d.topic] = index;
+    Sub& sub = *subs.back();
+    sub.reader = subscriber->create_datareader(sub.dds_topic, qos, sub.listener.get(),
+                                               fdds::StatusMask::data_available());
+    if (sub.reader == nullptr) {
+      throw dds::DdsError("cannot create a reader on '" + d.topic + "'");
+    }
+    owner.subscribed_.fetch_add(1);
+    log << "poise record: recording '" << d.topic << "' (" << d.type << ", "
+        << reliability_name(d.reliability) << ")\n";
+  }
+
+  void write_pending(Pending& p) {
+    Sub& s = *subs[p.sub];
+    writer->write(s.channel, p.sequence, static_cast<uint64_t>(p.log_ns),
+                  static_cast<uint64_t>(std::max<int64_t>(0, p.publish_ns)), p.bytes.data(),
+                  p.bytes.size());
+    owner.written_.fetch_add(1);
+    std::lock_guard<std::mutex> lock(mutex);
+    ++stats.topics[s.topic].written;
+    ++stats.written;
+  }
+};
+
+Recorder::Recorder(RecorderOptions options) : options_(std::move(options)) {
+  if (options_.output.empty()) {
+    throw WriteError("no output file given (-o FILE.mcap)");
+  }
+  if (!options_.all && options_.topics.empty()) {
+    throw WriteError("no topics given: name the topics to record or use --all");
+  }
+  impl_ = std::make_unique<Impl>(*this, options_);
+}
+
+Recorder::~Recorder() {
+  if (impl_) {
+    impl_->destroy_participant();
+  }
+}
+
+RecorderStats Recorder::run() {
+  Impl& im = *impl_;
+  const auto t0 = std::chrono::steady_clock::now();
+  im.open_file();
+  im.create_participant();
+  auto last_progress = t0;
+  std::deque<Impl::Pending> batch;
+  std::deque<Impl::Discovered> found;
+  auto stop_now = [&] {
+    if (stop_.load() || (options_.should_stop && options_.should_stop())) {
+      return true;
+    }
+    const double elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return options_.duration_s > 0.0 && elapsed >= options_.duration_s;
+  };
+  auto drain = [&]() {
+    for (auto& d : found) {
+      im.subscribe(d);
+    }
+    found.clear();
+    for (auto& p : batch) {
+      im.write_pending(p);
+      if (options_.split_size_bytes > 0 &&
+          im.writer->stats().bytes + im.writer->stats().pending_messages * 64 >=
+              options_.split_size_bytes) {
+        im.writer->close();
+        ++im.file_index;
+        im.open_file();
+      }
+    }
+    batch.clear();
+    im.writer->tick();
+  };
+  try {
+    while (!stop_now()) {
+      {
+        std::unique_lock<std::mutex> lock(im.mutex);
+        im.cv.wait_for(lock, std::chrono::milliseconds(100),
+                       [&] { return !im.queue.empty() || !im.discovered.empty(); });
+        batch.swap(im.queue);
+        found.swap(im.discovered);
+      }
+      drain();
+      const auto now = std::chrono::steady_clock::now();
+      if (now - last_progress >= std::chrono::seconds(5)) {
+        last_progress = now;
+        im.log << "poise record: " << written_.load() << " messages on " << subscribed_.load()
+               << " topics, " << im.writer->stats().bytes / 1024 << " KiB in "
+               << im.current_path() << "\n";
+      }
+    }
+    // Stop receiving, then write what is queued.
+    for (auto& s : im.subs) {
+      if (s->reader != nullptr) {
+        s->reader->set_listener(nullptr);
+      }
+    }
+    {
+      std::lock_guard<std::mutex> lock(im.mutex);
+      batch.swap(im.queue);
+      found.clear();
+      im.discovered.clear();
+    }
+    drain();
+    im.writer->close();
+  } catch (const WriteError& e) {
+    im.stats.error = e.what();
+  }
+  im.destroy_participant();
+  std::lock_guard<std::mutex> lock(im.mutex);
+  im.stats.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return im.stats;
+}
+
+}  // namespace poise::record

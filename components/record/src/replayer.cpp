@@ -1,0 +1,150 @@
+#include "poise/record/replayer.h"
+
+#include "poise/dds/participant.h"
+#include "poise/dds/topics.h"
+#include "poise/record/raw_type.h"
+
+#include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
+
+#include <chrono>
+#include <iostream>
+#include <thread>
+
+namespace poise::record {
+
+namespace fdds = eprosima::fastdds::dds;
+
+namespace {
+
+dds::QosKind kind_from(const Channel& channel) {
+  const auto p = channel.metadata.find("qos_profile");
+  if (p != channel.metadata.end()) {
+    for (dds::QosKind k : {dds::QosKind::kSensor, dds::QosKind::kEstimate, dds::QosKind::kStatic}) {
+      if (p->second == dds::profile_name(k)) {
+        return k;
+      }
+    }
+  }
+  return dds::default_qos_for_topic(channel.topic);
+}
+
+std::string meta(const Channel& channel, const std::string& key) {
+  const auto it = channel.metadata.find(key);
+  return it == channel.metadata.end() ? std::string() : it->second;
+}
+
+struct Output {
+  fdds::DataWriter* writer = nullptr;
+  std::unique_ptr<dds::detail::MatchCounter> matches;
+  RawSample sample;
+};
+
+}  // namespace
+
+ReplayStats replay(const ReplayOptions& options) {
+  std::ostream& log = options.log != nullptr ? *options.log : std::cerr;
+  McapReader reader = McapReader::open_file(options.input);
+  ReplayStats stats;
+  stats.complete = reader.report().complete;
+  stats.file_problems = reader.report().problems;
+  if (!stats.complete) {
+    log << "poise replay: " << options.input
+        << " is incomplete; replaying what could be recovered (" << reader.report().messages
+        << " messages):\n";
+    for (const std::string& p : reader.report().problems) {
+      log << "  " << p << "\n";
+    }
+  }
+  dds::Participant participant(
+      {options.domain, options.participant_profile, "", "poise replay"});
+  std::map<uint16_t, Output> outputs;
+  for (const auto& [id, channel] : reader.channels()) {
+    if (!options.schedule.topics.empty() && options.schedule.topics.count(channel.topic) == 0) {
+      continue;
+    }
+    const auto schema = reader.schemas().find(channel.schema_id);
+    const std::string type_name =
+        schema != reader.schemas().end() ? schema->second.name : meta(channel, "dds_type");
+    if (type_name.empty() || channel.message_encoding != "cdr") {
+      log << "poise replay: skipping '" << channel.topic << "' (no DDS type or not CDR)\n";
+      continue;
+    }
+    auto generated = make_generated_type(type_name);
+    if (!generated) {
+      log << "poise replay: '" << channel.topic << "' has type " << type_name
+          << " unknown to this build: published unkeyed\n";
+    }
+    fdds::Topic* topic = participant.topic(
+        channel.topic, fdds::TypeSupport(new RawPubSubType(type_name, std::move(generated))));
+    const dds::QosKind kind = kind_from(channel);
+    fdds::DataWriterQos qos = participant.publisher()->get_default_datawriter_qos();
+    participant.publisher()->get_datawriter_qos_from_profile(dds::profile_name(kind), qos);
+    if (meta(channel, "reliability") == "RELIABLE") {
+      qos.reliability().kind = fdds::RELIABLE_RELIABILITY_QOS;
+    } else if (meta(channel, "reliability") == "BEST_EFFORT") {
+      qos.reliability().kind = fdds::BEST_EFFORT_RELIABILITY_QOS;
+    }
+    if (qos.reliability().kind == fdds::RELIABLE_RELIABILITY_QOS) {
+      // Reliable topics are replayed without loss: a slow reader slows the replay down.
+      qos.history().kind = fdds::KEEP_ALL_HISTORY_QOS;
+      qos.resource_limits().max_samples = 4096;
+      qos.resource_limits().max_instances = 64;
+      qos.resource_limits().max_samples_per_instance = 4096;
+      qos.reliability().max_blocking_time = eprosima::fastrtps::Duration_t(5, 0);
+    }
+    if (meta(channel, "durability") == "TRANSIENT_LOCAL") {
+      qos.durability().kind = fdds::TRANSIENT_LOCAL_DURABILITY_QOS;
+    }
+    Output out;
+    out.matches = std::make_unique<dds::detail::MatchCounter>();
+    out.writer = participant.publisher()->create_datawriter(
+        topic, qos, out.matches.get(), fdds::StatusMask::publication_matched());
+    if (out.writer == nullptr) {
+      throw dds::DdsError("cannot create a DDS writer on '" + channel.topic + "'");
+    }
+    outputs.emplace(id, std::move(out));
+  }
+  if (outputs.empty()) {
+    log << "poise replay: no topic selected\n";
+    return stats;
+  }
+  // Give subscribers a bounded chance to match before the first sample.
+  const auto deadline = std::chrono::steady_clock::now() +
+                        std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                            std::chrono::duration<double>(options.wait_for_subscribers_s));
+  while (std::chrono::steady_clock::now() < deadline) {
+    bool all = true;
+    for (const auto& [id, out] : outputs) {
+      all = all && out.matches->matched() > 0;
+    }
+    if (all || (options.schedule.should_stop && options.schedule.should_stop())) {
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  ScheduleOptions schedule = options.schedule;
+  stats.schedule = run_schedule(reader, schedule, options.clock, [&](const MessageView& m) {
+    const auto found = outputs.find(m.channel->id);
+    if (found == outputs.end()) {
+      return false;
+    }
+    Output& out = found->second;
+    out.sample.bytes.assign(m.data, m.data + m.size);
+    if (!out.writer->write(&out.sample)) {
+      ++stats.write_failures;
+      return false;
+    }
+    return true;
+  });
+  for (const std::string& p : stats.schedule.problems) {
+    log << "poise replay: " << p << "\n";
+  }
+  // Let reliable writers deliver what they hold before the participant goes away.
+  for (auto& [id, out] : outputs) {
+    out.writer->wait_for_acknowledgments(eprosima::fastrtps::Duration_t(2, 0));
+    out.writer->set_listener(nullptr);
+  }
+  return stats;
+}
+
+}  // namespace poise::record
