@@ -96,8 +96,11 @@ TEST(TiltKf, BadInputLeavesStateUntouched) {
 
 TEST(TiltKf, PaperFirstOrderPropagationMatchesExactForSmallSteps) {
   TiltKfParams paper;
+  paper.exact_rotation = false;
+  paper.renormalize = false;
   TiltKfParams exact;
   exact.exact_rotation = true;
+  exact.renormalize = false;
   TiltKf a(paper);
   TiltKf b(exact);
   a.reset(Eigen::Vector3d(0.1, 0.2, 1.0));

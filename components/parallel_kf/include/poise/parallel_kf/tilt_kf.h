@@ -23,15 +23,16 @@
 namespace poise {
 
 /// Parameters of the tilt KF. Defaults: GY-87 data sheet noise (paper 000 Table 1), c_a of the
-/// paper; extensions off. See DirectionKfParams for what each extension does.
+/// paper, exact propagation + renormalisation on (set both false for the printed equations).
+/// See DirectionKfParams for what each extension does.
 struct TiltKfParams {
   double sigma_gyro_rps = 0.05 * kRadPerDeg;  ///< sigma_G, rad/s. Raising it trusts the accelerometer more (faster tilt correction, more acceleration leaks in).
   double sigma_accel_mps2 = 0.04;             ///< sigma_A, m/s^2 (400 ug/sqrt(Hz) over ~100 Hz). Raising it slows tilt correction.
   double c_a = 0.1;                           ///< acceleration model coefficient (5b), [0, 1). Paper: 0.1 at 100 Hz.
   double c_a_rate_hz = 0.0;                   ///< > 0: c_a is given at this rate, scaled to dt (c_a^(rate dt)). 0 = per step as printed.
   double gravity_mps2 = 9.81;                 ///< g in H1 (7f), m/s^2.
-  bool exact_rotation = false;                ///< propagate sZ with exp(-h s_G) instead of the first-order (5a).
-  bool renormalize = false;                   ///< renormalise sZ after each step (the paper does not).
+  bool exact_rotation = true;                 ///< propagate sZ with exp(-h s_G) instead of the first-order (5a) (paper: false; first order lets |sZ| grow without bound at high rates).
+  bool renormalize = true;                    ///< renormalise sZ after each step (paper: false).
   double sigma_gyro_extra_rps = 0.0;          ///< extra gyro error std in Q11 (e.g. residual bias), rad/s.
   double initial_var_tilt = 1e-2;             ///< P11 at reset (unit-vector components^2).
   double initial_var_accel = 1.0;             ///< P22 at reset, (m/s^2)^2.

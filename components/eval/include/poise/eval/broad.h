@@ -1,0 +1,59 @@
+// BROAD benchmark support: HDF5 reader, the benchmark's error metric, group means.
+// Dataset: D. Laidig, M. Caruso, A. Cereatti, T. Seel, "BROAD - A Benchmark for Robust Inertial
+// Orientation Estimation", Data 6(7):72, 2021 (CC BY 4.0). Layout and metric: shared/broad/README.md.
+#pragma once
+
+#include "poise/core/types.h"
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace poise::eval {
+
+/// One BROAD trial in memory. Sample k is at t = k / rate_hz.
+struct BroadTrial {
+  std::string path;
+  std::string stem;          ///< file name without directory and extension
+  int number = 0;            ///< leading trial number (01..39), 0 if none
+  double rate_hz = 0.0;      ///< attribute sampling_rate
+  std::vector<Eigen::Vector3d> gyr_rps;
+  std::vector<Eigen::Vector3d> acc_mps2;
+  std::vector<Eigen::Vector3d> mag_ut;
+  std::vector<Eigen::Vector4d> opt_quat_wxyz;  ///< reference q_world_body [w,x,y,z]; NaN rows = lost
+  std::vector<uint8_t> movement;               ///< 1 while the motion phase runs
+  [[nodiscard]] size_t size() const { return gyr_rps.size(); }
+  /// Sample k as an ImuSample (stamp = round(k * 1e9 / rate)).
+  [[nodiscard]] ImuSample sample(size_t k) const;
+  /// Trials 1-23 are undisturbed, 24-39 disturbed.
+  [[nodiscard]] bool disturbed() const { return number >= 24; }
+};
+
+/// Reads a BROAD HDF5 file (datasets imu_gyr, imu_acc, imu_mag, opt_quat, movement; attribute
+/// sampling_rate). Accepts N x k and k x N storage. Throws std::runtime_error with the file and
+/// dataset name on any problem.
+BroadTrial load_broad(const std::string& path);
+
+/// Per-trial errors (degrees), RMS over samples with movement and a finite reference.
+struct TrialErrors {
+  double total_deg = 0.0;
+  double heading_deg = 0.0;
+  double inclination_deg = 0.0;
+  size_t samples = 0;  ///< samples scored
+};
+
+/// The benchmark metric: q_err = q_est (x) conj(q_ref) (both normalised, world frame);
+/// total = 2 acos(|w|), heading = 2 atan(|z / w|), inclination = 2 acos(sqrt(w^2 + z^2)).
+/// `estimates` holds one q_world_body per sample. Throws std::invalid_argument on size mismatch.
+TrialErrors broad_errors(const std::vector<Eigen::Quaterniond>& estimates, const BroadTrial& trial);
+
+/// Errors of one sample (degrees): {total, heading, inclination}.
+Eigen::Vector3d broad_sample_errors_deg(const Eigen::Quaterniond& q_est, const Eigen::Quaterniond& q_ref);
+
+/// Leading integer of a file stem ("24_disturbed_tapping_A" -> 24), 0 if none.
+int trial_number_from_stem(const std::string& stem);
+
+}  // namespace poise::eval

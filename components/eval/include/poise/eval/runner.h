@@ -1,0 +1,36 @@
+// Running an AttitudeFilter over a BROAD trial and tabulating benchmark results.
+#pragma once
+
+#include "poise/core/attitude_filter.h"
+#include "poise/eval/broad.h"
+
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+namespace poise::eval {
+
+/// Runs `filter` (reset first) over every sample of `trial`, first to last; returns one
+/// q_world_body per input sample (identity before the filter is initialised).
+std::vector<Eigen::Quaterniond> run_filter(AttitudeFilter& filter, const BroadTrial& trial);
+
+/// Writes `t_s,qw,qx,qy,qz`, one row per sample.
+void write_quaternion_csv(const std::string& path, const std::vector<Eigen::Quaterniond>& q, double rate_hz);
+
+struct TrialResult {
+  std::string stem;
+  int number = 0;
+  bool disturbed = false;
+  TrialErrors errors;
+};
+
+/// Prints the per-trial table and the means for undisturbed (01-23), disturbed (24-39) and all.
+void print_table(std::ostream& os, const std::string& filter_name, const std::vector<TrialResult>& results);
+
+struct GroupMeans {
+  TrialErrors undisturbed, disturbed, all;
+  int n_undisturbed = 0, n_disturbed = 0;
+};
+GroupMeans group_means(const std::vector<TrialResult>& results);
+
+}  // namespace poise::eval

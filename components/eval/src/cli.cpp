@@ -1,0 +1,192 @@
+// `poise eval broad` and `poise bench filters`.
+#include "poise/cli/common.h"
+#include "poise/eval/broad.h"
+#include "poise/eval/filter_registry.h"
+#include "poise/eval/runner.h"
+#include "poise/sim/sensor_simulator.h"
+
+#include <CLI/CLI.hpp>
+
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <iomanip>
+#include <iostream>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace poise::cli {
+namespace {
+
+std::string filter_list() {
+  std::string s;
+  for (const auto& e : eval::registered_filters()) {
+    s += "\n  " + e.name + ": " + e.description;
+  }
+  return s;
+}
+
+std::unique_ptr<AttitudeFilter> make_or_throw(const std::string& name, const std::string& config) {
+  try {
+    return eval::make_filter(name, config);
+  } catch (const std::exception& e) {
+    throw Error(std::string(e.what()) + "; filters:" + filter_list());
+  }
+}
+
+void run_eval(const std::string& filter_name, const std::string& config, const std::string& out_dir,
+              const std::vector<std::string>& files) {
+  std::error_code ec;
+  std::filesystem::create_directories(out_dir, ec);
+  if (ec) {
+    throw Error("cannot create output directory '" + out_dir + "': " + ec.message());
+  }
+  auto filter = make_or_throw(filter_name, config);
+  std::vector<eval::TrialResult> results;
+  for (size_t i = 0; i < files.size(); ++i) {
+    if (stop_requested()) {
+      throw Error("interrupted");
+    }
+    std::cerr << "[" << (i + 1) << "/" << files.size() << "] " << files[i] << " ... " << std::flush;
+    eval::BroadTrial trial;
+    try {
+      trial = eval::load_broad(files[i]);
+    } catch (const std::exception& e) {
+      throw Error(std::string(e.what()) + " (pass BROAD .hdf5 files, e.g. ../shared/broad/*.hdf5)");
+    }
+    const auto q = eval::run_filter(*filter, trial);
+    const std::string csv = (std::filesystem::path(out_dir) / (trial.stem + ".csv")).string();
+    eval::write_quaternion_csv(csv, q, trial.rate_hz);
+    eval::TrialResult r;
+    r.stem = trial.stem;
+    r.number = trial.number;
+    r.disturbed = trial.disturbed();
+    r.errors = eval::broad_errors(q, trial);
+    results.push_back(r);
+    std::cerr << trial.size() << " samples, total RMSE " << std::fixed << std::setprecision(3)
+              << r.errors.total_deg << " deg -> " << csv << "\n";
+  }
+  eval::print_table(std::cout, filter_name, results);
+}
+
+std::string default_broad_dir() {
+  if (const char* env = std::getenv("POISE_SHARED_DIR"); env != nullptr && *env != '\0') {
+    return std::string(env) + "/broad";
+  }
+  return "../shared/broad";
+}
+
+void run_bench(const std::string& file_arg, const std::string& broad_dir, int repeats) {
+  install_stop_handlers();
+  std::string file = file_arg;
+  if (file.empty() && std::filesystem::is_directory(broad_dir)) {
+    std::vector<std::string> found;
+    for (const auto& e : std::filesystem::directory_iterator(broad_dir)) {
+      if (e.path().extension() == ".hdf5") {
+        found.push_back(e.path().string());
+      }
+    }
+    std::sort(found.begin(), found.end());
+    if (!found.empty()) {
+      file = found.front();
+    }
+  }
+  eval::BroadTrial trial;
+  if (!file.empty()) {
+    try {
+      trial = eval::load_broad(file);
+    } catch (const std::exception& e) {
+      throw Error(e.what());
+    }
+    std::cout << "input: BROAD trial " << file << " (" << trial.size() << " samples at "
+              << trial.rate_hz << " Hz)\n";
+  } else {
+    // No BROAD data: the simulator's random_motion scenario at BROAD's rate.
+    sim::SensorSimulator s(sim::make_scenario("random_motion", 2000.0 / 7.0, 1));
+    trial.stem = "sim_random_motion";
+    trial.rate_hz = s.config().rate_hz;
+    while (!s.done()) {
+      const sim::SimSample x = s.next();
+      trial.gyr_rps.push_back(x.imu.gyro_rps);
+      trial.acc_mps2.push_back(x.imu.accel_mps2);
+      trial.mag_ut.push_back(x.imu.mag_ut);
+      trial.opt_quat_wxyz.push_back(Eigen::Vector4d(x.truth.q_world_body.w(), x.truth.q_world_body.x(),
+                                                    x.truth.q_world_body.y(), x.truth.q_world_body.z()));
+      trial.movement.push_back(1);
+    }
+    std::cout << "input: BROAD not found in '" << broad_dir
+              << "': using the simulator (scenario random_motion, " << trial.size() << " samples at "
+              << trial.rate_hz << " Hz)\n";
+  }
+  std::vector<ImuSample> samples(trial.size());
+  for (size_t k = 0; k < trial.size(); ++k) {
+    samples[k] = trial.sample(k);
+  }
+  std::cout << "single thread, best of " << repeats << " runs; per sample: update() + q_world_body()\n";
+  std::cout << std::left << std::setw(22) << "filter" << std::right << std::setw(14) << "ns/sample" << "\n";
+  for (const auto& entry : eval::registered_filters()) {
+    auto f = entry.factory("");
+    double best = 1e300;
+    double sink = 0.0;
+    for (int r = 0; r < repeats && !stop_requested(); ++r) {
+      f->reset();
+      const auto t0 = std::chrono::steady_clock::now();
+      for (const auto& s : samples) {
+        f->update(s);
+        sink += f->q_world_body().w();
+      }
+      const auto t1 = std::chrono::steady_clock::now();
+      const double ns = static_cast<double>(std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count()) /
+                        static_cast<double>(samples.size());
+      best = std::min(best, ns);
+    }
+    std::cout << std::left << std::setw(22) << entry.name << std::right << std::setw(14) << std::fixed
+              << std::setprecision(1) << best << (sink == 12345.0 ? " " : "") << "\n";
+  }
+}
+
+}  // namespace
+
+void register_eval_cli(CLI::App& app) {
+  CLI::App* eval_group = subcommand_group(app, "eval", "Evaluate estimators on recorded data");
+  CLI::App* broad = eval_group->add_subcommand(
+      "broad", "Run an attitude filter over BROAD HDF5 trials; write DIR/<stem>.csv and print the RMSE table");
+  auto filter = std::make_shared<std::string>("parallel_kf");
+  auto config = std::make_shared<std::string>();
+  auto out = std::make_shared<std::string>();
+  auto files = std::make_shared<std::vector<std::string>>();
+  broad->add_option("--filter", *filter, "Filter name (see `poise bench filters --list`)")
+      ->capture_default_str();
+  broad->add_option("--config", *config, "YAML parameter file for the filter (config/filters/...)")
+      ->check(CLI::ExistingFile);
+  broad->add_option("--out", *out, "Output directory for the per-trial CSV files")->required();
+  broad->add_option("files", *files, "BROAD .hdf5 files")->required()->check(CLI::ExistingFile);
+  broad->callback([=]() {
+    install_stop_handlers();
+    run_eval(*filter, *config, *out, *files);
+  });
+
+  CLI::App* bench_group = subcommand_group(app, "bench", "Benchmarks (figures printed, not asserted)");
+  CLI::App* bench = bench_group->add_subcommand(
+      "filters", "ns per sample of each attitude filter on a BROAD trial (simulator if BROAD is absent)");
+  auto file = std::make_shared<std::string>();
+  auto dir = std::make_shared<std::string>(default_broad_dir());
+  auto repeats = std::make_shared<int>(3);
+  auto list = std::make_shared<bool>(false);
+  bench->add_option("--file", *file, "BROAD .hdf5 trial (default: the first one in --broad-dir)");
+  bench->add_option("--broad-dir", *dir, "Directory searched for BROAD trials")->capture_default_str();
+  bench->add_option("--repeat", *repeats, "Runs per filter (best is reported)")
+      ->check(CLI::Range(1, 100))
+      ->capture_default_str();
+  bench->add_flag("--list", *list, "List the registered filters and exit");
+  bench->callback([=]() {
+    if (*list) {
+      std::cout << "filters:" << filter_list() << "\n";
+      return;
+    }
+    run_bench(*file, *dir, *repeats);
+  });
+}
+
+}  // namespace poise::cli

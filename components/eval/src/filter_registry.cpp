@@ -1,0 +1,62 @@
+#include "poise/eval/filter_registry.h"
+
+#include "poise/gauss_newton/gauss_newton.h"
+#include "poise/parallel_kf/parallel_kf.h"
+
+#include <stdexcept>
+
+namespace poise::eval {
+namespace {
+
+std::vector<FilterEntry>& table() {
+  static std::vector<FilterEntry> t = [] {
+    std::vector<FilterEntry> v;
+    v.push_back({"gauss_newton", "Gauss-Newton orientation from accel + mag (baseline, no disturbance handling)",
+                 [](const std::string& cfg) -> std::unique_ptr<AttitudeFilter> {
+                   return std::make_unique<GaussNewtonFilter>(cfg.empty() ? GaussNewtonParams{}
+                                                                          : load_gauss_newton_params(cfg));
+                 }});
+    v.push_back({"parallel_kf", "parallel Kalman filter, shipped default configuration (paper 000 + extensions)",
+                 [](const std::string& cfg) -> std::unique_ptr<AttitudeFilter> {
+                   return std::make_unique<ParallelKfFilter>(cfg.empty() ? ParallelKfParams::defaults()
+                                                                         : load_parallel_kf_params(cfg));
+                 }});
+    v.push_back({"parallel_kf_paper", "parallel Kalman filter, paper-faithful configuration (eqs. 1-11)",
+                 [](const std::string& cfg) -> std::unique_ptr<AttitudeFilter> {
+                   return std::make_unique<ParallelKfFilter>(cfg.empty() ? ParallelKfParams::paper()
+                                                                         : load_parallel_kf_params(cfg));
+                 }});
+    return v;
+  }();
+  return t;
+}
+
+}  // namespace
+
+void register_filter(const std::string& name, const std::string& description, FilterFactory factory) {
+  for (auto& e : table()) {
+    if (e.name == name) {
+      e.description = description;
+      e.factory = std::move(factory);
+      return;
+    }
+  }
+  table().push_back({name, description, std::move(factory)});
+}
+
+std::vector<FilterEntry> registered_filters() { return table(); }
+
+std::unique_ptr<AttitudeFilter> make_filter(const std::string& name, const std::string& config_path) {
+  for (const auto& e : table()) {
+    if (e.name == name) {
+      return e.factory(config_path);
+    }
+  }
+  std::string known;
+  for (const auto& e : table()) {
+    known += (known.empty() ? "" : ", ") + e.name;
+  }
+  throw std::invalid_argument("unknown filter '" + name + "' (known: " + known + ")");
+}
+
+}  // namespace poise::eval

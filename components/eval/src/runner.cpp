@@ -1,0 +1,85 @@
+#include "poise/eval/runner.h"
+
+#include <cstdio>
+#include <fstream>
+#include <iomanip>
+#include <ostream>
+#include <stdexcept>
+
+namespace poise::eval {
+
+std::vector<Eigen::Quaterniond> run_filter(AttitudeFilter& filter, const BroadTrial& trial) {
+  filter.reset();
+  std::vector<Eigen::Quaterniond> out;
+  out.reserve(trial.size());
+  for (size_t k = 0; k < trial.size(); ++k) {
+    filter.update(trial.sample(k));
+    out.push_back(filter.initialized() ? filter.q_world_body() : Eigen::Quaterniond::Identity());
+  }
+  return out;
+}
+
+void write_quaternion_csv(const std::string& path, const std::vector<Eigen::Quaterniond>& q, double rate_hz) {
+  std::FILE* f = std::fopen(path.c_str(), "w");
+  if (f == nullptr) {
+    throw std::runtime_error("cannot write '" + path + "' (does the output directory exist and is it writable?)");
+  }
+  std::fputs("t_s,qw,qx,qy,qz\n", f);
+  for (size_t k = 0; k < q.size(); ++k) {
+    std::fprintf(f, "%.6f,%.9f,%.9f,%.9f,%.9f\n", static_cast<double>(k) / rate_hz, q[k].w(), q[k].x(),
+                 q[k].y(), q[k].z());
+  }
+  if (std::fclose(f) != 0) {
+    throw std::runtime_error("error while writing '" + path + "'");
+  }
+}
+
+GroupMeans group_means(const std::vector<TrialResult>& results) {
+  GroupMeans g;
+  int n_all = 0;
+  auto add = [](TrialErrors& acc, const TrialErrors& e) {
+    acc.total_deg += e.total_deg;
+    acc.heading_deg += e.heading_deg;
+    acc.inclination_deg += e.inclination_deg;
+    acc.samples += e.samples;
+  };
+  for (const auto& r : results) {
+    add(r.disturbed ? g.disturbed : g.undisturbed, r.errors);
+    add(g.all, r.errors);
+    (r.disturbed ? g.n_disturbed : g.n_undisturbed)++;
+    ++n_all;
+  }
+  auto div = [](TrialErrors& e, int n) {
+    if (n > 0) {
+      e.total_deg /= n;
+      e.heading_deg /= n;
+      e.inclination_deg /= n;
+    }
+  };
+  div(g.undisturbed, g.n_undisturbed);
+  div(g.disturbed, g.n_disturbed);
+  div(g.all, n_all);
+  return g;
+}
+
+void print_table(std::ostream& os, const std::string& filter_name, const std::vector<TrialResult>& results) {
+  os << "BROAD RMSE (deg), filter " << filter_name << "\n";
+  os << std::left << std::setw(48) << "trial" << std::right << std::setw(9) << "total" << std::setw(9)
+     << "heading" << std::setw(9) << "incl" << std::setw(10) << "samples" << "\n";
+  os << std::fixed << std::setprecision(3);
+  for (const auto& r : results) {
+    os << std::left << std::setw(48) << r.stem << std::right << std::setw(9) << r.errors.total_deg << std::setw(9)
+       << r.errors.heading_deg << std::setw(9) << r.errors.inclination_deg << std::setw(10) << r.errors.samples
+       << "\n";
+  }
+  const GroupMeans g = group_means(results);
+  auto line = [&](const std::string& label, const TrialErrors& e, int n) {
+    os << std::left << std::setw(48) << (label + " (" + std::to_string(n) + " trials)") << std::right
+       << std::setw(9) << e.total_deg << std::setw(9) << e.heading_deg << std::setw(9) << e.inclination_deg << "\n";
+  };
+  line("mean undisturbed 01-23", g.undisturbed, g.n_undisturbed);
+  line("mean disturbed 24-39", g.disturbed, g.n_disturbed);
+  line("mean all", g.all, static_cast<int>(results.size()));
+}
+
+}  // namespace poise::eval

@@ -1,0 +1,207 @@
+// ParallelKf: the parallel Kalman filter of paper 000 (J. K. Lee, "A Parallel Kalman Filter for
+// Estimation of Magnetic Disturbance and Orientation Based on Nine-axis Inertial/Magnetic Sensor
+// Signals", Trans. KSME A, 2016), eqs. 1-11, with switchable extensions.
+//
+// Notation (sensor/body frame S; world I = NWU inside the filter: X = horizontal magnetic north,
+// Z = up, Y = Z x X = west; ENU at the interface: x_ENU = -y_NWU, y_ENU = x_NWU, z_ENU = z_NWU)
+//   s_A, s_G, s_M   accelerometer (m/s^2), gyro (rad/s), magnetometer (uT)       (1a)-(1c)
+//   sZ, sa          KF1 state: world up seen in S (unit), external acceleration  (4)   [TiltKf]
+//   sX', sd         KF2 state: local field direction seen in S (unit, dip incl.),
+//                   magnetic disturbance (uT)                                    (8)
+//   g, m, alpha     gravity (m/s^2), field magnitude (uT), dip (rad)             (3a), (3b)
+//   KF2: sX'_k = (I - h[s_G,k-1 x]) sX'_{k-1},  sd_k = c_d sd_{k-1} + eps_d      (9a), (9b)
+//        F2, Q2 (Q22 uses |sd_{k-1}|^2: ESTIMATORS.md reading), H2 = [m I | I],
+//        M2 = sigma_M^2 I                                                         (10), (11a)-(11h)
+//   Combination: sY = normalise(sZ x sX'), sX = sY x sZ, sR = [sX sY sZ]          (2)
+//   World quantities: ^I a = sR^T sa, ^I d = sR^T sd;  R_NWU_body = sR^T.
+// m and alpha are not given by the paper: they are learnt over a start-up window (mean |s_M| and
+// mean angle(s_A, s_M) - 90 deg) or configured, and reported.
+//
+// Extensions (each a switch in ParallelKfParams; all off in ParallelKfParams::paper()):
+//   - gyro bias estimation: at rest (low-passed gyro while rest is detected) and in motion (the
+//     part of each KF correction not explained by the gyro, integrated with time constant
+//     motion_bias_tau_s; heading part only from accepted magnetometer updates);
+//   - magnetic disturbance gating: the heading update is skipped when | |s_M| - m | / m or
+//     |dip(s_M, sZ) - alpha| exceed thresholds (the dip is measured against the filtered up sZ,
+//     not the raw accelerometer, so external acceleration does not trip it); while gated, sd
+//     follows s_M - m sX' so the disturbance output stays meaningful; after mag_reacquire_s of
+//     continuous rejection with a stable field, the new field is adopted as the reference;
+//   - exact rotation propagation, renormalisation, c_a/c_d defined at a reference rate.
+// Bad input (NaN, zero vectors, non-monotonic stamps, gaps) is rejected and counted; the state is
+// untouched (a gap re-anchors time).
+#pragma once
+
+#include "poise/core/attitude.h"
+#include "poise/core/attitude_filter.h"
+#include "poise/core/sample_check.h"
+#include "poise/core/types.h"
+#include "poise/parallel_kf/direction_kf.h"
+#include "poise/parallel_kf/tilt_kf.h"
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace poise {
+
+/// Parameters. The struct defaults are the shipped `default` configuration (most accurate on
+/// BROAD); `paper()` is the faithful one. Every field: unit, and what raising it does.
+struct ParallelKfParams {
+  // --- KF1 (tilt) and KF2 (heading) noise model (paper 000 Table 1 / eqs. 7, 11)
+  TiltKfParams tilt;                     ///< KF1 parameters (sigma_G, sigma_A, c_a, ...)
+  double sigma_gyro_heading_rps = 0.0;   ///< sigma_G for KF2, rad/s (0 = same as tilt.sigma_gyro_rps). Raising: faster heading correction.
+  double sigma_mag_ut = 0.2;             ///< sigma_M, uT (HMC5883L 2 mG). Raising: slower heading correction.
+  double c_d = 0.1;                      ///< disturbance model coefficient (9b), [0, 1)
+  double c_d_rate_hz = 0.0;              ///< > 0: c_d given at this rate and scaled to dt
+  double sigma_gyro_extra_heading_rps = 0.0;  ///< extra gyro error std in Q21, rad/s
+
+  // --- field reference (m, dip)
+  double field_magnitude_ut = std::nan("");  ///< m, uT; NaN = learn at start-up
+  double dip_deg = std::nan("");             ///< alpha, deg; NaN = learn at start-up
+  double startup_s = 1.0;                    ///< start-up window for learning m and alpha, s
+
+  // --- propagation
+  bool gyro_trapezoid = false;  ///< propagate with the mean of s_G at k-1 and k (paper: k-1)
+
+  // --- gyro bias estimation (extension)
+  bool bias_estimation = true;
+  double rest_gyro_max_rps = 2.0 * kRadPerDeg;  ///< rest if the low-passed |s_G| stays below, rad/s
+  double rest_accel_max_mps2 = 0.5;             ///< ... and |s_A - lowpass(s_A)| stays below, m/s^2
+  double rest_min_s = 1.5;                      ///< ... for at least this long, s
+  double rest_filter_tau_s = 0.5;               ///< low-pass time constant of the rest detector, s
+  double rest_bias_tau_s = 2.0;                 ///< time constant of the bias low-pass at rest, s
+  double motion_bias_tau_s = 60.0;              ///< integral time constant in motion, s (0 = off)
+  double max_bias_rps = 3.0 * kRadPerDeg;       ///< clamp of the bias estimate, rad/s
+
+  // --- magnetic disturbance gating of the heading update (extension)
+  bool mag_gating = true;
+  double mag_norm_tol = 0.1;        ///< relative | |s_M| - m | / m above which s_M is rejected
+  double mag_dip_tol_deg = 10.0;    ///< |dip - alpha| above which s_M is rejected, deg
+  double mag_reacquire_s = 20.0;    ///< adopt a stable new field after this long rejected, s (0 = never)
+  double mag_reacquire_tol = 0.05;  ///< relative stability of the candidate field for adoption
+
+  SampleLimits limits;              ///< input validation
+
+  /// The faithful paper configuration (Table 1 noise, c_a = c_d = 0.1 per step, no extensions).
+  static ParallelKfParams paper();
+  /// The shipped default (same as a default-constructed struct).
+  static ParallelKfParams defaults() { return {}; }
+  /// Named configuration: "paper" or "default". Throws std::invalid_argument otherwise.
+  static ParallelKfParams named(const std::string& name);
+  /// Throws std::invalid_argument naming the first out-of-range field.
+  void validate() const;
+};
+
+/// Loads parameters from YAML: optional `preset: paper|default` (base), then any field by name
+/// (nested under `parallel_kf:` or at the top level). Unknown keys and out-of-range values are
+/// errors (std::runtime_error naming the file and key).
+ParallelKfParams load_parallel_kf_params(const std::string& path);
+
+/// Everything the filter reports after a step.
+struct ParallelKfOutput {
+  Eigen::Quaterniond q_world_body = Eigen::Quaterniond::Identity();  ///< ENU
+  Eigen::Vector3d rpy_rad{0, 0, 0};                ///< roll, pitch, yaw (ZYX, ENU yaw), rad
+  Eigen::Vector3d ext_accel_body_mps2{0, 0, 0};    ///< sa
+  Eigen::Vector3d ext_accel_world_mps2{0, 0, 0};   ///< ENU
+  Eigen::Vector3d mag_dist_body_ut{0, 0, 0};       ///< sd
+  Eigen::Vector3d mag_dist_world_ut{0, 0, 0};      ///< ENU
+  double mag_dist_norm_ut = 0.0;
+  Eigen::Vector3d gyro_bias_rps{0, 0, 0};
+  bool rest = false;              ///< rest detected (bias estimation)
+  bool mag_used = false;          ///< the last magnetometer sample corrected the heading
+  bool field_learnt = false;      ///< m and alpha known (configured or learnt)
+  double field_magnitude_ut = 0;  ///< m
+  double dip_rad = 0;             ///< alpha
+};
+
+class ParallelKf {
+ public:
+  explicit ParallelKf(const ParallelKfParams& params = {});
+
+  /// One sample. Returns false when the sample was rejected (counted in rejections()); a sample
+  /// with a bad magnetometer but good gyro/accelerometer is used without its magnetometer.
+  bool update(const ImuSample& s);
+  void reset();
+
+  [[nodiscard]] bool initialized() const { return initialized_; }
+  /// Everything reported (computed on demand from the state).
+  [[nodiscard]] ParallelKfOutput output() const;
+  /// q_world_body (ENU) from sZ and sX' (2); the last valid one if they are (anti)parallel.
+  [[nodiscard]] Eigen::Quaterniond q_world_body() const;
+  [[nodiscard]] const Eigen::Matrix<double, 6, 6>& tilt_covariance() const { return kf1_.covariance(); }
+  [[nodiscard]] const Eigen::Matrix<double, 6, 6>& heading_covariance() const { return kf2_.covariance(); }
+  [[nodiscard]] const TiltKf& tilt_kf() const { return kf1_; }
+  [[nodiscard]] const RejectCounters& rejections() const { return rejections_; }
+  /// Magnetometer samples not used for the heading: gated as disturbed.
+  [[nodiscard]] uint64_t mag_gated_count() const { return mag_gated_; }
+  [[nodiscard]] uint64_t field_reacquired_count() const { return reacquired_; }
+  [[nodiscard]] const ParallelKfParams& params() const { return p_; }
+
+ private:
+  void initialize(const ImuSample& s, bool mag_ok);
+  void learn_field(const Eigen::Vector3d& accel, const Eigen::Vector3d& mag, double dt);
+  void update_rest_and_bias(const Eigen::Vector3d& gyro_raw, const Eigen::Vector3d& accel, double dt);
+  void heading_step(const Eigen::Vector3d& w, const Eigen::Vector3d& accel,
+                    const Eigen::Vector3d& mag, bool mag_ok, double dt);
+
+  ParallelKfParams p_;
+  TiltKf kf1_;
+  DirectionKf kf2_;
+  bool initialized_ = false;
+  bool heading_initialized_ = false;
+  int64_t last_stamp_ns_ = -1;
+  Eigen::Vector3d prev_gyro_{0, 0, 0};  ///< bias-corrected s_G at k-1
+  RejectCounters rejections_;
+  uint64_t mag_gated_ = 0;
+  uint64_t reacquired_ = 0;
+  ParallelKfOutput out_;  ///< only mag_used is kept here (the rest is derived in output())
+  mutable Eigen::Quaterniond last_q_ = Eigen::Quaterniond::Identity();
+
+  // field learning
+  double field_m_ = 0.0;
+  double field_dip_ = 0.0;
+  bool field_learnt_ = false;
+  double learn_time_s_ = 0.0;
+  double learn_norm_sum_ = 0.0;
+  double learn_dip_sum_ = 0.0;
+  int learn_n_ = 0;
+  // reacquisition candidate
+  double cand_norm_ = 0.0;
+  double cand_dip_ = 0.0;
+  double cand_stable_s_ = 0.0;
+  double rejected_s_ = 0.0;
+
+  // bias / rest
+  Eigen::Vector3d bias_{0, 0, 0};
+  Eigen::Vector3d gyro_lp_{0, 0, 0};
+  Eigen::Vector3d accel_lp_{0, 0, 0};
+  double rest_time_s_ = 0.0;
+  bool rest_ = false;
+  bool lp_init_ = false;
+};
+
+/// AttitudeFilter adapter.
+class ParallelKfFilter : public AttitudeFilter {
+ public:
+  explicit ParallelKfFilter(const ParallelKfParams& p = {}) : kf_(p) {}
+  bool update(const ImuSample& s) override { return kf_.update(s); }
+  [[nodiscard]] Eigen::Quaterniond q_world_body() const override { return kf_.q_world_body(); }
+  [[nodiscard]] bool initialized() const override { return kf_.initialized(); }
+  void reset() override { kf_.reset(); }
+  [[nodiscard]] std::map<std::string, uint64_t> rejections() const override {
+    auto m = kf_.rejections().to_map();
+    if (kf_.mag_gated_count() != 0) {
+      m["mag_gated_disturbed"] = kf_.mag_gated_count();
+    }
+    return m;
+  }
+  [[nodiscard]] const ParallelKf& core() const { return kf_; }
+
+ private:
+  ParallelKf kf_;
+};
+
+}  // namespace poise

@@ -1,0 +1,298 @@
+#include "poise/parallel_kf/parallel_kf.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace poise {
+namespace {
+
+constexpr double kInitVarDirection = 1e-2;  // P11 / P21 at (re)initialisation, unit-vector comps^2
+constexpr double kInitVarDisturbanceUt2 = 4.0;  // P22 of KF2 at initialisation, uT^2
+constexpr double kMinCos2Dip = 0.05;        // guard for the heading part of the KF2 correction
+
+}  // namespace
+
+ParallelKfParams ParallelKfParams::paper() {
+  ParallelKfParams p;
+  p.tilt = TiltKfParams{};  // Table 1 noise, c_a = 0.1 per step
+  p.tilt.exact_rotation = false;  // (5a), (9a): first-order propagation
+  p.tilt.renormalize = false;     // the paper does not renormalise sZ, sX'
+  p.sigma_gyro_heading_rps = 0.0;
+  p.sigma_mag_ut = 0.2;
+  p.c_d = 0.1;
+  p.c_d_rate_hz = 0.0;
+  p.sigma_gyro_extra_heading_rps = 0.0;
+  p.gyro_trapezoid = false;
+  p.bias_estimation = false;
+  p.mag_gating = false;
+  return p;
+}
+
+ParallelKfParams ParallelKfParams::named(const std::string& name) {
+  if (name == "paper") {
+    return paper();
+  }
+  if (name == "default") {
+    return defaults();
+  }
+  throw std::invalid_argument("unknown parallel_kf configuration '" + name +
+                              "' (known: paper, default)");
+}
+
+void ParallelKfParams::validate() const {
+  auto need = [](bool ok, const char* what) {
+    if (!ok) {
+      throw std::invalid_argument(std::string("parallel_kf parameter out of range: ") + what);
+    }
+  };
+  need(tilt.sigma_gyro_rps > 0.0, "tilt.sigma_gyro_rps must be > 0 (rad/s)");
+  need(tilt.sigma_accel_mps2 > 0.0, "tilt.sigma_accel_mps2 must be > 0 (m/s^2)");
+  need(tilt.c_a >= 0.0 && tilt.c_a < 1.0, "tilt.c_a must be in [0, 1)");
+  need(tilt.c_a_rate_hz >= 0.0, "tilt.c_a_rate_hz must be >= 0 (Hz)");
+  need(tilt.gravity_mps2 > 5.0 && tilt.gravity_mps2 < 15.0, "tilt.gravity_mps2 must be in (5, 15)");
+  need(tilt.sigma_gyro_extra_rps >= 0.0, "tilt.sigma_gyro_extra_rps must be >= 0");
+  need(sigma_gyro_heading_rps >= 0.0, "sigma_gyro_heading_rps must be >= 0 (0 = tilt value)");
+  need(sigma_mag_ut > 0.0, "sigma_mag_ut must be > 0 (uT)");
+  need(c_d >= 0.0 && c_d < 1.0, "c_d must be in [0, 1)");
+  need(c_d_rate_hz >= 0.0, "c_d_rate_hz must be >= 0 (Hz)");
+  need(sigma_gyro_extra_heading_rps >= 0.0, "sigma_gyro_extra_heading_rps must be >= 0");
+  need(std::isnan(field_magnitude_ut) || field_magnitude_ut > 0.0, "field_magnitude_ut must be > 0 or null");
+  need(std::isnan(dip_deg) || std::abs(dip_deg) < 90.0, "dip_deg must be in (-90, 90) or null");
+  need(startup_s > 0.0, "startup_s must be > 0 (s)");
+  need(rest_gyro_max_rps > 0.0 && rest_accel_max_mps2 > 0.0, "rest thresholds must be > 0");
+  need(rest_min_s >= 0.0 && rest_filter_tau_s > 0.0 && rest_bias_tau_s > 0.0, "rest times must be > 0");
+  need(motion_bias_tau_s >= 0.0, "motion_bias_tau_s must be >= 0 (0 = off)");
+  need(max_bias_rps > 0.0, "max_bias_rps must be > 0");
+  need(mag_norm_tol > 0.0 && mag_dip_tol_deg > 0.0, "mag gating tolerances must be > 0");
+  need(mag_reacquire_s >= 0.0 && mag_reacquire_tol > 0.0, "mag_reacquire_s >= 0, mag_reacquire_tol > 0");
+  need(limits.max_dt_s > 0.0, "limits.max_dt_s must be > 0 (s)");
+}
+
+ParallelKf::ParallelKf(const ParallelKfParams& params) : p_(params), kf1_(params.tilt) {
+  p_.validate();
+  DirectionKfParams d;
+  d.sigma_gyro_rps = p_.sigma_gyro_heading_rps > 0.0 ? p_.sigma_gyro_heading_rps : p_.tilt.sigma_gyro_rps;
+  d.sigma_meas = p_.sigma_mag_ut;
+  d.c = p_.c_d;
+  d.c_rate_hz = p_.c_d_rate_hz;
+  d.exact_rotation = p_.tilt.exact_rotation;
+  d.renormalize = p_.tilt.renormalize;
+  d.sigma_gyro_extra_rps = p_.sigma_gyro_extra_heading_rps;
+  kf2_.set_params(d);
+  reset();
+}
+
+void ParallelKf::reset() {
+  kf1_ = TiltKf(p_.tilt);
+  kf2_.reset(Eigen::Vector3d::UnitX(), kInitVarDirection, kInitVarDisturbanceUt2);
+  initialized_ = false;
+  heading_initialized_ = false;
+  last_stamp_ns_ = -1;
+  prev_gyro_.setZero();
+  rejections_ = RejectCounters{};
+  mag_gated_ = 0;
+  reacquired_ = 0;
+  out_ = ParallelKfOutput{};
+  last_q_ = Eigen::Quaterniond::Identity();
+  field_m_ = std::isfinite(p_.field_magnitude_ut) ? p_.field_magnitude_ut : 0.0;
+  field_dip_ = std::isfinite(p_.dip_deg) ? p_.dip_deg * kRadPerDeg : 0.0;
+  field_learnt_ = std::isfinite(p_.field_magnitude_ut) && std::isfinite(p_.dip_deg);
+  learn_time_s_ = 0.0;
+  learn_norm_sum_ = 0.0;
+  learn_dip_sum_ = 0.0;
+  learn_n_ = 0;
+  cand_norm_ = 0.0;
+  cand_dip_ = 0.0;
+  cand_stable_s_ = 0.0;
+  rejected_s_ = 0.0;
+  bias_.setZero();
+  gyro_lp_.setZero();
+  accel_lp_.setZero();
+  rest_time_s_ = 0.0;
+  rest_ = false;
+  lp_init_ = false;
+}
+
+bool ParallelKf::update(const ImuSample& s) {
+  const SampleCheck c = check_imu_sample(s, last_stamp_ns_, p_.limits, rejections_);
+  if (c.reanchor) {
+    last_stamp_ns_ = s.stamp_ns;  // restart time after a gap; attitude kept
+    return false;
+  }
+  if (!c.accept) {
+    return false;
+  }
+  last_stamp_ns_ = s.stamp_ns;
+  if (!initialized_) {
+    initialize(s, c.mag_ok);
+    return true;
+  }
+  const double dt = c.dt_s;
+  if (p_.bias_estimation) {
+    update_rest_and_bias(s.gyro_rps, s.accel_mps2, dt);
+  }
+  const Eigen::Vector3d gyro = s.gyro_rps - bias_;
+  const Eigen::Vector3d w = p_.gyro_trapezoid ? Eigen::Vector3d(0.5 * (prev_gyro_ + gyro)) : prev_gyro_;
+
+  // KF1: tilt + external acceleration (5)-(7)
+  kf1_.predict(w, dt);
+  kf1_.correct(s.accel_mps2);
+  if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && !rest_) {
+    bias_ -= kf1_.last_correction_rotvec() / p_.motion_bias_tau_s;
+  }
+
+  // KF2: heading + magnetic disturbance (8)-(11)
+  heading_step(w, s.accel_mps2, s.mag_ut, c.mag_ok, dt);
+
+  if (p_.bias_estimation) {
+    const double bn = bias_.norm();
+    if (bn > p_.max_bias_rps) {
+      bias_ *= p_.max_bias_rps / bn;
+    }
+  }
+  prev_gyro_ = gyro;
+  return true;
+}
+
+void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
+  kf1_.reset(s.accel_mps2);  // sZ from the accelerometer
+  if (mag_ok) {
+    kf2_.reset(s.mag_ut.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
+    heading_initialized_ = true;
+    learn_field(s.accel_mps2, s.mag_ut, 0.0);
+  }
+  prev_gyro_ = s.gyro_rps;
+  initialized_ = true;
+}
+
+void ParallelKf::learn_field(const Eigen::Vector3d& /*accel*/, const Eigen::Vector3d& mag, double dt) {
+  // Mean |s_M| and mean dip against the filtered up sZ over the start-up window.
+  learn_norm_sum_ += mag.norm();
+  learn_dip_sum_ += angle_between_vectors(kf1_.up_body(), mag) - 0.5 * kPi;
+  ++learn_n_;
+  learn_time_s_ += dt;
+  if (!std::isfinite(p_.field_magnitude_ut)) {
+    field_m_ = learn_norm_sum_ / learn_n_;
+  }
+  if (!std::isfinite(p_.dip_deg)) {
+    field_dip_ = learn_dip_sum_ / learn_n_;
+  }
+  if (learn_time_s_ >= p_.startup_s) {
+    field_learnt_ = true;
+  }
+}
+
+void ParallelKf::update_rest_and_bias(const Eigen::Vector3d& gyro_raw, const Eigen::Vector3d& accel,
+                                      double dt) {
+  if (!lp_init_) {
+    gyro_lp_ = gyro_raw;
+    accel_lp_ = accel;
+    lp_init_ = true;
+  }
+  const double a = dt / (p_.rest_filter_tau_s + dt);
+  gyro_lp_ += a * (gyro_raw - gyro_lp_);
+  accel_lp_ += a * (accel - accel_lp_);
+  const bool still = gyro_lp_.norm() < p_.rest_gyro_max_rps &&
+                     (gyro_raw - gyro_lp_).norm() < p_.rest_gyro_max_rps &&
+                     (accel - accel_lp_).norm() < p_.rest_accel_max_mps2;
+  rest_time_s_ = still ? rest_time_s_ + dt : 0.0;
+  rest_ = rest_time_s_ >= p_.rest_min_s;
+  if (rest_) {
+    bias_ += (dt / (p_.rest_bias_tau_s + dt)) * (gyro_lp_ - bias_);
+  }
+}
+
+void ParallelKf::heading_step(const Eigen::Vector3d& w, const Eigen::Vector3d& accel,
+                              const Eigen::Vector3d& mag, bool mag_ok, double dt) {
+  out_.mag_used = false;
+  if (heading_initialized_) {
+    kf2_.predict(w, dt);  // (9a), (9b), (11a)-(11e)
+  }
+  if (!mag_ok) {
+    return;
+  }
+  if (!heading_initialized_) {
+    kf2_.reset(mag.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
+    heading_initialized_ = true;
+  }
+  if (!field_learnt_) {
+    learn_field(accel, mag, dt);
+  } else if (p_.mag_gating) {
+    const double norm = mag.norm();
+    const double dip = angle_between_vectors(kf1_.up_body(), mag) - 0.5 * kPi;
+    const bool disturbed = std::abs(norm - field_m_) > p_.mag_norm_tol * field_m_ ||
+                           std::abs(dip - field_dip_) > p_.mag_dip_tol_deg * kRadPerDeg;
+    if (disturbed) {
+      ++mag_gated_;
+      rejected_s_ += dt;
+      // the disturbance seen through the propagated heading: sd = s_M - m sX'
+      kf2_.set_e(mag - field_m_ * kf2_.u());
+      // candidate for a new reference: low-passed norm/dip and how long they stayed stable
+      if (p_.mag_reacquire_s > 0.0) {
+        if (cand_norm_ <= 0.0) {
+          cand_norm_ = norm;
+          cand_dip_ = dip;
+        }
+        const double k = dt / (1.0 + dt);
+        cand_norm_ += k * (norm - cand_norm_);
+        cand_dip_ += k * (dip - cand_dip_);
+        const bool stable = std::abs(norm - cand_norm_) < p_.mag_reacquire_tol * cand_norm_ &&
+                            std::abs(dip - cand_dip_) < 0.5 * p_.mag_dip_tol_deg * kRadPerDeg;
+        cand_stable_s_ = stable ? cand_stable_s_ + dt : 0.0;
+        if (rejected_s_ >= p_.mag_reacquire_s && cand_stable_s_ >= p_.mag_reacquire_s) {
+          field_m_ = cand_norm_;
+          field_dip_ = cand_dip_;
+          ++reacquired_;
+          rejected_s_ = 0.0;
+          cand_stable_s_ = 0.0;
+          cand_norm_ = 0.0;
+        }
+      }
+      return;
+    }
+    rejected_s_ = 0.0;
+    cand_stable_s_ = 0.0;
+    cand_norm_ = 0.0;
+  }
+  const Eigen::Vector3d x_prior = kf2_.u();
+  kf2_.correct(mag, field_m_);  // (10b), (11f)-(11h)
+  out_.mag_used = true;
+  if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && !rest_ && field_learnt_) {
+    // heading part (about sZ) of the correction rotation, sX'+ x sX'- = dtheta_perp(sX')
+    const Eigen::Vector3d& z = kf1_.up_body();
+    const Eigen::Vector3d corr = kf2_.u().normalized().cross(x_prior.normalized());
+    const double c2 = std::max(std::cos(field_dip_) * std::cos(field_dip_), kMinCos2Dip);
+    bias_ -= (corr.dot(z) / c2 / p_.motion_bias_tau_s) * z;
+  }
+}
+
+Eigen::Quaterniond ParallelKf::q_world_body() const {
+  Eigen::Matrix3d r_body_world;  // sR = [sX sY sZ] (2)
+  const Eigen::Vector3d fwd = heading_initialized_ ? kf2_.u() : Eigen::Vector3d::UnitX();
+  if (!initialized_ || !body_world_axes_from_up_forward(kf1_.up_body(), fwd, r_body_world)) {
+    return last_q_;
+  }
+  last_q_ = quat_canonical(quat_enu_nwu() * Eigen::Quaterniond(Eigen::Matrix3d(r_body_world.transpose())));
+  return last_q_;
+}
+
+ParallelKfOutput ParallelKf::output() const {
+  ParallelKfOutput o;
+  o.q_world_body = q_world_body();
+  o.rpy_rad = euler_zyx_from_quat(o.q_world_body);
+  o.ext_accel_body_mps2 = kf1_.ext_accel_body();
+  o.ext_accel_world_mps2 = o.q_world_body * o.ext_accel_body_mps2;
+  o.mag_dist_body_ut = kf2_.e();
+  o.mag_dist_world_ut = o.q_world_body * o.mag_dist_body_ut;
+  o.mag_dist_norm_ut = o.mag_dist_body_ut.norm();
+  o.gyro_bias_rps = bias_;
+  o.rest = rest_;
+  o.mag_used = out_.mag_used;
+  o.field_learnt = field_learnt_;
+  o.field_magnitude_ut = field_m_;
+  o.dip_rad = field_dip_;
+  return o;
+}
+
+}  // namespace poise
