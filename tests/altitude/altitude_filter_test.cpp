@@ -1,0 +1,221 @@
+// AltitudeFilter scenarios in simulated time: rest, constant climb, bad input, configuration.
+#include "poise/altitude/altitude_filter.h"
+
+#include "poise/testing/testing.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <stdexcept>
+
+namespace poise {
+namespace {
+
+constexpr double kG = IsaConstants::kG;
+constexpr int64_t kStepNs = 10'000'000;  // 100 Hz
+constexpr double kDt = 0.01;
+
+/// A noiseless sample of a level, still or vertically moving sensor at height h.
+/// `yaw_rate_rps` turns the sensor about the vertical (which keeps it level and the accelerometer
+/// unchanged) so that the ZUPT detector does not take a constant-velocity climb for rest.
+ImuSample level_sample(int64_t stamp_ns, double height_m, double vertical_accel_mps2 = 0.0,
+                       double yaw_rate_rps = 0.0) {
+  ImuSample s;
+  s.stamp_ns = stamp_ns;
+  s.accel_mps2 = Eigen::Vector3d(0.0, 0.0, kG + vertical_accel_mps2);
+  s.gyro_rps = Eigen::Vector3d(0.0, 0.0, yaw_rate_rps);
+  s.has_mag = false;
+  s.has_pressure = true;
+  s.pressure_pa = isa_pressure_pa(height_m, IsaConstants::kP0Pa);
+  return s;
+}
+
+TEST(AltitudeFilter, GivenRestWhenRunThenHeightIsBaroAndVelocityZeroAndStationary) {
+  constexpr double kHeightTolM = 1e-3;
+  constexpr double kVelTolMps = 1e-6;
+  AltitudeFilter f;
+  for (int k = 0; k < 500; ++k) {
+    ASSERT_TRUE(f.update(level_sample(k * kStepNs, 42.0)));
+  }
+  const auto& e = f.estimate();
+  EXPECT_TRUE(e.valid);
+  EXPECT_NEAR(e.height_m, 42.0, kHeightTolM);
+  EXPECT_NEAR(e.baro_height_m, 42.0, kHeightTolM);
+  EXPECT_NEAR(e.vertical_velocity_mps, 0.0, kVelTolMps);
+  EXPECT_TRUE(e.stationary);
+  EXPECT_TRUE(e.zupt_applied);
+  EXPECT_EQ(f.rejects().total(), 0U);
+}
+
+/// GIVEN a constant 0.5 m/s climb (baro consistent, level, no noise) WHEN each method runs for 30 s
+/// THEN the vertical velocity converges to 0.5 m/s and the height follows the truth.
+class AltitudeMethodTest : public ::testing::TestWithParam<AltitudeMethod> {};
+
+TEST_P(AltitudeMethodTest, ConstantClimbConverges) {
+  constexpr double kClimbMps = 0.5;
+  constexpr double kVelTolMps = 0.01;
+  constexpr double kHeightTolM = 0.05;
+  constexpr double kTurnRps = 0.3;
+  AltitudeParams p;
+  p.method = GetParam();
+  AltitudeFilter f(p);
+  // 2 s at rest, then accelerate at 0.5 m/s^2 for 1 s, then climb at constant speed.
+  double h = 10.0;
+  double v = 0.0;
+  int64_t t = 0;
+  for (int k = 0; k < 3200; ++k) {
+    const double a = (k >= 200 && k < 300) ? kClimbMps : 0.0;
+    ASSERT_TRUE(f.update(level_sample(t, h, a, kTurnRps)));
+    h += v * kDt + 0.5 * a * kDt * kDt;
+    v += a * kDt;
+    t += kStepNs;
+  }
+  EXPECT_NEAR(v, kClimbMps, 1e-9);
+  EXPECT_NEAR(f.estimate().vertical_velocity_mps, kClimbMps, kVelTolMps) << to_string(p.method);
+  EXPECT_NEAR(f.estimate().height_m, h, kHeightTolM) << to_string(p.method);
+  EXPECT_FALSE(f.estimate().stationary);
+}
+
+INSTANTIATE_TEST_SUITE_P(AllMethods, AltitudeMethodTest,
+                         ::testing::Values(AltitudeMethod::kTwoStepKf, AltitudeMethod::kCfZupt,
+                                           AltitudeMethod::kPiCfZupt, AltitudeMethod::kPiCf));
+
+TEST(AltitudeFilter, GivenAccelBiasWhenMovingWithoutStopsThenTheIntegralShrinksTheVelocityError) {
+  // GIVEN a 0.05 m/s^2 vertical accelerometer bias b and a constant 0.3 m/s climb (no stop: ZUPT
+  // cannot help) WHEN 300 s pass THEN the steady-state velocity errors are those of the loops:
+  //   conventional CF (13):          k1 b / k2      (0.19 m/s with the default gains)
+  //   PI CF, K_i [1; 1] (default):   b * 1 s        (the integral also feeds the height rate)
+  //   PI CF, K_i [0; 1]:             0
+  constexpr double kBias = 0.05;
+  constexpr double kClimbMps = 0.3;
+  constexpr double kTurnRps = 0.3;
+  constexpr double kRelTol = 0.1;
+  constexpr double kZeroTolMps = 0.005;
+  auto run = [&](AltitudeMethod m, bool velocity_only) {
+    AltitudeParams p;
+    p.method = m;
+    p.integral_velocity_only = velocity_only;
+    AltitudeFilter f(p);
+    double h = 0.0;
+    for (int k = 0; k < 30000; ++k) {
+      f.update(level_sample(k * kStepNs, h, kBias, kTurnRps));
+      h += kClimbMps * kDt;
+    }
+    return std::make_pair(f.estimate().vertical_velocity_mps - kClimbMps, f.cf_gain());
+  };
+  const auto [err_cf, gain] = run(AltitudeMethod::kCfZupt, false);
+  const double expected_cf = gain(0) * kBias / gain(1);
+  EXPECT_NEAR(err_cf, expected_cf, kRelTol * expected_cf);
+  const double err_pi = run(AltitudeMethod::kPiCfZupt, false).first;
+  EXPECT_NEAR(err_pi, kBias * 1.0, kRelTol * kBias);
+  EXPECT_LT(std::abs(err_pi), 0.5 * std::abs(err_cf));
+  const double err_pi_v = run(AltitudeMethod::kPiCfZupt, true).first;
+  EXPECT_LT(std::abs(err_pi_v), kZeroTolMps);
+}
+
+TEST(AltitudeFilter, GainsFollowEquation14OrHiggins) {
+  AltitudeParams p;
+  p.sigma_acc_mps2 = 0.08;
+  p.sigma_baro_m = 0.5;
+  p.gains = CfGains::kPaper;
+  AltitudeFilter paper(p);
+  EXPECT_NEAR(paper.cf_gain()(0), std::sqrt(0.16), 1e-12);
+  EXPECT_NEAR(paper.cf_gain()(1), 0.16, 1e-12);
+  p.gains = CfGains::kHiggins;
+  AltitudeFilter higgins(p);
+  EXPECT_NEAR(higgins.cf_gain()(0), std::sqrt(0.32), 1e-12);
+  EXPECT_NEAR(higgins.cf_gain()(1), 0.16, 1e-12);
+}
+
+TEST(AltitudeFilter, BadInputIsRejectedAndCounted) {
+  AltitudeFilter f;
+  int64_t t = 0;
+  for (int k = 0; k < 100; ++k, t += kStepNs) {
+    ASSERT_TRUE(f.update(level_sample(t, 5.0)));
+  }
+  const double h_before = f.estimate().height_m;
+
+  // WHEN pressures <= 0, NaN and out of range arrive THEN only the pressure is rejected.
+  for (double bad : {0.0, -100.0, std::nan(""), 5000.0, 200000.0}) {
+    ImuSample s = level_sample(t, 5.0);
+    s.pressure_pa = bad;
+    EXPECT_TRUE(f.update(s));
+    EXPECT_FALSE(f.estimate().baro_fresh);
+    t += kStepNs;
+  }
+  EXPECT_EQ(f.rejects().bad_pressure, 5U);
+
+  // WHEN the accelerometer or gyro is NaN or missing THEN the sample is rejected.
+  ImuSample nan_accel = level_sample(t, 5.0);
+  nan_accel.accel_mps2.x() = std::nan("");
+  EXPECT_FALSE(f.update(nan_accel));
+  ImuSample inf_gyro = level_sample(t, 5.0);
+  inf_gyro.gyro_rps.z() = std::numeric_limits<double>::infinity();
+  EXPECT_FALSE(f.update(inf_gyro));
+  ImuSample no_accel = level_sample(t, 5.0);
+  no_accel.has_accel = false;
+  EXPECT_FALSE(f.update(no_accel));
+  EXPECT_EQ(f.rejects().non_finite_imu, 3U);
+
+  // WHEN a stamp repeats or goes back THEN it is rejected.
+  EXPECT_FALSE(f.update(level_sample(t - kStepNs, 5.0)));
+  EXPECT_FALSE(f.update(level_sample(t - 10 * kStepNs, 5.0)));
+  EXPECT_EQ(f.rejects().non_monotonic_stamp, 2U);
+
+  // WHEN a 5 s gap arrives THEN time re-anchors (counted) and the filter keeps running.
+  t += 500 * kStepNs;
+  EXPECT_TRUE(f.update(level_sample(t, 5.0)));
+  EXPECT_EQ(f.rejects().dt_gap, 1U);
+  for (int k = 0; k < 50; ++k) {
+    t += kStepNs;
+    ASSERT_TRUE(f.update(level_sample(t, 5.0)));
+  }
+  EXPECT_TRUE(std::isfinite(f.estimate().height_m));
+  EXPECT_NEAR(f.estimate().height_m, h_before, 0.01);
+  EXPECT_EQ(f.rejects().total(), 11U);
+}
+
+TEST(AltitudeFilter, InvalidParamsThrow) {
+  AltitudeParams p;
+  p.sigma_baro_m = 0.0;
+  EXPECT_THROW(AltitudeFilter{p}, std::invalid_argument);
+  p = AltitudeParams{};
+  p.min_pressure_pa = 120000.0;
+  EXPECT_FALSE(p.validate().empty());
+}
+
+TEST(AltitudeConfig, ShippedYamlLoadsTheDefaults) {
+  const AltitudeParams p = load_altitude_params(testing::source_path("config/filters/altitude.yaml"));
+  const AltitudeParams d;
+  EXPECT_EQ(p.method, d.method);
+  EXPECT_EQ(p.gains, d.gains);
+  EXPECT_DOUBLE_EQ(p.sigma_acc_mps2, d.sigma_acc_mps2);
+  EXPECT_DOUBLE_EQ(p.sigma_baro_m, d.sigma_baro_m);
+  EXPECT_DOUBLE_EQ(p.k_i, d.k_i);
+  EXPECT_EQ(p.integral_time_scaled, d.integral_time_scaled);
+  EXPECT_DOUBLE_EQ(p.reference_pressure_pa, d.reference_pressure_pa);
+  EXPECT_EQ(p.tilt.exact_rotation, d.tilt.exact_rotation);
+  EXPECT_EQ(p.tilt.renormalize, d.tilt.renormalize);
+}
+
+TEST(AltitudeConfig, UnknownKeysAndBadValuesAreErrors) {
+  const std::string path = ::testing::TempDir() + "/altitude_bad.yaml";
+  const auto write = [&path](const std::string& text) {
+    std::ofstream(path) << text;
+  };
+  write("cf:\n  sigma_acc: 0.1\n");
+  EXPECT_THROW(load_altitude_params(path), std::runtime_error);
+  write("method: magic\n");
+  EXPECT_THROW(load_altitude_params(path), std::runtime_error);
+  write("cf:\n  sigma_baro_m: -1\n");
+  EXPECT_THROW(load_altitude_params(path), std::runtime_error);
+  write("barometer:\n  reference_pressure_pa: 102000\nmethod: cf_zupt\n");
+  const AltitudeParams p = load_altitude_params(path);
+  EXPECT_DOUBLE_EQ(p.reference_pressure_pa, 102000.0);
+  EXPECT_EQ(p.method, AltitudeMethod::kCfZupt);
+  EXPECT_THROW(load_altitude_params(path + ".missing"), std::runtime_error);
+}
+
+}  // namespace
+}  // namespace poise
