@@ -97,7 +97,8 @@ class StreamStats {
   StreamStats(std::string topic, double silence_ms)
       : topic_(std::move(topic)), silence_ns_(static_cast<int64_t>(silence_ms * 1e6)) {}
 
-  void on_sample(const std::string& source, uint32_t seq) {
+  /// `writer`: the publishing DataWriter's GUID; a new GUID for a known source is a restart.
+  void on_sample(const std::string& source, uint32_t seq, const std::string& writer) {
     const int64_t t = now_ns();
     std::lock_guard<std::mutex> lock(mutex_);
     auto [it, inserted] = sources_.try_emplace(source);
@@ -108,13 +109,13 @@ class StreamStats {
     } else {
       uint64_t lost_now = 0;
       bool restart = false;
-      if (seq > s.last_seq + 1U) {
+      if (writer != s.writer || seq <= s.last_seq) {
+        restart = true;  // a new publisher instance (e.g. restarted after kill -9)
+        ++s.restarts;
+      } else if (seq > s.last_seq + 1U) {
         lost_now = seq - s.last_seq - 1U;
         s.lost += lost_now;
         ++s.gaps;
-      } else if (seq <= s.last_seq) {
-        restart = true;  // a new publisher instance (e.g. restarted after kill -9) starts over
-        ++s.restarts;
       }
       const int64_t silence = t - s.last_ns;
       if (silence >= silence_ns_ || restart) {
@@ -126,6 +127,7 @@ class StreamStats {
     }
     s.last_seq = seq;
     s.last_ns = t;
+    s.writer = writer;
     ++s.received;
   }
 
@@ -150,12 +152,24 @@ class StreamStats {
     uint64_t lost = 0;
     uint64_t gaps = 0;
     uint64_t restarts = 0;
+    std::string writer;
   };
   std::string topic_;
   int64_t silence_ns_;
   std::mutex mutex_;
   std::map<std::string, Source> sources_;
 };
+
+/// The publishing writer's GUID (from SampleInfo) as hex.
+std::string writer_id(const eprosima::fastdds::dds::SampleInfo& info) {
+  std::string out;
+  char byte[3];
+  for (size_t i = 0; i < 16; ++i) {
+    std::snprintf(byte, sizeof(byte), "%02x", static_cast<unsigned>(info.publication_handle.value[i]));
+    out += byte;
+  }
+  return out;
+}
 
 /// Reports changes of an endpoint's matched count.
 template <typename Endpoint>
@@ -280,8 +294,8 @@ int run_fusion(const Common& c, const std::string& filter_id) {
   uint32_t out_seq = 0;
   msg::AttitudeEstimate out;
   dds::Reader<msg::ImuSamplePubSubType> imu_reader(
-      participant, in_topic, [&](const msg::ImuSample& in, const auto& /*info*/) {
-        imu_stats.on_sample(in.sensor_id().to_string(), in.header().seq());
+      participant, in_topic, [&](const msg::ImuSample& in, const auto& info) {
+        imu_stats.on_sample(in.sensor_id().to_string(), in.header().seq(), writer_id(info));
         const double ax = in.accel_mps2().x();
         const double ay = in.accel_mps2().y();
         const double az = in.accel_mps2().z();
@@ -306,8 +320,8 @@ int run_fusion(const Common& c, const std::string& filter_id) {
         writer.write(out);
       });
   dds::Reader<msg::VisionPosePubSubType> vision_reader(
-      participant, "vision_pose", [&](const msg::VisionPose& in, const auto& /*info*/) {
-        vision_stats.on_sample(in.sensor_id().to_string(), in.header().seq());
+      participant, "vision_pose", [&](const msg::VisionPose& in, const auto& info) {
+        vision_stats.on_sample(in.sensor_id().to_string(), in.header().seq(), writer_id(info));
       });
   int matched_in = -1;
   int matched_out = -1;
@@ -332,20 +346,20 @@ int run_watch(const Common& c, const std::string& type) {
   };
   if (type == "imu") {
     dds::Reader<msg::ImuSamplePubSubType> reader(
-        participant, topic, [&](const msg::ImuSample& m, const auto& /*info*/) {
-          stats.on_sample(m.sensor_id().to_string(), m.header().seq());
+        participant, topic, [&](const msg::ImuSample& m, const auto& info) {
+          stats.on_sample(m.sensor_id().to_string(), m.header().seq(), writer_id(info));
         });
     watch(reader);
   } else if (type == "vision_pose") {
     dds::Reader<msg::VisionPosePubSubType> reader(
-        participant, topic, [&](const msg::VisionPose& m, const auto& /*info*/) {
-          stats.on_sample(m.sensor_id().to_string(), m.header().seq());
+        participant, topic, [&](const msg::VisionPose& m, const auto& info) {
+          stats.on_sample(m.sensor_id().to_string(), m.header().seq(), writer_id(info));
         });
     watch(reader);
   } else {
     dds::Reader<msg::AttitudeEstimatePubSubType> reader(
-        participant, topic, [&](const msg::AttitudeEstimate& m, const auto& /*info*/) {
-          stats.on_sample(m.sensor_id().to_string(), m.header().seq());
+        participant, topic, [&](const msg::AttitudeEstimate& m, const auto& info) {
+          stats.on_sample(m.sensor_id().to_string(), m.header().seq(), writer_id(info));
         });
     watch(reader);
   }

@@ -130,6 +130,11 @@ NetLab::NetLab(const std::vector<std::string>& hosts, bool multicast) : hosts_(h
       ip_cmd({"link", "add", "name", port, "netns", sw, "type", "veth", "peer", "name", "eth0",
               "netns", h});
       ip_cmd({"-n", sw, "link", "set", port, "master", "br0", "up"});
+      if (!multicast) {
+        // A switch that drops multicast (as many managed / Wi-Fi networks do): the bridge port
+        // does not flood multicast frames; broadcast (ARP) and unicast still pass.
+        ip_cmd({"-n", sw, "link", "set", port, "type", "bridge_slave", "mcast_flood", "off"});
+      }
       ip_cmd({"-n", h, "link", "set", "lo", "up"});
       ip_cmd({"-n", h, "addr", "add", ip(hosts[i]) + "/24", "dev", "eth0"});
       ip_cmd({"-n", h, "link", "set", "eth0", "multicast", multicast ? "on" : "off", "up"});

@@ -28,8 +28,9 @@ int64_t monotonic_ns();
 
 class NetLab {
  public:
-  /// Hosts get 10.77.0.1, .2, ... in order. `multicast` false: interfaces without the MULTICAST
-  /// flag and no multicast route, so SPDP multicast discovery cannot work (discovery server tests).
+  /// Hosts get 10.77.0.1, .2, ... in order. `multicast` false: the switch drops multicast (bridge
+  /// ports with mcast_flood off), the interfaces have no MULTICAST flag and no multicast route, so
+  /// SPDP multicast discovery cannot work (discovery server tests).
   explicit NetLab(const std::vector<std::string>& hosts, bool multicast = true);
   ~NetLab();
   NetLab(const NetLab&) = delete;

@@ -1,0 +1,166 @@
+// Discovery without multicast: hosts whose interfaces have no MULTICAST flag and no multicast route
+// (SPDP multicast cannot leave them), with and without a `fast-discovery-server`.
+#include "netlab.h"
+
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+namespace poise::nettest {
+namespace {
+
+using namespace std::chrono_literals;
+constexpr auto kDiscoveryBound = 15s;
+/// How long the negative control waits for a discovery that must not happen: simple discovery
+/// announces every 3 s in Fast DDS 2.9 (first announcements immediately), so 4 s covers several.
+constexpr auto kNoDiscoveryWindow = 4s;
+constexpr const char* kServerPort = "11811";
+
+std::string read_file(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::string server_binary() {
+  for (const char* c : {"/usr/bin/fast-discovery-server", "/usr/local/bin/fast-discovery-server"}) {
+    if (::access(c, X_OK) == 0) {
+      return c;
+    }
+  }
+  return {};
+}
+
+/// The source's time from "both processes started" to "the reader matched": discovery time.
+double discovery_ms(const testing::Child& publisher, const testing::Child& reader,
+                    const Event& matched) {
+  const auto a = find_events(publisher.output(), "start");
+  const auto b = find_events(reader.output(), "start");
+  if (a.empty() || b.empty()) {
+    return -1.0;
+  }
+  return (matched.num("t_ns") - std::max(a[0].num("t_ns"), b[0].num("t_ns"))) * 1e-6;
+}
+
+// The built-in endpoint profiles are copied into the discovery server file: they must not drift.
+TEST(DiscoveryServerConfig, EndpointProfilesMatchTheBuiltInProfiles) {
+  const std::string builtin = read_file(testing::source_path("config/qos/poise_profiles.xml"));
+  const std::string ds = read_file(testing::source_path("config/qos/discovery_server_client.xml"));
+  const auto endpoints = [](const std::string& xml) {
+    const size_t begin = xml.find("<data_writer");
+    const size_t end = xml.find("</profiles>");
+    return (begin == std::string::npos || end == std::string::npos) ? std::string()
+                                                                    : xml.substr(begin, end - begin);
+  };
+  ASSERT_FALSE(endpoints(builtin).empty());
+  EXPECT_EQ(endpoints(ds), endpoints(builtin))
+      << "copy the <data_writer>/<data_reader> profiles of poise_profiles.xml into "
+         "discovery_server_client.xml";
+  EXPECT_NE(ds.find("profile_name=\"poise_ds_client\""), std::string::npos);
+  EXPECT_NE(ds.find("<discoveryProtocol>CLIENT</discoveryProtocol>"), std::string::npos);
+}
+
+// GIVEN multicast blocked WHEN two hosts use simple discovery THEN they never find each other
+// (the control showing that the server test below is meaningful).
+TEST(DiscoveryServer, WithoutServerMulticastBlockedHostsDoNotDiscover) {
+  POISE_REQUIRE_NETLAB();
+  testing::DomainLease lease;
+  const std::string domain = std::to_string(lease.id());
+  NetLab lab({"imu", "fusion"}, /*multicast=*/false);
+  auto watch = lab.node("fusion", {"watch", "--domain", domain, "--type", "imu"});
+  auto imu = lab.node("imu", {"imu", "--domain", domain, "--rate-hz", "50"});
+  const auto first = wait_event(*watch, "first", {}, kNoDiscoveryWindow);
+  EXPECT_FALSE(first) << "discovered without multicast and without a server:\n" << watch->output();
+  ASSERT_FALSE(find_events(imu->output(), "start").empty())
+      << "the publisher must be running for the control to mean anything:\n" << imu->output();
+}
+
+struct ServerCase {
+  const char* name;
+  bool via_xml;  // true: POISE_QOS_FILE with the client profile; false: ROS_DISCOVERY_SERVER
+};
+
+class DiscoveryServerTest : public ::testing::TestWithParam<ServerCase> {};
+
+// GIVEN multicast blocked and a fast-discovery-server on a fifth host
+// WHEN the IMU, fusion and recorder hosts are its clients
+// THEN IMU -> fusion -> recorder flows as on a multicast LAN.
+TEST_P(DiscoveryServerTest, ClientsDiscoverThroughTheServerWithMulticastBlocked) {
+  POISE_REQUIRE_NETLAB();
+  const std::string server_bin = server_binary();
+  if (server_bin.empty()) {
+    GTEST_SKIP() << "fast-discovery-server not installed (apt-get install fastdds-tools)";
+  }
+  testing::DomainLease lease;
+  const std::string domain = std::to_string(lease.id());
+  NetLab lab({"server", "imu", "fusion", "recorder"}, /*multicast=*/false);
+  const std::string server_ip = lab.ip("server");
+  testing::Child server(
+      lab.in_host("server", {server_bin, "-i", "0", "-l", server_ip, "-p", kServerPort}));
+
+  std::vector<std::string> env;
+  std::string xml_copy;
+  if (GetParam().via_xml) {
+    std::string xml = read_file(testing::source_path("config/qos/discovery_server_client.xml"));
+    for (size_t at = xml.find("192.168.1.10"); at != std::string::npos;
+         at = xml.find("192.168.1.10")) {
+      xml.replace(at, std::string("192.168.1.10").size(), server_ip);
+    }
+    xml_copy = "/tmp/poise-ds-client-" + std::to_string(::getpid()) + ".xml";
+    std::ofstream(xml_copy) << xml;
+    env = {"POISE_QOS_FILE=" + xml_copy, "POISE_DDS_PROFILE=poise_ds_client"};
+  } else {
+    env = {"ROS_DISCOVERY_SERVER=" + server_ip + ":" + kServerPort};
+  }
+  auto recorder = lab.node("recorder", {"watch", "--domain", domain, "--type", "attitude"}, env);
+  auto fusion = lab.node("fusion", {"fusion", "--domain", domain}, env);
+  auto imu = lab.node("imu", {"imu", "--domain", domain, "--rate-hz", "100"}, env);
+
+  const auto matched = wait_event(*fusion, "matched", {{"topic", "imu"}, {"count", "1"}},
+                                  kDiscoveryBound);
+  const auto at_fusion = wait_event(*fusion, "first", {{"topic", "imu"}}, kDiscoveryBound);
+  const auto at_recorder = wait_event(*recorder, "first", {{"topic", "attitude/tilt"}},
+                                      kDiscoveryBound);
+  if (!xml_copy.empty()) {
+    ::unlink(xml_copy.c_str());
+  }
+  ASSERT_TRUE(matched && at_fusion) << "fusion:\n" << fusion->output() << "imu:\n"
+                                    << imu->output() << "server:\n" << server.output();
+  ASSERT_TRUE(at_recorder) << recorder->output();
+  EXPECT_EQ(at_recorder->str("source"), "imu0");
+  std::printf("[figure] discovery server (%s), multicast blocked: start -> matched %.0f ms\n",
+              GetParam().name, discovery_ms(*imu, *fusion, *matched));
+  EXPECT_TRUE(find_events(server.output(), "error").empty());
+}
+
+INSTANTIATE_TEST_SUITE_P(Modes, DiscoveryServerTest,
+                         ::testing::Values(ServerCase{"ROS_DISCOVERY_SERVER", false},
+                                           ServerCase{"XML client profile", true}),
+                         [](const auto& param_info) {
+                           return std::string(param_info.param.via_xml ? "XmlProfile"
+                                                                       : "Environment");
+                         });
+
+// The same measurement on a multicast LAN, for the comparison in docs/NETWORK.md.
+TEST(DiscoveryServer, MulticastBaselineDiscoveryTime) {
+  POISE_REQUIRE_NETLAB();
+  testing::DomainLease lease;
+  const std::string domain = std::to_string(lease.id());
+  NetLab lab({"imu", "fusion"});
+  auto fusion = lab.node("fusion", {"fusion", "--domain", domain});
+  auto imu = lab.node("imu", {"imu", "--domain", domain, "--rate-hz", "100"});
+  const auto matched = wait_event(*fusion, "matched", {{"topic", "imu"}, {"count", "1"}},
+                                  kDiscoveryBound);
+  ASSERT_TRUE(matched) << fusion->output();
+  std::printf("[figure] simple discovery, multicast LAN: start -> matched %.0f ms\n",
+              discovery_ms(*imu, *fusion, *matched));
+}
+
+}  // namespace
+}  // namespace poise::nettest
