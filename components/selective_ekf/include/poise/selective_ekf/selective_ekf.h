@@ -1,0 +1,310 @@
+// Selective EKF (paper 002, Yun/Shim/Kim): gyro + Gauss-Newton IMU quaternion + vision pose, with
+// the IMU quaternion (i.e. the magnetometer) trusted only while the disturbance tests pass.
+//
+// Notation (ESTIMATORS.md section 4; equation numbers are paper 002's)
+//   x = [w, q, t, v]     nominal state: body angular rate w (rad/s), q = q_world_body (ENU, Hamilton),
+//                        position t (m, world) and velocity v (m/s, world) of the body.
+//   dx = [dw, dth, dt, dv]  12-dim error state; attitude error is body-frame (right) perturbation
+//                        q_true = q (x) exp(dth). This error-state form carries the same selective
+//                        behaviour as the paper's 13-dim form (accepted reading, section 4) and keeps
+//                        P free of the quaternion norm direction.
+//   Process (3)-(4):     w, v random walks; q <- q (x) exp(w h); t <- t + v h.
+//                        F: dth' = Exp(w h)^T dth + J_r(w h) h dw; dt' = dt + h dv.
+//                        Q: angular-acceleration and acceleration white noise (spectral densities),
+//                        integrated over h (first order).
+//   y = [w_gyro, q_imu, q_vision, t_vision]  (5)-(7): only rows with a fresh sample are fused.
+//     gyro:      y = w + n,                       H = [I 0 0 0]
+//     q_imu:     log(q^-1 (x) q_imu)  = dth + n,  H = [0 I 0 0]   (Gauss-Newton, eq. 2)
+//     q_vision:  log(q^-1 (x) q_vis)  = dth + n,  H = [0 I 0 0]   q_vis = q_world_cam (x) q_body_cam^-1
+//     t_vision:  p_world_cam = t + R(q) p_body_cam,  H = [0  -R [p_body_cam x]  I  0]
+//     Measured quaternions are sign-aligned to the prediction before the innovation.
+//   (7) printed P - K H^T P is read as P - K H P; we use the Joseph form
+//     P = (I - K H) P (I - K H)^T + K R K^T, then symmetrise. q is renormalised after each update.
+//   Disturbance angle (8): both vectors are rotated by the same matrix, so theta_m is the angle
+//     between m and the up vector; up is the raw accelerometer (paper) or the filter's predicted up
+//     R(q)^T e_z (UpSource::kFiltered, the VQF/PX4 improvement). theta_ref = 90 deg + dip, dip learnt
+//     from the first startup_samples (or configured). Disturbed when |theta_m - theta_ref| > threshold.
+//     Optional extension (off by default): |m| against the learnt norm.
+//   Quaternion error (9)-(10): dq = q_imu (x) q_pred^-1, theta_q = 2 acos(|dq_w|) (sign-invariant).
+//   Selective: either test failing marks the magnetometer untrusted (kept for untrusted_hold_s after
+//     the last failure); the q_imu rows are then inflated (R * inflate_factor) or dropped.
+//     A quaternion-error failure alone stops counting after q_error_lockout_s when no vision was
+//     fused within vision_anchor_s: without an absolute reference the prediction itself may be the
+//     one that drifted (prevents lock-out).
+//   Vision is applied at its capture time: a ring of post-update snapshots (one per IMU sample) and
+//     the inputs after them are kept for history_s; a late measurement restores the snapshot at or
+//     before its capture stamp, predicts to the capture stamp, fuses, and replays the later events
+//     (IMU samples and other vision measurements, in stamp order). Out-of-order measurements are
+//     handled the same way (counted); older than the history -> rejected (too_old).
+#pragma once
+
+#include "poise/core/attitude.h"
+#include "poise/core/attitude_filter.h"
+#include "poise/core/sample_check.h"
+#include "poise/core/types.h"
+#include "poise/gauss_newton/gauss_newton.h"
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace poise {
+
+/// Where the "up" vector of the disturbance-angle test (8) comes from.
+enum class UpSource : uint8_t {
+  kRawAccel = 0,  ///< paper: the measured accelerometer (contaminated by linear acceleration)
+  kFiltered,      ///< the predicted attitude's up axis R(q)^T e_z
+};
+
+/// What happens to the IMU quaternion rows while the magnetometer is untrusted.
+enum class ImuQuatAction : uint8_t {
+  kInflate = 0,  ///< measurement variance * inflate_factor
+  kDrop,         ///< rows left out of the update
+};
+
+struct SelectiveEkfParams {
+  // ---- process noise (continuous-time spectral densities)
+  /// Angular-acceleration noise driving the w random walk, rad/s^2/sqrt(Hz). Higher: w follows the
+  /// gyro faster (less smoothing); lower: more lag on fast motion.
+  double sigma_angular_accel = 2.0;
+  /// Acceleration noise driving the v random walk, m/s^2/sqrt(Hz).
+  double sigma_linear_accel = 2.0;
+  /// Extra attitude process noise, rad/sqrt(s) (model error of q <- q exp(w h)). 0 = paper.
+  double sigma_attitude_walk = 0.002;
+
+  // ---- measurement noise (standard deviations)
+  double sigma_gyro_rps = 0.01;        ///< gyro white noise, rad/s (GY-87 MPU6050 ~0.005-0.01)
+  double sigma_imu_quat_deg = 3.0;     ///< Gauss-Newton quaternion, per axis, deg
+  double sigma_vision_deg = 1.0;       ///< vision attitude per axis, deg (if the pose carries none)
+  double sigma_vision_m = 0.01;        ///< vision position per axis, m (if the pose carries none)
+
+  // ---- selective gating (paper eqs. 8-10)
+  bool gating_enabled = true;          ///< false: q_imu always fused at sigma_imu_quat_deg
+  UpSource up_source = UpSource::kFiltered;
+  double dip_deg = std::nan("");       ///< NaN: learnt from the first startup_samples; else deg
+  int startup_samples = 50;            ///< samples averaged for the dip (and |m|) reference
+  double disturbance_angle_threshold_deg = 3.0;  ///< |theta_m - theta_ref| above: disturbed
+  bool mag_norm_test = false;          ///< extension: also test |m| against the learnt norm
+  double mag_norm_threshold = 0.1;     ///< relative | |m| / m_ref - 1 | above: disturbed
+  bool quat_error_test = true;         ///< eqs. 9-10
+  double quat_error_threshold_deg = 10.0;  ///< theta_q above: disturbed
+  ImuQuatAction action = ImuQuatAction::kInflate;
+  double inflate_factor = 1.0e4;       ///< variance multiplier when inflating
+  double untrusted_hold_s = 0.5;       ///< stay untrusted this long after the last failed test, s
+  double q_error_lockout_s = 3.0;      ///< see notation block, s
+  double vision_anchor_s = 1.0;        ///< vision fused this recently anchors the prediction, s
+
+  // ---- vision
+  double vision_gate_sigma = 5.0;      ///< reject a vision row when innov^2 > gate^2 * var
+  int vision_reset_after_rejections = 10;  ///< consecutive rejections -> reset attitude/position
+  double history_s = 0.5;              ///< oldest capture accepted (latency bound), s
+  Eigen::Quaterniond q_body_camera = Eigen::Quaterniond::Identity();  ///< camera -> IMU body
+  Eigen::Vector3d p_body_camera_m{0.0, 0.0, 0.0};  ///< camera origin in the body frame, m
+
+  // ---- initial uncertainty
+  double init_sigma_attitude_deg = 10.0;
+  double init_sigma_rate_rps = 0.1;
+  double init_sigma_position_m = 1.0;
+  double init_sigma_velocity_mps = 1.0;
+
+  SampleLimits limits;                 ///< IMU input validation (NaN, zero, dt)
+  GaussNewtonParams gauss_newton;      ///< the q_imu source
+};
+
+/// Loads SelectiveEkfParams from YAML (top-level key `selective_ekf`, optional nested
+/// `gauss_newton`). Unknown keys and out-of-range values throw std::runtime_error naming the
+/// file and key.
+SelectiveEkfParams load_selective_ekf_params(const std::string& path);
+/// Validates ranges; throws std::invalid_argument with a message naming the field.
+void validate(const SelectiveEkfParams& p);
+
+/// A camera pose from the tag map, stamped at capture (not arrival).
+struct VisionPose {
+  int64_t capture_stamp_ns = 0;
+  Eigen::Quaterniond q_world_camera = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d p_world_camera_m{0.0, 0.0, 0.0};
+  bool has_position = true;
+  double sigma_rad = std::nan("");     ///< per-axis attitude std; NaN: params' default
+  double sigma_m = std::nan("");       ///< per-axis position std; NaN: params' default
+};
+
+enum class Source : uint8_t { kGyro = 0, kImuQuat, kVisionAttitude, kVisionPosition, kCount };
+const char* to_string(Source s);
+
+/// Why a source was or was not fused on its last sample.
+enum class Decision : uint8_t {
+  kNone = 0,            ///< no sample yet
+  kFused,
+  kFusedInflated,       ///< q_imu fused with inflated variance (magnetometer untrusted)
+  kRejectedDisturbance, ///< q_imu dropped: disturbance-angle test (8) or |m| test
+  kRejectedQuatError,   ///< q_imu dropped: quaternion-error test (9)-(10)
+  kRejectedNoMag,       ///< no valid magnetometer in the sample (no q_imu)
+  kRejectedGate,        ///< innovation test ratio > 1
+  kRejectedBadInput,    ///< NaN / non-unit quaternion / bad stamp
+  kRejectedTooOld,      ///< capture older than the history
+  kReset,               ///< state reset to this measurement (after repeated gate rejections)
+  kCount
+};
+const char* to_string(Decision d);
+
+/// Per-source status (goes on the diagnostics topic).
+struct SourceStatus {
+  Eigen::Vector3d innovation{0.0, 0.0, 0.0};           ///< rad/s, rad or m
+  Eigen::Vector3d innovation_variance{0.0, 0.0, 0.0};  ///< diagonal of H P H^T + R
+  double test_ratio = 0.0;   ///< max over axes of innov^2 / (gate^2 var) (gate 1 when ungated)
+  Decision last = Decision::kNone;
+  uint64_t fused = 0;        ///< counters count first-pass decisions (not replays)
+  uint64_t rejected = 0;
+  int64_t last_fused_stamp_ns = -1;
+  std::array<uint64_t, static_cast<size_t>(Decision::kCount)> by_decision{};
+};
+
+/// Magnetometer trust (the selective part).
+struct MagStatus {
+  bool trusted = true;
+  bool angle_test_failed = false;
+  bool norm_test_failed = false;
+  bool quat_error_test_failed = false;
+  double disturbance_angle_deg = 0.0;   ///< theta_m (8) of the last sample
+  double reference_angle_deg = 0.0;     ///< 90 + dip
+  double norm_ratio = 1.0;              ///< |m| / m_ref
+  double quat_error_deg = 0.0;          ///< theta_q (9)
+  bool reference_ready = false;         ///< dip (and |m|) learnt
+  double dip_deg = 0.0;
+  uint64_t untrusted_samples = 0;       ///< first-pass count
+};
+
+/// Vision bookkeeping.
+struct VisionCounters {
+  uint64_t received = 0;
+  uint64_t applied = 0;
+  uint64_t out_of_order = 0;     ///< capture older than a vision already applied (handled)
+  uint64_t too_old = 0;          ///< rejected: capture before the history
+  uint64_t bad_input = 0;        ///< rejected: NaN, zero quaternion, negative stamp
+  uint64_t before_init = 0;      ///< rejected: no IMU sample yet
+  uint64_t future = 0;           ///< capture after the last IMU sample: queued
+  uint64_t replayed_imu_samples = 0;  ///< total IMU samples re-processed
+};
+
+/// The filter state (inspectable; one snapshot per IMU sample in the history).
+struct SelectiveEkfState {
+  Eigen::Vector3d w_rps{0.0, 0.0, 0.0};
+  Eigen::Quaterniond q_world_body = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d t_m{0.0, 0.0, 0.0};
+  Eigen::Vector3d v_mps{0.0, 0.0, 0.0};
+  Eigen::Matrix<double, 12, 12> P = Eigen::Matrix<double, 12, 12>::Identity();
+  int64_t stamp_ns = -1;                 ///< time of the state
+  int64_t untrusted_until_ns = -1;       ///< magnetometer untrusted until (hold)
+  int64_t q_error_fail_since_ns = -1;    ///< start of the current quaternion-error failure run
+  int64_t last_vision_fused_ns = -1;
+  bool vision_aligned = false;           ///< first vision has aligned the attitude
+  bool position_aligned = false;
+  int vision_consecutive_rejects = 0;
+  int vision_pos_consecutive_rejects = 0;
+};
+
+class SelectiveEkf {
+ public:
+  static constexpr int kN = 12;
+  using Mat = Eigen::Matrix<double, kN, kN>;
+  using Vec = Eigen::Matrix<double, kN, 1>;
+  // error-state block offsets
+  static constexpr int kW = 0;
+  static constexpr int kTh = 3;
+  static constexpr int kT = 6;
+  static constexpr int kV = 9;
+
+  explicit SelectiveEkf(const SelectiveEkfParams& params = {});
+
+  /// One IMU sample (validated; rejected and counted when bad). Returns false when rejected.
+  bool update_imu(const ImuSample& s);
+  /// One vision pose (capture-stamped, may arrive late or out of order). Returns false when it
+  /// was rejected (bad input, too old, before the first IMU sample); the reason is counted.
+  bool update_vision(const VisionPose& v);
+
+  [[nodiscard]] bool initialized() const { return initialized_; }
+  [[nodiscard]] const SelectiveEkfState& state() const { return x_; }
+  [[nodiscard]] Eigen::Quaterniond q_world_body() const { return quat_canonical(x_.q_world_body); }
+  [[nodiscard]] const SourceStatus& status(Source s) const {
+    return status_[static_cast<size_t>(s)];
+  }
+  [[nodiscard]] const MagStatus& mag_status() const { return mag_; }
+  [[nodiscard]] const VisionCounters& vision_counters() const { return vc_; }
+  [[nodiscard]] const RejectCounters& imu_rejections() const { return rejections_; }
+  [[nodiscard]] const SelectiveEkfParams& params() const { return p_; }
+  [[nodiscard]] const GaussNewton& gauss_newton() const { return gn_; }
+  /// Body-frame attitude standard deviations, deg.
+  [[nodiscard]] Eigen::Vector3d attitude_sigma_deg() const;
+  void reset();
+
+ private:
+  struct ImuInput {
+    int64_t stamp_ns = 0;
+    Eigen::Vector3d gyro{0, 0, 0};
+    Eigen::Vector3d accel{0, 0, 0};
+    Eigen::Vector3d mag{0, 0, 0};
+    bool has_q_imu = false;
+    Eigen::Quaterniond q_imu = Eigen::Quaterniond::Identity();
+  };
+  struct HistoryEntry {
+    ImuInput input;
+    SelectiveEkfState post;  ///< state right after processing `input` (before same-stamp vision)
+  };
+
+  void predict_to(int64_t stamp_ns);
+  void process_imu(const ImuInput& in, bool first_pass);
+  void process_vision(const VisionPose& v, bool first_pass);
+  void learn_reference(const ImuSample& s);
+  void replay_from(size_t snapshot_index);
+  // Joseph-form update of rows selected by `cols` (H = selection) or a dense 3x12 H.
+  double fuse3(const Eigen::Matrix<double, 3, kN>& H, const Eigen::Vector3d& innov,
+               const Eigen::Vector3d& r_diag, double gate_sigma, bool gate, SourceStatus& st,
+               bool* accepted);
+  void inject(const Vec& dx);
+  void record(SourceStatus& st, Decision d, int64_t stamp_ns, bool first_pass) const;
+
+  SelectiveEkfParams p_;
+  GaussNewton gn_;
+  SelectiveEkfState x_;
+  bool initialized_ = false;
+  int64_t last_imu_stamp_ns_ = -1;
+  RejectCounters rejections_;
+  std::array<SourceStatus, static_cast<size_t>(Source::kCount)> status_{};
+  MagStatus mag_;
+  VisionCounters vc_;
+  // start-up reference
+  double dip_sum_rad_ = 0.0;
+  double norm_sum_ut_ = 0.0;
+  int ref_n_ = 0;
+  double ref_angle_rad_ = 0.5 * kPi;
+  double ref_norm_ut_ = 0.0;
+  // history
+  std::deque<HistoryEntry> history_;
+  std::deque<VisionPose> vision_log_;    ///< applied or queued, sorted by capture stamp
+  int64_t newest_vision_capture_ns_ = -1;
+};
+
+/// AttitudeFilter adapter (IMU-only path; vision goes through core().update_vision()).
+class SelectiveEkfFilter : public AttitudeFilter {
+ public:
+  explicit SelectiveEkfFilter(const SelectiveEkfParams& p = {}) : ekf_(p) {}
+  bool update(const ImuSample& s) override { return ekf_.update_imu(s); }
+  [[nodiscard]] Eigen::Quaterniond q_world_body() const override { return ekf_.q_world_body(); }
+  [[nodiscard]] bool initialized() const override { return ekf_.initialized(); }
+  void reset() override { ekf_.reset(); }
+  [[nodiscard]] std::map<std::string, uint64_t> rejections() const override;
+  [[nodiscard]] SelectiveEkf& core() { return ekf_; }
+  [[nodiscard]] const SelectiveEkf& core() const { return ekf_; }
+
+ private:
+  SelectiveEkf ekf_;
+};
+
+}  // namespace poise
