@@ -54,15 +54,22 @@ out=$(cd "$out" && pwd)
 umask 077
 
 # --- CA ------------------------------------------------------------------------------------------
+# The CA also signs governance/permissions as S/MIME: its keyUsage must include digitalSignature,
+# or PKCS7_verify rejects it ("unsuitable certificate purpose") and Fast DDS fails silently.
 if [[ ! -f $out/ca.pem ]]; then
   openssl ecparam -name prime256v1 -genkey -noout -out "$out/ca.key" 2>/dev/null
   openssl req -x509 -new -key "$out/ca.key" -sha256 -days "$days" -subj "/C=XX/O=$org/CN=$org CA" \
-    -addext "basicConstraints=critical,CA:TRUE" -addext "keyUsage=critical,keyCertSign,cRLSign" \
+    -addext "basicConstraints=critical,CA:TRUE" -addext "keyUsage=critical,keyCertSign,cRLSign,digitalSignature" \
     -out "$out/ca.pem"
 fi
 
 sign() {  # sign XML with the CA as S/MIME (text mode, as the DDS Security builtin plugins expect)
   openssl smime -sign -text -in "$1" -out "$2" -signer "$out/ca.pem" -inkey "$out/ca.key"
+  # Verify as Fast DDS will (it only says "participant creation failed" otherwise).
+  if ! openssl smime -verify -text -in "$2" -CAfile "$out/ca.pem" -out /dev/null 2>/dev/null; then
+    echo "make_security.sh: $2 does not verify against $out/ca.pem" >&2
+    exit 1
+  fi
 }
 
 # --- Governance ----------------------------------------------------------------------------------
