@@ -88,8 +88,8 @@ ReplayStats replay(const ReplayOptions& options) {
       // Reliable topics are replayed without loss: a slow reader slows the replay down.
       qos.history().kind = fdds::KEEP_ALL_HISTORY_QOS;
       qos.resource_limits().max_samples = 4096;
-      qos.resource_limits().max_instances = 64;
-      qos.resource_limits().max_samples_per_instance = 4096;
+      qos.resource_limits().max_instances = 8;
+      qos.resource_limits().max_samples_per_instance = 512;
       qos.reliability().max_blocking_time = eprosima::fastrtps::Duration_t(5, 0);
     }
     if (meta(channel, "durability") == "TRANSIENT_LOCAL") {

@@ -1,0 +1,245 @@
+// `poise info`, `poise record`, `poise replay`, `poise bench record`, `poise bench replay`.
+#include "poise/cli/common.h"
+#include "poise/dds/participant.h"
+#include "poise/record/bench.h"
+#include "poise/record/info.h"
+#include "poise/record/recorder.h"
+#include "poise/record/replayer.h"
+
+#include <CLI/CLI.hpp>
+
+#include <iostream>
+#include <memory>
+
+namespace poise::cli {
+
+namespace {
+
+struct InfoArgs {
+  std::string file;
+  bool verify = false;
+};
+
+struct RecordArgs {
+  std::string output;
+  std::vector<std::string> topics;
+  bool all = false;
+  double duration_s = 0.0;
+  double split_mb = 0.0;
+  std::string compression = "none";
+  int domain = 0;
+  std::string profile;
+};
+
+struct ReplayArgs {
+  std::string file;
+  double rate = 1.0;
+  double start_s = -1.0;
+  double end_s = -1.0;
+  std::vector<std::string> topics;
+  bool loop = false;
+  bool afap = false;
+  double wait_s = 1.0;
+  int domain = 0;
+  std::string profile;
+};
+
+void run_info(const InfoArgs& a) {
+  try {
+    record::McapReader reader = record::McapReader::open_file(a.file);
+    if (a.verify) {
+      reader.verify();
+    }
+    std::cout << record::format_info(reader, a.file);
+    if (!reader.report().complete) {
+      throw ExitCode{3};
+    }
+  } catch (const record::ReadError& e) {
+    throw Error(std::string(e.what()));
+  }
+}
+
+void run_record(const RecordArgs& a) {
+  record::RecorderOptions o;
+  o.output = a.output;
+  o.topics = a.topics;
+  o.all = a.all;
+  o.domain = a.domain;
+  o.participant_profile = a.profile;
+  o.duration_s = a.duration_s;
+  o.split_size_bytes = static_cast<uint64_t>(a.split_mb * 1024.0 * 1024.0);
+  if (a.compression == "zstd") {
+    if (!record::zstd_available()) {
+      throw Error("--compression zstd: this build has no libzstd (install libzstd-dev, rebuild)");
+    }
+    o.writer.compression = record::Compression::kZstd;
+  }
+  install_stop_handlers();
+  o.should_stop = [] { return stop_requested(); };
+  record::RecorderStats stats;
+  try {
+    record::Recorder recorder(o);
+    std::cerr << "poise record: waiting for publishers on domain " << a.domain
+              << (a.all ? " (all poise topics)" : "") << "; Ctrl-C to stop\n";
+    stats = recorder.run();
+  } catch (const record::WriteError& e) {
+    throw Error(e.what());
+  } catch (const dds::DdsError& e) {
+    throw Error(e.what());
+  }
+  std::cerr << "poise record: " << stats.written << " messages written to";
+  for (const auto& f : stats.files) {
+    std::cerr << " " << f;
+  }
+  std::cerr << " in " << stats.elapsed_s << " s\n";
+  for (const auto& [topic, t] : stats.topics) {
+    std::cerr << "  " << topic << " (" << t.type << "): received " << t.received << ", written "
+              << t.written << ", sequence gaps " << t.gaps << "\n";
+  }
+  if (stats.dropped_queue_full > 0) {
+    std::cerr << "  dropped (writer could not keep up): " << stats.dropped_queue_full << "\n";
+  }
+  if (!stats.error.empty()) {
+    throw Error(stats.error);
+  }
+}
+
+void run_replay(const ReplayArgs& a) {
+  record::ReplayOptions o;
+  o.input = a.file;
+  o.domain = a.domain;
+  o.participant_profile = a.profile;
+  o.wait_for_subscribers_s = a.wait_s;
+  o.schedule.rate = a.rate;
+  if (a.start_s >= 0.0) {
+    o.schedule.start_s = a.start_s;
+  }
+  if (a.end_s >= 0.0) {
+    o.schedule.end_s = a.end_s;
+  }
+  o.schedule.topics = std::set<std::string>(a.topics.begin(), a.topics.end());
+  o.schedule.loop = a.loop;
+  o.schedule.as_fast_as_possible = a.afap;
+  install_stop_handlers();
+  o.schedule.should_stop = [] { return stop_requested(); };
+  record::ReplayStats stats;
+  try {
+    stats = record::replay(o);
+  } catch (const record::ReadError& e) {
+    throw Error(e.what());
+  } catch (const dds::DdsError& e) {
+    throw Error(e.what());
+  }
+  const auto& s = stats.schedule;
+  std::cerr << "poise replay: published " << s.delivered << " messages (" << s.passes
+            << " passes) in " << s.elapsed_s << " s; recorded span " << s.recorded_span_s
+            << " s; worst lateness " << s.max_late_s * 1e3 << " ms\n";
+  for (const auto& [topic, n] : s.per_topic) {
+    std::cerr << "  " << topic << ": " << n << "\n";
+  }
+  if (stats.write_failures > 0) {
+    std::cerr << "  DDS refused " << stats.write_failures << " samples\n";
+  }
+  if (!stats.complete) {
+    std::cerr << "poise replay: the file was incomplete (see above); the recovered part was "
+                 "replayed\n";
+  }
+}
+
+}  // namespace
+
+void add_record_commands(CLI::App& app) {
+  auto info_args = std::make_shared<InfoArgs>();
+  CLI::App* info = app.add_subcommand(
+      "info", "Describe an MCAP recording: topics, types, counts, rates, duration, and whether "
+              "it is complete. Exit code 3 when the file is incomplete or damaged (the readable "
+              "part is described).");
+  info->add_option("file", info_args->file, "MCAP file")->required()->check(CLI::ExistingFile);
+  info->add_flag("--verify", info_args->verify,
+                 "read every chunk and check every CRC even if the summary is valid");
+  info->callback([info_args] { run_info(*info_args); });
+
+  auto rec = std::make_shared<RecordArgs>();
+  CLI::App* record_cmd = app.add_subcommand(
+      "record", "Record DDS topics to MCAP (payloads verbatim, omgidl schemas, QoS metadata).");
+  record_cmd->add_option("-o,--output", rec->output, "output FILE.mcap")->required();
+  record_cmd->add_option("topics", rec->topics, "topics to record");
+  record_cmd->add_flag("--all", rec->all, "record every topic of a poise type");
+  record_cmd->add_option("--duration", rec->duration_s, "stop after S seconds (0: Ctrl-C)")
+      ->check(CLI::NonNegativeNumber);
+  record_cmd->add_option("--split-size", rec->split_mb,
+                         "start a new file (FILE_000.mcap, FILE_001.mcap, ...) past MB megabytes")
+      ->check(CLI::NonNegativeNumber);
+  record_cmd->add_option("--compression", rec->compression, "chunk compression")
+      ->check(CLI::IsMember({"none", "zstd"}))
+      ->capture_default_str();
+  record_cmd->add_option("--profile", rec->profile,
+                         "DDS participant profile (default $POISE_DDS_PROFILE / poise_default)");
+  add_domain_option(record_cmd, &rec->domain);
+  record_cmd->callback([rec] {
+    if (!rec->all && rec->topics.empty()) {
+      throw CLI::ValidationError("topics", "name the topics to record, or use --all");
+    }
+    run_record(*rec);
+  });
+
+  auto rep = std::make_shared<ReplayArgs>();
+  CLI::App* replay_cmd = app.add_subcommand(
+      "replay", "Republish an MCAP recording over DDS, byte for byte, with recorded timing.");
+  replay_cmd->add_option("file", rep->file, "MCAP file")->required()->check(CLI::ExistingFile);
+  replay_cmd->add_option("--rate", rep->rate, "speed factor (2 = twice as fast)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  replay_cmd->add_option("--start", rep->start_s, "start S seconds into the recording")
+      ->check(CLI::NonNegativeNumber);
+  replay_cmd->add_option("--end", rep->end_s, "stop S seconds into the recording")
+      ->check(CLI::NonNegativeNumber);
+  replay_cmd->add_option("--topics", rep->topics, "only these topics");
+  replay_cmd->add_flag("--loop", rep->loop, "start again at the end (Ctrl-C to stop)");
+  replay_cmd->add_flag("--as-fast-as-possible", rep->afap, "ignore the recorded timing");
+  replay_cmd->add_option("--wait", rep->wait_s,
+                         "wait up to S seconds for subscribers before publishing")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  replay_cmd->add_option("--profile", rep->profile, "DDS participant profile");
+  add_domain_option(replay_cmd, &rep->domain);
+  replay_cmd->callback([rep] { run_replay(*rep); });
+
+  CLI::App* bench = subcommand_group(app, "bench", "Benchmarks (print figures)");
+  auto brec = std::make_shared<record::BenchRecordOptions>();
+  CLI::App* bench_record = bench->add_subcommand(
+      "record", "Recorder throughput: MCAP writer alone, then DDS -> recorder at rising rates "
+                "(best-effort ImuSample, loopback) until messages are lost.");
+  bench_record->add_option("--seconds", brec->seconds_per_step, "seconds per rate step")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  bench_record->add_option("--profile", brec->profile, "DDS participant profile")
+      ->capture_default_str();
+  add_domain_option(bench_record, &brec->domain);
+  bench_record->callback([brec] {
+    try {
+      record::bench_record(*brec, std::cout);
+    } catch (const dds::DdsError& e) {
+      throw Error(e.what());
+    }
+  });
+  auto brep = std::make_shared<record::BenchReplayOptions>();
+  CLI::App* bench_replay = bench->add_subcommand(
+      "replay", "Replay speed as a multiple of real time for a 1 kHz IMU recording (reader "
+                "alone, then over DDS as fast as possible).");
+  bench_replay->add_option("--seconds", brep->recording_s, "length of the recording")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  bench_replay->add_option("--profile", brep->profile, "DDS participant profile")
+      ->capture_default_str();
+  add_domain_option(bench_replay, &brep->domain);
+  bench_replay->callback([brep] {
+    try {
+      record::bench_replay(*brep, std::cout);
+    } catch (const dds::DdsError& e) {
+      throw Error(e.what());
+    }
+  });
+}
+
+}  // namespace poise::cli

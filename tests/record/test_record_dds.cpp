@@ -1,0 +1,318 @@
+// Record and replay over DDS on a leased domain (loopback profile), with bounded waits:
+//  - payloads are recorded verbatim (byte-equal to what the publisher serialised), publish time =
+//    Header.stamp_ns, QoS in the channel metadata; the file passes the independent validator;
+//  - replay republishes the same bytes;
+//  - after kill -9 the recorder's file holds every message older than the chunk age limit;
+//  - the CLI reports write failures (disk full) and damaged files clearly.
+#include "poise/dds/participant.h"
+#include "poise/record/mcap.h"
+#include "poise/record/raw_type.h"
+#include "poise/record/recorder.h"
+#include "poise/record/replayer.h"
+#include "record_test_support.h"
+
+#include <gtest/gtest.h>
+
+#include <csignal>
+#include <map>
+#include <mutex>
+#include <sstream>
+#include <thread>
+
+namespace poise::record {
+namespace {
+
+using namespace std::chrono_literals;
+constexpr auto kMatchTimeout = 15s;     // discovery on loopback, generous for loaded CI machines
+constexpr auto kDeliveryTimeout = 10s;
+constexpr const char* kProfile = "poise_loopback";
+constexpr double kMinBestEffortFraction = 0.9;  // loopback best-effort delivery we require
+
+std::string tool() { return std::string(POISE_RECORD_TOOL); }
+
+template <class PubSubType, class Message>
+Message deserialize(const uint8_t* data, size_t size) {
+  PubSubType type;
+  eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<uint32_t>(size));
+  std::memcpy(payload.data, data, size);
+  payload.length = static_cast<uint32_t>(size);
+  Message m;
+  type.deserialize(&payload, &m);
+  return m;
+}
+
+TEST(RawType, HeaderStampIsReadFromBothEndiannesses) {
+  const auto m = testing::make_imu(3, 0x0102030405060708LL);
+  const auto bytes = testing::serialize<msg::ImuSamplePubSubType>(m);
+  int64_t stamp = 0;
+  ASSERT_TRUE(header_stamp_ns(bytes.data(), bytes.size(), &stamp));
+  EXPECT_EQ(stamp, 0x0102030405060708LL);
+  const uint8_t be[12] = {0, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8};
+  ASSERT_TRUE(header_stamp_ns(be, sizeof(be), &stamp));
+  EXPECT_EQ(stamp, 0x0102030405060708LL);
+  EXPECT_FALSE(header_stamp_ns(be, 8, &stamp));
+  EXPECT_EQ(split_file_name("out.mcap", 2), "out_002.mcap");
+  EXPECT_EQ(split_file_name("dir/x", 0), "dir/x_000.mcap");
+}
+
+TEST(RawType, KeyMatchesTheGeneratedType) {
+  const auto m = testing::make_imu(5, 123);
+  RawSample raw{testing::serialize<msg::ImuSamplePubSubType>(m)};
+  RawPubSubType type("poise::msg::ImuSample", make_generated_type("poise::msg::ImuSample"));
+  msg::ImuSamplePubSubType generated;
+  eprosima::fastrtps::rtps::InstanceHandle_t a;
+  eprosima::fastrtps::rtps::InstanceHandle_t b;
+  ASSERT_TRUE(type.getKey(&raw, &a, false));
+  ASSERT_TRUE(generated.getKey(const_cast<msg::ImuSample*>(&m), &b, false));
+  EXPECT_EQ(a, b);
+  EXPECT_TRUE(type.m_isGetKeyDefined);
+  EXPECT_EQ(type.m_typeSize, generated.m_typeSize);
+}
+
+/// Collects serialized copies of every sample a typed reader receives.
+template <class PubSubType>
+struct Collector {
+  std::mutex mutex;
+  std::map<uint32_t, std::vector<uint8_t>> by_seq;
+  void add(const typename PubSubType::type& m) {
+    auto bytes = testing::serialize<PubSubType>(m);
+    std::lock_guard<std::mutex> lock(mutex);
+    by_seq[m.header().seq()] = std::move(bytes);
+  }
+  size_t size() {
+    std::lock_guard<std::mutex> lock(mutex);
+    return by_seq.size();
+  }
+};
+
+TEST(RecordReplay, RecordsPayloadsVerbatimAndReplaysThemByteForByte) {
+  poise::testing::DomainLease lease;
+  const std::string dir = testing::cases_dir("dds");
+  ASSERT_FALSE(dir.empty());
+  const std::string file = dir + "/recorded.mcap";
+  constexpr int kImu = 300;
+  constexpr int kAttitudeEvery = 10;
+  constexpr int kAttitude = kImu / kAttitudeEvery;
+  const int64_t t0 = 1'700'000'000'000'000'000LL;
+
+  // GIVEN a recorder on "imu" and "attitude/parallel_kf"
+  std::ostringstream log;
+  RecorderOptions ro;
+  ro.output = file;
+  ro.topics = {"imu", "attitude/parallel_kf"};
+  ro.domain = lease.id();
+  ro.participant_profile = kProfile;
+  ro.writer.max_chunk_duration_ns = 200'000'000;
+  ro.log = &log;
+  Recorder recorder(ro);
+  RecorderStats rstats;
+  std::thread thread([&] { rstats = recorder.run(); });
+  std::map<uint32_t, std::vector<uint8_t>> imu_sent;
+  std::map<uint32_t, std::vector<uint8_t>> att_sent;
+  {
+    dds::Participant pub({lease.id(), kProfile, "", "test_pub"});
+    dds::Writer<msg::ImuSamplePubSubType> imu(pub, "imu");
+    dds::Writer<msg::AttitudeEstimatePubSubType> att(pub, "attitude/parallel_kf");
+    const bool matched = poise::testing::wait_until(
+        [&] { return recorder.subscribed() == 2 && imu.matched() > 0 && att.matched() > 0; },
+        kMatchTimeout);
+    if (!matched) {
+      recorder.request_stop();
+      thread.join();
+      FAIL() << "recorder did not subscribe/match within the timeout\n" << log.str();
+    }
+    // WHEN 300 IMU samples (1 kHz) and 30 attitude estimates are published
+    for (int i = 0; i < kImu; ++i) {
+      const int64_t stamp = t0 + i * 1'000'000LL;
+      const auto m = testing::make_imu(static_cast<uint32_t>(i), stamp);
+      imu_sent[m.header().seq()] = testing::serialize<msg::ImuSamplePubSubType>(m);
+      imu.write(m);
+      if (i % kAttitudeEvery == 0) {
+        const auto a = testing::make_attitude(static_cast<uint32_t>(i / kAttitudeEvery), stamp);
+        att_sent[a.header().seq()] = testing::serialize<msg::AttitudeEstimatePubSubType>(a);
+        att.write(a);
+      }
+      std::this_thread::sleep_for(1ms);
+    }
+    poise::testing::wait_until([&] { return recorder.written() >= kImu + kAttitude; },
+                               kDeliveryTimeout);
+  }
+  recorder.request_stop();
+  thread.join();
+  ASSERT_TRUE(rstats.error.empty()) << rstats.error;
+
+  // THEN the file is complete, reliable messages are all there, and every payload is verbatim
+  McapReader reader = McapReader::open_file(file);
+  ASSERT_TRUE(reader.report().complete);
+  reader.verify();
+  ASSERT_TRUE(reader.report().complete);
+  std::map<std::string, const Channel*> by_topic;
+  for (const auto& [id, c] : reader.channels()) {
+    by_topic[c.topic] = &c;
+  }
+  ASSERT_EQ(by_topic.size(), 2u);
+  EXPECT_EQ(by_topic["imu"]->metadata.at("reliability"), "BEST_EFFORT");
+  EXPECT_EQ(by_topic["attitude/parallel_kf"]->metadata.at("reliability"), "RELIABLE");
+  EXPECT_EQ(by_topic["imu"]->message_encoding, "cdr");
+  EXPECT_EQ(reader.schemas().at(by_topic["imu"]->schema_id).name, "poise::msg::ImuSample");
+  EXPECT_EQ(reader.schemas().at(by_topic["imu"]->schema_id).encoding, "omgidl");
+  std::map<uint32_t, std::vector<uint8_t>> imu_rec;
+  std::map<uint32_t, std::vector<uint8_t>> att_rec;
+  std::vector<testing::ExpectedValue> expected;
+  uint64_t last_log = 0;
+  MessageCursor cursor = reader.messages();
+  while (const MessageView* m = cursor.next()) {
+    EXPECT_GE(m->log_time_ns, last_log);
+    last_log = m->log_time_ns;
+    std::vector<uint8_t> bytes(m->data, m->data + m->size);
+    if (m->channel->topic == "imu") {
+      const auto msg = deserialize<msg::ImuSamplePubSubType, msg::ImuSample>(m->data, m->size);
+      EXPECT_EQ(bytes, imu_sent[msg.header().seq()]) << "imu #" << msg.header().seq();
+      EXPECT_EQ(m->publish_time_ns, static_cast<uint64_t>(msg.header().stamp_ns()));
+      imu_rec[msg.header().seq()] = bytes;
+      expected.push_back({"imu", m->sequence, testing::to_json(msg), "",
+                          std::to_string(msg.header().stamp_ns())});
+    } else {
+      const auto msg =
+          deserialize<msg::AttitudeEstimatePubSubType, msg::AttitudeEstimate>(m->data, m->size);
+      EXPECT_EQ(bytes, att_sent[msg.header().seq()]) << "attitude #" << msg.header().seq();
+      EXPECT_EQ(m->publish_time_ns, static_cast<uint64_t>(msg.header().stamp_ns()));
+      att_rec[msg.header().seq()] = bytes;
+      expected.push_back({"attitude/parallel_kf", m->sequence, testing::to_json(msg), "",
+                          std::to_string(msg.header().stamp_ns())});
+    }
+  }
+  EXPECT_EQ(att_rec.size(), static_cast<size_t>(kAttitude));
+  EXPECT_GE(static_cast<double>(imu_rec.size()), kMinBestEffortFraction * kImu);
+  EXPECT_EQ(rstats.written, imu_rec.size() + att_rec.size());
+
+  // AND the independent reader agrees (framing, CRCs, indexes, decoded values)
+  testing::write_expected(file, static_cast<int64_t>(imu_rec.size() + att_rec.size()), 1,
+                          "{\"imu\":{\"schema\":\"poise::msg::ImuSample\",\"metadata\":{"
+                          "\"reliability\":\"BEST_EFFORT\"}},\"attitude/parallel_kf\":{\"count\":" +
+                              std::to_string(kAttitude) + "}}",
+                          expected);
+  const auto validation = testing::run_node_validator(dir);
+  if (validation.skip_reason.empty()) {
+    EXPECT_EQ(validation.exit_code, 0) << validation.output;
+    std::printf("%s", validation.output.c_str());
+  } else {
+    std::printf("independent validation not run: %s\n", validation.skip_reason.c_str());
+  }
+
+  // WHEN the file is replayed (recorded timing) to typed subscribers
+  Collector<msg::ImuSamplePubSubType> imu_got;
+  Collector<msg::AttitudeEstimatePubSubType> att_got;
+  {
+    dds::Participant sub({lease.id(), kProfile, "", "test_sub"});
+    dds::Reader<msg::ImuSamplePubSubType> imu_reader(
+        sub, "imu", [&](const msg::ImuSample& m, const auto&) { imu_got.add(m); });
+    dds::Reader<msg::AttitudeEstimatePubSubType> att_reader(
+        sub, "attitude/parallel_kf",
+        [&](const msg::AttitudeEstimate& m, const auto&) { att_got.add(m); });
+    ReplayOptions po;
+    po.input = file;
+    po.domain = lease.id();
+    po.participant_profile = kProfile;
+    po.wait_for_subscribers_s = 15.0;
+    std::ostringstream plog;
+    po.log = &plog;
+    const ReplayStats ps = replay(po);
+    EXPECT_EQ(ps.schedule.delivered, imu_rec.size() + att_rec.size()) << plog.str();
+    EXPECT_EQ(ps.write_failures, 0u);
+    poise::testing::wait_until(
+        [&] { return att_got.size() == att_rec.size() && imu_got.size() == imu_rec.size(); },
+        kDeliveryTimeout);
+  }
+  // THEN subscribers get the recorded bytes
+  EXPECT_EQ(att_got.size(), att_rec.size());
+  EXPECT_GE(static_cast<double>(imu_got.size()),
+            kMinBestEffortFraction * static_cast<double>(imu_rec.size()));
+  for (const auto& [seq, bytes] : att_got.by_seq) {
+    EXPECT_EQ(bytes, att_rec[seq]) << "attitude #" << seq;
+  }
+  for (const auto& [seq, bytes] : imu_got.by_seq) {
+    EXPECT_EQ(bytes, imu_rec[seq]) << "imu #" << seq;
+  }
+}
+
+TEST(RecordReplay, KillMinus9LeavesEveryMessageOlderThanTheChunkAgeReadable) {
+  poise::testing::DomainLease lease;
+  const std::string dir = testing::cases_dir("crash");
+  const std::string file = dir + "/crash.mcap";
+  constexpr int kMessages = 200;
+  // GIVEN `poise record` running in a child process
+  poise::testing::Child child({tool(), "record", "-o", file, "attitude/crash", "--domain",
+                               std::to_string(lease.id()), "--profile", kProfile});
+  dds::Participant pub({lease.id(), kProfile, "", "test_pub"});
+  dds::Writer<msg::AttitudeEstimatePubSubType> writer(pub, "attitude/crash");
+  ASSERT_TRUE(writer.wait_for_readers(1, kMatchTimeout)) << child.output();
+  // WHEN it receives 200 reliable messages and then nothing
+  for (int i = 0; i < kMessages; ++i) {
+    writer.write(testing::make_attitude(static_cast<uint32_t>(i), 1000 + i));
+    std::this_thread::sleep_for(2ms);
+  }
+  // THEN (without being stopped) it flushes them to the file within the chunk age limit...
+  auto count_in_file = [&file]() -> uint64_t {
+    try {
+      return McapReader::open_file(file).report().messages;
+    } catch (const std::exception&) {
+      return 0;
+    }
+  };
+  const bool flushed =
+      poise::testing::wait_until([&] { return count_in_file() == kMessages; }, kDeliveryTimeout);
+  EXPECT_TRUE(flushed) << "file holds " << count_in_file() << "\n" << child.output();
+  // ...and after kill -9 they are all readable, with the file reported as recovered
+  child.signal(SIGKILL);
+  child.wait_for(5s);
+  const McapReader reader = McapReader::open_file(file);
+  EXPECT_FALSE(reader.report().complete);
+  EXPECT_TRUE(reader.report().recovered);
+  EXPECT_EQ(reader.report().messages, static_cast<uint64_t>(kMessages));
+  std::string problems;
+  for (const auto& p : reader.report().problems) {
+    problems += p + "\n";
+  }
+  EXPECT_NE(problems.find("no Data End record: recovered 200 messages"), std::string::npos)
+      << problems;
+  // AND `poise info` says so (exit 3), and `poise replay` replays the recovered part
+  const auto info = poise::testing::run({tool(), "info", file}, 30s);
+  EXPECT_EQ(info.exit_code, 3) << info.output;
+  EXPECT_NE(info.output.find("RECOVERED"), std::string::npos) << info.output;
+  EXPECT_NE(info.output.find("attitude/crash"), std::string::npos) << info.output;
+  const auto rep = poise::testing::run({tool(), "replay", file, "--as-fast-as-possible", "--wait",
+                                        "0", "--domain", std::to_string(lease.id()), "--profile",
+                                        kProfile},
+                                       30s);
+  EXPECT_EQ(rep.exit_code, 0) << rep.output;
+  EXPECT_NE(rep.output.find("incomplete"), std::string::npos) << rep.output;
+  EXPECT_NE(rep.output.find("published 200 messages"), std::string::npos) << rep.output;
+}
+
+TEST(RecordCli, DiskFullAndBadFilesGiveClearErrors) {
+  poise::testing::DomainLease lease;
+  // Recording to a full device stops at once with the reason.
+  const auto full = poise::testing::run({tool(), "record", "-o", "/dev/full", "imu", "--domain",
+                                         std::to_string(lease.id()), "--profile", kProfile},
+                                        30s);
+  EXPECT_EQ(full.exit_code, 1) << full.output;
+  EXPECT_NE(full.output.find("No space left on device"), std::string::npos) << full.output;
+  // A file that is not MCAP.
+  const std::string dir = testing::cases_dir("cli");
+  const std::string junk = dir + "/junk.mcap";
+  std::ofstream(junk) << "this is not an mcap file at all, not even close";
+  const auto info = poise::testing::run({tool(), "info", junk}, 30s);
+  EXPECT_EQ(info.exit_code, 1) << info.output;
+  EXPECT_NE(info.output.find("not an MCAP file"), std::string::npos) << info.output;
+  // Usage errors.
+  const auto no_topics = poise::testing::run({tool(), "record", "-o", dir + "/x.mcap"}, 30s);
+  EXPECT_EQ(no_topics.exit_code, 2) << no_topics.output;
+  for (const char* cmd : {"info", "record", "replay"}) {
+    const auto help = poise::testing::run({tool(), cmd, "--help"}, 30s);
+    EXPECT_EQ(help.exit_code, 0) << help.output;
+  }
+}
+
+}  // namespace
+}  // namespace poise::record
