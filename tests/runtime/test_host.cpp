@@ -43,6 +43,12 @@ components:
   EXPECT_EQ(spec.components[1].params["max_iterations"].as<int>(), 5);
 }
 
+TEST(HostFile, FileParametersResolveAgainstTheHostFile) {
+  const HostSpec spec = parse("components: [{type: a, params: {filter_file: f/x.yaml, other: f/y}}]");
+  EXPECT_EQ(spec.components[0].params["filter_file"].as<std::string>(), "/cfg/f/x.yaml");
+  EXPECT_EQ(spec.components[0].params["other"].as<std::string>(), "f/y") << "only *_file keys are paths";
+}
+
 TEST(HostFile, ErrorsNameTheProblem) {
   EXPECT_NE(error_of("components: []").find("non-empty"), std::string::npos);
   EXPECT_NE(error_of("domian: 3\ncomponents: [{type: a}]").find("unknown key 'domian'"),

@@ -143,6 +143,13 @@ HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std
       throw ConfigError(where + ": 'params' must be a map");
     }
     c.params = merge(from_file, entry["params"]);
+    // Parameters named *_file are paths: relative ones resolve against the host file's directory.
+    for (auto param : c.params) {
+      const auto key = param.first.as<std::string>();
+      if (key.size() > 5 && key.compare(key.size() - 5, 5, "_file") == 0 && param.second.IsScalar()) {
+        c.params[key] = resolve(base_dir, param.second.as<std::string>());
+      }
+    }
     if (!names.insert(c.name).second) {
       throw ConfigError(where + ": two components are named '" + c.name + "' (names must be unique)");
     }

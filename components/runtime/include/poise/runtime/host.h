@@ -9,7 +9,8 @@
 //     - type: parallel_kf          # a registered component type (`poise run --list`)
 //       name: pkf                  # optional instance name (default: type)
 //       config: ../filters/parallel_kf.yaml   # optional parameter file (YAML map)
-//       params: {filter: default}  # optional inline parameters, override the config file
+//       params: {preset: default}  # optional inline parameters, override the config file
+//   Parameters whose name ends in `_file` are paths; relative ones resolve against this file.
 #pragma once
 
 #include "poise/runtime/component.h"

@@ -1,0 +1,71 @@
+// Pure conversions from estimator outputs to the attitude and diagnostics messages, shared by
+// every estimator node (so each node stays a thin adapter: sample -> core -> report -> write).
+#pragma once
+
+#include <poise/msg/diagnostics.h>
+#include <poise/msg/estimates.h>
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace poise::nodes {
+
+/// What an attitude estimator reports after a step (SI, ENU, q_world_body).
+struct AttitudeReport {
+  int64_t stamp_ns = 0;  ///< stamp of the IMU sample the estimate is for
+  uint32_t seq = 0;      ///< seq of that IMU sample (lets consumers match inputs and truth)
+  Eigen::Quaterniond q_world_body = Eigen::Quaterniond::Identity();
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  ///< world small-angle error, rad^2
+  Eigen::Vector3d ext_accel_body_mps2{0, 0, 0};
+  Eigen::Vector3d ext_accel_world_mps2{0, 0, 0};
+  Eigen::Vector3d mag_disturbance_body_ut{0, 0, 0};
+  Eigen::Vector3d mag_disturbance_world_ut{0, 0, 0};
+  double mag_disturbance_angle_rad = 0.0;
+  bool mag_trusted = false;
+  uint32_t sources_fused = 0;  ///< msg::SOURCE_* bits
+  Eigen::Vector3d gyro_bias_rps{0, 0, 0};
+};
+
+/// Builds the message (roll/pitch/yaw ZYX from q, disturbance norm from the vector).
+msg::AttitudeEstimate to_attitude_msg(const AttitudeReport& report, const std::string& sensor_id,
+                                      const std::string& filter_id);
+
+/// One source's fusion status (mirrors msg::SourceStatus).
+struct SourceReport {
+  std::string source;
+  bool fresh = false;
+  bool fused = false;
+  std::string reason;
+  std::vector<double> innovation;
+  std::vector<double> innovation_variance;
+  double test_ratio = 0.0;
+  int64_t last_fused_stamp_ns = 0;
+  uint64_t fused_count = 0;
+  uint64_t rejected_count = 0;
+};
+
+struct MetricReport {
+  std::string name;
+  double value = 0.0;
+  std::string unit;
+};
+
+struct DiagnosticsReport {
+  int64_t stamp_ns = 0;
+  uint32_t seq = 0;
+  std::string component;
+  std::vector<SourceReport> sources;
+  std::map<std::string, uint64_t> counters;
+  std::vector<MetricReport> metrics;
+};
+
+/// Builds the message; sequences longer than the IDL bounds are truncated and the truncation is
+/// itself counted ("diagnostics_truncated"), never silently dropped.
+msg::FilterDiagnostics to_diagnostics_msg(const DiagnosticsReport& report, const std::string& sensor_id);
+
+}  // namespace poise::nodes
