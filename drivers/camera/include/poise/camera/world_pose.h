@@ -1,0 +1,66 @@
+// Camera pose in the world from all corners of all visible mapped tags, jointly.
+//
+// Notation: X_i world corner points (from the tag map), u_i their undistorted (ideal pinhole) pixel
+// observations, T_world_camera = (R, p) the unknown. Residual r_i = pi(R^T (X_i - p)) - u_i, px.
+// Perturbation (world frame, matching PoseMeasurement's covariance): p <- p + dp,
+// R <- Exp(dtheta) R, parameters [dp, dtheta].
+//   d X_c / d dp = -R^T,  d X_c / d dtheta = R^T [X_i - p]x,  pi = K * (x/z, y/z)
+// Start: every IPPE solution (both, per mapped tag) mapped to the world; the best by joint RMS
+// is refined with Levenberg-Marquardt. The best competing start whose rotation differs by more
+// than ambiguity_min_angle_rad is refined too: world ambiguity ratio = RMS(best)/RMS(competitor).
+// With a single tag the two IPPE solutions are the two minima: the tag's own ratio is used.
+// Covariance = sigma^2 (J^T J)^-1 with sigma^2 = max(pixel_sigma_px^2, SSR / (2N - 6)).
+#pragma once
+
+#include "poise/camera/tag_map.h"
+#include "poise/camera/tag_pose.h"
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <array>
+#include <string>
+#include <vector>
+
+namespace poise::camera {
+
+struct WorldPoseParams {
+  double pixel_sigma_px = 0.25;        ///< prior corner noise, px (lower bound on sigma)
+  double max_reprojection_rms_px = 2.0;  ///< reject the world pose above this RMS, px
+  int max_iterations = 20;             ///< Levenberg-Marquardt iterations
+  double ambiguity_ratio_max = 0.3;    ///< as TagPoseParams (set from the same config keys)
+  double ambiguity_min_angle_rad = 0.13962634015954636;
+};
+
+void validate_world_pose_params(const WorldPoseParams& params);
+
+/// One mapped tag's observation.
+struct TagObservation {
+  const MappedTag* tag = nullptr;                 ///< map entry (not owned)
+  std::array<Eigen::Vector2d, 4> corners_px;      ///< ideal (undistorted) corners, library order
+  TagPoseEstimate pose;                           ///< per-tag IPPE result (starts)
+};
+
+struct WorldPoseResult {
+  bool valid = false;
+  std::string reject_reason;  ///< "no_mapped_tags", "ambiguous", "reprojection", "degenerate"
+  Eigen::Isometry3d T_world_camera = Eigen::Isometry3d::Identity();
+  Eigen::Matrix<double, 6, 6> covariance = Eigen::Matrix<double, 6, 6>::Identity();  ///< [p|theta]
+  double reprojection_rms_px = 0.0;
+  double ambiguity_ratio = 0.0;
+  int iterations = 0;
+  std::vector<int> tag_ids;  ///< tags used
+};
+
+WorldPoseResult estimate_world_pose(const std::vector<TagObservation>& observations,
+                                    const cv::Matx33d& camera_matrix,
+                                    const WorldPoseParams& params);
+
+/// Propagates a camera pose + covariance to the body: T_world_body = T_world_camera *
+/// T_body_camera^-1, covariance in the same [dp, dtheta] world-frame parameterisation.
+void camera_to_body(const Eigen::Isometry3d& T_world_camera,
+                    const Eigen::Matrix<double, 6, 6>& covariance_camera,
+                    const Eigen::Isometry3d& T_body_camera, Eigen::Isometry3d* T_world_body,
+                    Eigen::Matrix<double, 6, 6>* covariance_body);
+
+}  // namespace poise::camera
