@@ -357,6 +357,16 @@ TEST(RecordCli, DurationEndsTheRecordingWithACompleteFile) {
   EXPECT_NE(info.output.find("complete (summary and footer valid)"), std::string::npos)
       << info.output;
   EXPECT_NE(info.output.find("messages:  0"), std::string::npos) << info.output;
+  // Ctrl-C (SIGINT) also ends it with a complete file.
+  const std::string file2 = dir + "/interrupted.mcap";
+  poise::testing::Child child({tool(), "record", "-o", file2, "imu", "--domain",
+                               std::to_string(lease.id()), "--profile", kProfile});
+  ASSERT_TRUE(poise::testing::wait_until(
+      [&] { return child.output().find("waiting for publishers") != std::string::npos; }, 15s))
+      << child.output();
+  child.signal(SIGINT);
+  EXPECT_EQ(child.wait_for(15s), std::optional<int>(0)) << child.output();
+  EXPECT_TRUE(McapReader::open_file(file2).report().complete);
 }
 
 TEST(RecordCli, DiskFullAndBadFilesGiveClearErrors) {

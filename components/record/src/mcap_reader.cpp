@@ -104,6 +104,12 @@ std::vector<uint8_t> chunk_records(const uint8_t* body, size_t size) {
     out.assign(p.here(), p.here() + records_len);
   } else if (compression == "zstd") {
 #ifdef POISE_RECORD_HAVE_ZSTD
+    const unsigned long long frame_size =
+        ZSTD_getFrameContentSize(p.here(), static_cast<size_t>(records_len));
+    if (frame_size != ZSTD_CONTENTSIZE_UNKNOWN && frame_size != uncompressed_size) {
+      throw ReadError("zstd chunk holds " + std::to_string(frame_size) +
+                      " bytes but claims " + std::to_string(uncompressed_size));
+    }
     out.resize(static_cast<size_t>(uncompressed_size));
     const size_t n = ZSTD_decompress(out.data(), out.size(), p.here(),
                                      static_cast<size_t>(records_len));
