@@ -168,8 +168,13 @@ void TopicObserver::subscribe(const DiscoveredWriter& writer, const TypeTable* t
     const std::uint32_t max_size = writer.max_serialized_size > 0
                                        ? writer.max_serialized_size
                                        : poise::dds::RawPubSubType::kDefaultMaxSize;
+    // The reader's topic kind must equal the writer's or they never match: when a peer publishes a
+    // known type name with a different keyed-ness (another IDL version), ignore the schema's key.
+    const StructDef* schema = table != nullptr ? table->find_struct(writer.type) : nullptr;
+    const TypeTable* key_table =
+        (schema != nullptr && schema->has_key() != writer.keyed) ? nullptr : table;
     fdds::TypeSupport type(
-        new poise::dds::RawPubSubType(writer.type, table, writer.keyed, max_size));
+        new poise::dds::RawPubSubType(writer.type, key_table, writer.keyed, max_size));
     if (type.register_type(p) != ReturnCode_t::RETCODE_OK) {
       throw poise::dds::DdsError("cannot register the raw type '" + writer.type + "'");
     }

@@ -69,9 +69,9 @@ class TopicObserver {
   using SampleCallback =
       std::function<void(const poise::dds::RawSample&, const eprosima::fastdds::dds::SampleInfo&)>;
 
-  /// Subscribes to `writer.topic` with the raw type `writer.type` (key handling from `table` when
-  /// it knows the type, else from the writer's topic kind), in the writer's partitions and
-  /// ownership kind. At most one reader per topic; throws poise::dds::DdsError on failure or if
+  /// Subscribes to `writer.topic` with the raw type `writer.type`, keyed iff the writer is (keys
+  /// computed from `table` when it knows the type with the same keyed-ness), in the writer's
+  /// partitions and ownership kind. `table` (may be null) must outlive the observer. At most one reader per topic; throws poise::dds::DdsError on failure or if
   /// the topic is already subscribed.
   void subscribe(const DiscoveredWriter& writer, const TypeTable* table, SampleCallback callback,
                  const RawReaderOptions& options = {});
