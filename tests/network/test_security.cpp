@@ -26,47 +26,26 @@ constexpr auto kDiscoveryBound = 20s;
 /// How long intruders get to try after the legitimate flow is established.
 constexpr int kIntrusionWindowMs = 3000;
 
-/// Two security directories created once for the suite: `good` (the deployment's CA) and `rogue`
-/// (another CA issuing look-alike identities).
+/// The security directories made at build time by tools/security/make_security.sh (see
+/// CMakeLists.txt): `good` (the deployment's CA: imu, camera, fusion, recorder) and `rogue`
+/// (another CA issuing look-alike "imu" and "recorder" identities).
 class SecurityTest : public ::testing::Test {
- public:
-  static void SetUpTestSuite() {
-    root_ = fs::temp_directory_path() / ("poise-sec-" + std::to_string(::getpid()));
-    fs::remove_all(root_);
-    const std::string script = testing::source_path("tools/security/make_security.sh");
-    for (const auto& [dir, hosts] :
-         {std::pair<std::string, std::vector<std::string>>{"good", {"imu", "camera", "fusion", "recorder"}},
-          {"rogue", {"imu", "recorder"}}}) {
-      std::vector<std::string> argv{"/bin/bash", script, (root_ / dir).string()};
-      argv.insert(argv.end(), hosts.begin(), hosts.end());
-      const testing::RunResult r = testing::run(argv, 60s);
-      if (r.exit_code != 0) {
-        setup_error_ = "make_security.sh failed: " + r.output;
-        return;
+ protected:
+  void SetUp() override {
+    for (const char* d : {"good", "rogue"}) {
+      if (!fs::exists(dir(d) + "/governance.p7s")) {
+        GTEST_FAIL() << dir(d) << " is missing: build the target poise_network_security_material "
+                                  "(runs tools/security/make_security.sh)";
       }
     }
   }
-  static void TearDownTestSuite() {
-    std::error_code ec;
-    fs::remove_all(root_, ec);
+  static std::string dir(const std::string& name) {
+    return std::string(POISE_NET_SECURITY_DIR) + "/" + name;
   }
-
- protected:
-  void SetUp() override {
-    if (!setup_error_.empty()) {
-      GTEST_FAIL() << setup_error_;
-    }
-  }
-  static std::string dir(const std::string& name) { return (root_ / name).string(); }
   static std::vector<std::string> secure(const std::string& which, const std::string& identity) {
     return {"POISE_SECURITY_DIR=" + dir(which), "POISE_SECURITY_IDENTITY=" + identity};
   }
-
-  static fs::path root_;
-  static std::string setup_error_;
 };
-fs::path SecurityTest::root_;
-std::string SecurityTest::setup_error_;
 
 std::string read_file(const std::string& path) {
   std::ifstream in(path);
@@ -155,7 +134,8 @@ TEST_F(SecurityTest, SecureParticipantFromEnvironmentAndTamperedPermissionsRejec
     ScopedEnv i("POISE_SECURITY_IDENTITY", "fusion");
     EXPECT_NO_THROW(dds::Participant({lease.id(), "poise_loopback", "", "secure_ok"}));
   }
-  const std::string tampered = dir("tampered");
+  const std::string tampered = (fs::temp_directory_path() /
+                                ("poise-sec-tampered-" + std::to_string(::getpid()))).string();
   fs::create_directories(tampered + "/fusion");
   for (const char* f : {"ca.pem", "governance.p7s", "fusion/cert.pem", "fusion/key.pem"}) {
     fs::copy_file(dir("good") + "/" + f, tampered + "/" + f, fs::copy_options::overwrite_existing);
@@ -167,12 +147,15 @@ TEST_F(SecurityTest, SecureParticipantFromEnvironmentAndTamperedPermissionsRejec
   std::ofstream(tampered + "/fusion/permissions.p7s") << p7s;
   ScopedEnv d("POISE_SECURITY_DIR", tampered);
   ScopedEnv i("POISE_SECURITY_IDENTITY", "fusion");
+  std::string error;
   try {
     dds::Participant participant({lease.id(), "poise_loopback", "", "secure_tampered"});
-    FAIL() << "a participant with tampered permissions was created";
   } catch (const dds::DdsError& e) {
-    EXPECT_NE(std::string(e.what()).find("DDS Security"), std::string::npos) << e.what();
+    error = e.what();
   }
+  fs::remove_all(tampered);
+  EXPECT_NE(error.find("DDS Security"), std::string::npos)
+      << "a participant with tampered permissions must not be created: " << error;
 }
 
 // Control for the capture below: without security the marker travels in clear.
