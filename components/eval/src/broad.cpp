@@ -181,7 +181,13 @@ BroadTrial load_broad(const std::string& path) {
   for (size_t i = 0; i < mv.rows; ++i) {
     t.movement[i] = mv.data[i] != 0.0 ? 1 : 0;
   }
+  if (H5Lexists(file.get(), "opt_pos", H5P_DEFAULT) > 0) {
+    t.opt_pos_m = to_vec3(read_matrix(file.get(), "opt_pos", 3, path));
+  }
   const size_t n = t.gyr_rps.size();
+  if (!t.opt_pos_m.empty() && t.opt_pos_m.size() != n) {
+    throw std::runtime_error(path + ": opt_pos has a different length");
+  }
   if (t.acc_mps2.size() != n || t.mag_ut.size() != n || t.opt_quat_wxyz.size() != n || t.movement.size() != n) {
     throw std::runtime_error(path + ": datasets have different lengths");
   }

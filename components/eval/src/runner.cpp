@@ -10,6 +10,9 @@ namespace poise::eval {
 
 std::vector<Eigen::Quaterniond> run_filter(AttitudeFilter& filter, const BroadTrial& trial) {
   filter.reset();
+  if (auto* inputs = dynamic_cast<TrialInputs*>(&filter)) {
+    inputs->begin_trial(trial);
+  }
   std::vector<Eigen::Quaterniond> out;
   out.reserve(trial.size());
   for (size_t k = 0; k < trial.size(); ++k) {

@@ -23,7 +23,8 @@ ParallelKfParams ParallelKfParams::paper() {
   p.c_d = 0.1;
   p.c_d_rate_hz = 0.0;
   p.sigma_gyro_extra_heading_rps = 0.0;
-  p.gyro_trapezoid = false;
+  p.gyro_current_weight = 0.0;
+  p.accel_lowpass_tau_s = 0.0;
   p.bias_estimation = false;
   p.mag_gating = false;
   return p;
@@ -66,6 +67,8 @@ void ParallelKfParams::validate() const {
   need(max_bias_rps > 0.0, "max_bias_rps must be > 0");
   need(mag_norm_tol > 0.0 && mag_dip_tol_deg > 0.0, "mag gating tolerances must be > 0");
   need(mag_reacquire_s >= 0.0 && mag_reacquire_tol > 0.0, "mag_reacquire_s >= 0, mag_reacquire_tol > 0");
+  need(gyro_current_weight >= 0.0 && gyro_current_weight <= 1.0, "gyro_current_weight must be in [0, 1]");
+  need(accel_lowpass_tau_s >= 0.0, "accel_lowpass_tau_s must be >= 0 (s, 0 = off)");
   need(limits.max_dt_s > 0.0, "limits.max_dt_s must be > 0 (s)");
 }
 
@@ -124,6 +127,7 @@ bool ParallelKf::update(const ImuSample& s) {
     return false;
   }
   last_stamp_ns_ = s.stamp_ns;
+  last_accel_ = s.accel_mps2;
   if (!initialized_) {
     initialize(s, c.mag_ok);
     return true;
@@ -133,17 +137,38 @@ bool ParallelKf::update(const ImuSample& s) {
     update_rest_and_bias(s.gyro_rps, s.accel_mps2, dt);
   }
   const Eigen::Vector3d gyro = s.gyro_rps - bias_;
-  const Eigen::Vector3d w = p_.gyro_trapezoid ? Eigen::Vector3d(0.5 * (prev_gyro_ + gyro)) : prev_gyro_;
+  const Eigen::Vector3d w = prev_gyro_ + p_.gyro_current_weight * (gyro - prev_gyro_);
+
+  // One transition for both filters: exp(-h w) or the printed first order I - h[w x] (5a), (9a)
+  Eigen::Matrix3d a;
+  if (p_.tilt.exact_rotation) {
+    a = rot_exp(-dt * w);
+  } else {
+    a = -dt * skew(w);
+    a.diagonal().array() += 1.0;
+  }
 
   // KF1: tilt + external acceleration (5)-(7)
-  kf1_.predict(w, dt);
-  kf1_.correct(s.accel_mps2);
+  kf1_.core().predict_with_transition(a, dt);
+  if (p_.accel_lowpass_tau_s > 0.0) {
+    // Low-pass the accelerometer in a gyro-propagated, almost inertial frame: external
+    // accelerations average out there while gravity stays put; KF1 sees the filtered vector.
+    r_ib_ = (r_ib_ * a.transpose()).eval();  // R_ib(k) = R_ib(k-1) exp(h w)
+    if (++r_ib_steps_ >= 256) {
+      r_ib_ = Eigen::Quaterniond(r_ib_).normalized().toRotationMatrix();
+      r_ib_steps_ = 0;
+    }
+    lp_accel_i_ += (dt / (p_.accel_lowpass_tau_s + dt)) * (r_ib_ * s.accel_mps2 - lp_accel_i_);
+    kf1_.correct(r_ib_.transpose() * lp_accel_i_);
+  } else {
+    kf1_.correct(s.accel_mps2);
+  }
   if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && !rest_) {
     bias_ -= kf1_.last_correction_rotvec() / p_.motion_bias_tau_s;
   }
 
   // KF2: heading + magnetic disturbance (8)-(11)
-  heading_step(w, s.accel_mps2, s.mag_ut, c.mag_ok, dt);
+  heading_step(a, s.accel_mps2, s.mag_ut, c.mag_ok, dt);
 
   if (p_.bias_estimation) {
     const double bn = bias_.norm();
@@ -163,6 +188,9 @@ void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
     learn_field(s.accel_mps2, s.mag_ut, 0.0);
   }
   prev_gyro_ = s.gyro_rps;
+  r_ib_.setIdentity();
+  r_ib_steps_ = 0;
+  lp_accel_i_ = s.accel_mps2;
   initialized_ = true;
 }
 
@@ -203,11 +231,11 @@ void ParallelKf::update_rest_and_bias(const Eigen::Vector3d& gyro_raw, const Eig
   }
 }
 
-void ParallelKf::heading_step(const Eigen::Vector3d& w, const Eigen::Vector3d& accel,
+void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& accel,
                               const Eigen::Vector3d& mag, bool mag_ok, double dt) {
   out_.mag_used = false;
   if (heading_initialized_) {
-    kf2_.predict(w, dt);  // (9a), (9b), (11a)-(11e)
+    kf2_.predict_with_transition(a, dt);  // (9a), (9b), (11a)-(11e)
   }
   if (!mag_ok) {
     return;
@@ -281,7 +309,11 @@ ParallelKfOutput ParallelKf::output() const {
   ParallelKfOutput o;
   o.q_world_body = q_world_body();
   o.rpy_rad = euler_zyx_from_quat(o.q_world_body);
-  o.ext_accel_body_mps2 = kf1_.ext_accel_body();
+  // With the inertial low-pass, KF1's sa is the residual of the filtered vector: report the
+  // instantaneous external acceleration s_A - g sZ instead (4).
+  o.ext_accel_body_mps2 = p_.accel_lowpass_tau_s > 0.0
+                              ? Eigen::Vector3d(last_accel_ - p_.tilt.gravity_mps2 * kf1_.up_body())
+                              : kf1_.ext_accel_body();
   o.ext_accel_world_mps2 = o.q_world_body * o.ext_accel_body_mps2;
   o.mag_dist_body_ut = kf2_.e();
   o.mag_dist_world_ut = o.q_world_body * o.mag_dist_body_ut;

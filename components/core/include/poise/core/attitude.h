@@ -138,9 +138,24 @@ inline Eigen::Vector3d quat_log(const Eigen::Quaterniond& q_in) {
   return v * (angle / vn);
 }
 
-/// Rotation matrix of a rotation vector (Rodrigues).
+/// Rotation matrix of a rotation vector (Rodrigues: I + a [phi x] + b [phi x]^2 with
+/// a = sin(t)/t, b = (1 - cos(t))/t^2; series below 0.05 rad, so per-sample steps need no trig).
 inline Eigen::Matrix3d rot_exp(const Eigen::Vector3d& phi) {
-  return quat_exp(phi).toRotationMatrix();
+  const double t2 = phi.squaredNorm();
+  double a;
+  double b;
+  if (t2 < 0.05 * 0.05) {
+    a = 1.0 - t2 / 6.0 + t2 * t2 / 120.0;
+    b = 0.5 - t2 / 24.0 + t2 * t2 / 720.0;
+  } else {
+    const double t = std::sqrt(t2);
+    a = std::sin(t) / t;
+    b = (1.0 - std::cos(t)) / t2;
+  }
+  const Eigen::Matrix3d k = skew(phi);
+  Eigen::Matrix3d r = a * k + b * (k * k);
+  r.diagonal().array() += 1.0;
+  return r;
 }
 
 /// Rotation vector of a rotation matrix (via the quaternion, robust near pi).

@@ -25,6 +25,9 @@ struct BroadTrial {
   std::vector<Eigen::Vector3d> mag_ut;
   std::vector<Eigen::Vector4d> opt_quat_wxyz;  ///< reference q_world_body [w,x,y,z]; NaN rows = lost
   std::vector<uint8_t> movement;               ///< 1 while the motion phase runs
+  /// Reference position of the optical body, m (dataset opt_pos); NaN rows = lost; empty when the
+  /// file has none. Used to synthesise vision poses (selective EKF hybrid benchmark).
+  std::vector<Eigen::Vector3d> opt_pos_m;
   [[nodiscard]] size_t size() const { return gyr_rps.size(); }
   /// Sample k as an ImuSample (stamp = round(k * 1e9 / rate)).
   [[nodiscard]] ImuSample sample(size_t k) const;

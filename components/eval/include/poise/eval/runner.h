@@ -10,6 +10,15 @@
 
 namespace poise::eval {
 
+/// Optional second interface of a filter that also consumes inputs derived from the trial (e.g.
+/// the selective EKF's vision synthesised from the reference): run_filter() calls begin_trial()
+/// right after reset(); the filter then feeds itself per update() (sample k = k-th update).
+class TrialInputs {
+ public:
+  virtual ~TrialInputs() = default;
+  virtual void begin_trial(const BroadTrial& trial) = 0;
+};
+
 /// Runs `filter` (reset first) over every sample of `trial`, first to last; returns one
 /// q_world_body per input sample (identity before the filter is initialised).
 std::vector<Eigen::Quaterniond> run_filter(AttitudeFilter& filter, const BroadTrial& trial);

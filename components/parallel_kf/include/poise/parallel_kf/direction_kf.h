@@ -50,7 +50,10 @@ class DirectionKf {
   DirectionKf() = default;
   explicit DirectionKf(const DirectionKfParams& p) : p_(p) {}
 
-  void set_params(const DirectionKfParams& p) { p_ = p; }
+  void set_params(const DirectionKfParams& p) {
+    p_ = p;
+    cached_h_ = -1.0;
+  }
   [[nodiscard]] const DirectionKfParams& params() const { return p_; }
 
   /// Starts at direction `u` (normalised) with e = 0 and covariance diag(var_u I, var_e I).
@@ -64,26 +67,34 @@ class DirectionKf {
 
   /// Time update over h with gyro w (rad/s, already bias-corrected by the caller if wanted).
   void predict(const Eigen::Vector3d& w_rps, double h_s) {
-    Eigen::Matrix3d a;
     if (p_.exact_rotation) {
-      a = rot_exp(-h_s * w_rps);  // u_k = R(h w)^T u_{k-1}
+      predict_with_transition(rot_exp(-h_s * w_rps), h_s);  // u_k = R(h w)^T u_{k-1}
     } else {
-      a = Eigen::Matrix3d::Identity() - h_s * skew(w_rps);  // (5a), (7a)
+      Eigen::Matrix3d a = -h_s * skew(w_rps);  // (5a), (7a): I - h[s_G x]
+      a.diagonal().array() += 1.0;
+      predict_with_transition(a, h_s);
     }
+  }
+
+  /// Time update with a given direction transition `a` (I - h[w x] or exp(-h w)) over h.
+  void predict_with_transition(const Eigen::Matrix3d& a, double h_s) {
     const double c = step_c(h_s);
-    const Eigen::Matrix3d su = skew(u_);
     const double sg2 = p_.sigma_gyro_rps * p_.sigma_gyro_rps +
                        p_.sigma_gyro_extra_rps * p_.sigma_gyro_extra_rps;
-    const Eigen::Matrix3d q11 = (h_s * h_s * sg2) * (su * su.transpose());  // (7d), (11d)
+    // Q11 = h^2 sigma^2 [u x][u x]^T = h^2 sigma^2 (|u|^2 I - u u^T)            (7d), (11d)
+    const double qg = h_s * h_s * sg2;
     const double q22 = c * c / 3.0 * e_.squaredNorm() + p_.sigma_meas * p_.sigma_meas;  // (7e), (11e)
+    const Eigen::Vector3d u_prev = u_;
 
     u_ = a * u_;  // (5a), (9a)
     e_ *= c;      // (5b), (9b)
 
     const Eigen::Matrix3d p11 = p_mat_.topLeftCorner<3, 3>();
     const Eigen::Matrix3d p12 = p_mat_.topRightCorner<3, 3>();
-    p_mat_.topLeftCorner<3, 3>().noalias() = a * p11 * a.transpose();
-    p_mat_.topLeftCorner<3, 3>() += q11;
+    Eigen::Matrix3d n11 = a * p11 * a.transpose();
+    n11.noalias() -= qg * (u_prev * u_prev.transpose());
+    n11.diagonal().array() += qg * u_prev.squaredNorm();
+    p_mat_.topLeftCorner<3, 3>() = n11;
     p_mat_.topRightCorner<3, 3>().noalias() = c * (a * p12);
     p_mat_.bottomLeftCorner<3, 3>() = p_mat_.topRightCorner<3, 3>().transpose();
     p_mat_.bottomRightCorner<3, 3>() *= c * c;
@@ -125,7 +136,11 @@ class DirectionKf {
   /// The Markov coefficient for a step of h seconds.
   [[nodiscard]] double step_c(double h_s) const {
     if (p_.c_rate_hz > 0.0 && p_.c > 0.0) {
-      return std::pow(p_.c, p_.c_rate_hz * h_s);
+      if (h_s != cached_h_) {
+        cached_h_ = h_s;
+        cached_c_ = std::pow(p_.c, p_.c_rate_hz * h_s);
+      }
+      return cached_c_;
     }
     return p_.c;
   }
@@ -135,6 +150,8 @@ class DirectionKf {
   Eigen::Vector3d u_{0.0, 0.0, 1.0};
   Eigen::Vector3d e_{0.0, 0.0, 0.0};
   Matrix6 p_mat_ = Matrix6::Identity();
+  mutable double cached_h_ = -1.0;  // step_c() cache (the pow is only recomputed when h changes)
+  mutable double cached_c_ = 0.0;
 };
 
 }  // namespace poise

@@ -64,7 +64,14 @@ struct ParallelKfParams {
   double startup_s = 1.0;                    ///< start-up window for learning m and alpha, s
 
   // --- propagation
-  bool gyro_trapezoid = false;  ///< propagate with the mean of s_G at k-1 and k (paper: k-1)
+  /// Propagation rate w = (1 - x) s_G,k-1 + x s_G,k: 0 = the paper's s_G at k-1 (7a), 0.5 =
+  /// trapezoid, 1 = the current sample (right when the IMU reports the mean rate over (k-1, k]).
+  double gyro_current_weight = 1.0;
+
+  // --- accelerometer low-pass in an almost inertial frame (extension)
+  /// > 0: KF1 is corrected with the accelerometer low-passed with this time constant (s) in a
+  /// gyro-propagated frame (external accelerations average out, gravity does not move), 0 = paper.
+  double accel_lowpass_tau_s = 3.0;
 
   // --- gyro bias estimation (extension)
   bool bias_estimation = true;
@@ -73,7 +80,7 @@ struct ParallelKfParams {
   double rest_min_s = 1.5;                      ///< ... for at least this long, s
   double rest_filter_tau_s = 0.5;               ///< low-pass time constant of the rest detector, s
   double rest_bias_tau_s = 2.0;                 ///< time constant of the bias low-pass at rest, s
-  double motion_bias_tau_s = 60.0;              ///< integral time constant in motion, s (0 = off)
+  double motion_bias_tau_s = 0.0;               ///< integral time constant in motion, s (0 = off)
   double max_bias_rps = 3.0 * kRadPerDeg;       ///< clamp of the bias estimate, rad/s
 
   // --- magnetic disturbance gating of the heading update (extension)
@@ -144,7 +151,7 @@ class ParallelKf {
   void initialize(const ImuSample& s, bool mag_ok);
   void learn_field(const Eigen::Vector3d& accel, const Eigen::Vector3d& mag, double dt);
   void update_rest_and_bias(const Eigen::Vector3d& gyro_raw, const Eigen::Vector3d& accel, double dt);
-  void heading_step(const Eigen::Vector3d& w, const Eigen::Vector3d& accel,
+  void heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& accel,
                     const Eigen::Vector3d& mag, bool mag_ok, double dt);
 
   ParallelKfParams p_;
@@ -173,6 +180,12 @@ class ParallelKf {
   double cand_dip_ = 0.0;
   double cand_stable_s_ = 0.0;
   double rejected_s_ = 0.0;
+
+  // inertial low-pass of the accelerometer
+  Eigen::Matrix3d r_ib_ = Eigen::Matrix3d::Identity();  ///< body -> almost inertial frame
+  int r_ib_steps_ = 0;
+  Eigen::Vector3d lp_accel_i_{0, 0, 0};
+  Eigen::Vector3d last_accel_{0, 0, 0};
 
   // bias / rest
   Eigen::Vector3d bias_{0, 0, 0};
