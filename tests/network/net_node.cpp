@@ -260,7 +260,8 @@ int run_imu(const Common& c) {
         writer.write(m);
       },
       c.rate_hz);
-  event("@summary topic=%s sent=%u\n", topic.c_str(), seq);
+  event("@summary topic=%s sent=%u t_ns=%lld\n", topic.c_str(), seq,
+        static_cast<long long>(now_ns()));
   return 0;
 }
 
