@@ -177,7 +177,17 @@ TEST(ImuProtocolReject, OutOfRange) {
   expect_reject(line("IMU,4294967296,2,0,0,9.8,0,0,0,1,2,3,,"), RejectReason::kOutOfRange);
   expect_reject(line("IMU,1,2,1e999,0,9.8,0,0,0,1,2,3,,"), RejectReason::kOutOfRange);
   expect_reject(line("RAW,1,2,0,0,40000,0,0,0,1,2,3,,"), RejectReason::kOutOfRange);    // int16
-  expect_reject(line("RAW,1,2,0,0,16384,0,0,0,-4096,2,3,,"), RejectReason::kOutOfRange); // HMC ovf
+}
+
+TEST(ImuProtocol, EmptyOrSaturatedMagnetometerFlagsTheSampleInsteadOfDroppingIt) {
+  ParseResult r = parse(line("IMU,1,2,0,0,9.8,0,0,0,,,,,"));
+  ASSERT_TRUE(r.ok) << to_string(r.reason);
+  EXPECT_FALSE(r.sample.has_mag);
+  r = parse(line("RAW,1,2,0,0,16384,0,0,0,-4096,2,3,,"));  // HMC5883L overflow on x
+  ASSERT_TRUE(r.ok) << to_string(r.reason);
+  EXPECT_FALSE(r.sample.has_mag);
+  EXPECT_NEAR(r.sample.accel_mps2.z(), 9.80665, kCountTol);
+  expect_reject(line("IMU,1,2,0,0,9.8,0,0,0,1,,,,"), RejectReason::kMissingField);  // partial mag
 }
 
 TEST(ImuProtocol, EveryReasonHasADistinctName) {

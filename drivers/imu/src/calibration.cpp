@@ -118,10 +118,11 @@ void Calibration::apply(const RawSample& raw, ImuSample* out) const {
   out->seq = raw.seq;
   out->gyro_rps = r_imu * gyro_scale.cwiseProduct(raw.gyro_rps - gyro_bias_rps);
   out->accel_mps2 = r_imu * accel_scale.cwiseProduct(raw.accel_mps2 - accel_bias_mps2);
-  out->mag_ut = r_mag * (mag_soft_iron * (raw.mag_ut - mag_hard_iron_ut));
   out->has_accel = true;
   out->has_gyro = true;
-  out->has_mag = true;
+  out->has_mag = raw.has_mag;
+  out->mag_ut = raw.has_mag ? Eigen::Vector3d(r_mag * (mag_soft_iron * (raw.mag_ut - mag_hard_iron_ut)))
+                            : Eigen::Vector3d::Zero();
   out->pressure_pa = raw.pressure_pa;
   out->has_pressure = raw.has_pressure;
   out->temperature_c = raw.temperature_c;

@@ -99,6 +99,7 @@ void ImuDriver::on_line(std::string_view line) {
   stats_.clock_valid = clock_.valid();
   stats_.clock_resets = clock_.resets();
   ++stats_.samples;
+  if (!raw.has_mag) ++stats_.samples_without_mag;
   if (sink_) {
     SampleInfo info;
     info.raw = raw;

@@ -191,6 +191,7 @@ void CalibrationSession::add(const RawSample& s, int64_t sensor_ns) {
     case Phase::kDone:
       return;
   }
+  if (!s.has_mag) return;
   if (mag_.empty() || (s.mag_ut - mag_.back()).norm() >= params_.min_mag_spacing_ut) {
     if (mag_.size() < params_.max_mag_points) mag_.push_back(s.mag_ut);
   }

@@ -165,7 +165,9 @@ ParseResult LineParser::parse(std::string_view line) const {
 
   if (!raw) {
     std::array<double, 9> v{};
+    s.has_mag = !(fields[8].empty() && fields[9].empty() && fields[10].empty());
     for (std::size_t i = 0; i < 9; ++i) {
+      if (i >= 6 && !s.has_mag) break;
       st = parse_double(fields[2 + i], &v[i]);
       if (st != FieldStatus::kOk) return reject(reason_of(st));
     }
@@ -180,13 +182,18 @@ ParseResult LineParser::parse(std::string_view line) const {
     s.has_temperature = st == FieldStatus::kOk;
   } else {
     std::array<int32_t, 9> c{};
+    s.has_mag = !(fields[8].empty() && fields[9].empty() && fields[10].empty());
     for (std::size_t i = 0; i < 9; ++i) {
+      if (i >= 6 && !s.has_mag) break;
       st = parse_i32(fields[2 + i], &c[i]);
       if (st != FieldStatus::kOk) return reject(reason_of(st));
       if (c[i] < std::numeric_limits<int16_t>::min() || c[i] > std::numeric_limits<int16_t>::max()) {
         return reject(RejectReason::kOutOfRange);
       }
-      if (i >= 6 && c[i] == kHmcOverflow) return reject(RejectReason::kOutOfRange);
+    }
+    if (s.has_mag && (c[6] == kHmcOverflow || c[7] == kHmcOverflow || c[8] == kHmcOverflow)) {
+      s.has_mag = false;  // saturated: the sample stays, its magnetometer is flagged invalid
+      c[6] = c[7] = c[8] = 0;
     }
     const double accel_k = raw_.g_mps2 / raw_.accel_lsb_per_g;
     const double gyro_k = kPi / 180.0 / raw_.gyro_lsb_per_dps;
@@ -238,13 +245,19 @@ std::string wrap_payload(std::string_view payload) {
 
 std::string format_imu_line(const RawSample& s, int decimals) {
   char buf[512];
-  int n = std::snprintf(buf, sizeof buf, "IMU,%u,%u,%.*f,%.*f,%.*f,%.*f,%.*f,%.*f,%.*f,%.*f,%.*f,",
+  int n = std::snprintf(buf, sizeof buf, "IMU,%u,%u,%.*f,%.*f,%.*f,%.*f,%.*f,%.*f,",
                         static_cast<unsigned>(s.seq), static_cast<unsigned>(s.t_us), decimals,
                         s.accel_mps2.x(), decimals, s.accel_mps2.y(), decimals, s.accel_mps2.z(),
                         decimals, s.gyro_rps.x(), decimals, s.gyro_rps.y(), decimals,
-                        s.gyro_rps.z(), decimals, s.mag_ut.x(), decimals, s.mag_ut.y(), decimals,
-                        s.mag_ut.z());
+                        s.gyro_rps.z());
   std::string payload(buf, static_cast<std::size_t>(n));
+  if (s.has_mag) {
+    n = std::snprintf(buf, sizeof buf, "%.*f,%.*f,%.*f,", decimals, s.mag_ut.x(), decimals,
+                      s.mag_ut.y(), decimals, s.mag_ut.z());
+    payload.append(buf, static_cast<std::size_t>(n));
+  } else {
+    payload += ",,,";
+  }
   if (s.has_pressure) {
     n = std::snprintf(buf, sizeof buf, "%.1f", s.pressure_pa);
     payload.append(buf, static_cast<std::size_t>(n));
@@ -259,11 +272,16 @@ std::string format_imu_line(const RawSample& s, int decimals) {
 
 std::string format_raw_line(const RawCounts& c) {
   char buf[256];
-  int n = std::snprintf(buf, sizeof buf, "RAW,%u,%u,%d,%d,%d,%d,%d,%d,%d,%d,%d,",
+  int n = std::snprintf(buf, sizeof buf, "RAW,%u,%u,%d,%d,%d,%d,%d,%d,",
                         static_cast<unsigned>(c.seq), static_cast<unsigned>(c.t_us), c.accel[0],
-                        c.accel[1], c.accel[2], c.gyro[0], c.gyro[1], c.gyro[2], c.mag[0],
-                        c.mag[1], c.mag[2]);
+                        c.accel[1], c.accel[2], c.gyro[0], c.gyro[1], c.gyro[2]);
   std::string payload(buf, static_cast<std::size_t>(n));
+  if (c.has_mag) {
+    n = std::snprintf(buf, sizeof buf, "%d,%d,%d,", c.mag[0], c.mag[1], c.mag[2]);
+    payload.append(buf, static_cast<std::size_t>(n));
+  } else {
+    payload += ",,,";
+  }
   if (c.has_pressure) payload += std::to_string(c.pressure_pa);
   payload += ',';
   if (c.has_temperature) payload += std::to_string(c.temperature);

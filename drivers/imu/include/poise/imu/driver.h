@@ -41,6 +41,7 @@ struct DriverStats {
   uint64_t lines = 0;        ///< candidate '$' lines framed
   uint64_t samples = 0;      ///< samples published
   uint64_t info_lines = 0;   ///< '#' firmware messages
+  uint64_t samples_without_mag = 0;  ///< published with has_mag = false (empty or saturated)
   RejectCounts rejects{};    ///< per RejectReason
   uint64_t seq_gap_drops = 0;  ///< lines lost according to sequence gaps
   uint64_t sensor_restarts = 0;  ///< seq jumps treated as a sensor restart (resync)

@@ -2,11 +2,13 @@
 //
 // One ASCII line per sample (full description: docs/SERIAL_PROTOCOL.md):
 //   $IMU,<seq>,<t_us>,<ax>,<ay>,<az>,<gx>,<gy>,<gz>,<mx>,<my>,<mz>,<p_pa>,<temp_c>*<CS>\r\n
-//     SI values as decimal floats (m/s^2, rad/s, uT, Pa, C); p_pa and temp_c may be empty.
+//     SI values as decimal floats (m/s^2, rad/s, uT, Pa, C); p_pa and temp_c may be empty; the
+//     three mag fields may be empty together (no magnetometer, or it saturated).
 //   $RAW,<seq>,<t_us>,<ax>,<ay>,<az>,<gx>,<gy>,<gz>,<mx>,<my>,<mz>,<p_pa>,<temp>*<CS>\r\n
 //     register counts as signed decimal integers (MPU6050 accel/gyro, HMC5883L mag in X,Y,Z order,
 //     MPU6050 TEMP_OUT), pressure in integer Pa (BMP180 compensated on the board); converted to SI
-//     with RawScale. p_pa and temp may be empty.
+//     with RawScale. p_pa and temp may be empty; mag may be empty (all three) and an HMC5883L
+//     overflow count (-4096) on any axis also marks the magnetometer invalid for that sample.
 //   CS: two hex digits, XOR of every byte strictly between '$' and '*'.
 //   Lines starting with '#' are informational messages from the firmware (not samples).
 #pragma once
@@ -33,7 +35,7 @@ enum class RejectReason : int {
   kChecksumMismatch,  ///< XOR checksum differs
   kUnknownSentence,   ///< talker other than IMU / RAW
   kFieldCount,        ///< wrong number of comma-separated fields
-  kMissingField,      ///< a mandatory field is empty (everything but pressure and temperature)
+  kMissingField,      ///< a mandatory field is empty (accel, gyro, seq, t_us; or 1-2 mag axes)
   kNonNumeric,        ///< a field is not a (complete) number of the expected kind
   kNotFinite,         ///< NaN or infinity
   kOutOfRange,        ///< value outside the configured physical limits (or int16 counts)
@@ -81,6 +83,7 @@ struct RawSample {
   Eigen::Vector3d mag_ut{0, 0, 0};
   double pressure_pa = 0.0;
   double temperature_c = 0.0;
+  bool has_mag = true;           ///< false: mag fields empty or saturated (mag_ut is zero)
   bool has_pressure = false;
   bool has_temperature = false;
   bool from_raw_counts = false;  ///< true for $RAW lines
@@ -122,6 +125,7 @@ struct RawCounts {
   std::array<int32_t, 3> accel{0, 0, 0};
   std::array<int32_t, 3> gyro{0, 0, 0};
   std::array<int32_t, 3> mag{0, 0, 0};
+  bool has_mag = true;
   bool has_pressure = false;
   int32_t pressure_pa = 0;
   bool has_temperature = false;

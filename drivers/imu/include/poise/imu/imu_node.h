@@ -1,0 +1,83 @@
+// The serial IMU driver as a DDS component: port -> ImuDriver -> `imu` topic (ImuSample) and
+// `diagnostics` (FilterDiagnostics, component_name "imu_driver", once per diagnostics period).
+// Runs its own reader thread; survives unplug/replug (PortReader).
+//
+// Component parameters (host file or `poise imu` options):
+//   port: /dev/ttyACM0        (required)
+//   baud: 115200              (overrides serial.baud of the driver config)
+//   config_file: imu.yaml     (driver YAML, config/drivers/imu.yaml format) -- or the same
+//                             sections inline: serial, protocol, limits, raw, clock, calibration
+//   diagnostics_period_s: 1.0
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+
+#include <poise/msg/diagnosticsPubSubTypes.h>
+#include <poise/msg/imuPubSubTypes.h>
+
+#include "poise/imu/config.h"
+#include "poise/imu/driver.h"
+#include "poise/imu/serial_port.h"
+#include "poise/nodes/reports.h"
+#include "poise/runtime/component.h"
+
+namespace poise::imu {
+
+struct ImuNodeOptions {
+  std::string port;
+  DriverConfig config;
+  double diagnostics_period_s = 1.0;
+  bool log_to_stderr = true;
+};
+
+/// Parses component parameters into options (ConfigError with what to fix).
+ImuNodeOptions imu_node_options(const runtime::ComponentSpec& spec);
+
+/// Diagnostics report of the driver (pure; counters per reject reason, rates, clock).
+nodes::DiagnosticsReport driver_diagnostics(const DriverStats& stats,
+                                            const RateLatencyMeter::Summary& rate, bool connected,
+                                            uint64_t connects, int64_t stamp_ns, uint32_t seq);
+
+class ImuDriverNode : public runtime::Component {
+ public:
+  ImuDriverNode(const ImuNodeOptions& options, const std::string& sensor_id,
+                runtime::HostContext& host);
+  ~ImuDriverNode() override;
+  void start() override;
+  void stop() override;
+  [[nodiscard]] std::string status() const override;
+
+ private:
+  void on_sample(const ImuSample& sample, const SampleInfo& info);
+  void on_tick(int64_t now_ns);
+
+  ImuNodeOptions options_;
+  std::string sensor_id_;
+  runtime::HostContext& host_;
+  dds::Writer<msg::ImuSamplePubSubType> imu_writer_;
+  dds::Writer<msg::FilterDiagnosticsPubSubType> diag_writer_;
+  ImuDriver driver_;
+  PortReader reader_;
+  RateLatencyMeter meter_;
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+  int64_t next_diag_ns_ = 0;
+  uint32_t diag_seq_ = 0;
+  uint64_t write_failures_ = 0;
+  int64_t last_stamp_ns_ = 0;
+  mutable std::mutex status_mutex_;
+  std::string status_;
+  uint64_t warned_no_valid_at_bytes_ = 0;
+};
+
+}  // namespace poise::imu
+
+namespace poise::runtime {
+/// Registers the "imu_driver" component type (poise_add_component_module).
+void register_imu_driver(ComponentRegistry& registry);
+}  // namespace poise::runtime
