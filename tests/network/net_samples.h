@@ -4,6 +4,7 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 
 namespace poise::nettest {
@@ -46,5 +47,25 @@ inline VisionValues vision_values(uint32_t seq) {
 
 /// Marker placed in sensor_id by the capture tests: found in plain RTPS traffic, never in encrypted.
 inline constexpr const char* kMarkerSensorId = "poise-wire-marker-5e1f";
+
+}  // namespace poise::nettest
+
+namespace poise::nettest {
+
+/// PoseEstimate fields for sequence number `seq`: covariance(i, j) = 100 * i + j + 1 (9x9,
+/// row-major), so every element's origin is recognisable after a re-layout.
+struct PoseValues {
+  std::array<double, 3> position_m;
+  std::array<double, 4> q_wxyz;
+};
+
+inline PoseValues pose_values(uint32_t seq) {
+  const double s = static_cast<double>(seq % 1000U);
+  return {{10.0 + 1e-3 * s, -5.0, 1.25}, {0.5, -0.5, 0.5, 0.5}};
+}
+
+inline double pose_covariance(std::size_t row, std::size_t col) {
+  return static_cast<double>(100 * row + col + 1);
+}
 
 }  // namespace poise::nettest
