@@ -265,6 +265,9 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
     std::unique_ptr<fdds::TopicDataType> generated = make_generated_type(d.type);
     const std::optional<std::string> idl = flattened_idl(d.type);
     if (!generated || !idl) {
+      if (opt.all && !d.topic.empty() && d.topic[0] == '_') {
+        return;  // middleware-internal topics (e.g. Fast DDS statistics): not user data
+      }
       warn_once("unknown:" + d.topic,
                 "topic '" + d.topic + "' has type " + d.type +
                     " which is not a poise IDL type: not recorded");
@@ -398,6 +401,16 @@ RecorderStats Recorder::run() {
         im.log << "poise record: " << written_.load() << " messages on " << subscribed_.load()
                << " topics, " << im.writer->stats().bytes / 1024 << " KiB in "
                << im.current_path() << "\n";
+        std::string waiting;
+        for (const std::string& t : options_.all ? std::vector<std::string>{} : options_.topics) {
+          if (im.by_topic.count(t) == 0) {
+            waiting += " " + t;
+          }
+        }
+        if (!waiting.empty()) {
+          im.log << "poise record: no publisher discovered yet on:" << waiting
+                 << " (check the topic names and --domain)\n";
+        }
       }
     }
     // Stop receiving, then write what is queued.
