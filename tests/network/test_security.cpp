@@ -173,8 +173,9 @@ TEST_F(SecurityTest, PlainTrafficShowsTheMarkerOnTheWire) {
   ASSERT_EQ(capture->wait_for(10s), 0) << capture->output();
   const auto c = find_events(capture->output(), "capture");
   ASSERT_EQ(c.size(), 1U) << capture->output();
-  EXPECT_GT(c[0].num("rtps"), 50.0) << "100 Hz for 1.5 s";
-  EXPECT_GT(c[0].num("rtps_marker"), 50.0) << "plain RTPS carries sensor_id in clear";
+  // 100 Hz for 1.5 s nominal; the bounds leave room for a loaded machine.
+  EXPECT_GT(c[0].num("rtps"), 20.0);
+  EXPECT_GT(c[0].num("rtps_marker"), 20.0) << "plain RTPS carries sensor_id in clear";
 }
 
 // GIVEN the IMU, fusion and recorder hosts with identities of the deployment CA
@@ -204,7 +205,7 @@ TEST_F(SecurityTest, SecureHostsCommunicateEncryptedAndStrangersSeeNothing) {
 
   const auto c = find_events(capture->output(), "capture");
   ASSERT_EQ(c.size(), 1U) << capture->output();
-  EXPECT_GT(c[0].num("rtps"), 100.0) << "imu in + attitude out at 100 Hz for 2 s";
+  EXPECT_GT(c[0].num("rtps"), 40.0) << "imu in + attitude out at 100 Hz for 2 s (400 nominal)";
   EXPECT_EQ(c[0].num("marker"), 0.0) << "the sensor_id must not appear in clear";
   for (auto* s : {stranger_imu.get(), stranger_att.get()}) {
     EXPECT_TRUE(find_events(s->output(), "first").empty()) << s->output();
@@ -252,7 +253,7 @@ TEST_F(SecurityTest, IntrudersCannotInjectOrReadImuSamples) {
     rogue_sources.insert(e.str("source"));
   }
   EXPECT_EQ(rogue_sources, std::set<std::string>{"rogue-ca"}) << rogue_reader->output();
-  ASSERT_EQ(camera->wait_for(5s), 1) << "the camera identity may not create an imu writer:\n"
+  ASSERT_EQ(camera->wait_for(15s), 1) << "the camera identity may not create an imu writer:\n"
                                      << camera->output();
   EXPECT_FALSE(find_events(camera->output(), "error").empty()) << camera->output();
   // The intruders themselves were running (they published), so the test means something.
