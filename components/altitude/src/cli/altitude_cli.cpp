@@ -31,8 +31,8 @@ std::string score_json(const AltitudeScore& s, const AltitudeParams& p) {
 }  // namespace
 
 void register_altitude_cli(CLI::App& app) {
-  CLI::App* sim = subcommand_group(app, "sim", "Simulators: run an estimator on synthetic data");
-  CLI::App* cmd = sim->add_subcommand(
+  CLI::App* sim_group = subcommand_group(app, "sim", "Simulators: run an estimator on synthetic data");
+  CLI::App* cmd = sim_group->add_subcommand(
       "altitude",
       "Altitude / vertical-velocity filter (paper 003) on a simulated GY-87 test profile: prints "
       "height and vertical-velocity RMSE");
@@ -97,11 +97,11 @@ void register_altitude_cli(CLI::App& app) {
           std::printf("%-18s", profile.c_str());
         }
         for (auto m : methods) {
-          AltitudeSimConfig sim;
-          sim.profile = profile;
-          sim.seed = opt->seed;
+          AltitudeSimConfig sim_config;
+          sim_config.profile = profile;
+          sim_config.seed = opt->seed;
           params.method = m;
-          const AltitudeScore s = score_altitude(sim, params);
+          const AltitudeScore s = score_altitude(sim_config, params);
           if (opt->json) {
             std::printf("%s%s", first ? "" : ",", score_json(s, params).c_str());
             first = false;
@@ -120,10 +120,10 @@ void register_altitude_cli(CLI::App& app) {
       return;
     }
     parse_altitude_method(opt->method, params.method);
-    AltitudeSimConfig sim;
-    sim.profile = opt->profile;
-    sim.seed = opt->seed;
-    const AltitudeScore s = score_altitude(sim, params);
+    AltitudeSimConfig sim_config;
+    sim_config.profile = opt->profile;
+    sim_config.seed = opt->seed;
+    const AltitudeScore s = score_altitude(sim_config, params);
     if (opt->json) {
       std::cout << score_json(s, params) << "\n";
       return;

@@ -1,0 +1,312 @@
+#include "poise/vehicle/vehicle_estimator.h"
+
+#include "poise/core/attitude.h"
+
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace poise {
+
+const char* to_string(VehicleMode m) {
+  switch (m) {
+    case VehicleMode::kSwitched:
+      return "switched";
+    case VehicleMode::kTriad:
+      return "triad";
+    case VehicleMode::kEkf:
+      return "ekf";
+  }
+  return "?";
+}
+
+bool parse_vehicle_mode(const std::string& name, VehicleMode& out) {
+  for (VehicleMode m : {VehicleMode::kSwitched, VehicleMode::kTriad, VehicleMode::kEkf}) {
+    if (name == to_string(m)) {
+      out = m;
+      return true;
+    }
+  }
+  return false;
+}
+
+std::string VehicleParams::validate() const {
+  std::ostringstream err;
+  const auto positive = [&err](double v, const char* name) {
+    if (!std::isfinite(v) || v <= 0.0) {
+      err << name << " must be > 0 (got " << v << "); ";
+    }
+  };
+  const auto non_negative = [&err](double v, const char* name) {
+    if (!std::isfinite(v) || v < 0.0) {
+      err << name << " must be >= 0 (got " << v << "); ";
+    }
+  };
+  positive(model.i_x_kgm2, "model.i_x_kgm2");
+  positive(model.i_y_kgm2, "model.i_y_kgm2");
+  non_negative(model.k_x_nm_per_rad, "model.k_x_nm_per_rad");
+  non_negative(model.k_y_nm_per_rad, "model.k_y_nm_per_rad");
+  non_negative(model.b_x_nms_per_rad, "model.b_x_nms_per_rad");
+  non_negative(model.b_y_nms_per_rad, "model.b_y_nms_per_rad");
+  positive(model.m_s_kg, "model.m_s_kg");
+  non_negative(model.h_s_m, "model.h_s_m");
+  positive(gravity_mps2, "gravity_mps2");
+  if (!mag_world_ut.allFinite() || mag_world_ut.norm() < 1.0) {
+    err << "mag_world_ut must be a finite field of at least 1 uT; ";
+  } else if (mag_world_ut.head<2>().norm() < 1e-3 * mag_world_ut.norm()) {
+    err << "mag_world_ut must not be vertical (no heading reference); ";
+  }
+  positive(static_yaw_rate_max_rps, "switching.static_yaw_rate_max_rps");
+  positive(static_speed_max_mps, "switching.static_speed_max_mps");
+  non_negative(q_roll_rad2_per_s, "ekf.q_roll_rad2_per_s");
+  non_negative(q_pitch_rad2_per_s, "ekf.q_pitch_rad2_per_s");
+  non_negative(q_yaw_rad2_per_s, "ekf.q_yaw_rad2_per_s");
+  positive(r_mag_ut2, "ekf.r_mag_ut2");
+  positive(initial_var_angle_rad2, "ekf.initial_var_angle_rad2");
+  positive(initial_var_rate_rad2ps2, "ekf.initial_var_rate_rad2ps2");
+  positive(max_dt_s, "max_dt_s");
+  if (!(mag_norm_tolerance > 0.0 && mag_norm_tolerance < 1.0)) {
+    err << "mag_norm_tolerance must be in (0, 1) (got " << mag_norm_tolerance << "); ";
+  }
+  std::string s = err.str();
+  if (!s.empty()) {
+    s.resize(s.size() - 2);
+  }
+  return s;
+}
+
+Eigen::Matrix3d body_world_from_euler(double roll_rad, double pitch_rad, double yaw_rad) {
+  return quat_from_euler_zyx(roll_rad, pitch_rad, yaw_rad).toRotationMatrix().transpose();  // (1)
+}
+
+Eigen::Vector3d euler_from_body_world(const Eigen::Matrix3d& r) {
+  // (10) with 1-based indices R(2,3), R(3,3), R(1,3), R(1,2), R(1,1).
+  double s = -r(0, 2);
+  s = s > 1.0 ? 1.0 : (s < -1.0 ? -1.0 : s);
+  return {std::atan2(r(1, 2), r(2, 2)), std::asin(s), std::atan2(r(0, 1), r(0, 0))};
+}
+
+bool triad_body_world(const Eigen::Vector3d& mag_body_ut, double accel_lat_g,
+                      const Eigen::Vector3d& mag_world_ut, Eigen::Matrix3d& r_body_world) {
+  if (!mag_body_ut.allFinite() || !std::isfinite(accel_lat_g)) {
+    return false;
+  }
+  const double ay = accel_lat_g > 1.0 ? 1.0 : (accel_lat_g < -1.0 ? -1.0 : accel_lat_g);
+  const Eigen::Vector3d g_m(0.0, ay, std::sqrt(1.0 - ay * ay));  // (7), world up seen in the body
+  const Eigen::Vector3d g_ref(0.0, 0.0, 1.0);
+  Eigen::Vector3d s1;
+  Eigen::Vector3d s2;
+  Eigen::Vector3d r1;
+  Eigen::Vector3d r2;
+  if (!safe_normalize(mag_body_ut, s1) || !safe_normalize(mag_body_ut.cross(g_m), s2, 1e-9) ||
+      !safe_normalize(mag_world_ut, r1) || !safe_normalize(mag_world_ut.cross(g_ref), r2, 1e-9)) {
+    return false;
+  }
+  const Eigen::Vector3d s3 = s1.cross(s2).normalized();  // (9)
+  const Eigen::Vector3d r3 = r1.cross(r2).normalized();  // (9), r3 from r (the print repeats s)
+  Eigen::Matrix3d s;
+  Eigen::Matrix3d rr;
+  s << s1, s2, s3;
+  rr << r1, r2, r3;
+  r_body_world = s * rr.transpose();  // (9)
+  return true;
+}
+
+VehicleEstimator::VehicleEstimator(const VehicleParams& params) : params_(params) {
+  const std::string problems = params_.validate();
+  if (!problems.empty()) {
+    throw std::invalid_argument("vehicle estimator parameters: " + problems);
+  }
+  reset();
+}
+
+void VehicleEstimator::reset() {
+  est_ = VehicleEstimate{};
+  rejects_ = VehicleRejects{};
+  have_stamp_ = false;
+  last_stamp_ns_ = 0;
+  last_speed_mps_ = 0.0;
+  ekf_init_ = false;
+  x_.setZero();
+  p_.setZero();
+  prev_ax_ = prev_ay_ = prev_r_ = 0.0;
+  static_mag_sum_.setZero();
+  static_ay_sum_ = 0.0;
+  static_count_ = 0;
+}
+
+void VehicleEstimator::ekf_init(const Eigen::Vector3d& euler) {
+  x_ << euler(0), 0.0, euler(1), 0.0, euler(2);
+  p_.setZero();
+  p_.diagonal() << params_.initial_var_angle_rad2, params_.initial_var_rate_rad2ps2,
+      params_.initial_var_angle_rad2, params_.initial_var_rate_rad2ps2, params_.initial_var_angle_rad2;
+  ekf_init_ = true;
+}
+
+void VehicleEstimator::ekf_predict(double a_x, double a_y, double r, double dt_s) {
+  const VehicleModelParams& m = params_.model;
+  const double phi = x_(0);
+  const double theta = x_(2);
+  const double sp = std::sin(phi);
+  const double cp = std::cos(phi);
+  const double st = std::sin(theta);
+  const double ct = std::cos(theta);
+  const double mh = m.m_s_kg * m.h_s_m;
+  Vector5 f;  // (11)
+  f << x_(1) + cp * st * r,
+      (-m.k_x_nm_per_rad * phi - m.b_x_nms_per_rad * x_(1) + mh * a_y) / m.i_x_kgm2,
+      x_(3) - sp * r,
+      (-m.k_y_nm_per_rad * theta - m.b_y_nms_per_rad * x_(3) - mh * a_x) / m.i_y_kgm2,
+      cp * ct * r;
+  Matrix5 j = Matrix5::Zero();  // J_f_x
+  j(0, 0) = -sp * st * r;
+  j(0, 1) = 1.0;
+  j(0, 2) = cp * ct * r;
+  j(1, 0) = -m.k_x_nm_per_rad / m.i_x_kgm2;
+  j(1, 1) = -m.b_x_nms_per_rad / m.i_x_kgm2;
+  j(2, 0) = -cp * r;
+  j(2, 3) = 1.0;
+  j(3, 2) = -m.k_y_nm_per_rad / m.i_y_kgm2;
+  j(3, 3) = -m.b_y_nms_per_rad / m.i_y_kgm2;
+  j(4, 0) = -sp * ct * r;
+  j(4, 2) = -cp * st * r;
+  const Matrix5 fm = Matrix5::Identity() + j * dt_s;
+  x_ += f * dt_s;
+  x_(4) = wrap_angle(x_(4));
+  Vector5 q;
+  q << params_.q_roll_rad2_per_s, 0.0, params_.q_pitch_rad2_per_s, 0.0, params_.q_yaw_rad2_per_s;  // (13)
+  p_ = fm * p_ * fm.transpose();
+  p_.diagonal() += q * dt_s;
+  p_ = 0.5 * (p_ + p_.transpose());
+}
+
+void VehicleEstimator::ekf_correct(const Eigen::Vector3d& mag_ut) {
+  const double phi = x_(0);
+  const double theta = x_(2);
+  const double psi = x_(4);
+  // R = Rx(phi)^T Ry(theta)^T Rz(psi)^T = Rx(-phi) Ry(-theta) Rz(-psi); d/da R(-a) = -[e x] R(-a).
+  const Eigen::Matrix3d rx = Eigen::AngleAxisd(-phi, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  const Eigen::Matrix3d ry = Eigen::AngleAxisd(-theta, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  const Eigen::Matrix3d rz = Eigen::AngleAxisd(-psi, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  const Eigen::Vector3d& h_w = params_.mag_world_ut;
+  const Eigen::Vector3d v_z = rz * h_w;
+  const Eigen::Vector3d v_y = ry * v_z;
+  const Eigen::Vector3d pred = rx * v_y;  // (12)
+  Eigen::Matrix<double, 3, 5> hm = Eigen::Matrix<double, 3, 5>::Zero();  // J_B_x
+  hm.col(0) = -skew(Eigen::Vector3d::UnitX()) * pred;
+  hm.col(2) = rx * (-skew(Eigen::Vector3d::UnitY()) * v_y);
+  hm.col(4) = rx * ry * (-skew(Eigen::Vector3d::UnitZ()) * v_z);
+  const Eigen::Matrix3d rm = Eigen::Matrix3d::Identity() * params_.r_mag_ut2;  // (13)
+  const Eigen::Matrix3d s = hm * p_ * hm.transpose() + rm;
+  const Eigen::Matrix<double, 5, 3> k = p_ * hm.transpose() * s.inverse();
+  x_ += k * (mag_ut - pred);
+  x_(4) = wrap_angle(x_(4));
+  const Matrix5 ikh = Matrix5::Identity() - k * hm;
+  p_ = ikh * p_ * ikh.transpose() + k * rm * k.transpose();  // Joseph form
+  p_ = 0.5 * (p_ + p_.transpose());
+}
+
+void VehicleEstimator::set_output(const Eigen::Vector3d& euler, bool from_triad) {
+  est_.roll_rad = euler(0);
+  est_.pitch_rad = euler(1);
+  est_.yaw_rad = wrap_angle(euler(2));
+  est_.q_world_body = quat_from_euler_zyx(euler(0), euler(1), euler(2));
+  est_.from_triad = from_triad;
+  est_.valid = true;
+}
+
+bool VehicleEstimator::update(const VehicleSample& s) {
+  if (!std::isfinite(s.accel_lon_mps2) || !std::isfinite(s.accel_lat_mps2) ||
+      !std::isfinite(s.yaw_rate_rps)) {
+    ++rejects_.non_finite_input;
+    return false;
+  }
+  double dt_s = 0.0;
+  bool gap = false;
+  if (have_stamp_) {
+    if (s.stamp_ns <= last_stamp_ns_) {
+      ++rejects_.non_monotonic_stamp;
+      return false;
+    }
+    dt_s = static_cast<double>(s.stamp_ns - last_stamp_ns_) * 1e-9;
+    if (dt_s > params_.max_dt_s) {
+      ++rejects_.dt_gap;
+      gap = true;
+    }
+  }
+  last_stamp_ns_ = s.stamp_ns;
+
+  if (s.has_speed && std::isfinite(s.speed_mps) && s.speed_mps >= 0.0) {
+    last_speed_mps_ = s.speed_mps;
+  } else {
+    ++rejects_.bad_speed;
+  }
+  bool mag_ok = s.has_mag && s.mag_ut.allFinite();
+  if (!mag_ok) {
+    ++rejects_.missing_mag;
+  } else {
+    const double ratio = s.mag_ut.norm() / params_.mag_world_ut.norm();
+    if (std::abs(ratio - 1.0) > params_.mag_norm_tolerance) {
+      ++rejects_.disturbed_mag;
+      mag_ok = false;
+    }
+  }
+
+  const bool is_static = std::abs(s.yaw_rate_rps) < params_.static_yaw_rate_max_rps &&
+                         last_speed_mps_ < params_.static_speed_max_mps;
+  est_.is_static = is_static;
+  est_.stamp_ns = s.stamp_ns;
+
+  Eigen::Vector3d mag_in = s.mag_ut;
+  double ay_in = s.accel_lat_mps2;
+  if (!is_static) {
+    static_count_ = 0;
+    static_mag_sum_.setZero();
+    static_ay_sum_ = 0.0;
+  } else if (params_.static_average && mag_ok) {
+    static_mag_sum_ += s.mag_ut;
+    static_ay_sum_ += s.accel_lat_mps2;
+    ++static_count_;
+    mag_in = static_mag_sum_ / static_cast<double>(static_count_);
+    ay_in = static_ay_sum_ / static_cast<double>(static_count_);
+  }
+  Eigen::Vector3d triad_euler(0.0, 0.0, 0.0);
+  bool triad_ok = false;
+  if (mag_ok) {
+    Eigen::Matrix3d r;
+    triad_ok = triad_body_world(mag_in, ay_in / params_.gravity_mps2, params_.mag_world_ut, r);
+    if (triad_ok) {
+      triad_euler = euler_from_body_world(r);
+    }
+  }
+
+  const bool propagate = have_stamp_ && !gap && ekf_init_;
+  have_stamp_ = true;
+  const VehicleMode mode = params_.mode;
+  const bool use_triad = mode == VehicleMode::kTriad || (mode == VehicleMode::kSwitched && is_static);
+  if (use_triad) {
+    if (triad_ok) {
+      set_output(triad_euler, true);
+      ekf_init(triad_euler);  // the EKF restarts from the static solution
+    }
+    // else: no usable magnetometer; the last output is held (static: the vehicle does not turn).
+  } else if (ekf_init_) {
+    if (propagate) {
+      ekf_predict(prev_ax_, prev_ay_, prev_r_, dt_s);
+    }
+    if (mag_ok) {
+      ekf_correct(s.mag_ut);
+    }
+    set_output(Eigen::Vector3d(x_(0), x_(2), x_(4)), false);
+  } else if (triad_ok) {
+    ekf_init(triad_euler);  // first fix: the EKF starts from TRIAD
+    set_output(triad_euler, true);
+  }
+
+  prev_ax_ = s.accel_lon_mps2;
+  prev_ay_ = s.accel_lat_mps2;
+  prev_r_ = s.yaw_rate_rps;
+  return true;
+}
+
+}  // namespace poise

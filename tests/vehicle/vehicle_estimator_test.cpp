@@ -1,0 +1,281 @@
+// Vehicle attitude (paper 001): TRIAD closed forms, EKF convergence, switching, bad input, config.
+#include "poise/vehicle/vehicle_estimator.h"
+
+#include "poise/core/attitude.h"
+#include "poise/testing/testing.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <stdexcept>
+
+namespace poise {
+namespace {
+
+constexpr double kG = 9.80665;
+constexpr double kExactTolRad = 1e-9;
+constexpr int64_t kStepNs = 10'000'000;  // 100 Hz
+
+/// Noiseless static sample of a vehicle at (roll, 0, yaw) on the default field.
+VehicleSample static_sample(int64_t stamp_ns, double roll, double pitch, double yaw,
+                            const Eigen::Vector3d& h = VehicleParams{}.mag_world_ut) {
+  const Eigen::Matrix3d r = body_world_from_euler(roll, pitch, yaw);
+  const Eigen::Vector3d f = r * Eigen::Vector3d(0.0, 0.0, kG);
+  VehicleSample s;
+  s.stamp_ns = stamp_ns;
+  s.accel_lon_mps2 = f.x();
+  s.accel_lat_mps2 = f.y();
+  s.yaw_rate_rps = 0.0;
+  s.mag_ut = r * h;
+  s.speed_mps = 0.0;
+  return s;
+}
+
+TEST(VehicleMath, MatrixOneMatchesThePrintedEntries) {
+  // (1) with C/S of roll f, pitch t, yaw p, (1,2) = C(t)S(p) (the print of (12) has C(t)C(p)).
+  const double f = 0.3;
+  const double t = -0.2;
+  const double p = 1.1;
+  const Eigen::Matrix3d r = body_world_from_euler(f, t, p);
+  using std::cos;
+  using std::sin;
+  Eigen::Matrix3d printed;
+  printed << cos(t) * cos(p), cos(t) * sin(p), -sin(t),
+      -cos(f) * sin(p) + sin(f) * sin(t) * cos(p), cos(f) * cos(p) + sin(f) * sin(t) * sin(p), sin(f) * cos(t),
+      sin(f) * sin(p) + cos(f) * sin(t) * cos(p), -sin(f) * cos(p) + cos(f) * sin(t) * sin(p), cos(f) * cos(t);
+  EXPECT_TRUE(r.isApprox(printed, 1e-12));
+  const Eigen::Vector3d e = euler_from_body_world(r);  // (10)
+  EXPECT_NEAR(e(0), f, kExactTolRad);
+  EXPECT_NEAR(e(1), t, kExactTolRad);
+  EXPECT_NEAR(e(2), p, kExactTolRad);
+}
+
+TEST(VehicleTriad, ExactOnStaticSyntheticDataWithoutGrade) {
+  // GIVEN a vehicle at rest with any roll and yaw and no pitch (the virtual gravity (7) assumes
+  // no longitudinal slope) WHEN TRIAD runs THEN it returns the exact angles.
+  const Eigen::Vector3d h = VehicleParams{}.mag_world_ut;
+  for (double roll : {-0.35, -0.1, 0.0, 0.2, 0.35}) {
+    for (double yaw : {-3.0, -1.2, 0.0, 0.7, 2.9}) {
+      const VehicleSample s = static_sample(0, roll, 0.0, yaw);
+      Eigen::Matrix3d r;
+      ASSERT_TRUE(triad_body_world(s.mag_ut, s.accel_lat_mps2 / kG, h, r));
+      const Eigen::Vector3d e = euler_from_body_world(r);
+      EXPECT_NEAR(e(0), roll, kExactTolRad) << roll << " " << yaw;
+      EXPECT_NEAR(e(1), 0.0, kExactTolRad);
+      EXPECT_NEAR(wrap_angle(e(2) - yaw), 0.0, kExactTolRad);
+      // The magnetometer is reproduced exactly (TRIAD's anchor vector).
+      EXPECT_TRUE((r * h).isApprox(s.mag_ut, 1e-12));
+    }
+  }
+}
+
+TEST(VehicleTriad, GradeIsNotObservedByTheVirtualGravity) {
+  // GIVEN a 5 deg grade at rest WHEN TRIAD runs THEN the magnetometer is still matched exactly but
+  // the angles are off (documented limitation of (7)).
+  const VehicleSample s = static_sample(0, 0.0, -5.0 * kRadPerDeg, 0.4);
+  Eigen::Matrix3d r;
+  ASSERT_TRUE(triad_body_world(s.mag_ut, s.accel_lat_mps2 / kG, VehicleParams{}.mag_world_ut, r));
+  const Eigen::Vector3d e = euler_from_body_world(r);
+  EXPECT_GT(std::abs(e(1) + 5.0 * kRadPerDeg) + std::abs(e(2) - 0.4) + std::abs(e(0)), 1e-3);
+  EXPECT_TRUE((r * VehicleParams{}.mag_world_ut).isApprox(s.mag_ut, 1e-12));
+}
+
+TEST(VehicleTriad, DegenerateInputFails) {
+  Eigen::Matrix3d r;
+  EXPECT_FALSE(triad_body_world(Eigen::Vector3d::Zero(), 0.0, VehicleParams{}.mag_world_ut, r));
+  // Field parallel to the virtual gravity.
+  EXPECT_FALSE(triad_body_world(Eigen::Vector3d(0.0, 0.0, 40.0), 0.0, VehicleParams{}.mag_world_ut, r));
+  EXPECT_FALSE(triad_body_world(Eigen::Vector3d(std::nan(""), 1.0, 1.0), 0.0,
+                                VehicleParams{}.mag_world_ut, r));
+}
+
+TEST(VehicleEstimator, GivenStandstillThenSwitchedUsesTriadExactly) {
+  VehicleEstimator est;
+  for (int k = 0; k < 50; ++k) {
+    ASSERT_TRUE(est.update(static_sample(k * kStepNs, 0.1, 0.0, 1.0)));
+  }
+  const auto& e = est.estimate();
+  EXPECT_TRUE(e.valid);
+  EXPECT_TRUE(e.is_static);
+  EXPECT_TRUE(e.from_triad);
+  EXPECT_NEAR(e.roll_rad, 0.1, kExactTolRad);
+  EXPECT_NEAR(e.pitch_rad, 0.0, kExactTolRad);
+  EXPECT_NEAR(e.yaw_rad, 1.0, kExactTolRad);
+  const Eigen::Vector3d rpy = euler_zyx_from_quat(e.q_world_body);
+  EXPECT_NEAR(rpy(0), 0.1, 1e-9);
+  EXPECT_NEAR(rpy(2), 1.0, 1e-9);
+}
+
+TEST(VehicleEstimator, GivenWrongStartWhenDrivingStraightThenEkfConverges) {
+  // GIVEN an EKF-only estimator initialised 15 deg off in yaw (first sample's magnetometer rotated)
+  // WHEN the vehicle drives straight and level at 20 m/s with noiseless sensors for 20 s
+  // THEN roll, pitch and yaw converge to the truth.
+  constexpr double kConvergedTolRad = 0.2 * kRadPerDeg;
+  VehicleParams p;
+  p.mode = VehicleMode::kEkf;
+  VehicleEstimator est(p);
+  const double yaw = 0.8;
+  VehicleSample first = static_sample(0, 0.0, 0.0, yaw + 15.0 * kRadPerDeg);
+  first.speed_mps = 20.0;
+  ASSERT_TRUE(est.update(first));
+  EXPECT_NEAR(est.estimate().yaw_rad, yaw + 15.0 * kRadPerDeg, 1e-9);
+  for (int k = 1; k <= 2000; ++k) {
+    VehicleSample s = static_sample(k * kStepNs, 0.0, 0.0, yaw);
+    s.speed_mps = 20.0;
+    ASSERT_TRUE(est.update(s));
+  }
+  const auto& e = est.estimate();
+  EXPECT_FALSE(e.from_triad);
+  EXPECT_FALSE(e.is_static);
+  EXPECT_NEAR(e.roll_rad, 0.0, kConvergedTolRad);
+  EXPECT_NEAR(e.pitch_rad, 0.0, kConvergedTolRad);
+  EXPECT_NEAR(wrap_angle(e.yaw_rad - yaw), 0.0, kConvergedTolRad);
+  // The covariance stays symmetric positive definite.
+  const auto& pm = est.ekf_covariance();
+  EXPECT_TRUE(pm.isApprox(pm.transpose(), 1e-12));
+  EXPECT_GT(pm.llt().info() == Eigen::Success ? 1 : 0, 0);
+}
+
+TEST(VehicleEstimator, GivenSteadyTurnThenEkfMatchesTheSuspensionEquilibrium) {
+  // GIVEN a steady flat turn with lateral specific force a_y (model exact, noiseless) WHEN the EKF
+  // runs THEN roll settles at m_s h_s a_y / k_x (roll out of the turn), the equilibrium of (11).
+  VehicleParams p;
+  p.mode = VehicleMode::kEkf;
+  VehicleEstimator est(p);
+  const double v = 20.0;
+  const double ay = 3.0;  // m/s^2, left turn
+  const double r = ay / v;
+  const double roll_eq = p.model.m_s_kg * p.model.h_s_m * ay / p.model.k_x_nm_per_rad;
+  double yaw = 0.0;
+  for (int k = 0; k < 3000; ++k) {
+    // Body roll phi = roll_eq: the accelerometer sees the specific force of the turn plus gravity.
+    const Eigen::Matrix3d rbw = body_world_from_euler(roll_eq, 0.0, yaw);
+    const Eigen::Vector3d a_w(-ay * std::sin(yaw), ay * std::cos(yaw), 0.0);  // centripetal
+    const Eigen::Vector3d f = rbw * (a_w + Eigen::Vector3d(0.0, 0.0, kG));
+    VehicleSample s;
+    s.stamp_ns = k * kStepNs;
+    s.accel_lon_mps2 = f.x();
+    s.accel_lat_mps2 = f.y();
+    s.yaw_rate_rps = std::cos(roll_eq) * r;
+    s.mag_ut = rbw * p.mag_world_ut;
+    s.speed_mps = v;
+    ASSERT_TRUE(est.update(s));
+    yaw = wrap_angle(yaw + r * 0.01);
+  }
+  EXPECT_GT(roll_eq, 0.0);
+  EXPECT_NEAR(est.estimate().roll_rad, roll_eq, 0.3 * kRadPerDeg);
+  EXPECT_NEAR(wrap_angle(est.estimate().yaw_rad - (yaw - r * 0.01)), 0.0, 0.5 * kRadPerDeg);
+}
+
+TEST(VehicleEstimator, BadInputIsRejectedAndCounted) {
+  VehicleEstimator est;
+  int64_t t = 0;
+  for (int k = 0; k < 10; ++k, t += kStepNs) {
+    ASSERT_TRUE(est.update(static_sample(t, 0.05, 0.0, 0.3)));
+  }
+  VehicleSample s = static_sample(t, 0.05, 0.0, 0.3);
+  s.accel_lat_mps2 = std::nan("");
+  EXPECT_FALSE(est.update(s));
+  s = static_sample(t, 0.05, 0.0, 0.3);
+  s.yaw_rate_rps = std::numeric_limits<double>::infinity();
+  EXPECT_FALSE(est.update(s));
+  EXPECT_EQ(est.rejects().non_finite_input, 2U);
+
+  // Negative, NaN and missing speed: counted, the last valid speed is kept, the sample is used.
+  for (int i = 0; i < 3; ++i) {
+    s = static_sample(t, 0.05, 0.0, 0.3);
+    if (i == 0) {
+      s.speed_mps = -1.0;
+    } else if (i == 1) {
+      s.speed_mps = std::nan("");
+    } else {
+      s.has_speed = false;
+    }
+    EXPECT_TRUE(est.update(s));
+    t += kStepNs;
+  }
+  EXPECT_EQ(est.rejects().bad_speed, 3U);
+
+  // Missing or NaN magnetometer: counted; the output stays finite.
+  s = static_sample(t, 0.05, 0.0, 0.3);
+  s.has_mag = false;
+  EXPECT_TRUE(est.update(s));
+  t += kStepNs;
+  s = static_sample(t, 0.05, 0.0, 0.3);
+  s.mag_ut.x() = std::nan("");
+  EXPECT_TRUE(est.update(s));
+  t += kStepNs;
+  EXPECT_EQ(est.rejects().missing_mag, 2U);
+  // A field three times too strong (magnet nearby): disturbed.
+  s = static_sample(t, 0.05, 0.0, 0.3);
+  s.mag_ut *= 3.0;
+  EXPECT_TRUE(est.update(s));
+  t += kStepNs;
+  EXPECT_EQ(est.rejects().disturbed_mag, 1U);
+  EXPECT_TRUE(std::isfinite(est.estimate().roll_rad));
+  EXPECT_NEAR(est.estimate().roll_rad, 0.05, 1e-6);
+
+  // Stamps that do not advance.
+  EXPECT_FALSE(est.update(static_sample(t - kStepNs, 0.05, 0.0, 0.3)));
+  EXPECT_EQ(est.rejects().non_monotonic_stamp, 1U);
+  t += 100 * kStepNs;
+  EXPECT_TRUE(est.update(static_sample(t, 0.05, 0.0, 0.3)));
+  EXPECT_EQ(est.rejects().dt_gap, 1U);
+  EXPECT_EQ(est.rejects().total(), 10U);
+}
+
+TEST(VehicleEstimator, MissingMagnetometerWhileDrivingPredictsOnly) {
+  VehicleParams p;
+  p.mode = VehicleMode::kEkf;
+  VehicleEstimator est(p);
+  VehicleSample s = static_sample(0, 0.0, 0.0, 0.5);
+  s.speed_mps = 15.0;
+  ASSERT_TRUE(est.update(s));
+  for (int k = 1; k < 100; ++k) {
+    s = static_sample(k * kStepNs, 0.0, 0.0, 0.5);
+    s.speed_mps = 15.0;
+    s.has_mag = false;
+    ASSERT_TRUE(est.update(s));
+  }
+  EXPECT_EQ(est.rejects().missing_mag, 99U);
+  EXPECT_NEAR(est.estimate().yaw_rad, 0.5, 1e-9);
+  // The yaw variance grew with no magnetometer to bound it.
+  EXPECT_GT(est.ekf_covariance()(4, 4), p.initial_var_angle_rad2);
+}
+
+TEST(VehicleConfig, ShippedYamlLoadsTheDefaults) {
+  const VehicleParams p = load_vehicle_params(testing::source_path("config/filters/vehicle.yaml"));
+  const VehicleParams d;
+  EXPECT_EQ(p.mode, d.mode);
+  EXPECT_DOUBLE_EQ(p.model.k_x_nm_per_rad, d.model.k_x_nm_per_rad);
+  EXPECT_DOUBLE_EQ(p.model.h_s_m, d.model.h_s_m);
+  EXPECT_DOUBLE_EQ(p.q_roll_rad2_per_s, d.q_roll_rad2_per_s);
+  EXPECT_DOUBLE_EQ(p.r_mag_ut2, d.r_mag_ut2);
+  EXPECT_EQ(p.static_average, d.static_average);
+  EXPECT_TRUE(p.mag_world_ut.isApprox(d.mag_world_ut));
+}
+
+TEST(VehicleConfig, UnknownKeysAndBadValuesAreErrors) {
+  const std::string path = ::testing::TempDir() + "/vehicle_bad.yaml";
+  const auto write = [&path](const std::string& text) { std::ofstream(path) << text; };
+  write("model:\n  kx: 1\n");
+  EXPECT_THROW(load_vehicle_params(path), std::runtime_error);
+  write("model:\n  i_x_kgm2: -3\n");
+  EXPECT_THROW(load_vehicle_params(path), std::runtime_error);
+  write("mag_world_ut: [0, 0, -40]\n");
+  EXPECT_THROW(load_vehicle_params(path), std::runtime_error);
+  write("mag_world_ut: [1, 2]\n");
+  EXPECT_THROW(load_vehicle_params(path), std::runtime_error);
+  write("mode: ekf\nswitching:\n  static_speed_max_mps: 1.5\n");
+  const VehicleParams p = load_vehicle_params(path);
+  EXPECT_EQ(p.mode, VehicleMode::kEkf);
+  EXPECT_DOUBLE_EQ(p.static_speed_max_mps, 1.5);
+  VehicleParams bad;
+  bad.r_mag_ut2 = 0.0;
+  EXPECT_THROW(VehicleEstimator{bad}, std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace poise
