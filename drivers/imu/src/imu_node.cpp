@@ -10,7 +10,8 @@ namespace poise::imu {
 namespace {
 const std::set<std::string> kDriverSections{"serial", "protocol", "limits", "raw", "clock",
                                             "calibration"};
-const std::set<std::string> kNodeKeys{"port", "baud", "config_file", "diagnostics_period_s"};
+const std::set<std::string> kNodeKeys{"port", "baud", "config_file", "diagnostics_period_s",
+                                      "reliable"};
 }  // namespace
 
 ImuNodeOptions imu_node_options(const runtime::ComponentSpec& spec) {
@@ -26,8 +27,8 @@ ImuNodeOptions imu_node_options(const runtime::ComponentSpec& spec) {
       } else if (kNodeKeys.count(key) == 0) {
         throw runtime::ConfigError(spec.origin + ": unknown parameter '" + key +
                                    "' of imu_driver (known: port, baud, config_file, "
-                                   "diagnostics_period_s, serial, protocol, limits, raw, clock, "
-                                   "calibration)");
+                                   "diagnostics_period_s, reliable, serial, protocol, limits, raw, "
+                                   "clock, calibration)");
       }
     }
   }
@@ -61,6 +62,7 @@ ImuNodeOptions imu_node_options(const runtime::ComponentSpec& spec) {
   if (!(o.diagnostics_period_s > 0.0 && o.diagnostics_period_s <= 3600.0)) {
     throw runtime::ConfigError(spec.origin + ": diagnostics_period_s must be in (0, 3600]");
   }
+  o.reliable = runtime::param<bool>(spec, "reliable", false);
   return o;
 }
 
@@ -100,7 +102,8 @@ ImuDriverNode::ImuDriverNode(const ImuNodeOptions& options, const std::string& s
     : options_(options),
       sensor_id_(sensor_id),
       host_(host),
-      imu_writer_(host.participant, host.topics.imu),
+      imu_writer_(host.participant, host.topics.imu,
+                  options.reliable ? dds::QosKind::kEstimate : dds::QosKind::kSensor),
       diag_writer_(host.participant, host.topics.diagnostics),
       driver_(options.config.params, options.config.calibration,
               [this](const ImuSample& s, const SampleInfo& i) { on_sample(s, i); }),

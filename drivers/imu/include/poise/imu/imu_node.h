@@ -8,6 +8,8 @@
 //   config_file: imu.yaml     (driver YAML, config/drivers/imu.yaml format) -- or the same
 //                             sections inline: serial, protocol, limits, raw, clock, calibration
 //   diagnostics_period_s: 1.0
+//   reliable: false           (true: publish `imu` with the reliable "estimate" QoS instead of the
+//                             best-effort "sensor" one, e.g. for recording or exact-count tests)
 #pragma once
 
 #include <atomic>
@@ -32,6 +34,7 @@ struct ImuNodeOptions {
   std::string port;
   DriverConfig config;
   double diagnostics_period_s = 1.0;
+  bool reliable = false;
   bool log_to_stderr = true;
 };
 
