@@ -7,6 +7,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <ctime>
 #include <cstdlib>
@@ -85,7 +86,8 @@ std::string default_broad_dir() {
   return "../shared/broad";
 }
 
-void run_bench(const std::string& file_arg, const std::string& broad_dir, int repeats) {
+void run_bench(const std::string& file_arg, const std::string& broad_dir, int repeats,
+               const std::vector<std::string>& only) {
   install_stop_handlers();
   std::string file = file_arg;
   if (file.empty() && std::filesystem::is_directory(broad_dir)) {
@@ -137,6 +139,9 @@ void run_bench(const std::string& file_arg, const std::string& broad_dir, int re
   std::cout << std::left << std::setw(22) << "filter" << std::right << std::setw(16) << "cpu ns/sample"
             << std::setw(16) << "wall ns/sample" << "\n";
   for (const auto& entry : eval::registered_filters()) {
+    if (!only.empty() && std::find(only.begin(), only.end(), entry.name) == only.end()) {
+      continue;
+    }
     auto f = entry.factory("");
     double best_cpu = 1e300;
     double best_wall = 1e300;
@@ -188,18 +193,20 @@ void register_eval_cli(CLI::App& app) {
   auto dir = std::make_shared<std::string>(default_broad_dir());
   auto repeats = std::make_shared<int>(3);
   auto list = std::make_shared<bool>(false);
+  auto only = std::make_shared<std::vector<std::string>>();
   bench->add_option("--file", *file, "BROAD .hdf5 trial (default: the first one in --broad-dir)");
   bench->add_option("--broad-dir", *dir, "Directory searched for BROAD trials")->capture_default_str();
   bench->add_option("--repeat", *repeats, "Runs per filter (best is reported)")
       ->check(CLI::Range(1, 100))
       ->capture_default_str();
   bench->add_flag("--list", *list, "List the registered filters and exit");
+  bench->add_option("--filter", *only, "Only these filters (repeatable; default: all)");
   bench->callback([=]() {
     if (*list) {
       std::cout << "filters:" << filter_list() << "\n";
       return;
     }
-    run_bench(*file, *dir, *repeats);
+    run_bench(*file, *dir, *repeats, *only);
   });
 }
 

@@ -15,11 +15,11 @@ constexpr double kMinCos2Dip = 0.05;        // guard for the heading part of the
 
 ParallelKfParams ParallelKfParams::paper() {
   ParallelKfParams p;
-  p.tilt = TiltKfParams{};  // Table 1 noise, c_a = 0.1 per step
+  p.tilt = TiltKfParams{};  // Table 1 noise (sigma_G 0.05 deg/s, sigma_A 0.04 m/s^2), c_a = 0.1 per step
   p.tilt.exact_rotation = false;  // (5a), (9a): first-order propagation
   p.tilt.renormalize = false;     // the paper does not renormalise sZ, sX'
-  p.sigma_gyro_heading_rps = 0.0;
-  p.sigma_mag_ut = 0.2;
+  p.sigma_gyro_heading_rps = 0.0;  // KF2 uses the same sigma_G as KF1
+  p.sigma_mag_ut = 0.2;             // 2 mG
   p.c_d = 0.1;
   p.c_d_rate_hz = 0.0;
   p.sigma_gyro_extra_heading_rps = 0.0;
@@ -66,6 +66,7 @@ void ParallelKfParams::validate() const {
   need(motion_bias_tau_s >= 0.0, "motion_bias_tau_s must be >= 0 (0 = off)");
   need(max_bias_rps > 0.0, "max_bias_rps must be > 0");
   need(mag_norm_tol > 0.0 && mag_dip_tol_deg > 0.0, "mag gating tolerances must be > 0");
+  need(mag_max_reject_s >= 0.0, "mag_max_reject_s must be >= 0 (s, 0 = never)");
   need(mag_reacquire_s >= 0.0 && mag_reacquire_tol > 0.0, "mag_reacquire_s >= 0, mag_reacquire_tol > 0");
   need(gyro_current_weight >= 0.0 && gyro_current_weight <= 1.0, "gyro_current_weight must be in [0, 1]");
   need(accel_lowpass_tau_s >= 0.0, "accel_lowpass_tau_s must be >= 0 (s, 0 = off)");
@@ -95,6 +96,7 @@ void ParallelKf::reset() {
   prev_gyro_.setZero();
   rejections_ = RejectCounters{};
   mag_gated_ = 0;
+  mag_forced_ = 0;
   reacquired_ = 0;
   out_ = ParallelKfOutput{};
   last_q_ = Eigen::Quaterniond::Identity();
@@ -109,6 +111,7 @@ void ParallelKf::reset() {
   cand_dip_ = 0.0;
   cand_stable_s_ = 0.0;
   rejected_s_ = 0.0;
+  gate_dip_ = std::nan("");
   bias_.setZero();
   gyro_lp_.setZero();
   accel_lp_.setZero();
@@ -248,10 +251,23 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
     learn_field(accel, mag, dt);
   } else if (p_.mag_gating) {
     const double norm = mag.norm();
-    const double dip = angle_between_vectors(kf1_.up_body(), mag) - 0.5 * kPi;
+    // sin(dip) = -sZ . s_M / |s_M| (sZ unit); |dip - alpha| <= tol  <=>  sin(dip) within
+    // [sin(alpha - tol), sin(alpha + tol)] (sin is monotonic on [-90, 90] deg): no atan2 per sample.
+    const Eigen::Vector3d& up = kf1_.up_body();
+    const double sin_dip = -up.dot(mag) / (norm * up.norm());
+    if (field_dip_ != gate_dip_) {  // bounds recomputed only when the reference changes
+      const double tol = p_.mag_dip_tol_deg * kRadPerDeg;
+      gate_sin_lo_ = std::sin(std::max(field_dip_ - tol, -0.5 * kPi));
+      gate_sin_hi_ = std::sin(std::min(field_dip_ + tol, 0.5 * kPi));
+      gate_dip_ = field_dip_;
+    }
     const bool disturbed = std::abs(norm - field_m_) > p_.mag_norm_tol * field_m_ ||
-                           std::abs(dip - field_dip_) > p_.mag_dip_tol_deg * kRadPerDeg;
-    if (disturbed) {
+                           sin_dip < gate_sin_lo_ || sin_dip > gate_sin_hi_;
+    const bool forced = disturbed && p_.mag_max_reject_s > 0.0 && rejected_s_ >= p_.mag_max_reject_s;
+    if (forced) {
+      ++mag_forced_;
+    }
+    if (disturbed && !forced) {
       ++mag_gated_;
       rejected_s_ += dt;
       // the disturbance seen through the propagated heading: sd = s_M - m sX'
@@ -260,8 +276,9 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
       if (p_.mag_reacquire_s > 0.0) {
         if (cand_norm_ <= 0.0) {
           cand_norm_ = norm;
-          cand_dip_ = dip;
+          cand_dip_ = std::asin(std::max(-1.0, std::min(1.0, sin_dip)));
         }
+        const double dip = std::asin(std::max(-1.0, std::min(1.0, sin_dip)));
         const double k = dt / (1.0 + dt);
         cand_norm_ += k * (norm - cand_norm_);
         cand_dip_ += k * (dip - cand_dip_);
@@ -279,9 +296,11 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
       }
       return;
     }
-    rejected_s_ = 0.0;
-    cand_stable_s_ = 0.0;
-    cand_norm_ = 0.0;
+    if (!disturbed) {
+      rejected_s_ = 0.0;
+      cand_stable_s_ = 0.0;
+      cand_norm_ = 0.0;
+    }
   }
   const Eigen::Vector3d x_prior = kf2_.u();
   kf2_.correct(mag, field_m_);  // (10b), (11f)-(11h)
@@ -296,13 +315,22 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
 }
 
 Eigen::Quaterniond ParallelKf::q_world_body() const {
-  Eigen::Matrix3d r_body_world;  // sR = [sX sY sZ] (2)
+  Eigen::Matrix3d r_body_world;  // sR = [sX sY sZ] (2), world = NWU
   const Eigen::Vector3d fwd = heading_initialized_ ? kf2_.u() : Eigen::Vector3d::UnitX();
   if (!initialized_ || !body_world_axes_from_up_forward(kf1_.up_body(), fwd, r_body_world)) {
     return last_q_;
   }
-  last_q_ = quat_canonical(quat_enu_nwu() * Eigen::Quaterniond(Eigen::Matrix3d(r_body_world.transpose())));
-  return last_q_;
+  // R_ENU_body = R_ENU_NWU sR^T: rows -sY^T, sX^T, sZ^T (x_ENU = -y_NWU, y_ENU = x_NWU)
+  Eigen::Matrix3d r_enu_body;
+  r_enu_body.row(0) = -r_body_world.col(1).transpose();
+  r_enu_body.row(1) = r_body_world.col(0).transpose();
+  r_enu_body.row(2) = r_body_world.col(2).transpose();
+  Eigen::Quaterniond q(r_enu_body);
+  if (q.w() < 0.0) {
+    q.coeffs() = -q.coeffs();
+  }
+  last_q_ = q;
+  return q;
 }
 
 ParallelKfOutput ParallelKf::output() const {

@@ -152,9 +152,16 @@ inline Eigen::Matrix3d rot_exp(const Eigen::Vector3d& phi) {
     a = std::sin(t) / t;
     b = (1.0 - std::cos(t)) / t2;
   }
-  const Eigen::Matrix3d k = skew(phi);
-  Eigen::Matrix3d r = a * k + b * (k * k);
-  r.diagonal().array() += 1.0;
+  // [phi x]^2 = phi phi^T - |phi|^2 I
+  Eigen::Matrix3d r = b * (phi * phi.transpose());
+  r.diagonal().array() += 1.0 - b * t2;
+  const Eigen::Vector3d av = a * phi;
+  r(0, 1) -= av.z();
+  r(1, 0) += av.z();
+  r(0, 2) += av.y();
+  r(2, 0) -= av.y();
+  r(1, 2) -= av.x();
+  r(2, 1) += av.x();
   return r;
 }
 

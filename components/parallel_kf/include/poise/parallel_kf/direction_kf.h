@@ -105,21 +105,22 @@ class DirectionKf {
   /// to M (0 for the paper). Returns the innovation z - H x (before the update).
   Eigen::Vector3d correct(const Eigen::Vector3d& z, double k, double extra_var = 0.0) {
     const Eigen::Vector3d innov = z - k * u_ - e_;
-    const Eigen::Matrix3d p11 = p_mat_.topLeftCorner<3, 3>();
-    const Eigen::Matrix3d p12 = p_mat_.topRightCorner<3, 3>();
-    const Eigen::Matrix3d p22 = p_mat_.bottomRightCorner<3, 3>();
-    // P H^T = [k P11 + P12; k P21 + P22]
-    Eigen::Matrix<double, 6, 3> pht;
-    pht.topRows<3>() = k * p11 + p12;
-    pht.bottomRows<3>() = k * p12.transpose() + p22;
-    Eigen::Matrix3d s = k * pht.topRows<3>() + pht.bottomRows<3>();  // H P H^T
-    s.diagonal().array() += p_.sigma_meas * p_.sigma_meas + extra_var;  // + M  (7h), (11h)
-    const Eigen::Matrix3d s_inv = s.inverse();
-    const Eigen::Matrix<double, 6, 3> kg = pht * s_inv;
-    u_ += kg.topRows<3>() * innov;
-    e_ += kg.bottomRows<3>() * innov;
-    p_mat_.noalias() -= kg * pht.transpose();  // P - K H P
+    // M is diagonal, so the batch update equals three sequential scalar updates (rows of
+    // H = [k I | I]); this avoids the 3x3 inverse and the 6x3 gain products.
+    const double r = p_.sigma_meas * p_.sigma_meas + extra_var;  // (7h), (11h)
+    Eigen::Matrix<double, 6, 1> x;
+    x << u_, e_;
+    for (int i = 0; i < 3; ++i) {
+      const Eigen::Matrix<double, 6, 1> pht = k * p_mat_.col(i) + p_mat_.col(3 + i);  // P h^T
+      const double s = k * pht[i] + pht[3 + i] + r;                                    // h P h^T + r
+      const double y = z[i] - (k * x[i] + x[3 + i]);
+      const Eigen::Matrix<double, 6, 1> gain = pht / s;
+      x.noalias() += gain * y;
+      p_mat_.noalias() -= gain * pht.transpose();  // P - K h P
+    }
     p_mat_ = 0.5 * (p_mat_ + p_mat_.transpose()).eval();
+    u_ = x.head<3>();
+    e_ = x.tail<3>();
     if (p_.renormalize) {
       u_.normalize();
     }

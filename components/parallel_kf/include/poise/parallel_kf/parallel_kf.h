@@ -25,7 +25,8 @@
 //     |dip(s_M, sZ) - alpha| exceed thresholds (the dip is measured against the filtered up sZ,
 //     not the raw accelerometer, so external acceleration does not trip it); while gated, sd
 //     follows s_M - m sX' so the disturbance output stays meaningful; after mag_reacquire_s of
-//     continuous rejection with a stable field, the new field is adopted as the reference;
+//     continuous rejection with a stable field, the new field is adopted as the reference, and
+//     after mag_max_reject_s the magnetometer is used again regardless (bounded heading drift);
 //   - exact rotation propagation, renormalisation, c_a/c_d defined at a reference rate.
 // Bad input (NaN, zero vectors, non-monotonic stamps, gaps) is rejected and counted; the state is
 // untouched (a gap re-anchors time).
@@ -50,10 +51,18 @@ namespace poise {
 /// Parameters. The struct defaults are the shipped `default` configuration (most accurate on
 /// BROAD); `paper()` is the faithful one. Every field: unit, and what raising it does.
 struct ParallelKfParams {
+  /// KF1 defaults of the shipped configuration: sigma_G 0.086 deg/s, sigma_A 0.08 m/s^2 (a tilt
+  /// time constant of ~7 s behind the 3 s accelerometer low-pass; chosen on BROAD).
+  static TiltKfParams default_tilt() {
+    TiltKfParams t;
+    t.sigma_gyro_rps = 0.0015;
+    t.sigma_accel_mps2 = 0.08;
+    return t;
+  }
   // --- KF1 (tilt) and KF2 (heading) noise model (paper 000 Table 1 / eqs. 7, 11)
-  TiltKfParams tilt;                     ///< KF1 parameters (sigma_G, sigma_A, c_a, ...)
-  double sigma_gyro_heading_rps = 0.0;   ///< sigma_G for KF2, rad/s (0 = same as tilt.sigma_gyro_rps). Raising: faster heading correction.
-  double sigma_mag_ut = 0.2;             ///< sigma_M, uT (HMC5883L 2 mG). Raising: slower heading correction.
+  TiltKfParams tilt = default_tilt();    ///< KF1 parameters (sigma_G, sigma_A, c_a, ...)
+  double sigma_gyro_heading_rps = 0.05 * kRadPerDeg;  ///< sigma_G for KF2, rad/s (0 = same as tilt.sigma_gyro_rps). Raising: faster heading correction.
+  double sigma_mag_ut = 0.4;             ///< sigma_M, uT (HMC5883L: 2 mG = 0.2 uT). Raising: slower heading correction.
   double c_d = 0.1;                      ///< disturbance model coefficient (9b), [0, 1)
   double c_d_rate_hz = 0.0;              ///< > 0: c_d given at this rate and scaled to dt
   double sigma_gyro_extra_heading_rps = 0.0;  ///< extra gyro error std in Q21, rad/s
@@ -85,10 +94,13 @@ struct ParallelKfParams {
 
   // --- magnetic disturbance gating of the heading update (extension)
   bool mag_gating = true;
-  double mag_norm_tol = 0.1;        ///< relative | |s_M| - m | / m above which s_M is rejected
+  double mag_norm_tol = 0.07;       ///< relative | |s_M| - m | / m above which s_M is rejected
   double mag_dip_tol_deg = 10.0;    ///< |dip - alpha| above which s_M is rejected, deg
   double mag_reacquire_s = 20.0;    ///< adopt a stable new field after this long rejected, s (0 = never)
   double mag_reacquire_tol = 0.05;  ///< relative stability of the candidate field for adoption
+  /// After this long of continuous rejection the magnetometer is used again even though it fails
+  /// the gate (bounds the gyro-only heading drift in a permanently changed field), s. 0 = never.
+  double mag_max_reject_s = 60.0;
 
   SampleLimits limits;              ///< input validation
 
@@ -145,6 +157,8 @@ class ParallelKf {
   /// Magnetometer samples not used for the heading: gated as disturbed.
   [[nodiscard]] uint64_t mag_gated_count() const { return mag_gated_; }
   [[nodiscard]] uint64_t field_reacquired_count() const { return reacquired_; }
+  /// Magnetometer samples used although gated, because rejection lasted mag_max_reject_s.
+  [[nodiscard]] uint64_t mag_forced_count() const { return mag_forced_; }
   [[nodiscard]] const ParallelKfParams& params() const { return p_; }
 
  private:
@@ -163,6 +177,7 @@ class ParallelKf {
   Eigen::Vector3d prev_gyro_{0, 0, 0};  ///< bias-corrected s_G at k-1
   RejectCounters rejections_;
   uint64_t mag_gated_ = 0;
+  uint64_t mag_forced_ = 0;
   uint64_t reacquired_ = 0;
   ParallelKfOutput out_;  ///< only mag_used is kept here (the rest is derived in output())
   mutable Eigen::Quaterniond last_q_ = Eigen::Quaterniond::Identity();
@@ -180,6 +195,9 @@ class ParallelKf {
   double cand_dip_ = 0.0;
   double cand_stable_s_ = 0.0;
   double rejected_s_ = 0.0;
+  double gate_dip_ = 0.0;      ///< dip the gate bounds were computed for
+  double gate_sin_lo_ = 0.0;   ///< sin(alpha - tol)
+  double gate_sin_hi_ = 0.0;   ///< sin(alpha + tol)
 
   // inertial low-pass of the accelerometer
   Eigen::Matrix3d r_ib_ = Eigen::Matrix3d::Identity();  ///< body -> almost inertial frame
