@@ -1,0 +1,230 @@
+// ParallelKf scenario tests in simulated time (GIVEN/WHEN/THEN), bad input, configuration.
+#include "poise/parallel_kf/parallel_kf.h"
+
+#include "poise/sim/sensor_simulator.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <string>
+
+namespace poise {
+namespace {
+
+constexpr double kTiltTolDeg = 1.0;            // roll/pitch promise of the parallel structure
+constexpr double kInitS = 5.0;                 // s allowed for start-up convergence (bias at rest)
+constexpr double kDisturbanceTolUt = 2.0;      // uT, disturbance estimate vs injected (hold phase)
+constexpr double kHeadingTolMagnetDeg = 3.0;   // deg, heading while the magnet is near (default)
+
+struct RunStats {
+  double max_roll_pitch_err_deg = 0.0;
+  double max_heading_err_deg = 0.0;
+  double max_dist_err_hold_ut = 0.0;   // while the magnet is fully near
+  double rms_total_err_deg = 0.0;
+  double rms_ext_accel_err = 0.0;      // world frame, m/s^2
+  double rms_ext_accel = 0.0;
+  uint64_t n = 0;
+};
+
+// Roll/pitch error = tilt angle between estimated and true up axes in the body frame;
+// heading error = yaw part of the world-frame error quaternion.
+RunStats run(const ParallelKfParams& params, sim::SensorSimulator& sim) {
+  ParallelKf kf(params);
+  RunStats st;
+  double sq_total = 0.0;
+  double sq_acc_err = 0.0;
+  double sq_acc = 0.0;
+  while (!sim.done()) {
+    const sim::SimSample s = sim.next();
+    EXPECT_TRUE(kf.update(s.imu));
+    if (s.truth.t_s < kInitS) {
+      continue;
+    }
+    const ParallelKfOutput o = kf.output();
+    const Eigen::Vector3d up_true = s.truth.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
+    const Eigen::Vector3d up_est = o.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
+    st.max_roll_pitch_err_deg = std::max(st.max_roll_pitch_err_deg, angle_between_vectors(up_true, up_est) * kDegPerRad);
+    const auto hi = heading_inclination_of_world_error(o.q_world_body * s.truth.q_world_body.conjugate());
+    st.max_heading_err_deg = std::max(st.max_heading_err_deg, hi.heading_rad * kDegPerRad);
+    const double tot = quat_angle_between(o.q_world_body, s.truth.q_world_body) * kDegPerRad;
+    sq_total += tot * tot;
+    const double strength = s.truth.mag_disturbance_world_ut.norm();
+    if (strength > 0.0 && sim.config().magnets.size() > 0) {
+      // fully near = within 1% of the first episode's full strength
+      const double full = sim.config().magnets.front().field_ut.norm();
+      if (std::abs(strength - full) < 0.01 * full) {
+        st.max_dist_err_hold_ut =
+            std::max(st.max_dist_err_hold_ut, (o.mag_dist_world_ut - s.truth.mag_disturbance_world_ut).norm());
+      }
+    }
+    const Eigen::Vector3d a_true_world = s.truth.a_world_mps2;
+    sq_acc_err += (o.ext_accel_world_mps2 - a_true_world).squaredNorm();
+    sq_acc += a_true_world.squaredNorm();
+    ++st.n;
+  }
+  st.rms_total_err_deg = std::sqrt(sq_total / static_cast<double>(st.n));
+  st.rms_ext_accel_err = std::sqrt(sq_acc_err / static_cast<double>(st.n));
+  st.rms_ext_accel = std::sqrt(sq_acc / static_cast<double>(st.n));
+  return st;
+}
+
+TEST(ParallelKf, GivenStaticSensorWhenMagnetIsBroughtNearAndRemovedThenTiltStaysAndDisturbanceIsTracked) {
+  // GIVEN a static, tilted GY-87-like sensor with gyro bias; a ~35 uT magnet approaches at 15 s,
+  // stays 15 s and leaves, a weaker one follows at 50 s (scenario static_magnet, 100 Hz)
+  sim::SensorSimulator sim(sim::make_scenario("static_magnet", 100.0, 21));
+  // WHEN the default filter processes the 80 s
+  const RunStats st = run(ParallelKfParams::defaults(), sim);
+  std::printf("default: max roll/pitch err %.3f deg, max heading err %.3f deg, max disturbance err %.3f uT\n",
+              st.max_roll_pitch_err_deg, st.max_heading_err_deg, st.max_dist_err_hold_ut);
+  // THEN roll and pitch stay within 1 deg of the truth, the heading is not dragged by the magnet
+  // and the disturbance estimate follows the injected field
+  EXPECT_LT(st.max_roll_pitch_err_deg, kTiltTolDeg);
+  EXPECT_LT(st.max_heading_err_deg, kHeadingTolMagnetDeg);
+  EXPECT_LT(st.max_dist_err_hold_ut, kDisturbanceTolUt);
+}
+
+TEST(ParallelKf, GivenPaperConfigurationWhenMagnetIsNearThenTiltIsUnaffectedAndDisturbanceIsEstimated) {
+  // GIVEN the paper-faithful filter (no bias estimation) and a bias-free static sensor
+  sim::SimConfig cfg = sim::make_scenario("static_magnet", 100.0, 22);
+  cfg.noise.gyro_bias_rps.setZero();
+  sim::SensorSimulator sim(cfg);
+  // WHEN the magnet comes and goes
+  const RunStats st = run(ParallelKfParams::paper(), sim);
+  std::printf("paper: max roll/pitch err %.3f deg, max heading err %.3f deg, max disturbance err %.3f uT\n",
+              st.max_roll_pitch_err_deg, st.max_heading_err_deg, st.max_dist_err_hold_ut);
+  // THEN the tilt (KF1) never sees the magnetometer, and KF2 explains most of the ~35 uT field
+  // change by sd (without gating part of it still leaks into the heading: printed above)
+  EXPECT_LT(st.max_roll_pitch_err_deg, kTiltTolDeg);
+  EXPECT_LT(st.max_dist_err_hold_ut, 0.25 * cfg.magnets.front().field_ut.norm());
+}
+
+TEST(ParallelKf, GivenFastMotionWithExternalAccelerationWhenFilteredThenAttitudeAndAccelAreTracked) {
+  // GIVEN 40 s of fast rotation (up to ~230 deg/s per axis) and translation (up to ~12 m/s^2)
+  sim::SensorSimulator sim(sim::make_scenario("fast_motion", 200.0, 23));
+  // WHEN the default filter runs
+  const RunStats st = run(ParallelKfParams::defaults(), sim);
+  std::printf("fast: rms total err %.3f deg, max roll/pitch err %.3f deg, ext accel rms err %.3f of rms %.3f m/s^2\n",
+              st.rms_total_err_deg, st.max_roll_pitch_err_deg, st.rms_ext_accel_err, st.rms_ext_accel);
+  // THEN the attitude stays accurate and most of the external acceleration is explained
+  EXPECT_LT(st.rms_total_err_deg, 2.0);          // deg RMS
+  EXPECT_LT(st.max_roll_pitch_err_deg, 4.0);     // deg worst case
+  EXPECT_LT(st.rms_ext_accel_err, 0.3 * st.rms_ext_accel);
+}
+
+TEST(ParallelKf, LearnsFieldMagnitudeAndDipAtStartUp) {
+  sim::SimConfig cfg = sim::make_scenario("static_magnet", 100.0, 24);
+  cfg.duration_s = 5.0;
+  sim::SensorSimulator sim(cfg);
+  ParallelKf kf;
+  while (!sim.done()) {
+    kf.update(sim.next().imu);
+  }
+  const ParallelKfOutput o = kf.output();
+  EXPECT_TRUE(o.field_learnt);
+  EXPECT_NEAR(o.field_magnitude_ut, cfg.field.magnitude_ut, 0.2);        // uT
+  EXPECT_NEAR(o.dip_rad * kDegPerRad, cfg.field.dip_deg, 0.5);           // deg
+}
+
+TEST(ParallelKf, BadInputIsRejectedCountedAndLeavesTheStateUntouched) {
+  ParallelKf kf;
+  ImuSample s;
+  s.stamp_ns = 1'000'000'000;
+  s.accel_mps2 = Eigen::Vector3d(0.5, -0.3, 9.8);
+  s.gyro_rps = Eigen::Vector3d(0.01, 0.0, -0.02);
+  s.mag_ut = Eigen::Vector3d(20.0, 5.0, -40.0);
+  for (int i = 0; i < 100; ++i) {
+    s.stamp_ns += 10'000'000;
+    ASSERT_TRUE(kf.update(s));
+  }
+  const Eigen::Quaterniond q0 = kf.q_world_body();
+  const Eigen::Matrix<double, 6, 6> p0 = kf.tilt_covariance();
+  const double nan = std::nan("");
+  auto expect_rejected = [&](ImuSample bad, RejectReason reason) {
+    const uint64_t before = kf.rejections().count(reason);
+    EXPECT_FALSE(kf.update(bad)) << to_string(reason);
+    EXPECT_EQ(kf.rejections().count(reason), before + 1) << to_string(reason);
+    EXPECT_EQ(kf.q_world_body().coeffs(), q0.coeffs()) << to_string(reason);
+    EXPECT_EQ(kf.tilt_covariance(), p0) << to_string(reason);
+  };
+  ImuSample bad = s;
+  bad.stamp_ns = s.stamp_ns + 10'000'000;
+  bad.gyro_rps.y() = nan;
+  expect_rejected(bad, RejectReason::kNonFiniteGyro);
+  bad = s;
+  bad.stamp_ns = s.stamp_ns + 10'000'000;
+  bad.accel_mps2.z() = std::numeric_limits<double>::infinity();
+  expect_rejected(bad, RejectReason::kNonFiniteAccel);
+  bad = s;
+  bad.stamp_ns = s.stamp_ns + 10'000'000;
+  bad.accel_mps2.setZero();
+  expect_rejected(bad, RejectReason::kZeroAccel);
+  bad = s;  // same stamp again
+  expect_rejected(bad, RejectReason::kNonMonotonicStamp);
+  bad = s;
+  bad.stamp_ns = s.stamp_ns - 5'000'000;  // older
+  expect_rejected(bad, RejectReason::kNonMonotonicStamp);
+  bad = s;
+  bad.stamp_ns = s.stamp_ns + 5'000'000'000;  // 5 s gap
+  expect_rejected(bad, RejectReason::kTimeGap);
+  // after the gap, time restarts at the gap sample: the next sample is used again
+  s.stamp_ns = bad.stamp_ns + 10'000'000;
+  EXPECT_TRUE(kf.update(s));
+  // a bad magnetometer alone: gyro and accelerometer still used, magnetometer counted
+  ImuSample no_mag = s;
+  no_mag.stamp_ns = s.stamp_ns + 10'000'000;
+  no_mag.mag_ut = Eigen::Vector3d(nan, 0.0, 0.0);
+  EXPECT_TRUE(kf.update(no_mag));
+  EXPECT_EQ(kf.rejections().count(RejectReason::kNonFiniteMag), 1u);
+  no_mag.stamp_ns += 10'000'000;
+  no_mag.mag_ut.setZero();
+  EXPECT_TRUE(kf.update(no_mag));
+  EXPECT_EQ(kf.rejections().count(RejectReason::kZeroMag), 1u);
+  EXPECT_FALSE(kf.output().mag_used);
+  EXPECT_TRUE(kf.q_world_body().coeffs().allFinite());
+}
+
+TEST(ParallelKf, ShippedConfigsLoadAndMatchTheNamedPresets) {
+  const std::string dir = std::string(POISE_SOURCE_DIR) + "/config/filters/";
+  const ParallelKfParams def = load_parallel_kf_params(dir + "parallel_kf.yaml");
+  const ParallelKfParams ref = ParallelKfParams::defaults();
+  EXPECT_EQ(def.mag_norm_tol, ref.mag_norm_tol);
+  EXPECT_EQ(def.tilt.sigma_gyro_rps, ref.tilt.sigma_gyro_rps);
+  EXPECT_EQ(def.accel_lowpass_tau_s, ref.accel_lowpass_tau_s);
+  const ParallelKfParams paper = load_parallel_kf_params(dir + "parallel_kf_paper.yaml");
+  EXPECT_FALSE(paper.bias_estimation);
+  EXPECT_FALSE(paper.mag_gating);
+  EXPECT_FALSE(paper.tilt.exact_rotation);
+  EXPECT_EQ(paper.accel_lowpass_tau_s, 0.0);
+}
+
+TEST(ParallelKf, BadConfigIsAStartupErrorNamingTheKey) {
+  const std::string path = ::testing::TempDir() + "/pkf_bad.yaml";
+  auto write = [&](const std::string& text) {
+    std::FILE* f = std::fopen(path.c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    std::fputs(text.c_str(), f);
+    std::fclose(f);
+  };
+  write("parallel_kf:\n  no_such_key: 1\n");
+  try {
+    load_parallel_kf_params(path);
+    FAIL() << "unknown key accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("no_such_key"), std::string::npos);
+  }
+  write("parallel_kf:\n  c_d: 1.5\n");
+  try {
+    load_parallel_kf_params(path);
+    FAIL() << "c_d = 1.5 accepted";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("c_d"), std::string::npos);
+  }
+  write("parallel_kf:\n  preset: paper\n  tilt:\n    sigma_accel_mps2: 0.1\n");
+  const ParallelKfParams p = load_parallel_kf_params(path);
+  EXPECT_EQ(p.tilt.sigma_accel_mps2, 0.1);
+  EXPECT_FALSE(p.bias_estimation);
+  EXPECT_THROW(ParallelKfParams::named("nope"), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace poise
