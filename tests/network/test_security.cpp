@@ -5,6 +5,8 @@
 
 #include "poise/dds/participant.h"
 
+#include <poise/msg/imuPubSubTypes.h>
+
 #include <gtest/gtest.h>
 
 #include <unistd.h>
@@ -156,6 +158,17 @@ TEST_F(SecurityTest, SecureParticipantFromEnvironmentAndTamperedPermissionsRejec
   fs::remove_all(tampered);
   EXPECT_NE(error.find("DDS Security"), std::string::npos)
       << "a participant with tampered permissions must not be created: " << error;
+}
+
+// A host name without topic rules (here "monitor") may join the domain but not use any topic.
+TEST_F(SecurityTest, IdentityWithoutTopicGrantsJoinsButCannotReadImu) {
+  testing::DomainLease lease;
+  ScopedEnv d("POISE_SECURITY_DIR", dir("good"));
+  ScopedEnv i("POISE_SECURITY_IDENTITY", "monitor");
+  dds::Participant participant({lease.id(), "poise_loopback", "", "secure_monitor"});
+  EXPECT_THROW(dds::Reader<msg::ImuSamplePubSubType>(participant, "imu",
+                                                      [](const auto&, const auto&) {}),
+               dds::DdsError);
 }
 
 // Control for the capture below: without security the marker travels in clear.

@@ -4,8 +4,8 @@
 # discovery and data) and signed per-host permissions (who may publish / subscribe which topic).
 #
 # Usage: tools/security/make_security.sh OUT_DIR [HOST...]
-#   HOST defaults to: imu camera fusion recorder. Unknown host names get no topic grants (they can
-#   authenticate but neither publish nor subscribe anything).
+#   HOST defaults to: imu camera fusion recorder. Other host names (e.g. a discovery server, a
+#   monitoring tool) may join the domains but neither publish nor subscribe anything.
 # Options (environment):
 #   POISE_SEC_ORG      organisation in the subject names (default "poise")
 #   POISE_SEC_DOMAINS  domain id range "MIN-MAX" the rules apply to (default 0-232)
@@ -145,13 +145,13 @@ for h in "${hosts[@]}"; do
         <not_after>2099-12-31T23:59:59</not_after>
       </validity>
 XML
-    if [[ ${#pub[@]} -gt 0 || ${#sub[@]} -gt 0 ]]; then
-      echo "      <allow_rule>"
-      echo "        <domains><id_range><min>$dmin</min><max>$dmax</max></id_range></domains>"
-      topics_xml publish "${pub[@]}"
-      topics_xml subscribe "${sub[@]}"
-      echo "      </allow_rule>"
-    fi
+    # Every host may join the domains (a participant needs a rule for its domain); the topics
+    # listed are all it may use.
+    echo "      <allow_rule>"
+    echo "        <domains><id_range><min>$dmin</min><max>$dmax</max></id_range></domains>"
+    topics_xml publish "${pub[@]}"
+    topics_xml subscribe "${sub[@]}"
+    echo "      </allow_rule>"
     cat <<XML
       <default>DENY</default>
     </grant>
