@@ -133,7 +133,8 @@ struct ExpectedValue {
 /// Writes FILE.expected.json for validate.mjs. CHANNELS_JSON is the "channels" object text.
 inline void write_expected(const std::string& mcap_path, int64_t messages, int min_chunks,
                            const std::string& channels_json,
-                           const std::vector<ExpectedValue>& values) {
+                           const std::vector<ExpectedValue>& values,
+                           const std::vector<std::string>& undecodable = {}) {
   const std::string path = mcap_path.substr(0, mcap_path.size() - 5) + ".expected.json";
   std::ofstream out(path);
   out << "{\n";
@@ -141,7 +142,11 @@ inline void write_expected(const std::string& mcap_path, int64_t messages, int m
     out << "\"messages\": " << messages << ",\n";
   }
   out << "\"min_chunks\": " << min_chunks << ",\n\"channels\": " << channels_json
-      << ",\n\"values\": [\n";
+      << ",\n\"undecodable\": [";
+  for (size_t i = 0; i < undecodable.size(); ++i) {
+    out << (i > 0 ? "," : "") << "\"" << undecodable[i] << "\"";
+  }
+  out << "],\n\"values\": [\n";
   for (size_t i = 0; i < values.size(); ++i) {
     const ExpectedValue& v = values[i];
     out << "{\"topic\":\"" << v.topic << "\",\"sequence\":" << v.sequence;

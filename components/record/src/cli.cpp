@@ -2,9 +2,12 @@
 #include "poise/cli/common.h"
 #include "poise/dds/participant.h"
 #include "poise/record/bench.h"
+#include "poise/eval/filter_registry.h"
 #include "poise/record/info.h"
+#include "poise/record/process.h"
 #include "poise/record/recorder.h"
 #include "poise/record/replayer.h"
+#include "poise/runtime/host.h"
 
 #include <CLI/CLI.hpp>
 
@@ -43,6 +46,104 @@ struct ReplayArgs {
   int domain = 0;
   std::string profile;
 };
+
+struct ProcessArgs {
+  std::string file;
+  std::string output;
+  std::string host;
+  std::vector<std::string> filters;
+  std::string imu_topic;
+};
+
+std::string known_filters() {
+  std::string known;
+  for (const auto& e : eval::registered_filters()) {
+    known += (known.empty() ? "" : ", ") + e.name;
+  }
+  return known;
+}
+
+std::unique_ptr<AttitudeFilter> make_offline_filter(const std::string& name, const std::string& config) {
+  try {
+    return eval::make_filter(name, config);
+  } catch (const std::exception& e) {
+    throw Error("filter '" + name + "': " + e.what());
+  }
+}
+
+void run_process(const ProcessArgs& a) {
+  std::vector<record::ProcessFilter> filters;
+  std::string imu_topic = a.imu_topic;
+  if (!a.host.empty()) {
+    runtime::HostSpec host;
+    try {
+      host = runtime::load_host_file(a.host);
+    } catch (const std::exception& e) {
+      throw Error(e.what());
+    }
+    if (imu_topic.empty()) {
+      imu_topic = host.topics.imu;
+    }
+    std::set<std::string> offline;
+    for (const auto& e : eval::registered_filters()) {
+      offline.insert(e.name);
+    }
+    for (const auto& c : host.components) {
+      std::string name = c.type;
+      const std::string file = runtime::param<std::string>(c, "filter_file", "");
+      if (name == "parallel_kf" && file.empty() &&
+          runtime::param<std::string>(c, "preset", "default") == "paper") {
+        name = "parallel_kf_paper";
+      }
+      if (offline.count(name) == 0) {
+        std::cerr << "poise process: component '" << c.name << "' (" << c.type
+                  << ") has no offline attitude filter: skipped\n";
+        continue;
+      }
+      filters.push_back({c.name, make_offline_filter(name, file)});
+    }
+  }
+  for (const std::string& f : a.filters) {
+    const size_t eq = f.find('=');
+    const std::string name = f.substr(0, eq);
+    const std::string config = eq == std::string::npos ? std::string() : f.substr(eq + 1);
+    filters.push_back({name, make_offline_filter(name, config)});
+  }
+  if (filters.empty()) {
+    throw Error("no filter to run: give --host HOST.yaml with estimator components, or "
+                "--filter NAME[=CONFIG.yaml] (known: " + known_filters() + ")");
+  }
+  record::ProcessOptions o;
+  o.input = a.file;
+  o.output = a.output;
+  o.imu_topic = imu_topic.empty() ? "imu" : imu_topic;
+  o.progress = &std::cerr;
+  record::ProcessStats stats;
+  try {
+    stats = record::process_recording(o, filters);
+  } catch (const record::ReadError& e) {
+    throw Error(e.what());
+  } catch (const record::WriteError& e) {
+    throw Error(e.what());
+  }
+  if (!stats.input_complete) {
+    std::cerr << "poise process: the input was incomplete; processed the recovered part:\n";
+    for (const auto& p : stats.input_problems) {
+      std::cerr << "  " << p << "\n";
+    }
+  }
+  std::cerr << "poise process: " << stats.input_messages << " messages, " << stats.imu_samples
+            << " IMU samples on '" << o.imu_topic << "' (" << stats.undecodable
+            << " undecodable) -> " << a.output << "\n";
+  for (const auto& f : filters) {
+    std::cerr << "  " << o.output_prefix << f.name << ": " << stats.estimates[f.name]
+              << " estimates, " << stats.rejected[f.name] << " samples rejected\n";
+  }
+  if (stats.imu_samples == 0) {
+    throw Error("no ImuSample messages on topic '" + o.imu_topic +
+                "' in the recording (use --imu-topic; `poise info` lists the topics)");
+  }
+}
 
 void run_info(const InfoArgs& a) {
   try {
@@ -204,6 +305,23 @@ void add_record_commands(CLI::App& app) {
   replay_cmd->add_option("--profile", rep->profile, "DDS participant profile");
   add_domain_option(replay_cmd, &rep->domain);
   replay_cmd->callback([rep] { run_replay(*rep); });
+
+  auto proc = std::make_shared<ProcessArgs>();
+  CLI::App* process_cmd = app.add_subcommand(
+      "process", "Run attitude filters on a recording offline (no DDS, no sleeps, deterministic: "
+                 "the same input gives a byte-identical output). The output holds the input "
+                 "messages plus processed/attitude/<name> per filter.");
+  process_cmd->add_option("file", proc->file, "input MCAP file")->required()->check(CLI::ExistingFile);
+  process_cmd->add_option("-o,--output", proc->output, "output MCAP file")->required();
+  process_cmd->add_option("--host", proc->host,
+                          "host file: its estimator components (type, name, filter_file) and "
+                          "topic names are used")
+      ->check(CLI::ExistingFile);
+  process_cmd->add_option("--filter", proc->filters,
+                          "NAME[=CONFIG.yaml]: a filter to run (repeatable); see `poise bench "
+                          "filters --help` for names");
+  process_cmd->add_option("--imu-topic", proc->imu_topic, "IMU topic (default: host file / imu)");
+  process_cmd->callback([proc] { run_process(*proc); });
 
   CLI::App* bench = subcommand_group(app, "bench", "Benchmarks (print figures)");
   auto brec = std::make_shared<record::BenchRecordOptions>();

@@ -6,6 +6,9 @@
 //     message indexes; the messages must equal the stream reader's, and Statistics must match.
 //  3. Each payload is decoded with the channel's omgidl schema (@foxglove/omgidl-parser +
 //     @foxglove/omgidl-serialization, as Foxglove does) and compared with the expected values.
+// Expected JSON: messages, min_chunks, channels {topic: {schema, count, min_count, metadata}},
+// values [{topic, sequence, log_time?, publish_time?, value}], undecodable ["topic/sequence"]
+// (payloads written invalid on purpose: they must fail to decode).
 // Prints one line per file; exits 1 if any check fails.
 import { McapIndexedReader, McapStreamReader } from "@mcap/core";
 import { FileHandleReadable } from "@mcap/nodejs";
@@ -152,10 +155,13 @@ async function validate(file, expected) {
         decoder = new MessageReader(schema.name, parseIDL(text));
         decoders.set(schema.id, decoder);
       }
+      const id = `${channel.topic}/${m.sequence}`;
+      const mustFail = (expected.undecodable ?? []).includes(id);
       try {
-        decoded.set(`${channel.topic}/${m.sequence}`, { message: m, value: decoder.readMessage(m.data) });
+        decoded.set(id, { message: m, value: decoder.readMessage(m.data) });
+        if (mustFail) errors.push(`${id}: decoded, but it was written as an invalid payload`);
       } catch (e) {
-        errors.push(`${channel.topic} #${m.sequence}: cannot decode: ${e.message}`);
+        if (!mustFail) errors.push(`${channel.topic} #${m.sequence}: cannot decode: ${e.message}`);
       }
     }
     // Compare with expectations.
