@@ -181,10 +181,13 @@ class ImageListSource : public FrameSource {
     frame.name = path;
     frame.index = index_++;
     frame.truth_T_world_camera.reset();
-    try {
-      frame.image = cv::imread(path, cv::IMREAD_GRAYSCALE);
-    } catch (const cv::Exception& e) {
-      frame.image.release();
+    frame.image.release();
+    if (fs::is_regular_file(path)) {  // (imread would also log a warning for a missing file)
+      try {
+        frame.image = cv::imread(path, cv::IMREAD_GRAYSCALE);
+      } catch (const cv::Exception&) {
+        frame.image.release();
+      }
     }
     if (frame.image.empty()) {
       error = "cannot read image '" + path + "' (missing, unreadable or not an image)";

@@ -35,12 +35,18 @@ struct DetectorParams {
 /// Throws ConfigError when a field is out of range.
 void validate_detector_params(const DetectorParams& params);
 
+/// Four zero corners (Eigen vectors are not zero-initialised by default).
+inline std::array<Eigen::Vector2d, 4> zero_corners() {
+  return {Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero(), Eigen::Vector2d::Zero(),
+          Eigen::Vector2d::Zero()};
+}
+
 /// One detected tag.
 struct TagDetection {
   int id = -1;
   int hamming = 0;                ///< bits corrected
   double decision_margin = 0.0;   ///< libapriltag decision margin (higher = more confident)
-  std::array<Eigen::Vector2d, 4> corners_px;  ///< distorted image corners, library order, px
+  std::array<Eigen::Vector2d, 4> corners_px = zero_corners();  ///< distorted image corners, library order, px
   Eigen::Vector2d center_px{0, 0};            ///< tag centre in the image, px
 };
 

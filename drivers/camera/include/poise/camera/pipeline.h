@@ -43,7 +43,7 @@ CameraConfig load_camera_config(const std::string& path);
 
 struct DetectionResult {
   TagDetection detection;                      ///< as detected (distorted pixels)
-  std::array<Eigen::Vector2d, 4> ideal_px;     ///< undistorted (pinhole) corners, px
+  std::array<Eigen::Vector2d, 4> ideal_px = zero_corners();  ///< undistorted (pinhole) corners, px
   bool in_map = false;
   double size_m = 0.0;                          ///< size used for the pose (0 = none)
   bool pose_computed = false;

@@ -12,6 +12,7 @@
 // Covariance = sigma^2 (J^T J)^-1 with sigma^2 = max(pixel_sigma_px^2, SSR / (2N - 6)).
 #pragma once
 
+#include "poise/camera/detector.h"
 #include "poise/camera/tag_map.h"
 #include "poise/camera/tag_pose.h"
 
@@ -37,7 +38,7 @@ void validate_world_pose_params(const WorldPoseParams& params);
 /// One mapped tag's observation.
 struct TagObservation {
   const MappedTag* tag = nullptr;                 ///< map entry (not owned)
-  std::array<Eigen::Vector2d, 4> corners_px;      ///< ideal (undistorted) corners, library order
+  std::array<Eigen::Vector2d, 4> corners_px = zero_corners();  ///< ideal (undistorted) corners, library order
   TagPoseEstimate pose;                           ///< per-tag IPPE result (starts)
 };
 

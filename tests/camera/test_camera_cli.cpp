@@ -1,0 +1,142 @@
+// `poise tags detect/render`, `poise camera`, `poise bench camera` through the real executable.
+#include "poise/testing/testing.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <regex>
+#include <sstream>
+
+namespace poise::testing {
+namespace {
+
+using namespace std::chrono_literals;
+namespace fs = std::filesystem;
+
+constexpr double kCornerTolPx = 0.5;  // detected vs rendered truth, blur 0.8 px, noise 2
+
+fs::path fresh_dir(const std::string& name) {
+  const fs::path dir = fs::path(::testing::TempDir()) / ("poise_camcli_" + name);
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+std::vector<double> numbers_after(const std::string& text, const std::string& key) {
+  std::vector<double> out;
+  const auto pos = text.find(key);
+  if (pos == std::string::npos) return out;
+  const std::string rest = text.substr(pos + key.size(), 200);
+  const std::regex number(R"(-?[0-9]+\.[0-9]+)");
+  for (auto it = std::sregex_iterator(rest.begin(), rest.end(), number);
+       it != std::sregex_iterator() && out.size() < 8; ++it) {
+    out.push_back(std::stod(it->str()));
+  }
+  return out;
+}
+
+// GIVEN an image rendered by `poise tags render` with ids 3 and 8
+// WHEN `poise tags detect --json` reads it
+// THEN both ids come back, one JSON object per line, corners within 0.5 px of the truth.
+TEST(CameraCli, RenderThenDetectFindsTheTagsAtTheTrueCorners) {
+  const fs::path dir = fresh_dir("render");
+  const std::string img = (dir / "two.png").string();
+  const auto r = run({bin("poise"), "tags", "render", "--out", img, "--ids", "3,8", "--distance",
+                      "0.9", "--yaw", "25", "--pitch", "-10"},
+                     60s);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto d = run({bin("poise"), "tags", "detect", img, "--json"}, 60s);
+  ASSERT_EQ(d.exit_code, 0) << d.output;
+  for (int id : {3, 8}) {
+    std::istringstream lines(d.output);
+    std::string line;
+    std::string found;
+    while (std::getline(lines, line)) {
+      if (line.find("\"id\": " + std::to_string(id) + ",") != std::string::npos) found = line;
+    }
+    ASSERT_FALSE(found.empty()) << "id " << id << " not detected:\n" << d.output;
+    EXPECT_NE(found.find("\"hamming\": 0"), std::string::npos);
+    EXPECT_NE(found.find("\"decision_margin\""), std::string::npos);
+    const auto corners = numbers_after(found, "\"corners_px\"");
+    // Truth printed by render: "<img>  id N  true corners (x, y) ..."
+    std::istringstream rl(r.output);
+    std::vector<double> truth;
+    while (std::getline(rl, line)) {
+      if (line.find("id " + std::to_string(id) + " ") != std::string::npos) {
+        truth = numbers_after(line, "true corners");
+      }
+    }
+    ASSERT_EQ(corners.size(), 8U) << found;
+    ASSERT_EQ(truth.size(), 8U) << r.output;
+    for (std::size_t i = 0; i < 8; ++i) {
+      EXPECT_NEAR(corners[i], truth[i], kCornerTolPx) << "id " << id << " value " << i;
+    }
+  }
+}
+
+TEST(CameraCli, UnreadableImagesAreReportedAndFailTheCommand) {
+  const fs::path dir = fresh_dir("bad");
+  std::ofstream(dir / "garbage.png") << "not an image";
+  const auto d = run({bin("poise"), "tags", "detect", (dir / "garbage.png").string(),
+                      (dir / "missing.png").string()},
+                     30s);
+  EXPECT_EQ(d.exit_code, 1) << d.output;
+  EXPECT_NE(d.output.find("cannot read image '" + (dir / "garbage.png").string() + "'"),
+            std::string::npos) << d.output;
+  EXPECT_NE(d.output.find("missing.png"), std::string::npos) << d.output;
+}
+
+TEST(CameraCli, MissingDeviceIsAClearError) {
+  DomainLease domain;
+  const auto r = run({bin("poise"), "camera", "--source", "/dev/video97", "--intrinsics",
+                      source_path("config/camera/intrinsics_example_ros.yaml"), "--tags",
+                      source_path("config/camera/tags_example.yaml"), "--domain",
+                      std::to_string(domain.id())},
+                     30s);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("/dev/video97 does not exist"), std::string::npos) << r.output;
+}
+
+TEST(CameraCli, BadIntrinsicsAreAClearError) {
+  const fs::path dir = fresh_dir("intr");
+  const std::string bad = (dir / "zero.yaml").string();
+  std::ofstream(bad) << "image_width: 640\nimage_height: 480\ncamera_matrix: {rows: 3, cols: 3, "
+                        "data: [0, 0, 320, 0, 0, 240, 0, 0, 1]}\n";
+  DomainLease domain;
+  const auto r = run({bin("poise"), "camera", "--source", "synthetic", "--intrinsics", bad,
+                      "--tags", source_path("config/camera/tags_example.yaml"), "--domain",
+                      std::to_string(domain.id())},
+                     30s);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("focal lengths must be positive"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(bad), std::string::npos) << r.output;
+}
+
+TEST(CameraCli, SyntheticRunEndsWithTheSource) {
+  DomainLease domain;
+  const auto r = run({bin("poise"), "camera", "--source", "synthetic:frames=4", "--fast",
+                      "--intrinsics", source_path("config/camera/intrinsics_example_opencv.yaml"),
+                      "--tags", source_path("config/camera/tags_example.yaml"), "--config",
+                      source_path("config/camera/camera.yaml"), "--domain",
+                      std::to_string(domain.id())},
+                     60s);
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("stopped after 4 frames, 4 poses published"), std::string::npos)
+      << r.output;
+}
+
+TEST(CameraCli, HelpWorksEverywhere) {
+  for (const auto& args : std::vector<std::vector<std::string>>{
+           {"camera", "--help"}, {"tags", "--help"}, {"tags", "detect", "--help"},
+           {"tags", "render", "--help"}, {"bench", "camera", "--help"}}) {
+    std::vector<std::string> argv{bin("poise")};
+    argv.insert(argv.end(), args.begin(), args.end());
+    const auto r = run(argv, 30s);
+    EXPECT_EQ(r.exit_code, 0) << args[0] << " " << args[1] << ": " << r.output;
+  }
+}
+
+}  // namespace
+}  // namespace poise::testing
