@@ -48,6 +48,12 @@ TEST(AltitudeCli, UnknownProfileOrMethodIsAUsageError) {
   ::testing::internal::GetCapturedStdout();
 }
 
+TEST(AltitudeCli, BenchPrintsCpuAndWallFigures) {
+  const std::string out = run_cli({"bench", "altitude", "--samples", "2000"});
+  EXPECT_NE(out.find("ns/sample cpu"), std::string::npos);
+  EXPECT_NE(out.find("ns/sample wall"), std::string::npos);
+}
+
 TEST(AltitudeCli, MissingConfigIsAnActionableError) {
   EXPECT_THROW(run_cli({"sim", "altitude", "--config", "/nonexistent/altitude.yaml"}),
                poise::cli::Error);

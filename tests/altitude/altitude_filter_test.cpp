@@ -114,6 +114,45 @@ TEST(AltitudeFilter, GivenAccelBiasWhenMovingWithoutStopsThenTheIntegralShrinksT
   EXPECT_LT(std::abs(err_pi_v), kZeroTolMps);
 }
 
+TEST(AltitudeFilter, GivenBaroAt25HzThenHeldValueKeepsTheLoopAndAStaleBaroIsNotUsed) {
+  // GIVEN the barometer in every 4th sample (25 Hz) and a 0.5 m/s climb WHEN the filter runs THEN
+  // it converges as at 100 Hz (the last baro height is held between samples).
+  constexpr double kClimbMps = 0.5;
+  constexpr double kTurnRps = 0.3;
+  AltitudeFilter f;
+  double h = 0.0;
+  double v = 0.0;
+  int64_t t = 0;
+  for (int k = 0; k < 3200; ++k, t += kStepNs) {
+    const double a = (k >= 200 && k < 300) ? kClimbMps : 0.0;  // 2 s still, then 1 s at 0.5 m/s^2
+    ImuSample s = level_sample(t, h, a, kTurnRps);
+    s.has_pressure = k % 4 == 0;
+    ASSERT_TRUE(f.update(s));
+    EXPECT_EQ(f.estimate().baro_fresh, s.has_pressure);
+    h += v * kDt + 0.5 * a * kDt * kDt;
+    v += a * kDt;
+  }
+  EXPECT_NEAR(f.estimate().vertical_velocity_mps, kClimbMps, 0.01);
+  EXPECT_NEAR(f.estimate().height_m, h, 0.05);
+  // WHEN the barometer stops for 5 s THEN no correction uses the stale height: the integral
+  // (which only grows with fresh innovations) is frozen.
+  const double integral_before = f.estimate().integral_sum_m;
+  for (int k = 0; k < 500; ++k, t += kStepNs) {
+    ImuSample s = level_sample(t, h, 0.0, kTurnRps);
+    s.has_pressure = false;
+    ASSERT_TRUE(f.update(s));
+  }
+  // Within max_baro_age_s (0.5 s) the held value still counts; after it nothing changes.
+  const double integral_mid = f.estimate().integral_sum_m;
+  for (int k = 0; k < 100; ++k, t += kStepNs) {
+    ImuSample s = level_sample(t, h, 0.0, kTurnRps);
+    s.has_pressure = false;
+    ASSERT_TRUE(f.update(s));
+  }
+  EXPECT_NE(integral_before, integral_mid);
+  EXPECT_DOUBLE_EQ(f.estimate().integral_sum_m, integral_mid);
+}
+
 TEST(AltitudeFilter, GainsFollowEquation14OrHiggins) {
   AltitudeParams p;
   p.sigma_acc_mps2 = 0.08;

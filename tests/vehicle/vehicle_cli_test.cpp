@@ -37,6 +37,12 @@ TEST(VehicleCli, TextShowsTheBankFigure) {
   EXPECT_NE(out.find("switched"), std::string::npos);
 }
 
+TEST(VehicleCli, BenchPrintsCpuAndWallFigures) {
+  const std::string out = run_cli({"bench", "vehicle", "--samples", "2000", "--mode", "ekf"});
+  EXPECT_NE(out.find("vehicle ekf:"), std::string::npos);
+  EXPECT_NE(out.find("ns/sample cpu"), std::string::npos);
+}
+
 TEST(VehicleCli, UnknownCaseIsAUsageError) {
   EXPECT_THROW(run_cli({"sim", "vehicle", "--case", "moon"}), CLI::ValidationError);
   ::testing::internal::GetCapturedStdout();

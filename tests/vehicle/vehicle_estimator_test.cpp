@@ -252,7 +252,7 @@ TEST(VehicleConfig, ShippedYamlLoadsTheDefaults) {
   EXPECT_DOUBLE_EQ(p.model.k_x_nm_per_rad, d.model.k_x_nm_per_rad);
   EXPECT_DOUBLE_EQ(p.model.h_s_m, d.model.h_s_m);
   EXPECT_DOUBLE_EQ(p.q_roll_rad2_per_s, d.q_roll_rad2_per_s);
-  EXPECT_DOUBLE_EQ(p.r_mag_ut2, d.r_mag_ut2);
+  EXPECT_TRUE(p.r_mag_ut2.isApprox(d.r_mag_ut2));
   EXPECT_EQ(p.static_average, d.static_average);
   EXPECT_TRUE(p.mag_world_ut.isApprox(d.mag_world_ut));
 }
@@ -273,7 +273,7 @@ TEST(VehicleConfig, UnknownKeysAndBadValuesAreErrors) {
   EXPECT_EQ(p.mode, VehicleMode::kEkf);
   EXPECT_DOUBLE_EQ(p.static_speed_max_mps, 1.5);
   VehicleParams bad;
-  bad.r_mag_ut2 = 0.0;
+  bad.r_mag_ut2.y() = 0.0;
   EXPECT_THROW(VehicleEstimator{bad}, std::invalid_argument);
 }
 

@@ -123,7 +123,12 @@ VehicleParams load_vehicle_params(const std::string& path) {
   ekf.get("q_roll_rad2_per_s", p.q_roll_rad2_per_s);
   ekf.get("q_pitch_rad2_per_s", p.q_pitch_rad2_per_s);
   ekf.get("q_yaw_rad2_per_s", p.q_yaw_rad2_per_s);
-  ekf.get("r_mag_ut2", p.r_mag_ut2);
+  std::vector<double> rm = {p.r_mag_ut2.x(), p.r_mag_ut2.y(), p.r_mag_ut2.z()};
+  ekf.get("r_mag_ut2", rm);
+  if (rm.size() != 3) {
+    ekf.fail("ekf.r_mag_ut2", "must be a list of 3 variances [R_x, R_y, R_z] in uT^2");
+  }
+  p.r_mag_ut2 = Eigen::Vector3d(rm[0], rm[1], rm[2]);
   ekf.get("initial_var_angle_rad2", p.initial_var_angle_rad2);
   ekf.get("initial_var_rate_rad2ps2", p.initial_var_rate_rad2ps2);
   ekf.finish();

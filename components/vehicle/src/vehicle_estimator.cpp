@@ -61,7 +61,9 @@ std::string VehicleParams::validate() const {
   non_negative(q_roll_rad2_per_s, "ekf.q_roll_rad2_per_s");
   non_negative(q_pitch_rad2_per_s, "ekf.q_pitch_rad2_per_s");
   non_negative(q_yaw_rad2_per_s, "ekf.q_yaw_rad2_per_s");
-  positive(r_mag_ut2, "ekf.r_mag_ut2");
+  if (!r_mag_ut2.allFinite() || (r_mag_ut2.array() <= 0.0).any()) {
+    err << "ekf.r_mag_ut2 must be three values > 0; ";
+  }
   positive(initial_var_angle_rad2, "ekf.initial_var_angle_rad2");
   positive(initial_var_rate_rad2ps2, "ekf.initial_var_rate_rad2ps2");
   positive(max_dt_s, "max_dt_s");
@@ -196,7 +198,7 @@ void VehicleEstimator::ekf_correct(const Eigen::Vector3d& mag_ut) {
   hm.col(0) = -skew(Eigen::Vector3d::UnitX()) * pred;
   hm.col(2) = rx * (-skew(Eigen::Vector3d::UnitY()) * v_y);
   hm.col(4) = rx * ry * (-skew(Eigen::Vector3d::UnitZ()) * v_z);
-  const Eigen::Matrix3d rm = Eigen::Matrix3d::Identity() * params_.r_mag_ut2;  // (13)
+  const Eigen::Matrix3d rm = params_.r_mag_ut2.asDiagonal();  // (13)
   const Eigen::Matrix3d s = hm * p_ * hm.transpose() + rm;
   const Eigen::Matrix<double, 5, 3> k = p_ * hm.transpose() * s.inverse();
   x_ += k * (mag_ut - pred);

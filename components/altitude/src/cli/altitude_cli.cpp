@@ -31,6 +31,25 @@ std::string score_json(const AltitudeScore& s, const AltitudeParams& p) {
 }  // namespace
 
 void register_altitude_cli(CLI::App& app) {
+  CLI::App* bench_group = subcommand_group(app, "bench", "Benchmarks (figures printed, not asserted)");
+  CLI::App* bench = bench_group->add_subcommand(
+      "altitude", "Cost of the altitude filter (tilt KF included) per sample, on the simulated test 1");
+  auto bench_samples = std::make_shared<int>(200000);
+  auto bench_method = std::make_shared<std::string>("pi_cf_zupt");
+  bench->add_option("--samples", *bench_samples, "Samples per run (best of 3 runs)")
+      ->check(CLI::Range(1, 100000000))
+      ->capture_default_str();
+  bench->add_option("--method", *bench_method, "Method to time")
+      ->check(CLI::IsMember({"two_step_kf", "cf_zupt", "pi_cf_zupt", "pi_cf"}))
+      ->capture_default_str();
+  bench->callback([bench_samples, bench_method]() {
+    AltitudeParams p;
+    parse_altitude_method(*bench_method, p.method);
+    const AltitudeBenchFigures f = bench_altitude(*bench_samples, 3, p);
+    std::printf("altitude %s: %.0f ns/sample cpu, %.0f ns/sample wall (best of 3 x %d samples)\n",
+                bench_method->c_str(), f.cpu_ns_per_sample, f.wall_ns_per_sample, *bench_samples);
+  });
+
   CLI::App* sim_group = subcommand_group(app, "sim", "Simulators: run an estimator on synthetic data");
   CLI::App* cmd = sim_group->add_subcommand(
       "altitude",

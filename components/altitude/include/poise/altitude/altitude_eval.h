@@ -1,6 +1,6 @@
 // Runs the altitude filter over a simulated profile and scores it against the truth; also the
-// per-sample timing used by `poise bench filters`. Pure C++ (the bench takes the clock from the
-// caller-side std::chrono, which is allowed outside estimator cores: this file is evaluation code).
+// per-sample timing for `poise bench filters`. Evaluation code, not the estimator core: the bench
+// reads clocks (thread CPU time and steady_clock).
 #pragma once
 
 #include "poise/altitude/altitude_filter.h"
@@ -28,8 +28,15 @@ struct AltitudeScore {
 /// Simulates `sim` and runs a filter with `params` over it.
 AltitudeScore score_altitude(const AltitudeSimConfig& sim, const AltitudeParams& params);
 
-/// Mean wall time of AltitudeFilter::update (ns per sample) over `n` simulated samples (profile
-/// "random", method of `params`). For `poise bench filters`.
-double bench_altitude_ns_per_sample(int n, const AltitudeParams& params = {});
+/// Cost of one update, ns per sample: thread CPU time (what the filter costs) and wall time
+/// (inflated when other processes share the cores).
+struct AltitudeBenchFigures {
+  double cpu_ns_per_sample = 0.0;
+  double wall_ns_per_sample = 0.0;
+};
+
+/// Times AltitudeFilter::update over `n` simulated samples (profile "random", method of `params`),
+/// best of `repeats` runs. For `poise bench filters`.
+AltitudeBenchFigures bench_altitude(int n, int repeats = 3, const AltitudeParams& params = {});
 
 }  // namespace poise

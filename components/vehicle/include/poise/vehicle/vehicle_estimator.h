@@ -82,7 +82,7 @@ struct VehicleParams {
   double q_roll_rad2_per_s = 1e-3;             ///< s_x: roll process noise density, rad^2/s. Raising it lets the magnetometer pull roll harder (less bank bias, more noise).
   double q_pitch_rad2_per_s = 1e-3;            ///< s_y: pitch, rad^2/s
   double q_yaw_rad2_per_s = 1e-4;              ///< s_z: yaw, rad^2/s (yaw-rate sensor noise and bias)
-  double r_mag_ut2 = 0.25;                     ///< R_x = R_y = R_z: magnetometer noise variance, uT^2
+  Eigen::Vector3d r_mag_ut2{0.25, 0.25, 0.25};  ///< [R_x, R_y, R_z]: magnetometer noise variances, uT^2 (HMC5883L ~0.2 uT + residual calibration)
   double initial_var_angle_rad2 = 1e-3;        ///< P of phi, theta, psi at (re)initialisation
   double initial_var_rate_rad2ps2 = 1e-3;      ///< P of phi_dot, theta_dot
 

@@ -35,8 +35,14 @@ struct VehicleScore {
 /// Simulates `sim` and runs an estimator with `params` (its mode decides TRIAD/EKF/switched).
 VehicleScore score_vehicle(const VehicleSimConfig& sim, const VehicleParams& params);
 
-/// Mean wall time of VehicleEstimator::update (ns per sample, switched mode on the
-/// mountain_road case) over `n` samples. For `poise bench filters`.
-double bench_vehicle_ns_per_sample(int n, const VehicleParams& params = {});
+/// Cost of one update, ns per sample: thread CPU time and wall time.
+struct VehicleBenchFigures {
+  double cpu_ns_per_sample = 0.0;
+  double wall_ns_per_sample = 0.0;
+};
+
+/// Times VehicleEstimator::update over `n` samples of the mountain_road case (mode of `params`,
+/// switched by default), best of `repeats` runs. For `poise bench filters`.
+VehicleBenchFigures bench_vehicle(int n, int repeats = 3, const VehicleParams& params = {});
 
 }  // namespace poise
