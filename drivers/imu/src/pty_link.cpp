@@ -85,12 +85,24 @@ PtyLink::WriteStatus PtyLink::write(std::string_view data) {
     had_reader_ = true;
   }
   if ((p.revents & POLLOUT) == 0) return WriteStatus::kFull;
-  const ssize_t n = ::write(master_, data.data(), data.size());
-  if (n == static_cast<ssize_t>(data.size())) return WriteStatus::kWritten;
-  if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) return WriteStatus::kFull;
-  if (n < 0 && errno == EIO) return WriteStatus::kNoReader;
-  // A partial write leaves a cut line on the wire (the reader counts it as truncated).
-  return n >= 0 ? WriteStatus::kFull : WriteStatus::kNoReader;
+  ssize_t n = ::write(master_, data.data(), data.size());
+  if (n < 0) {
+    if (errno == EAGAIN || errno == EWOULDBLOCK) return WriteStatus::kFull;
+    return WriteStatus::kNoReader;
+  }
+  // A line is never left half-written if the reader drains within a short bound: finish it.
+  std::size_t done = static_cast<std::size_t>(n);
+  constexpr int kFinishTimeoutMs = 1000;
+  while (done < data.size()) {
+    pollfd q{master_, POLLOUT, 0};
+    if (::poll(&q, 1, kFinishTimeoutMs) <= 0 || (q.revents & POLLHUP) != 0) {
+      return WriteStatus::kFull;  // cut line on the wire: the reader counts it as truncated
+    }
+    n = ::write(master_, data.data() + done, data.size() - done);
+    if (n < 0 && errno != EAGAIN && errno != EWOULDBLOCK) return WriteStatus::kNoReader;
+    if (n > 0) done += static_cast<std::size_t>(n);
+  }
+  return WriteStatus::kWritten;
 }
 
 }  // namespace poise::imu

@@ -18,7 +18,8 @@ class PtyLink {
 
   enum class WriteStatus { kWritten, kNoReader, kFull, kDisconnected };
   /// Writes `data` entirely or not at all. kNoReader: nobody has the port open (the bytes are
-  /// dropped, as on a real UART); kFull: the reader is not keeping up (dropped).
+  /// dropped, as on a real UART); kFull: the reader is not keeping up (dropped; if the reader
+  /// stalls for 1 s mid-line, the line stays cut and the reader counts it as truncated).
   WriteStatus write(std::string_view data);
   void disconnect();
   void reconnect();  ///< throws std::runtime_error
