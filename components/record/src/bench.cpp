@@ -1,7 +1,9 @@
 #include "poise/record/bench.h"
 
 #include "poise/dds/participant.h"
+#include "poise/eval/filter_registry.h"
 #include "poise/record/idl_schema.h"
+#include "poise/record/process.h"
 #include "poise/record/recorder.h"
 #include "poise/record/replayer.h"
 
@@ -215,6 +217,25 @@ void bench_replay(const BenchReplayOptions& options, std::ostream& out) {
                   options.recording_s / dt, static_cast<unsigned long long>(count), dt,
                   static_cast<unsigned long long>(checksum));
     out << line;
+  }
+  // Offline processing (no DDS): the parallel KF over the same recording.
+  {
+    std::vector<ProcessFilter> filters;
+    filters.push_back({"parallel_kf", eval::make_filter("parallel_kf")});
+    ProcessOptions po;
+    po.input = path;
+    po.output = temp_path("processed");
+    po.imu_topic = "bench/replay_imu";
+    const auto t0 = Clock::now();
+    const ProcessStats ps = process_recording(po, filters);
+    const double dt = since(t0);
+    std::snprintf(line, sizeof(line),
+                  "poise process (parallel_kf): %8.1f x real time (%llu samples, %llu estimates "
+                  "in %.3f s)\n",
+                  options.recording_s / dt, static_cast<unsigned long long>(ps.imu_samples),
+                  static_cast<unsigned long long>(ps.estimates.at("parallel_kf")), dt);
+    out << line;
+    std::filesystem::remove(po.output);
   }
   // Over DDS, as fast as possible, into a best-effort subscriber.
   dds::Participant participant({options.domain, options.profile, "", "poise bench subscriber"});
