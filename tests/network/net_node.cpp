@@ -18,6 +18,7 @@
 #include "ros2_mirror.h"
 
 #include "poise/dds/participant.h"
+#include "poise/dds/sequence_gaps.h"
 
 #include <poise/msg/estimatesPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
@@ -35,6 +36,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <cstdarg>
@@ -96,85 +98,54 @@ void run_until_stopped(double duration_s, const std::function<void()>& tick = {}
   }
 }
 
-/// Per-source arrival statistics: sequence gaps (lost samples), publisher restarts, silences.
+/// Per-source arrival events on top of poise::dds::SequenceGaps: @first, @resume after a silence
+/// or a publisher restart (with the samples lost in that gap), @summary with the totals.
 class StreamStats {
  public:
   StreamStats(std::string topic, double silence_ms)
       : topic_(std::move(topic)), silence_ns_(static_cast<int64_t>(silence_ms * 1e6)) {}
 
-  /// `writer`: the publishing DataWriter's GUID; a new GUID for a known source is a restart.
-  void on_sample(const std::string& source, uint32_t seq, const std::string& writer) {
+  /// `stamp_ns`: the sample's header stamp (same host clock here), to report the age of the first
+  /// sample after a silence (stale data queued during an outage shows as a large age).
+  void on_sample(const std::string& source, uint32_t seq, const std::string& writer,
+                 int64_t stamp_ns) {
     const int64_t t = now_ns();
     std::lock_guard<std::mutex> lock(mutex_);
-    auto [it, inserted] = sources_.try_emplace(source);
-    Source& s = it->second;
-    if (inserted) {
+    const dds::SequenceGaps::Event e = gaps_.on_sample(source, seq, writer);
+    int64_t& last = last_ns_[source];
+    if (e.first) {
       event("@first topic=%s source=%s seq=%u t_ns=%lld\n", topic_.c_str(), source.c_str(), seq,
             static_cast<long long>(t));
-    } else {
-      uint64_t lost_now = 0;
-      bool restart = false;
-      if (writer != s.writer || seq <= s.last_seq) {
-        restart = true;  // a new publisher instance (e.g. restarted after kill -9)
-        ++s.restarts;
-      } else if (seq > s.last_seq + 1U) {
-        lost_now = seq - s.last_seq - 1U;
-        s.lost += lost_now;
-        ++s.gaps;
-      }
-      const int64_t silence = t - s.last_ns;
-      if (silence >= silence_ns_ || restart) {
-        event("@resume topic=%s source=%s seq=%u t_ns=%lld silence_ms=%.1f lost=%llu restart=%d\n",
-              topic_.c_str(), source.c_str(), seq, static_cast<long long>(t),
-              static_cast<double>(silence) * 1e-6, static_cast<unsigned long long>(lost_now),
-              restart ? 1 : 0);
-      }
+    } else if (!e.duplicate && (t - last >= silence_ns_ || e.restart)) {
+      event("@resume topic=%s source=%s seq=%u t_ns=%lld silence_ms=%.1f lost=%llu restart=%d "
+            "age_ms=%.1f\n",
+            topic_.c_str(), source.c_str(), seq, static_cast<long long>(t),
+            static_cast<double>(t - last) * 1e-6, static_cast<unsigned long long>(e.lost),
+            e.restart ? 1 : 0, static_cast<double>(t - stamp_ns) * 1e-6);
     }
-    s.last_seq = seq;
-    s.last_ns = t;
-    s.writer = writer;
-    ++s.received;
+    last = t;
   }
 
   void print_summary() {
     std::lock_guard<std::mutex> lock(mutex_);
-    for (const auto& [source, s] : sources_) {
+    for (const auto& [source, s] : gaps_.by_source()) {
       event("@summary topic=%s source=%s received=%llu lost=%llu gaps=%llu restarts=%llu\n",
             topic_.c_str(), source.c_str(), static_cast<unsigned long long>(s.received),
             static_cast<unsigned long long>(s.lost), static_cast<unsigned long long>(s.gaps),
             static_cast<unsigned long long>(s.restarts));
     }
-    if (sources_.empty()) {
+    if (gaps_.by_source().empty()) {
       event("@summary topic=%s source=none received=0 lost=0 gaps=0 restarts=0\n", topic_.c_str());
     }
   }
 
  private:
-  struct Source {
-    uint32_t last_seq = 0;
-    int64_t last_ns = 0;
-    uint64_t received = 0;
-    uint64_t lost = 0;
-    uint64_t gaps = 0;
-    uint64_t restarts = 0;
-    std::string writer;
-  };
   std::string topic_;
   int64_t silence_ns_;
   std::mutex mutex_;
-  std::map<std::string, Source> sources_;
+  dds::SequenceGaps gaps_;
+  std::map<std::string, int64_t> last_ns_;
 };
-
-/// The publishing writer's GUID (from SampleInfo) as hex.
-std::string writer_id(const eprosima::fastdds::dds::SampleInfo& info) {
-  std::string out;
-  char byte[3];
-  for (size_t i = 0; i < 16; ++i) {
-    std::snprintf(byte, sizeof(byte), "%02x", static_cast<unsigned>(info.publication_handle.value[i]));
-    out += byte;
-  }
-  return out;
-}
 
 /// Reports changes of an endpoint's matched count.
 template <typename Endpoint>
@@ -257,16 +228,23 @@ int run_imu(const Common& c) {
   uint32_t seq = 0;
   int matched = -1;
   msg::ImuSample m;
+  int64_t max_write_ns = 0;
+  uint64_t slow_writes = 0;  // write() calls over 1 ms: they would stall a driver's read loop
   run_until_stopped(
       c.duration_s,
       [&] {
         report_matches(writer, topic, matched);
         fill_imu(m, c.sensor_id, seq++);
+        const int64_t t0 = now_ns();
         writer.write(m);
+        const int64_t took = now_ns() - t0;
+        max_write_ns = std::max(max_write_ns, took);
+        slow_writes += took > 1000000 ? 1U : 0U;
       },
       c.rate_hz);
-  event("@summary topic=%s sent=%u t_ns=%lld\n", topic.c_str(), seq,
-        static_cast<long long>(now_ns()));
+  event("@summary topic=%s sent=%u t_ns=%lld max_write_us=%lld slow_writes=%llu\n", topic.c_str(),
+        seq, static_cast<long long>(now_ns()), static_cast<long long>(max_write_ns / 1000),
+        static_cast<unsigned long long>(slow_writes));
   return 0;
 }
 
@@ -380,7 +358,8 @@ int run_fusion(const Common& c, const std::string& filter_id) {
   msg::AttitudeEstimate out;
   dds::Reader<msg::ImuSamplePubSubType> imu_reader(
       participant, in_topic, [&](const msg::ImuSample& in, const auto& info) {
-        imu_stats.on_sample(in.sensor_id().to_string(), in.header().seq(), writer_id(info));
+        imu_stats.on_sample(in.sensor_id().to_string(), in.header().seq(), dds::writer_key(info),
+                            in.header().stamp_ns());
         const double ax = in.accel_mps2().x();
         const double ay = in.accel_mps2().y();
         const double az = in.accel_mps2().z();
@@ -406,7 +385,8 @@ int run_fusion(const Common& c, const std::string& filter_id) {
       });
   dds::Reader<msg::VisionPosePubSubType> vision_reader(
       participant, "vision_pose", [&](const msg::VisionPose& in, const auto& info) {
-        vision_stats.on_sample(in.sensor_id().to_string(), in.header().seq(), writer_id(info));
+        vision_stats.on_sample(in.sensor_id().to_string(), in.header().seq(), dds::writer_key(info),
+                               in.header().stamp_ns());
       });
   int matched_in = -1;
   int matched_out = -1;
@@ -432,19 +412,22 @@ int run_watch(const Common& c, const std::string& type) {
   if (type == "imu") {
     dds::Reader<msg::ImuSamplePubSubType> reader(
         participant, topic, [&](const msg::ImuSample& m, const auto& info) {
-          stats.on_sample(m.sensor_id().to_string(), m.header().seq(), writer_id(info));
+          stats.on_sample(m.sensor_id().to_string(), m.header().seq(), dds::writer_key(info),
+                          m.header().stamp_ns());
         });
     watch(reader);
   } else if (type == "vision_pose") {
     dds::Reader<msg::VisionPosePubSubType> reader(
         participant, topic, [&](const msg::VisionPose& m, const auto& info) {
-          stats.on_sample(m.sensor_id().to_string(), m.header().seq(), writer_id(info));
+          stats.on_sample(m.sensor_id().to_string(), m.header().seq(), dds::writer_key(info),
+                          m.header().stamp_ns());
         });
     watch(reader);
   } else {
     dds::Reader<msg::AttitudeEstimatePubSubType> reader(
         participant, topic, [&](const msg::AttitudeEstimate& m, const auto& info) {
-          stats.on_sample(m.sensor_id().to_string(), m.header().seq(), writer_id(info));
+          stats.on_sample(m.sensor_id().to_string(), m.header().seq(), dds::writer_key(info),
+                          m.header().stamp_ns());
         });
     watch(reader);
   }

@@ -97,10 +97,11 @@ TEST(Faults, LinkCutFiveSecondsResumesAndCountsLostSamples) {
           ? 0.0
           : summary[0].num("sent") / ((summary[0].num("t_ns") - started[0].num("t_ns")) * 1e-9);
   std::printf("[figure] link cut %d ms: data again %.0f ms after link up, silence %.0f ms, "
-              "lost %.0f samples (publisher at %.0f Hz of %.0f requested: %.0f sent in the "
-              "silence)\n",
-              kCutMs, resume_ms, silence_ms, lost, achieved_hz, kImuRateHz,
-              silence_ms * 1e-3 * achieved_hz);
+              "lost %.0f samples, first sample after the cut %.0f ms old (publisher averaged "
+              "%.0f Hz of %.0f requested; %.0f write() calls over 1 ms, longest %.1f ms)\n",
+              kCutMs, resume_ms, silence_ms, lost, resumed->num("age_ms"), achieved_hz, kImuRateHz,
+              summary.empty() ? -1.0 : summary[0].num("slow_writes"),
+              summary.empty() ? -1.0 : summary[0].num("max_write_us") * 1e-3);
   RecordProperty("lost_samples", std::to_string(lost));
   EXPECT_GE(silence_ms, kCutMs * 0.9);
   EXPECT_EQ(resumed->str("restart"), "0") << "same publisher, not a restart";
