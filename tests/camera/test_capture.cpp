@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
 
 #include <filesystem>
 #include <fstream>
@@ -55,6 +56,40 @@ TEST(Capture, ImageDirectorySkipsUnreadableWithClearMessage) {
   const auto files = expand_image_spec((dir / "*.png").string());
   ASSERT_EQ(files.size(), 2U);
   EXPECT_LT(files[0], files[1]);
+}
+
+// GIVEN a 3-frame MJPG video at 10 fps
+// WHEN read as a source
+// THEN frames come in order, stamped first-grab host time (minus delay) + media time, then end.
+TEST(Capture, VideoFileStampsFollowMediaTime) {
+  const fs::path dir = fresh_dir("video");
+  const std::string path = (dir / "clip.avi").string();
+  {
+    cv::VideoWriter writer(path, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 10.0, cv::Size(64, 48), false);
+    if (!writer.isOpened()) {
+      GTEST_SKIP() << "this OpenCV build cannot write MJPG/AVI";
+    }
+    for (int i = 0; i < 3; ++i) {
+      writer.write(cv::Mat(48, 64, CV_8UC1, cv::Scalar(40 * (i + 1))));
+    }
+  }
+  SourceOptions o;
+  int64_t now = kNowNs;
+  o.clock = [&now] { return now; };
+  o.delay_ns = kDelayNs;
+  auto source = open_source(path, o);
+  Frame f;
+  std::string error;
+  std::vector<int64_t> stamps;
+  while (source->grab(f, error) == GrabStatus::kFrame) {
+    stamps.push_back(f.stamp_ns);
+    now += 1'000'000'000;  // host time runs on; stamps must follow the media time instead
+  }
+  ASSERT_EQ(stamps.size(), 3U);
+  constexpr int64_t kFramePeriodNs = 100'000'000;
+  constexpr int64_t kStampTolNs = 1'000'000;  // media time is rounded to ms by some backends
+  EXPECT_EQ(stamps[0], kNowNs - kDelayNs);
+  EXPECT_NEAR(static_cast<double>(stamps[2] - stamps[0]), 2.0 * kFramePeriodNs, kStampTolNs);
 }
 
 TEST(Capture, MissingDeviceIsAClearError) {
