@@ -12,7 +12,7 @@ void TiltKf::reset(const Eigen::Vector3d& up_body) {
   }
   kf_.reset(z, params_.initial_var_tilt, params_.initial_var_accel);
   innovation_.setZero();
-  correction_rotvec_.setZero();
+  z_prior_ = kf_.u();
   initialized_ = true;
 }
 
@@ -32,10 +32,8 @@ bool TiltKf::correct(const Eigen::Vector3d& accel_mps2, double extra_var_mps2sq)
     reset(accel_mps2);
     return initialized_;
   }
-  const Eigen::Vector3d z_prior = kf_.u();
+  z_prior_ = kf_.u();
   innovation_ = kf_.correct(accel_mps2, params_.gravity_mps2, extra_var_mps2sq);
-  // sZ+ = sZ- - dtheta x sZ-  =>  dtheta_perp = sZ+ x sZ- (normalised directions).
-  correction_rotvec_ = kf_.u().normalized().cross(z_prior.normalized());
   return true;
 }
 

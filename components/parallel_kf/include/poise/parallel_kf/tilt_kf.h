@@ -81,7 +81,10 @@ class TiltKf {
   [[nodiscard]] const Eigen::Vector3d& last_innovation() const { return innovation_; }
   /// Small body-frame rotation (rad) that the last correction applied to the tilt: the part of
   /// the attitude change not explained by the gyro (perpendicular to sZ). Used for bias estimation.
-  [[nodiscard]] const Eigen::Vector3d& last_correction_rotvec() const { return correction_rotvec_; }
+  [[nodiscard]] Eigen::Vector3d last_correction_rotvec() const {
+    // sZ+ = sZ- - dtheta x sZ-  =>  dtheta_perp = sZ+ x sZ- (normalised directions)
+    return kf_.u().normalized().cross(z_prior_.normalized());
+  }
 
   /// Direct access for composite filters (ParallelKf).
   [[nodiscard]] DirectionKf& core() { return kf_; }
@@ -91,7 +94,7 @@ class TiltKf {
   DirectionKf kf_;
   bool initialized_ = false;
   Eigen::Vector3d innovation_{0.0, 0.0, 0.0};
-  Eigen::Vector3d correction_rotvec_{0.0, 0.0, 0.0};
+  Eigen::Vector3d z_prior_{0.0, 0.0, 1.0};  ///< sZ before the last correction
 };
 
 }  // namespace poise
