@@ -98,6 +98,18 @@ TEST(Echo, GivenNoWriterWhenEchoedThenItGivesUpAfterTheTimeoutWithExitCode1) {
       << r.output;
 }
 
+TEST(Echo, GivenAnUnreadableIdlDirectoryWhenEchoedThenItExitsWithCode1AndSaysWhy) {
+  DomainLease lease;
+  std::vector<std::string> env = kEnv;
+  env.emplace_back("POISE_IDL_DIR=/nonexistent-poise-idl");
+  const auto r = run({poise::testing::bin("poise"), "echo", "imu", "--domain",
+                      std::to_string(lease.id()), "--timeout", "1"},
+                     kCommandTimeout, env);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("cannot load the IDL types"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("/nonexistent-poise-idl"), std::string::npos) << r.output;
+}
+
 TEST(Echo, GivenBadOptionsWhenRunThenUsageAndExitCode2) {
   for (const std::vector<std::string>& args :
        {std::vector<std::string>{"echo"}, {"echo", "imu", "--count", "-1"},
@@ -118,6 +130,13 @@ TEST(Topics, GivenTwoPublishersWhenListedThenEachTopicHasItsTypeWriterAndRate) {
   DomainLease lease;
   auto imu = publisher(lease.id(), "imu", 100.0);
   auto diag = publisher(lease.id(), "diagnostics", 20.0);
+  // Both publishers are up (one sample echoed from each) before the sampling window starts.
+  for (const char* topic : {"imu", "diagnostics"}) {
+    const auto up = run({poise::testing::bin("poise"), "echo", topic, "--count", "1", "--domain",
+                         std::to_string(lease.id()), "--timeout", "15"},
+                        kCommandTimeout, kEnv);
+    ASSERT_EQ(up.exit_code, 0) << up.output << imu->output() << diag->output();
+  }
   const auto r = run({poise::testing::bin("poise"), "topics", "--json", "--duration", "3",
                       "--domain", std::to_string(lease.id())},
                      kCommandTimeout, kEnv);
