@@ -9,6 +9,7 @@
 #include <Eigen/LU>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <memory>
 #include <vector>
@@ -192,6 +193,11 @@ TEST_F(PoseScenario, MultiTagBeatsEverySingleTag) {
   const Measured joint = run(scene, tags, seed, cam);
   ASSERT_TRUE(joint.valid) << joint.reason;
   EXPECT_EQ(joint.world.tag_ids, (std::vector<int>{1, 2, 3, 4}));
+  const auto& dets = joint.frame.detections;
+  const auto unknown_it = std::find_if(dets.begin(), dets.end(),
+                                       [](const DetectionResult& d) { return d.detection.id == 9; });
+  ASSERT_NE(unknown_it, dets.end()) << "the unmapped tag must still be reported";
+  EXPECT_FALSE(unknown_it->in_map);
   double best_single_pos = 1e9;
   double best_single_angle = 1e9;
   for (const auto& t : tags) {
