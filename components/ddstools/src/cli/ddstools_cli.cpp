@@ -374,9 +374,78 @@ void run_test_pub(const TestPubOptions& o) {
   }
 }
 
+// ---------------------------------------------------------------------------------------------
+// poise bench decode: schema-layer decoding speed (payload -> Value -> JSON / text).
+
+template <class PubSubType>
+std::vector<std::uint8_t> bench_payload(typename PubSubType::type& msg) {
+  PubSubType type;
+  eprosima::fastrtps::rtps::SerializedPayload_t payload(type.m_typeSize);
+  if (!type.serialize(&msg, &payload)) {
+    throw Error("cannot serialize a benchmark sample");
+  }
+  return {payload.data, payload.data + payload.length};
+}
+
+void run_bench_decode(int iterations) {
+  const ddstools::TypeTable& table = type_table();
+  poise::msg::ImuSample imu;
+  imu.sensor_id("imu0");
+  imu.header().frame_id("body");
+  poise::msg::FilterDiagnostics diag;  // a busy diagnostics sample: 6 sources, 20 counters
+  diag.sensor_id("parallel_kf");
+  for (int k = 0; k < 6; ++k) {
+    poise::msg::SourceStatus st;
+    st.source("source" + std::to_string(k));
+    st.innovation({0.1, 0.2, 0.3});
+    st.innovation_variance({0.01, 0.02, 0.03});
+    diag.sources().push_back(st);
+  }
+  for (int k = 0; k < 20; ++k) {
+    poise::msg::Counter c;
+    c.name("rejected_reason_" + std::to_string(k));
+    c.value(static_cast<std::uint64_t>(k));
+    diag.counters().push_back(c);
+  }
+  const std::vector<std::pair<std::string, std::vector<std::uint8_t>>> cases = {
+      {"poise::msg::ImuSample", bench_payload<poise::msg::ImuSamplePubSubType>(imu)},
+      {"poise::msg::FilterDiagnostics",
+       bench_payload<poise::msg::FilterDiagnosticsPubSubType>(diag)}};
+  std::printf("%-30s %6s %12s %12s %12s\n", "TYPE", "BYTES", "DECODE_US", "+JSON_US", "+TEXT_US");
+  for (const auto& [type, payload] : cases) {
+    std::size_t sink = 0;
+    const auto time_us = [&](int mode) {
+      const auto t0 = Clock::now();
+      for (int i = 0; i < iterations; ++i) {
+        const ddstools::Value v = ddstools::decode(table, type, payload);
+        sink += mode == 0 ? v.fields.size()
+                          : (mode == 1 ? ddstools::to_json(v).size() : ddstools::to_text(v).size());
+      }
+      return std::chrono::duration<double, std::micro>(Clock::now() - t0).count() / iterations;
+    };
+    const double decode_us = time_us(0);
+    const double json_us = time_us(1);
+    const double text_us = time_us(2);
+    std::printf("%-30s %6zu %12.2f %12.2f %12.2f\n", type.c_str(), payload.size(), decode_us,
+                json_us, text_us);
+    if (sink == 0) {
+      std::printf("(nothing decoded)\n");
+    }
+  }
+}
+
 }  // namespace
 
 void register_ddstools_commands(CLI::App& app) {
+  CLI::App* bench = subcommand_group(app, "bench", "Benchmarks that print figures");
+  auto iterations = std::make_shared<int>(20000);
+  CLI::App* b = bench->add_subcommand(
+      "decode", "Schema-layer CDR decoding speed per sample (decode, +JSON, +text), in microseconds");
+  b->add_option("--iterations", *iterations, "Samples decoded per figure")
+      ->check(CLI::Range(1, 100000000))
+      ->capture_default_str();
+  b->callback([iterations] { run_bench_decode(*iterations); });
+
   auto echo = std::make_shared<EchoOptions>();
   CLI::App* e = app.add_subcommand(
       "echo", "Print the samples of a DDS topic, decoded with the IDL types (--json: one object per line)");
