@@ -72,6 +72,13 @@ void PtyLink::reconnect() {
   open_pty();
 }
 
+bool PtyLink::has_reader() const {
+  if (master_ < 0) return false;
+  pollfd p{master_, POLLOUT, 0};
+  ::poll(&p, 1, 0);
+  return (p.revents & POLLHUP) == 0;
+}
+
 PtyLink::WriteStatus PtyLink::write(std::string_view data) {
   if (master_ < 0) return WriteStatus::kDisconnected;
   pollfd p{master_, POLLOUT, 0};

@@ -269,7 +269,12 @@ void run_sim_imu(const SimImuOptions& o) {
     const double sensor_s = static_cast<double>(t_ns - boot_ns) * 1e-9 * (1.0 + o.drift_ppm * 1e-6);
     const auto t_us = static_cast<uint32_t>(
         (static_cast<uint64_t>(std::llround(sensor_s * 1e6)) + o.t_start_us) & 0xFFFFFFFFull);
-    const std::string bytes = injector.apply(make_line(s, seq++, t_us, raw_format));
+    const std::string line = make_line(s, seq++, t_us, raw_format);
+    if (!link->has_reader()) {  // as a UART with nobody listening: the line is lost, no fault
+      ++no_reader;
+      continue;
+    }
+    const std::string bytes = injector.apply(line);
     if (bytes.empty()) continue;
     switch (link->write(bytes)) {
       case imu::PtyLink::WriteStatus::kWritten: ++sent; break;
@@ -280,6 +285,7 @@ void run_sim_imu(const SimImuOptions& o) {
   }
   const std::string held = injector.flush();
   if (!held.empty()) link->write(held);
+  sleep_until_ns(imu::monotonic_now_ns() + 100'000'000);  // let the reader drain the last lines
   link.reset();  // removes the symlink
   // Summary on stdout (machine-readable "key: value" lines).
   std::printf("lines_written: %" PRIu64 "\nlines_without_reader: %" PRIu64

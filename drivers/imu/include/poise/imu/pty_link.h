@@ -21,6 +21,8 @@ class PtyLink {
   /// dropped, as on a real UART); kFull: the reader is not keeping up (dropped; if the reader
   /// stalls for 1 s mid-line, the line stays cut and the reader counts it as truncated).
   WriteStatus write(std::string_view data);
+  /// True while some process has the device open (no hangup on the master).
+  [[nodiscard]] bool has_reader() const;
   void disconnect();
   void reconnect();  ///< throws std::runtime_error
   [[nodiscard]] bool connected() const { return master_ >= 0; }

@@ -1,0 +1,138 @@
+// The IMU commands as processes: `poise sim-imu` -> `poise imu` -> DDS subscriber (this test),
+// with faults and a disconnect; help and error conventions.
+#include <gtest/gtest.h>
+
+#include <signal.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <regex>
+#include <string>
+
+#include <poise/msg/diagnosticsPubSubTypes.h>
+#include <poise/msg/imuPubSubTypes.h>
+
+#include "poise/dds/convert.h"
+#include "poise/dds/participant.h"
+#include "poise/testing/testing.h"
+
+namespace poise::imu {
+namespace {
+
+using namespace std::chrono_literals;
+using poise::testing::Child;
+using poise::testing::run;
+
+/// The executable under test: `poise` (POISE_IMU_TEST_BIN may point at poise_imu_dev).
+std::string poise_bin() {
+  const char* env = std::getenv("POISE_IMU_TEST_BIN");
+  return env != nullptr && *env != '\0' ? env : poise::testing::bin("poise");
+}
+
+std::string temp_path(const std::string& tag) {
+  return ::testing::TempDir() + "poise-imu-cli-" + tag + "-" + std::to_string(::getpid());
+}
+
+TEST(ImuCli, HelpWorksForEveryCommand) {
+  for (const auto& args : std::vector<std::vector<std::string>>{
+           {"imu", "--help"}, {"sim-imu", "--help"}, {"calibrate", "imu", "--help"}, {"bench", "imu", "--help"}}) {
+    std::vector<std::string> argv{poise_bin()};
+    argv.insert(argv.end(), args.begin(), args.end());
+    const auto r = run(argv, 20s);
+    EXPECT_EQ(r.exit_code, 0) << args[0] << ": " << r.output;
+    EXPECT_NE(r.output.find("Usage"), std::string::npos) << r.output;
+  }
+}
+
+TEST(ImuCli, UsageAndSetupErrorsAreClear) {
+  auto r = run({poise_bin(), "imu", "--port", "/tmp/x", "--baud", "12345"}, 20s);
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  r = run({poise_bin(), "sim-imu", "--link", temp_path("bad"), "--faults", "bogus=1"}, 20s);
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("unknown key 'bogus'"), std::string::npos) << r.output;
+  const std::string bad_config = temp_path("bad.yaml");
+  std::ofstream(bad_config) << "calibration: {mag_soft_iron: [[1,0,0],[0,1,0],[0,0,0]]}\n";
+  r = run({poise_bin(), "imu", "--port", "/tmp/x", "--config", bad_config, "--duration", "1"}, 20s);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("mag_soft_iron"), std::string::npos) << r.output;
+  ::unlink(bad_config.c_str());
+}
+
+uint64_t stat_of(const std::string& output, const std::string& key) {
+  const std::regex re(key + ": ([0-9]+)");
+  std::smatch m;
+  return std::regex_search(output, m, re) ? std::stoull(m[1].str()) : ~0ull;
+}
+
+TEST(ImuCli, SimImuThroughImuToASubscriberWithFaultsAndADisconnect) {
+  // GIVEN `poise imu` waiting for a device that `poise sim-imu` then provides, with bit flips,
+  // garbage and a 0.3 s disconnect (board reboot) in the middle
+  poise::testing::DomainLease domain;
+  const std::string link = temp_path("link");
+  const std::string d = std::to_string(domain.id());
+  std::mutex mu;
+  std::map<std::string, uint64_t> counters;
+  uint64_t received = 0;
+  uint32_t max_seq_before_restart = 0;
+  bool resumed_after_restart = false;
+  dds::Participant participant({domain.id(), "", "", "imu cli test"});
+  dds::Reader<msg::FilterDiagnosticsPubSubType> diag(
+      participant, "diagnostics", [&](const msg::FilterDiagnostics& m, const auto&) {
+        if (m.component_name().to_string() != "imu_driver") return;
+        std::lock_guard<std::mutex> lock(mu);
+        for (const auto& c : m.counters()) counters[c.name().to_string()] = c.value();
+      });
+  dds::Reader<msg::ImuSamplePubSubType> imu(participant, "imu", [&](const msg::ImuSample& m, const auto&) {
+    std::lock_guard<std::mutex> lock(mu);
+    ++received;
+    const uint32_t seq = m.header().seq();
+    if (seq > max_seq_before_restart && !resumed_after_restart) max_seq_before_restart = seq;
+    // The rebooted board counts from 0 again: a large backward jump means publishing resumed.
+    if (max_seq_before_restart > 300 && seq + 200 < max_seq_before_restart) resumed_after_restart = true;
+  });
+  Child driver({poise_bin(), "imu", "--port", link, "--domain", d, "--status-period", "1"});
+  ASSERT_TRUE(imu.wait_for_writers(1, 20s)) << driver.output();
+  Child sim({poise_bin(), "sim-imu", "--link", link, "--rate", "200", "--duration", "4",
+             "--faults", "flip=0.03,garbage=0.03,disconnect=2:0.3,seed=4"});
+  // WHEN the simulated device finishes
+  const auto sim_exit = sim.wait_for(30s);
+  ASSERT_TRUE(sim_exit.has_value()) << sim.output();
+  EXPECT_EQ(*sim_exit, 0) << sim.output();
+  EXPECT_NE(::access(link.c_str(), F_OK), 0) << "sim-imu must remove its symlink";
+  const std::string out = sim.output();
+  const uint64_t flips = stat_of(out, "fault_flip");
+  const uint64_t garbage = stat_of(out, "fault_garbage");
+  ASSERT_NE(flips, ~0ull) << out;
+  ASSERT_GT(flips + garbage, 0u) << out;
+  EXPECT_EQ(stat_of(out, "disconnects"), 1u) << out;
+  // THEN the driver counted every injected fault, reconnected by itself and kept publishing
+  const auto counter = [&](const std::string& k) {
+    std::lock_guard<std::mutex> lock(mu);
+    const auto it = counters.find(k);
+    return it == counters.end() ? ~0ull : it->second;
+  };
+  EXPECT_TRUE(poise::testing::wait_until(
+      [&] { return counter("rejected_checksum_mismatch") == flips && counter("rejected_garbage") == garbage; },
+      20s))
+      << "flips " << flips << " vs " << counter("rejected_checksum_mismatch") << ", garbage " << garbage
+      << " vs " << counter("rejected_garbage") << "\n" << driver.output();
+  EXPECT_GE(counter("connects"), 2u) << driver.output();
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    EXPECT_GT(received, 300u);
+    EXPECT_TRUE(resumed_after_restart) << "no sample after the reconnect; max seq before "
+                                       << max_seq_before_restart;
+  }
+  // AND the driver stops cleanly on SIGINT
+  driver.signal(SIGINT);
+  const auto drv_exit = driver.wait_for(15s);
+  ASSERT_TRUE(drv_exit.has_value()) << driver.output();
+  EXPECT_EQ(*drv_exit, 0) << driver.output();
+}
+
+}  // namespace
+}  // namespace poise::imu
