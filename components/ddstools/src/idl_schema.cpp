@@ -59,13 +59,6 @@ bool StructDef::has_key() const {
 
 namespace {
 
-std::string strip_global(std::string_view name) {
-  if (name.substr(0, 2) == "::") {
-    name.remove_prefix(2);
-  }
-  return std::string(name);
-}
-
 // ---------------------------------------------------------------------------------------------
 // Tokenizer
 
@@ -665,12 +658,18 @@ bool TypeTable::has_type(std::string_view scoped) const {
 }
 
 const StructDef* TypeTable::find_struct(std::string_view scoped_name) const {
-  const auto it = struct_index_.find(strip_global(scoped_name));
+  if (scoped_name.substr(0, 2) == "::") {
+    scoped_name.remove_prefix(2);
+  }
+  const auto it = struct_index_.find(scoped_name);
   return it == struct_index_.end() ? nullptr : &structs_[it->second];
 }
 
 const EnumDef* TypeTable::find_enum(std::string_view scoped_name) const {
-  const auto it = enum_index_.find(strip_global(scoped_name));
+  if (scoped_name.substr(0, 2) == "::") {
+    scoped_name.remove_prefix(2);
+  }
+  const auto it = enum_index_.find(scoped_name);
   return it == enum_index_.end() ? nullptr : &enums_[it->second];
 }
 
