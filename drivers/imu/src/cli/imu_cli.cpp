@@ -99,9 +99,31 @@ struct SimImuOptions {
   uint64_t seed = 1;
   double drift_ppm = 0;
   uint32_t t_start_us = 0;
+  double speed = 1.0;
+  std::vector<double> mag_hard_iron;  // 3 values, uT
+  std::vector<double> mag_soft_iron;  // 9 values, row-major
   bool loop = false;
   bool quiet = false;
 };
+
+/// A still start then tumbling through every orientation, no magnets: for `poise calibrate imu`.
+sim::SimConfig calibration_scenario(double rate_hz, uint64_t seed) {
+  sim::SimConfig c = sim::make_scenario("static_magnet", rate_hz, seed);
+  c.name = "calibration";
+  c.magnets.clear();
+  sim::MotionSegment rest;
+  rest.name = "static";
+  rest.duration_s = 8.0;
+  sim::MotionSegment tumble;
+  tumble.name = "tumble";
+  tumble.duration_s = 120.0;
+  tumble.rotation_amplitude_rps = 2.5;
+  tumble.rotation_freq_hz = 0.2;
+  tumble.level_gain_per_s = 0.0;
+  c.segments = {rest, tumble};
+  c.duration_s = 0;
+  return c;
+}
 
 /// Produces ImuSamples for sim-imu from the simulator or a BROAD file.
 class SimSource {
@@ -109,16 +131,19 @@ class SimSource {
   SimSource(const SimImuOptions& o, double* rate_hz) {
     if (o.source == "trajectory") {
       const double rate = o.rate_hz > 0 ? o.rate_hz : 200.0;
-      sim::SimConfig cfg;
-      try {
-        cfg = sim::make_scenario(o.scenario, rate, o.seed);
-      } catch (const std::invalid_argument& e) {
-        std::string names;
-        for (const auto& n : sim::scenario_names()) names += (names.empty() ? "" : ", ") + n;
-        throw Error("--scenario " + o.scenario + ": unknown (use one of " + names + ")");
+      if (o.scenario == "calibration") {
+        config_ = calibration_scenario(rate, o.seed);
+      } else {
+        try {
+          config_ = sim::make_scenario(o.scenario, rate, o.seed);
+        } catch (const std::invalid_argument& e) {
+          std::string names = "calibration";
+          for (const auto& n : sim::scenario_names()) names += ", " + n;
+          throw Error("--scenario " + o.scenario + ": unknown (use one of " + names + ")");
+        }
       }
-      cfg.duration_s = 0;  // endless: sim-imu stops on --duration/--count/Ctrl-C
-      sim_ = std::make_unique<sim::SensorSimulator>(cfg);
+      config_.duration_s = 0;  // endless: sim-imu stops on --duration/--count/Ctrl-C
+      sim_ = std::make_unique<sim::SensorSimulator>(config_);
       *rate_hz = rate;
     } else if (o.source.rfind("broad:", 0) == 0) {
       const std::string path = o.source.substr(6);
@@ -135,6 +160,11 @@ class SimSource {
                   kUsageExitCode);
     }
   }
+  /// The board was reset: start the trajectory / recording from the beginning.
+  void restart() {
+    if (sim_) sim_ = std::make_unique<sim::SensorSimulator>(config_);
+    k_ = 0;
+  }
   /// False when a BROAD file is exhausted (and --loop is off).
   bool next(ImuSample* s) {
     if (sim_) {
@@ -150,6 +180,7 @@ class SimSource {
   }
 
  private:
+  sim::SimConfig config_;
   std::unique_ptr<sim::SensorSimulator> sim_;
   std::unique_ptr<eval::BroadTrial> trial_;
   std::size_t k_ = 0;
@@ -215,6 +246,19 @@ void run_sim_imu(const SimImuOptions& o) {
   double rate = 0;
   SimSource source(o, &rate);
   if (!(rate > 0 && rate <= 10000)) throw Error("--rate must be in (0, 10000] Hz", kUsageExitCode);
+  // Magnetometer distortion of the simulated board: m_raw = A m + b.
+  Eigen::Vector3d hard_iron = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d soft_iron = Eigen::Matrix3d::Identity();
+  if (!o.mag_hard_iron.empty()) {
+    if (o.mag_hard_iron.size() != 3) throw Error("--mag-hard-iron needs 3 values (uT)", kUsageExitCode);
+    hard_iron = Eigen::Vector3d(o.mag_hard_iron[0], o.mag_hard_iron[1], o.mag_hard_iron[2]);
+  }
+  if (!o.mag_soft_iron.empty()) {
+    if (o.mag_soft_iron.size() != 9) {
+      throw Error("--mag-soft-iron needs 9 values (3x3, row-major)", kUsageExitCode);
+    }
+    for (int i = 0; i < 9; ++i) soft_iron(i / 3, i % 3) = o.mag_soft_iron[static_cast<std::size_t>(i)];
+  }
   imu::FaultInjector injector(spec);
   install_stop_handlers();
   std::unique_ptr<imu::PtyLink> link;
@@ -228,7 +272,7 @@ void run_sim_imu(const SimImuOptions& o) {
                  o.link.c_str(), link->slave_name().c_str(), rate, o.source.c_str(),
                  o.faults.empty() ? "none" : o.faults.c_str());
   }
-  const auto period_ns = static_cast<int64_t>(std::llround(1e9 / rate));
+  const auto period_ns = static_cast<int64_t>(std::llround(1e9 / (rate * o.speed)));
   const int64_t start_ns = imu::monotonic_now_ns();
   int64_t boot_ns = start_ns;  // the simulated board's power-on time (reset by disconnects)
   uint32_t seq = 0;
@@ -237,6 +281,7 @@ void run_sim_imu(const SimImuOptions& o) {
   uint64_t full = 0;
   uint64_t disconnects = 0;
   const bool raw_format = o.format == "raw";
+  bool had_reader = false;
   int64_t next_disconnect_ns =
       spec.disconnect_every_s > 0 ? start_ns + static_cast<int64_t>(spec.disconnect_every_s * 1e9) : 0;
   for (uint64_t k = 0; !stop_requested(); ++k) {
@@ -257,23 +302,32 @@ void run_sim_imu(const SimImuOptions& o) {
       } catch (const std::exception& e) {
         throw Error(e.what());
       }
-      // The board was power-cycled: it boots again (seq and clock from zero).
-      boot_ns = imu::monotonic_now_ns();
-      seq = 0;
+      had_reader = false;  // power-cycled: it boots again when the reader reopens the port
       next_disconnect_ns = t_ns + static_cast<int64_t>(spec.disconnect_every_s * 1e9);
       if (!o.quiet) std::fprintf(stderr, "poise sim-imu: reconnected at %s\n", link->slave_name().c_str());
       continue;
     }
+    if (!link->has_reader()) {  // as a UART with nobody listening: the line is lost, no fault
+      ++no_reader;
+      had_reader = false;
+      continue;
+    }
+    if (!had_reader) {
+      // Opening the port resets the board (Arduino DTR): it boots and starts over.
+      had_reader = true;
+      source.restart();
+      seq = 0;
+      boot_ns = t_ns;
+      link->write("# poise sim-imu board ready\r\n");
+    }
     ImuSample s;
     if (!source.next(&s)) break;
-    const double sensor_s = static_cast<double>(t_ns - boot_ns) * 1e-9 * (1.0 + o.drift_ppm * 1e-6);
+    if (s.has_mag) s.mag_ut = soft_iron * s.mag_ut + hard_iron;
+    const double sensor_s =
+        static_cast<double>(t_ns - boot_ns) * 1e-9 * o.speed * (1.0 + o.drift_ppm * 1e-6);
     const auto t_us = static_cast<uint32_t>(
         (static_cast<uint64_t>(std::llround(sensor_s * 1e6)) + o.t_start_us) & 0xFFFFFFFFull);
     const std::string line = make_line(s, seq++, t_us, raw_format);
-    if (!link->has_reader()) {  // as a UART with nobody listening: the line is lost, no fault
-      ++no_reader;
-      continue;
-    }
     const std::string bytes = injector.apply(line);
     if (bytes.empty()) continue;
     switch (link->write(bytes)) {
@@ -328,7 +382,9 @@ void register_imu_cli(CLI::App& app) {
   sim_cmd->add_option("--link", so->link, "Symlink path to create for the device (e.g. /tmp/imu0)")->required();
   sim_cmd->add_option("--source", so->source, "trajectory (sensor simulator) or broad:FILE (BROAD HDF5)")
       ->capture_default_str();
-  sim_cmd->add_option("--scenario", so->scenario, "Simulator scenario for --source trajectory")
+  sim_cmd->add_option("--scenario", so->scenario, "Simulator scenario for --source trajectory "
+                                                  "(demo, tour, random_motion, fast_motion, "
+                                                  "static_magnet, calibration)")
       ->capture_default_str();
   sim_cmd->add_option("--rate", so->rate_hz, "Sample rate, Hz (default 200, or the BROAD file's)")
       ->check(CLI::Range(0.1, 10000.0));
@@ -344,6 +400,15 @@ void register_imu_cli(CLI::App& app) {
   sim_cmd->add_option("--drift-ppm", so->drift_ppm, "Sensor clock drift vs host, ppm")
       ->check(CLI::Range(-50000.0, 50000.0));
   sim_cmd->add_option("--t-start-us", so->t_start_us, "Sensor clock at boot, us (test the 2^32 wrap)");
+  sim_cmd->add_option("--speed", so->speed, "Time scale: stream this many times faster than real "
+                                            "time (sensor clock included)")
+      ->capture_default_str()->check(CLI::Range(0.01, 100.0));
+  sim_cmd->add_option("--mag-hard-iron", so->mag_hard_iron, "Distort the magnetometer: offset b, "
+                                                            "3 values in uT (m_raw = A m + b)")
+      ->delimiter(',')->expected(3);
+  sim_cmd->add_option("--mag-soft-iron", so->mag_soft_iron, "Distort the magnetometer: A, 9 values "
+                                                            "row-major")
+      ->delimiter(',')->expected(9);
   sim_cmd->add_flag("--loop", so->loop, "Repeat a BROAD file forever");
   sim_cmd->add_flag("--quiet", so->quiet, "No progress messages");
   sim_cmd->callback([so] { run_sim_imu(*so); });
