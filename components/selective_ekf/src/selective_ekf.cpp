@@ -73,6 +73,7 @@ void validate(const SelectiveEkfParams& p) {
   need(p.vision_gate_sigma > 0.0, "vision_gate_sigma must be > 0");
   need(p.vision_reset_after_rejections >= 1, "vision_reset_after_rejections must be >= 1");
   need(p.history_s > 0.0 && p.history_s <= 5.0, "history_s must be in (0, 5]");
+  need(std::abs(p.vision_time_offset_s) <= 0.2, "vision_time_offset_s must be in [-0.2, 0.2]");
   need(finite_quat(p.q_body_camera), "q_body_camera must be a finite unit quaternion");
   need(p.p_body_camera_m.allFinite(), "p_body_camera_m must be finite");
   need(p.init_sigma_attitude_deg > 0.0 && p.init_sigma_rate_rps > 0.0 &&
@@ -154,19 +155,42 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
   const double qw = p_.sigma_angular_accel * p_.sigma_angular_accel * h;
   const double qth = p_.sigma_attitude_walk * p_.sigma_attitude_walk * h;
   const double qv = p_.sigma_linear_accel * p_.sigma_linear_accel * h;
-  x_.P.diagonal().segment<3>(kW).array() += qw;
-  x_.P.diagonal().segment<3>(kTh).array() += qth + qw * h * h / 3.0;
-  x_.P.diagonal().segment<3>(kT).array() += qv * h * h / 3.0;
-  x_.P.diagonal().segment<3>(kV).array() += qv;
+  // Q of the continuous white-noise models over h: [q h, q h^2/2; q h^2/2, q h^3/3] for each
+  // (rate, attitude) and (velocity, position) pair. The cross terms let the gyro row correct the
+  // attitude integrated with the previous rate (trapezoid-like, no one-sample lag).
+  const double qc_w = qw * h / 2.0;
+  const double qc_v = qv * h / 2.0;
+  for (int i = 0; i < 3; ++i) {
+    x_.P(kW + i, kW + i) += qw;
+    x_.P(kTh + i, kTh + i) += qth + qw * h * h / 3.0;
+    x_.P(kW + i, kTh + i) += qc_w;
+    x_.P(kTh + i, kW + i) += qc_w;
+    x_.P(kV + i, kV + i) += qv;
+    x_.P(kT + i, kT + i) += qv * h * h / 3.0;
+    x_.P(kV + i, kT + i) += qc_v;
+    x_.P(kT + i, kV + i) += qc_v;
+  }
   x_.stamp_ns = stamp_ns;
 }
 
 // ------------------------------------------------------------------------------------ update
-double SelectiveEkf::fuse3(const Eigen::Matrix<double, 3, kN>& H, const Eigen::Vector3d& innov,
+double SelectiveEkf::fuse3(int col, const Eigen::Matrix3d* h_th, const Eigen::Vector3d& innov,
                            const Eigen::Vector3d& r_diag, double gate_sigma, bool gate,
                            SourceStatus& st, bool* accepted) {
-  const Eigen::Matrix<double, kN, 3> pht = x_.P * H.transpose();
-  Eigen::Matrix3d s = H * pht;
+  // H = [I at `col`] (+ h_th at kTh when given): H P and P H^T are then column blocks of P, so
+  // every product below is 12x3 or 3x3 (about 1/4 of the dense 12x12 work).
+  Eigen::Matrix<double, kN, 3> pht = x_.P.middleCols<3>(col);  // P H^T
+  if (h_th != nullptr) {
+    pht.noalias() += x_.P.middleCols<3>(kTh).lazyProduct(h_th->transpose());
+  }
+  auto h_times = [&](const auto& m) {  // H m for a 12x3 m
+    Eigen::Matrix3d out = m.template middleRows<3>(col);
+    if (h_th != nullptr) {
+      out.noalias() += h_th->lazyProduct(m.template middleRows<3>(kTh));
+    }
+    return out;
+  };
+  Eigen::Matrix3d s = h_times(pht);
   s.diagonal() += r_diag;
   double ratio = 0.0;
   for (int i = 0; i < 3; ++i) {
@@ -179,14 +203,19 @@ double SelectiveEkf::fuse3(const Eigen::Matrix<double, 3, kN>& H, const Eigen::V
     *accepted = false;
     return ratio;
   }
-  const Eigen::Matrix<double, kN, 3> k = pht * s.inverse();  // (5)
-  const Vec dx = k * innov;                                   // (6)
+  const Eigen::Matrix<double, kN, 3> k = pht.lazyProduct(s.inverse());  // (5)
+  const Vec dx = k.lazyProduct(innov);                                  // (6)
   // Joseph form of (7): P = (I - K H) P (I - K H)^T + K R K^T, using H P = (P H^T)^T.
-  const Mat ap = x_.P - k * pht.transpose();
-  const Eigen::Matrix<double, kN, 3> apht = ap * H.transpose();
-  Mat pn = ap - apht * k.transpose();
-  pn.noalias() += k * r_diag.asDiagonal() * k.transpose();
-  x_.P = 0.5 * (pn + pn.transpose());
+  Mat ap = x_.P;
+  ap.noalias() -= k.lazyProduct(pht.transpose());                 // (I - K H) P
+  Eigen::Matrix<double, kN, 3> apht = ap.middleCols<3>(col);      // (I - K H) P H^T
+  if (h_th != nullptr) {
+    apht.noalias() += ap.middleCols<3>(kTh).lazyProduct(h_th->transpose());
+  }
+  ap.noalias() -= apht.lazyProduct(k.transpose());
+  const Eigen::Matrix<double, kN, 3> kr = k * r_diag.asDiagonal();
+  ap.noalias() += kr.lazyProduct(k.transpose());
+  x_.P = 0.5 * (ap + ap.transpose());
   inject(dx);
   *accepted = true;
   return ratio;
@@ -219,11 +248,9 @@ void SelectiveEkf::process_imu(const ImuInput& in, bool first_pass) {
   const int64_t now = in.stamp_ns;
   // Gyro rows: y = w.
   {
-    Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
-    h.middleCols<3>(kW).setIdentity();
     const double r = p_.sigma_gyro_rps * p_.sigma_gyro_rps;
     bool ok = false;
-    fuse3(h, in.gyro - x_.w_rps, Eigen::Vector3d::Constant(r), kReportGateSigma, false,
+    fuse3(kW, nullptr, in.gyro - x_.w_rps, Eigen::Vector3d::Constant(r), kReportGateSigma, false,
           status_[static_cast<size_t>(Source::kGyro)], &ok);
     record(status_[static_cast<size_t>(Source::kGyro)], Decision::kFused, now, first_pass);
   }
@@ -234,8 +261,13 @@ void SelectiveEkf::process_imu(const ImuInput& in, bool first_pass) {
     return;
   }
   // Disturbance angle (8) and quaternion error (9)-(10).
+  // The filtered up axis is only as good as the tilt: without a recent vision fix the tilt is
+  // carried by the gyro alone (q_imu gated), and a drifting tilt would keep the test failing
+  // (self-locking), so the raw accelerometer is used until vision anchors the attitude again.
+  const bool anchored = x_.last_vision_fused_ns >= 0 &&
+                        now - x_.last_vision_fused_ns <= seconds_to_ns(p_.vision_anchor_s);
   Eigen::Vector3d up = in.accel;
-  if (p_.up_source == UpSource::kFiltered) {
+  if (p_.up_source == UpSource::kFiltered && anchored) {
     up = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
   }
   const double theta_m = angle_between_vectors(in.mag, up);                 // (8)
@@ -255,8 +287,6 @@ void SelectiveEkf::process_imu(const ImuInput& in, bool first_pass) {
     if (x_.q_error_fail_since_ns < 0) {
       x_.q_error_fail_since_ns = now;
     }
-    const bool anchored = x_.last_vision_fused_ns >= 0 &&
-                          now - x_.last_vision_fused_ns <= seconds_to_ns(p_.vision_anchor_s);
     if (!anchored && now - x_.q_error_fail_since_ns > seconds_to_ns(p_.q_error_lockout_s)) {
       q_fail = false;  // lock-out release: the prediction, not q_imu, may have drifted
     }
@@ -279,8 +309,6 @@ void SelectiveEkf::process_imu(const ImuInput& in, bool first_pass) {
 
   const Eigen::Quaterniond qm = quat_align_sign(in.q_imu, x_.q_world_body);
   const Eigen::Vector3d innov = quat_log(x_.q_world_body.conjugate() * qm);
-  Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
-  h.middleCols<3>(kTh).setIdentity();
   const double sig = p_.sigma_imu_quat_deg * kRadPerDeg;
   double r = sig * sig;
   if (!trusted && p_.action == ImuQuatAction::kDrop) {
@@ -301,7 +329,7 @@ void SelectiveEkf::process_imu(const ImuInput& in, bool first_pass) {
     r *= p_.inflate_factor;
   }
   bool ok = false;
-  fuse3(h, innov, Eigen::Vector3d::Constant(r), kReportGateSigma, false, sq, &ok);
+  fuse3(kTh, nullptr, innov, Eigen::Vector3d::Constant(r), kReportGateSigma, false, sq, &ok);
   record(sq, trusted ? Decision::kFused : Decision::kFusedInflated, now, first_pass);
 }
 
@@ -331,10 +359,8 @@ void SelectiveEkf::process_vision(const VisionPose& v, bool first_pass) {
   } else {
     const Eigen::Quaterniond qa = quat_align_sign(q_meas, x_.q_world_body);
     const Eigen::Vector3d innov = quat_log(x_.q_world_body.conjugate() * qa);
-    Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
-    h.middleCols<3>(kTh).setIdentity();
     bool ok = false;
-    fuse3(h, innov, Eigen::Vector3d::Constant(sr * sr), p_.vision_gate_sigma, true, sa, &ok);
+    fuse3(kTh, nullptr, innov, Eigen::Vector3d::Constant(sr * sr), p_.vision_gate_sigma, true, sa, &ok);
     if (ok) {
       x_.vision_consecutive_rejects = 0;
       x_.last_vision_fused_ns = now;
@@ -360,12 +386,12 @@ void SelectiveEkf::process_vision(const VisionPose& v, bool first_pass) {
     record(sp, Decision::kReset, now, first_pass);
     return;
   }
-  Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
-  h.middleCols<3>(kTh) = J_rotate_right_perturbation(x_.q_world_body, p_.p_body_camera_m);
-  h.middleCols<3>(kT).setIdentity();
+  // H = [0  -R [p_body_cam x]  I  0]
+  const Eigen::Matrix3d h_th = J_rotate_right_perturbation(x_.q_world_body, p_.p_body_camera_m);
+  const bool lever = p_.p_body_camera_m.squaredNorm() > 0.0;
   const Eigen::Vector3d innov = v.p_world_camera_m - (x_.t_m + rot * p_.p_body_camera_m);
   bool ok = false;
-  fuse3(h, innov, Eigen::Vector3d::Constant(sm * sm), p_.vision_gate_sigma, true, sp, &ok);
+  fuse3(kT, lever ? &h_th : nullptr, innov, Eigen::Vector3d::Constant(sm * sm), p_.vision_gate_sigma, true, sp, &ok);
   if (ok) {
     x_.vision_pos_consecutive_rejects = 0;
     record(sp, Decision::kFused, now, first_pass);
@@ -480,6 +506,12 @@ bool SelectiveEkf::update_vision(const VisionPose& v_in) {
   }
   VisionPose v = v_in;
   v.q_world_camera.normalize();
+  v.capture_stamp_ns += seconds_to_ns(p_.vision_time_offset_s);  // onto the IMU clock
+  if (v.capture_stamp_ns < history_.front().input.stamp_ns) {
+    ++vc_.too_old;
+    record(sa, Decision::kRejectedTooOld, v.capture_stamp_ns, true);
+    return false;
+  }
   if (v.capture_stamp_ns < newest_vision_capture_ns_) {
     ++vc_.out_of_order;
   }

@@ -22,7 +22,8 @@
 //     P = (I - K H) P (I - K H)^T + K R K^T, then symmetrise. q is renormalised after each update.
 //   Disturbance angle (8): both vectors are rotated by the same matrix, so theta_m is the angle
 //     between m and the up vector; up is the raw accelerometer (paper) or the filter's predicted up
-//     R(q)^T e_z (UpSource::kFiltered, the VQF/PX4 improvement). theta_ref = 90 deg + dip, dip learnt
+//     R(q)^T e_z (UpSource::kFiltered, the VQF/PX4 improvement; only while vision anchors the tilt,
+//     else raw: a gyro-only tilt would drift and lock the test). theta_ref = 90 deg + dip, dip learnt
 //     from the first startup_samples (or configured). Disturbed when |theta_m - theta_ref| > threshold.
 //     Optional extension (off by default): |m| against the learnt norm.
 //   Quaternion error (9)-(10): dq = q_imu (x) q_pred^-1, theta_q = 2 acos(|dq_w|) (sign-invariant).
@@ -60,7 +61,8 @@ namespace poise {
 /// Where the "up" vector of the disturbance-angle test (8) comes from.
 enum class UpSource : uint8_t {
   kRawAccel = 0,  ///< paper: the measured accelerometer (contaminated by linear acceleration)
-  kFiltered,      ///< the predicted attitude's up axis R(q)^T e_z
+  kFiltered,      ///< the predicted up axis R(q)^T e_z while vision anchors the tilt (fused
+                  ///< within vision_anchor_s), else the raw accelerometer
 };
 
 /// What happens to the IMU quaternion rows while the magnetometer is untrusted.
@@ -105,6 +107,10 @@ struct SelectiveEkfParams {
   double vision_gate_sigma = 5.0;      ///< reject a vision row when innov^2 > gate^2 * var
   int vision_reset_after_rejections = 10;  ///< consecutive rejections -> reset attitude/position
   double history_s = 0.5;              ///< oldest capture accepted (latency bound), s
+  /// Camera-IMU time offset, s: a frame stamped t shows the pose at IMU time t + offset (Kalibr's
+  /// timeshift convention, negative when the camera clock lags). Calibrated, e.g. by matching
+  /// gyro-integrated rotation to the camera's rotation (docs/SELECTIVE_EKF.md). 0 = in sync.
+  double vision_time_offset_s = 0.0;
   Eigen::Quaterniond q_body_camera = Eigen::Quaterniond::Identity();  ///< camera -> IMU body
   Eigen::Vector3d p_body_camera_m{0.0, 0.0, 0.0};  ///< camera origin in the body frame, m
 
@@ -263,8 +269,8 @@ class SelectiveEkf {
   void process_vision(const VisionPose& v, bool first_pass);
   void learn_reference(const ImuSample& s);
   void replay_from(size_t snapshot_index);
-  // Joseph-form update of rows selected by `cols` (H = selection) or a dense 3x12 H.
-  double fuse3(const Eigen::Matrix<double, 3, kN>& H, const Eigen::Vector3d& innov,
+  // Joseph-form update of 3 rows, H = [I at column `col`] plus `h_th` at kTh when non-null.
+  double fuse3(int col, const Eigen::Matrix3d* h_th, const Eigen::Vector3d& innov,
                const Eigen::Vector3d& r_diag, double gate_sigma, bool gate, SourceStatus& st,
                bool* accepted);
   void inject(const Vec& dx);

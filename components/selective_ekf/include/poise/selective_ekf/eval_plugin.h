@@ -1,0 +1,42 @@
+// The selective EKF as an evaluation filter (library poise_selective_ekf_eval): an AttitudeFilter
+// that, given a BROAD trial (eval::TrialInputs), feeds itself vision poses synthesised from the
+// trial's reference. Registered as "selective" (vision from `poise eval broad --vision-*`) and
+// "selective_vision30" (the hybrid benchmark's vision, for `poise bench filters`).
+#pragma once
+
+#include "poise/eval/runner.h"
+#include "poise/selective_ekf/selective_ekf.h"
+#include "poise/selective_ekf/vision_synth.h"
+
+#include <memory>
+
+namespace CLI {
+class App;
+}
+
+namespace poise {
+
+class SelectiveEvalFilter : public SelectiveEkfFilter, public eval::TrialInputs {
+ public:
+  /// `vision.rate_hz` 0 = IMU only. Throws std::invalid_argument for bad vision options.
+  SelectiveEvalFilter(const SelectiveEkfParams& p, const VisionSynthParams& vision);
+  bool update(const ImuSample& s) override;
+  void reset() override;
+  void begin_trial(const eval::BroadTrial& trial) override;
+
+ private:
+  VisionSynthParams vision_;
+  const eval::BroadTrial* trial_ = nullptr;
+  std::unique_ptr<VisionSynthesizer> synth_;
+  size_t k_ = 0;
+};
+
+/// 30 Hz, 50 ms, 1 deg, 1 cm, 30 % dropout, seed 1.
+VisionSynthParams hybrid_benchmark_vision();
+
+namespace cli {
+/// Registers the filters and the `poise eval broad --vision-*` options.
+void register_selective_ekf_cli(CLI::App& app);
+}  // namespace cli
+
+}  // namespace poise
