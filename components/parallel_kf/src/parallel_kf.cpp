@@ -263,6 +263,12 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
     }
     const bool disturbed = std::abs(norm - field_m_) > p_.mag_norm_tol * field_m_ ||
                            sin_dip < gate_sin_lo_ || sin_dip > gate_sin_hi_;
+    if (p_.mag_soft_weight > 0.0) {
+      // inflate M2 smoothly with the gate ratios (1 at the gate)
+      const double rn = (norm - field_m_) / (p_.mag_norm_tol * field_m_);
+      const double rd = (sin_dip - std::sin(field_dip_)) / (0.5 * (gate_sin_hi_ - gate_sin_lo_));
+      mag_extra_var_ = p_.mag_soft_weight * p_.sigma_mag_ut * p_.sigma_mag_ut * (rn * rn + rd * rd);
+    }
     const bool forced = disturbed && p_.mag_max_reject_s > 0.0 && rejected_s_ >= p_.mag_max_reject_s;
     if (forced) {
       ++mag_forced_;
@@ -303,7 +309,8 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
     }
   }
   const Eigen::Vector3d x_prior = kf2_.u();
-  kf2_.correct(mag, field_m_);  // (10b), (11f)-(11h)
+  kf2_.correct(mag, field_m_, mag_extra_var_);  // (10b), (11f)-(11h)
+  mag_extra_var_ = 0.0;
   out_.mag_used = true;
   if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && !rest_ && field_learnt_) {
     // heading part (about sZ) of the correction rotation, sX'+ x sX'- = dtheta_perp(sX')

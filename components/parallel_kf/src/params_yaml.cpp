@@ -74,6 +74,7 @@ const std::vector<Field>& fields() {
       make("mag_reacquire_s", &ParallelKfParams::mag_reacquire_s),
       make("mag_reacquire_tol", &ParallelKfParams::mag_reacquire_tol),
       make("mag_max_reject_s", &ParallelKfParams::mag_max_reject_s),
+      make("mag_soft_weight", &ParallelKfParams::mag_soft_weight),
       make_limits("min_accel_norm_mps2", &SampleLimits::min_accel_norm_mps2),
       make_limits("min_mag_norm_ut", &SampleLimits::min_mag_norm_ut),
       make_limits("max_dt_s", &SampleLimits::max_dt_s),
