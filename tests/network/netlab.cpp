@@ -181,6 +181,12 @@ std::unique_ptr<testing::Child> NetLab::node(const std::string& host,
                                              const std::vector<std::string>& env) const {
   std::vector<std::string> argv{testing::bin("poise_net_node")};
   argv.insert(argv.end(), args.begin(), args.end());
+  return process(host, argv, env);
+}
+
+std::unique_ptr<testing::Child> NetLab::process(const std::string& host,
+                                                const std::vector<std::string>& argv,
+                                                const std::vector<std::string>& env) const {
   std::vector<std::string> full_env{"POISE_DDS_PROFILE=poise_udp"};
   full_env.insert(full_env.end(), env.begin(), env.end());
   return std::make_unique<testing::Child>(in_host(host, argv), full_env);

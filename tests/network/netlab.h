@@ -46,6 +46,10 @@ class NetLab {
   [[nodiscard]] std::unique_ptr<testing::Child> node(const std::string& host,
                                                      const std::vector<std::string>& args,
                                                      const std::vector<std::string>& env = {}) const;
+  /// Starts any executable `argv` on `host` with the UDP-only participant profile plus `env`.
+  [[nodiscard]] std::unique_ptr<testing::Child> process(const std::string& host,
+                                                        const std::vector<std::string>& argv,
+                                                        const std::vector<std::string>& env = {}) const;
   /// Takes the host's link down or up (the switch side of its veth pair: a cable pulled).
   void set_link(const std::string& host, bool up) const;
 
