@@ -52,8 +52,11 @@ class RawReaderListener : public fdds::DataReaderListener {
 
 struct TopicObserver::Impl : public fdds::DomainParticipantListener {
   fdds::DomainParticipant* participant = nullptr;
+  // Guards `alive` only. Never held while calling into Fast DDS: discovery callbacks run on Fast
+  // DDS threads that may hold its internal locks, so nesting the two could deadlock.
   mutable std::mutex mutex;
   std::vector<DiscoveredWriter> alive;
+  mutable std::mutex subscriptions_mutex;  // guards `subscriptions` (user threads only)
 
   struct Subscription {
     fdds::Subscriber* subscriber = nullptr;
@@ -159,7 +162,7 @@ std::optional<DiscoveredWriter> TopicObserver::wait_for_writer(
 
 void TopicObserver::subscribe(const DiscoveredWriter& writer, const TypeTable* table,
                               SampleCallback callback, const RawReaderOptions& options) {
-  std::lock_guard<std::mutex> lock(impl_->mutex);
+  std::lock_guard<std::mutex> lock(impl_->subscriptions_mutex);
   if (impl_->subscriptions.count(writer.topic) != 0) {
     throw poise::dds::DdsError("topic '" + writer.topic + "' is already subscribed");
   }
@@ -210,7 +213,7 @@ void TopicObserver::subscribe(const DiscoveredWriter& writer, const TypeTable* t
 }
 
 int TopicObserver::matched_writers(const std::string& topic) const {
-  std::lock_guard<std::mutex> lock(impl_->mutex);
+  std::lock_guard<std::mutex> lock(impl_->subscriptions_mutex);
   const auto it = impl_->subscriptions.find(topic);
   return it == impl_->subscriptions.end() ? 0 : it->second.listener->matched();
 }
