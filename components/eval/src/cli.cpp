@@ -149,6 +149,9 @@ void run_bench(const std::string& file_arg, const std::string& broad_dir, int re
     const double n = static_cast<double>(samples.size());
     for (int r = 0; r < repeats && !stop_requested(); ++r) {
       f->reset();
+      if (auto* inputs = dynamic_cast<eval::TrialInputs*>(f.get())) {
+        inputs->begin_trial(trial);  // e.g. selective_vision30: vision synthesised from the reference
+      }
       const int64_t c0 = thread_cpu_ns();
       const auto t0 = std::chrono::steady_clock::now();
       for (const auto& s : samples) {

@@ -23,8 +23,9 @@ std::vector<FilterEntry>& table() {
                  }});
     v.push_back({"parallel_kf_paper", "parallel Kalman filter, paper-faithful configuration (eqs. 1-11)",
                  [](const std::string& cfg) -> std::unique_ptr<AttitudeFilter> {
-                   return std::make_unique<ParallelKfFilter>(cfg.empty() ? ParallelKfParams::paper()
-                                                                         : load_parallel_kf_params(cfg));
+                   return std::make_unique<ParallelKfFilter>(
+                       cfg.empty() ? ParallelKfParams::paper()
+                                   : load_parallel_kf_params(cfg, ParallelKfParams::paper()));
                  }});
     return v;
   }();

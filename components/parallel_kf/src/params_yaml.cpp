@@ -118,7 +118,7 @@ void apply(ParallelKfParams& p, const YAML::Node& node, const std::string& prefi
 
 }  // namespace
 
-ParallelKfParams load_parallel_kf_params(const std::string& path) {
+ParallelKfParams load_parallel_kf_params(const std::string& path, const ParallelKfParams& base) {
   YAML::Node root;
   try {
     root = YAML::LoadFile(path);
@@ -131,7 +131,7 @@ ParallelKfParams load_parallel_kf_params(const std::string& path) {
   if (!root.IsMap()) {
     throw std::runtime_error(path + ": expected a map of parallel_kf parameters");
   }
-  ParallelKfParams p;
+  ParallelKfParams p = base;
   if (root["preset"]) {
     try {
       p = ParallelKfParams::named(root["preset"].as<std::string>());

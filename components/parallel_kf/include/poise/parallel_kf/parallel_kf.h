@@ -124,10 +124,11 @@ struct ParallelKfParams {
   void validate() const;
 };
 
-/// Loads parameters from YAML: optional `preset: paper|default` (base), then any field by name
-/// (nested under `parallel_kf:` or at the top level). Unknown keys and out-of-range values are
-/// errors (std::runtime_error naming the file and key).
-ParallelKfParams load_parallel_kf_params(const std::string& path);
+/// Loads parameters from YAML: optional `preset: paper|default` (base; without it `base`), then
+/// any field by name (nested under `parallel_kf:` or at the top level; `tilt.x` or `tilt: {x: }`).
+/// Unknown keys and out-of-range values are errors (std::runtime_error naming the file and key).
+ParallelKfParams load_parallel_kf_params(const std::string& path,
+                                         const ParallelKfParams& base = ParallelKfParams{});
 
 /// Everything the filter reports after a step.
 struct ParallelKfOutput {
