@@ -88,6 +88,31 @@ TEST(ImuCalibration, AppliesBiasScaleIronAndAxisRemap) {
   EXPECT_EQ(cal.imu_axes.to_string(), "+y,-x,+z");
 }
 
+TEST(ImuCalibration, InvertUndoesApply) {
+  Calibration cal;
+  std::string err;
+  ASSERT_TRUE(AxisMap::parse("-y,x,z", &cal.imu_axes, &err)) << err;
+  ASSERT_TRUE(AxisMap::parse("z,-y,x", &cal.mag_axes, &err)) << err;
+  cal.gyro_bias_rps = {0.01, -0.02, 0.03};
+  cal.gyro_scale = {1.1, 0.9, 1.0};
+  cal.accel_bias_mps2 = {0.1, 0.2, -0.3};
+  cal.accel_scale = {0.98, 1.02, 1.0};
+  cal.mag_hard_iron_ut = {5, -6, 7};
+  cal.mag_soft_iron << 1.1, 0.05, 0.0, 0.05, 0.95, 0.02, 0.0, 0.02, 1.0;
+  ASSERT_EQ(cal.validate(), "");
+  RawSample raw;
+  raw.gyro_rps = {0.3, -0.2, 0.1};
+  raw.accel_mps2 = {1.0, -2.0, 9.0};
+  raw.mag_ut = {20, -30, 40};
+  ImuSample body;
+  cal.apply(raw, &body);
+  const RawSample back = cal.invert(body);
+  constexpr double kRoundTripTol = 1e-12;
+  EXPECT_LT((back.gyro_rps - raw.gyro_rps).norm(), kRoundTripTol);
+  EXPECT_LT((back.accel_mps2 - raw.accel_mps2).norm(), kRoundTripTol);
+  EXPECT_LT((back.mag_ut - raw.mag_ut).norm(), kRoundTripTol);
+}
+
 // Directions spread over the sphere (seeded), true field magnitude 48 uT.
 std::vector<Eigen::Vector3d> true_field(std::mt19937& rng, int n, bool half = false) {
   std::normal_distribution<double> g(0, 1);

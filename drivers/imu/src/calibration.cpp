@@ -129,4 +129,21 @@ void Calibration::apply(const RawSample& raw, ImuSample* out) const {
   out->has_temperature = raw.has_temperature;
 }
 
+RawSample Calibration::invert(const ImuSample& s) const {
+  RawSample r;
+  r.seq = s.seq;
+  r.gyro_rps = (imu_axes.matrix().transpose() * s.gyro_rps).cwiseQuotient(gyro_scale) + gyro_bias_rps;
+  r.accel_mps2 =
+      (imu_axes.matrix().transpose() * s.accel_mps2).cwiseQuotient(accel_scale) + accel_bias_mps2;
+  r.has_mag = s.has_mag;
+  if (s.has_mag) {
+    r.mag_ut = mag_soft_iron.inverse() * (mag_axes.matrix().transpose() * s.mag_ut) + mag_hard_iron_ut;
+  }
+  r.has_pressure = s.has_pressure;
+  r.pressure_pa = s.pressure_pa;
+  r.has_temperature = s.has_temperature;
+  r.temperature_c = s.temperature_c;
+  return r;
+}
+
 }  // namespace poise::imu

@@ -67,17 +67,6 @@ void print_progress(const imu::CalibrationSession& s, bool final_line) {
   std::fflush(stderr);
 }
 
-/// Undoes a calibration: body-frame calibrated sample -> sensor-axes raw sample.
-imu::RawSample uncalibrate(const ImuSample& s, const imu::Calibration& c) {
-  imu::RawSample r;
-  r.seq = s.seq;
-  r.gyro_rps = (c.imu_axes.matrix().transpose() * s.gyro_rps).cwiseQuotient(c.gyro_scale) + c.gyro_bias_rps;
-  r.accel_mps2 =
-      (c.imu_axes.matrix().transpose() * s.accel_mps2).cwiseQuotient(c.accel_scale) + c.accel_bias_mps2;
-  r.mag_ut = c.mag_soft_iron.inverse() * (c.mag_axes.matrix().transpose() * s.mag_ut) + c.mag_hard_iron_ut;
-  return r;
-}
-
 void run_calibrate(const CalibrateOptions& o) {
   if (o.port.empty() == o.topic.empty()) {
     throw Error("give exactly one of --port PATH or --topic NAME", kUsageExitCode);
@@ -141,7 +130,7 @@ void run_calibrate(const CalibrateOptions& o) {
         std::lock_guard<std::mutex> lock(mu);
         batch.swap(queue);
       }
-      for (const auto& s : batch) session.add(uncalibrate(s, config.calibration), s.stamp_ns);
+      for (const auto& s : batch) session.add(config.calibration.invert(s), s.stamp_ns);
       tick(imu::monotonic_now_ns());
     }
   }
@@ -284,7 +273,9 @@ void bench_latency(const BenchOptions& o) {
   const auto total = static_cast<std::size_t>(o.rate_hz * o.seconds);
   std::vector<int64_t> written(total, 0);
   std::vector<int64_t> latency;
+  std::vector<int64_t> stamp_error;  // stamp - true sampling instant (the write time), ns
   latency.reserve(total);
+  stamp_error.reserve(total);
   std::mutex mu;
   std::atomic<uint64_t> received{0};
   dds::ParticipantOptions po;
@@ -296,7 +287,10 @@ void bench_latency(const BenchOptions& o) {
         const int64_t now = imu::monotonic_now_ns();
         const uint32_t seq = m.header().seq();
         std::lock_guard<std::mutex> lock(mu);
-        if (seq < written.size() && written[seq] != 0) latency.push_back(now - written[seq]);
+        if (seq < written.size() && written[seq] != 0) {
+          latency.push_back(now - written[seq]);
+          stamp_error.push_back(m.header().stamp_ns() - written[seq]);
+        }
         received.fetch_add(1);
       });
   std::fprintf(stderr, "bench imu: waiting for `poise imu` (pid %d) to connect and match...\n", child);
@@ -320,6 +314,7 @@ void bench_latency(const BenchOptions& o) {
   {
     std::lock_guard<std::mutex> lock(mu);
     latency.clear();
+    stamp_error.clear();
   }
   const auto period = static_cast<int64_t>(1e9 / o.rate_hz);
   const int64_t start = imu::monotonic_now_ns();
@@ -344,9 +339,11 @@ void bench_latency(const BenchOptions& o) {
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
   std::vector<int64_t> lat;
+  std::vector<int64_t> err;
   {
     std::lock_guard<std::mutex> lock(mu);
     lat = latency;
+    err = stamp_error;
   }
   if (lat.empty()) throw Error("no measured sample was received");
   std::sort(lat.begin(), lat.end());
@@ -357,6 +354,14 @@ void bench_latency(const BenchOptions& o) {
               "p50 %.3f ms, p99 %.3f ms, max %.3f ms; received %zu of %zu (%" PRIu64 " not written)\n",
               o.rate_hz, o.seconds, pct(0.5), pct(0.99), static_cast<double>(lat.back()) * 1e-6,
               lat.size(), total, not_written);
+  // The sensor time of each line is taken right before it is written, so the written instant is
+  // the true sampling instant: the stamp error shows the clock estimation (offset + drift).
+  std::sort(err.begin(), err.end());
+  const auto epct = [&err](double q) {
+    return static_cast<double>(err[std::min(err.size() - 1, static_cast<std::size_t>(q * static_cast<double>(err.size())))]) * 1e-6;
+  };
+  std::printf("stamp - true sampling instant: p1 %.3f ms, p50 %.3f ms, p99 %.3f ms\n", epct(0.01),
+              epct(0.5), epct(0.99));
 }
 
 }  // namespace

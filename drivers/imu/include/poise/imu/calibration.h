@@ -44,6 +44,9 @@ struct Calibration {
   [[nodiscard]] std::string validate() const;
   /// Calibrated sample in the body frame; stamp/seq are left for the caller.
   void apply(const RawSample& raw, ImuSample* out) const;
+  /// The inverse of apply(): the raw sensor-axes sample a calibrated one came from (used to
+  /// re-calibrate from a published topic). Requires validate() to pass.
+  [[nodiscard]] RawSample invert(const ImuSample& calibrated) const;
 };
 
 }  // namespace poise::imu
