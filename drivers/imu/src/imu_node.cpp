@@ -150,9 +150,9 @@ void ImuDriverNode::on_tick(int64_t now_ns) {
   diag_writer_.write(nodes::to_diagnostics_msg(report, sensor_id_));
   char line[512];
   std::snprintf(line, sizeof line,
-                "imu %s: %s, %.1f Hz, %" PRIu64 " samples, %" PRIu64 " rejected, %" PRIu64
+                "%s, %.1f Hz, %" PRIu64 " samples, %" PRIu64 " rejected, %" PRIu64
                 " lost (seq gaps), latency p50 %.2f ms p99 %.2f ms, clock offset %.6f s drift %.0f ppm",
-                sensor_id_.c_str(), reader_.connected() ? "connected" : "waiting for port",
+                reader_.connected() ? "connected" : "waiting for port",
                 summary.rate_hz, st.samples, st.rejected_total(), st.seq_gap_drops,
                 summary.latency_p50_ms, summary.latency_p99_ms,
                 static_cast<double>(st.clock_offset_ns) * 1e-9, st.clock_drift_ppm);
@@ -175,7 +175,7 @@ void ImuDriverNode::on_tick(int64_t now_ns) {
 
 std::string ImuDriverNode::status() const {
   std::lock_guard<std::mutex> lock(status_mutex_);
-  return status_.empty() ? "imu " + sensor_id_ + ": starting" : status_;
+  return status_.empty() ? std::string("starting") : status_;
 }
 
 }  // namespace poise::imu

@@ -14,14 +14,26 @@
 #include <Wire.h>
 
 // ------------------------------------------------------------------ configuration
+#ifndef BAUD
 #define BAUD 115200UL            // must match `poise imu --baud` (9600 .. 1000000)
+#endif
+#ifndef SAMPLE_PERIOD_US
 #define SAMPLE_PERIOD_US 10000UL // 100 Hz; ~95-byte lines need ~9.5 kB/s (115200 baud = 11.5 kB/s)
+#endif
+#ifndef OUTPUT_RAW
 #define OUTPUT_RAW 0             // 1: $RAW register counts (shorter lines, convert on the host)
+#endif
 
 // Ranges (must match raw.* in the driver YAML when OUTPUT_RAW is 1).
+#ifndef ACCEL_FS_SEL
 #define ACCEL_FS_SEL 1           // 0: +-2 g, 1: +-4 g, 2: +-8 g, 3: +-16 g
+#endif
+#ifndef GYRO_FS_SEL
 #define GYRO_FS_SEL 1            // 0: 250, 1: 500, 2: 1000, 3: 2000 deg/s
+#endif
+#ifndef BARO_OSS
 #define BARO_OSS 1               // BMP180 oversampling 0..3
+#endif
 
 // ------------------------------------------------------------------ constants
 static const uint8_t MPU_ADDR = 0x68;

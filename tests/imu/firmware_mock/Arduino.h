@@ -1,0 +1,28 @@
+// Minimal host-side stand-in for the Arduino core, enough to run tools/firmware/gy87_poise on a
+// PC against a simulated I2C bus (see Wire.h) in tests. Not a general Arduino emulator.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <string>
+
+#define F(x) (x)
+
+extern uint32_t mock_micros_now;
+inline uint32_t micros() { return mock_micros_now; }
+inline void delay(unsigned long ms) { mock_micros_now += static_cast<uint32_t>(ms * 1000UL); }
+
+struct MockSerial {
+  std::string out;
+  void begin(unsigned long) {}
+  size_t print(const char* s) {
+    out += s;
+    return std::strlen(s);
+  }
+  size_t write(const uint8_t* b, size_t n) {
+    out.append(reinterpret_cast<const char*>(b), n);
+    return n;
+  }
+};
+extern MockSerial Serial;
