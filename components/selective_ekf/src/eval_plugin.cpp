@@ -10,6 +10,7 @@
 #include <CLI/CLI.hpp>
 
 #include <memory>
+#include <stdexcept>
 
 namespace poise {
 
@@ -17,8 +18,13 @@ SelectiveEvalFilter::SelectiveEvalFilter(const SelectiveEkfParams& p, const Visi
     : SelectiveEkfFilter(p), vision_(v) {
   vision_.q_body_camera = p.q_body_camera;
   vision_.p_body_camera_m = p.p_body_camera_m;
-  VisionSynthesizer check(vision_);  // validates the options early
-  (void)check;
+  if (vision_.rate_hz < 0.0) {
+    throw std::invalid_argument("vision rate must be >= 0 Hz (0 = no vision)");
+  }
+  if (vision_.rate_hz > 0.0) {
+    VisionSynthesizer check(vision_);  // validates the options early
+    (void)check;
+  }
 }
 
 void SelectiveEvalFilter::reset() {
