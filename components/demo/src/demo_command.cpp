@@ -1,16 +1,25 @@
-// `poise demo`: a simulated IMU stream published over DDS and received by a subscriber on another
-// participant, printed live. With no hardware this is the smallest honest end-to-end run.
+// `poise demo`: the main job on the embedded default. With no hardware it starts the simulated
+// serial IMU on a pseudo-terminal (the serial driver reads it as it would a GY-87), a synthetic
+// camera seeing AprilTags, and every estimator, in one host process; shows a live dashboard
+// (each filter vs simulated truth, disturbance and magnetometer trust, tags in view, altitude,
+// rates, latencies, rejections) through scripted episodes (magnet brought near, tag lost, stairs,
+// magnet attached); stops after --duration or Ctrl-C and writes a report directory.
+// With hardware: --port /dev/ttyUSB0 (and --camera /dev/video0 with --intrinsics/--tags).
 #include "poise/cli/common.h"
-#include "poise/dds/convert.h"
-#include "poise/dds/participant.h"
+#include "poise/demo/monitor.h"
+#include "poise/demo/report.h"
+#include "poise/runtime/host.h"
+#include "poise/sim/sensor_simulator.h"
 
-#include <poise/msg/imuPubSubTypes.h>
+#include <unistd.h>
 
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
+#include <sstream>
+#include <limits>
 #include <thread>
 
 namespace poise::cli {
@@ -18,103 +27,289 @@ namespace {
 
 struct DemoOptions {
   int domain = 0;
-  double duration_s = 10.0;
+  double duration_s = 30.0;
   double rate_hz = 200.0;
+  std::string scenario = "tour";
+  uint64_t seed = 1;
+  std::string port;        // real IMU instead of the simulator
+  std::string imu_config;  // driver YAML for the real IMU
+  std::string camera;      // real camera source instead of the synthetic one
+  std::string intrinsics;
+  std::string tags;
+  std::string out = "poise-demo-report";
+  bool no_camera = false;
+  bool plain = false;      // no screen redraws (automatic when stdout is not a terminal)
 };
 
-int64_t now_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(
-             std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+constexpr double kTagLostStart = 9.0;  // within each scenario cycle: the tag leaves the view
+constexpr double kTagLostEnd = 13.0;
 
-/// A sensor rotating slowly about world up at rest in a 50 uT field with 60 deg dip.
-ImuSample synthetic_sample(uint32_t seq, int64_t stamp_ns, double t_s) {
-  constexpr double kGravity = 9.80665;
-  constexpr double kRate = 0.5;  // rad/s about z
-  const double yaw = kRate * t_s;
-  ImuSample s;
-  s.stamp_ns = stamp_ns;
-  s.seq = seq;
-  s.accel_mps2 = {0.0, 0.0, kGravity};
-  s.gyro_rps = {0.0, 0.0, kRate};
-  const Eigen::Vector3d field_world(0.0, 25.0, -43.3);  // ENU, uT
-  s.mag_ut = Eigen::AngleAxisd(-yaw, Eigen::Vector3d::UnitZ()) * field_world;
-  s.pressure_pa = 101325.0;
-  s.temperature_c = 25.0;
-  s.has_pressure = true;
-  s.has_temperature = true;
-  return s;
-}
-
-void run_demo(const DemoOptions& options) {
-  install_stop_handlers();
-  dds::Participant source({options.domain, "", "", "poise_demo_imu"});
-  dds::Participant sink({options.domain, "", "", "poise_demo_monitor"});
-  std::atomic<uint64_t> received{0};
-  std::atomic<int64_t> last_latency_ns{0};
-  std::atomic<double> last_yaw_deg{0.0};
-  dds::Reader<msg::ImuSamplePubSubType> reader(
-      sink, "imu", [&](const msg::ImuSample& m, const auto& /*info*/) {
-        received.fetch_add(1);
-        last_latency_ns.store(now_ns() - m.header().stamp_ns());
-        const Eigen::Vector3d mag = dds::from_msg(m.mag_ut());
-        last_yaw_deg.store(std::atan2(-mag.x(), mag.y()) * 180.0 / M_PI);
-      });
-  dds::Writer<msg::ImuSamplePubSubType> writer(source, "imu");
-  std::fprintf(stderr, "poise demo: simulated IMU at %.0f Hz on domain %d for %.0f s (Ctrl-C stops)\n",
-               options.rate_hz, options.domain, options.duration_s);
-  writer.wait_for_readers(1, std::chrono::seconds(5));
-
-  const auto period = std::chrono::nanoseconds(static_cast<int64_t>(1e9 / options.rate_hz));
-  const auto start = std::chrono::steady_clock::now();
-  auto next = start;
-  auto next_print = start;
-  uint32_t seq = 0;
-  uint64_t published = 0;
-  while (!stop_requested()) {
-    const auto now = std::chrono::steady_clock::now();
-    const double t_s = std::chrono::duration<double>(now - start).count();
-    if (t_s >= options.duration_s) {
+/// The scripted episodes of the scenario over [0, duration].
+std::vector<demo::Episode> episodes(const sim::SimConfig& config, double duration_s, bool camera) {
+  std::vector<demo::Episode> out;
+  const double cycle = config.cycle_s();
+  for (double base = 0.0; base < duration_s; base += cycle) {
+    for (const auto& m : config.magnets) {
+      out.push_back({base + m.start_s, base + m.start_s + 2.0 * m.ramp_s + m.hold_s,
+                     m.body_fixed ? "magnet attached" : "magnet near", 0});
+    }
+    double t = base;
+    for (const auto& s : config.segments) {
+      if (s.climb_rate_mps != 0.0) {
+        out.push_back({t, t + s.duration_s, s.climb_rate_mps > 0 ? "stairs up" : "stairs down", 2});
+      }
+      t += s.duration_s;
+    }
+    if (camera) {
+      out.push_back({base + kTagLostStart, base + kTagLostEnd, "tag lost", 1});
+    }
+    if (cycle <= 0.0) {
       break;
     }
-    if (writer.write(dds::to_msg(synthetic_sample(seq++, now_ns(), t_s), "sim_imu"))) {
-      ++published;
-    }
-    if (now >= next_print) {
-      std::printf("t=%5.1fs published=%7llu received=%7llu latency=%6.1fus heading(mag)=%7.1fdeg\n",
-                  t_s, static_cast<unsigned long long>(published),
-                  static_cast<unsigned long long>(received.load()),
-                  static_cast<double>(last_latency_ns.load()) / 1e3, last_yaw_deg.load());
-      std::fflush(stdout);
-      next_print += std::chrono::milliseconds(500);
-    }
-    next += period;
-    std::this_thread::sleep_until(next);
   }
-  std::this_thread::sleep_for(std::chrono::milliseconds(200));
-  std::printf("done: published %llu, received %llu\n", static_cast<unsigned long long>(published),
-              static_cast<unsigned long long>(received.load()));
-  if (received.load() == 0) {
-    throw Error("the subscriber received no sample: DDS discovery failed on domain " +
-                std::to_string(options.domain));
+  return out;
+}
+
+std::string active_episodes(const std::vector<demo::Episode>& list, double t) {
+  std::string s;
+  for (const auto& e : list) {
+    if (t >= e.start_s && t < e.end_s) {
+      s += (s.empty() ? "" : ", ") + e.label;
+    }
+  }
+  return s.empty() ? "-" : s;
+}
+
+YAML::Node map_of(std::initializer_list<std::pair<const char*, YAML::Node>> entries) {
+  YAML::Node n(YAML::NodeType::Map);
+  for (const auto& [k, v] : entries) {
+    n[k] = v;
+  }
+  return n;
+}
+
+runtime::ComponentSpec component(const std::string& type, const std::string& name, YAML::Node params) {
+  runtime::ComponentSpec c;
+  c.type = type;
+  c.name = name;
+  c.params = params;
+  c.origin = "poise demo (" + name + ")";
+  return c;
+}
+
+std::string dashboard(const DemoOptions& o, const demo::PipelineMonitor& monitor,
+                      const std::vector<std::string>& filters,
+                      const std::vector<demo::Episode>& episode_list, const std::string& devices) {
+  const double t = monitor.elapsed_s();
+  const auto stats = monitor.filter_stats();
+  std::ostringstream os;
+  char line[256];
+  std::snprintf(line, sizeof line, "poise demo   t = %5.1f / %.0f s   domain %d   %s\n", t, o.duration_s,
+                o.domain, devices.c_str());
+  os << line << "episode: " << active_episodes(episode_list, t) << "\n\n";
+  std::snprintf(line, sizeof line, "%-14s %7s %8s %8s %8s %9s %17s\n", "filter", "rate", "roll",
+                "pitch", "yaw", "error", "latency p50/p99");
+  os << line;
+  std::vector<std::string> rows{"truth"};
+  rows.insert(rows.end(), filters.begin(), filters.end());
+  for (const auto& f : rows) {
+    const auto it = stats.find(f);
+    if (it == stats.end()) {
+      std::snprintf(line, sizeof line, "%-14s %7s\n", f.c_str(), "waiting");
+      os << line;
+      continue;
+    }
+    const auto& s = it->second;
+    const Eigen::Vector3d rpy = s.latest.rpy_rad * 180.0 / M_PI;
+    char err[32] = "";
+    char lat[48] = "";
+    if (f != "truth") {
+      std::snprintf(err, sizeof err, "%.2f deg", s.error_deg);
+      std::snprintf(lat, sizeof lat, "%.2f/%.2f ms", demo::percentile(s.latencies_ms, 50),
+                    demo::percentile(s.latencies_ms, 99));
+    }
+    std::snprintf(line, sizeof line, "%-14s %5.0fHz %8.1f %8.1f %8.1f %9s %17s\n", f.c_str(), s.rate_hz,
+                  rpy.x(), rpy.y(), rpy.z(), err, lat);
+    os << line;
+  }
+  auto disturbance = [&](const char* f) {
+    const auto it = stats.find(f);
+    return it == stats.end() ? std::string("-") : [&] {
+      char b[64];
+      std::snprintf(b, sizeof b, "%.1f uT", it->second.latest.disturbance_norm_ut);
+      return std::string(b);
+    }();
+  };
+  auto trusted = [&](const char* f) {
+    const auto it = stats.find(f);
+    return it == stats.end() ? std::string("-") : std::string(it->second.latest.mag_trusted ? "yes" : "NO");
+  };
+  os << "\nmagnetic disturbance: truth " << disturbance("truth") << ", parallel_kf "
+     << disturbance("parallel_kf") << "   magnetometer trusted: parallel_kf " << trusted("parallel_kf")
+     << ", selective_ekf " << trusted("selective_ekf") << "\n";
+  const auto cam = monitor.camera_stats();
+  std::snprintf(line, sizeof line, "camera: %llu frames, tags in view %d, vision poses %llu%s\n",
+                static_cast<unsigned long long>(cam.frames), cam.tags_in_view,
+                static_cast<unsigned long long>(cam.poses),
+                (cam.last_pose_t_s >= 0 && t - cam.last_pose_t_s > 0.5) ? "  (no pose: tag lost)" : "");
+  os << line;
+  const auto alt = monitor.altitude_series();
+  const auto a = alt.find("altitude");
+  const auto at = alt.find("truth");
+  if (a != alt.end() && !a->second.empty()) {
+    const auto& p = a->second.back();
+    const double truth_h = (at != alt.end() && !at->second.empty()) ? at->second.back().height_m : std::numeric_limits<double>::quiet_NaN();
+    const double truth_v =
+        (at != alt.end() && !at->second.empty()) ? at->second.back().vertical_velocity_mps : std::numeric_limits<double>::quiet_NaN();
+    std::snprintf(line, sizeof line,
+                  "altitude: %.2f m (truth %.2f)   vertical velocity %.2f m/s (truth %.2f)   %s\n",
+                  p.height_m, truth_h, p.vertical_velocity_mps, truth_v, p.stationary ? "stationary" : "moving");
+    os << line;
+  }
+  os << "rejected:";
+  const auto rejected = monitor.rejected_counts();
+  if (rejected.empty()) {
+    os << " -";
+  }
+  for (const auto& [name, n] : rejected) {
+    os << " " << name << " " << n;
+  }
+  os << "\n";
+  return os.str();
+}
+
+void run_demo(const DemoOptions& o) {
+  install_stop_handlers();
+  auto& registry = runtime::ComponentRegistry::instance();
+  const bool simulated_imu = o.port.empty();
+  const std::string link = "/tmp/poise-demo-imu-" + std::to_string(::getpid());
+  runtime::HostSpec spec;
+  std::string devices;
+  if (simulated_imu) {
+    spec.components.push_back(component(
+        "sim_imu", "sim_imu",
+        map_of({{"link", YAML::Node(link)}, {"scenario", YAML::Node(o.scenario)},
+                {"rate_hz", YAML::Node(o.rate_hz)}, {"seed", YAML::Node(o.seed)}})));
+    devices = "simulated IMU on " + link;
+  } else {
+    devices = "IMU " + o.port;
+  }
+  YAML::Node driver = map_of({{"port", YAML::Node(simulated_imu ? link : o.port)}});
+  if (!o.imu_config.empty()) {
+    driver["config_file"] = o.imu_config;
+  }
+  spec.components.push_back(component("imu_driver", "imu0", driver));
+  const bool camera = !o.no_camera && (!o.camera.empty() ? registry.find("camera") != nullptr
+                                                          : registry.find("sim_camera") != nullptr);
+  if (camera) {
+    if (o.camera.empty()) {
+      spec.components.push_back(component(
+          "sim_camera", "camera0",
+          map_of({{"blackouts", YAML::Load("[[" + std::to_string(kTagLostStart) + ", " +
+                                           std::to_string(kTagLostEnd) + "]]")}})));
+      devices += ", synthetic camera";
+    } else {
+      if (o.intrinsics.empty() || o.tags.empty()) {
+        throw Error("--camera needs --intrinsics FILE and --tags FILE", kUsageExitCode);
+      }
+      spec.components.push_back(component(
+          "camera", "camera0",
+          map_of({{"source", YAML::Node(o.camera)}, {"intrinsics_file", YAML::Node(o.intrinsics)},
+                  {"tags_file", YAML::Node(o.tags)}})));
+      devices += ", camera " + o.camera;
+    }
+  }
+  std::vector<std::string> filters;
+  for (const char* f : {"parallel_kf", "selective_ekf", "gauss_newton"}) {
+    if (registry.find(f) != nullptr && (std::string(f) != "selective_ekf" || camera)) {
+      YAML::Node params(YAML::NodeType::Map);
+      if (std::string(f) == "selective_ekf" && o.camera.empty()) {
+        params["q_body_camera"] = YAML::Load("[0, 1, 0, 0]");  // the synthetic camera looks down
+      }
+      spec.components.push_back(component(f, f, params));
+      filters.emplace_back(f);
+    }
+  }
+  if (registry.find("altitude") != nullptr) {
+    spec.components.push_back(
+        component("altitude", "altitude", map_of({{"relative_to_start", YAML::Node(true)}})));
+  }
+
+  sim::SimConfig scenario;
+  try {
+    scenario = sim::make_scenario(o.scenario, o.rate_hz, o.seed);
+  } catch (const std::invalid_argument& e) {
+    throw Error(std::string("--scenario: ") + e.what(), kUsageExitCode);
+  }
+  const auto episode_list = simulated_imu ? episodes(scenario, o.duration_s, camera && o.camera.empty())
+                                          : std::vector<demo::Episode>{};
+
+  runtime::Host host(spec, o.domain);
+  demo::PipelineMonitor monitor(host.participant(), spec.topics, filters);
+  host.start();
+  const bool redraw = !o.plain && ::isatty(STDOUT_FILENO) != 0;
+  auto next_draw = std::chrono::steady_clock::now();
+  while (!stop_requested() && monitor.elapsed_s() < o.duration_s) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    const auto now = std::chrono::steady_clock::now();
+    if (now < next_draw) {
+      continue;
+    }
+    const std::string text = dashboard(o, monitor, filters, episode_list, devices);
+    if (redraw) {
+      std::printf("\033[H\033[2J%s", text.c_str());
+      next_draw = now + std::chrono::milliseconds(250);
+    } else {
+      std::printf("%s\n", text.c_str());
+      next_draw = now + std::chrono::seconds(5);
+    }
+    std::fflush(stdout);
+  }
+  host.stop();
+
+  demo::ReportInput input;
+  input.title = "poise demo";
+  input.filters = filters;
+  input.episodes = episode_list;
+  input.notes = {"devices: " + devices, "scenario: " + o.scenario + " (seed " + std::to_string(o.seed) +
+                                            "), IMU " + std::to_string(static_cast<int>(o.rate_hz)) + " Hz",
+                 "duration: " + std::to_string(static_cast<int>(monitor.elapsed_s())) + " s"};
+  const std::string index = demo::write_report(o.out, input, monitor);
+  std::printf("%s\nreport: %s\n", dashboard(o, monitor, filters, episode_list, devices).c_str(),
+              std::filesystem::absolute(index).c_str());
+  const auto stats = monitor.filter_stats();
+  for (const auto& f : filters) {
+    if (stats.count(f) == 0 || stats.at(f).received == 0) {
+      throw Error("no estimate from " + f + " was received: the pipeline did not run (see above)");
+    }
   }
 }
 
 }  // namespace
 
+void register_bench_latency(CLI::App& app);
+
 void register_demo_commands(CLI::App& app) {
-  auto options = std::make_shared<DemoOptions>();
+  register_bench_latency(app);
+  auto o = std::make_shared<DemoOptions>();
   CLI::App* demo = app.add_subcommand(
-      "demo", "Run the main job on the embedded default: simulated IMU -> DDS -> live output");
-  add_domain_option(demo, &options->domain);
-  demo->add_option("--duration", options->duration_s, "Run time, s")
-      ->check(CLI::PositiveNumber)
+      "demo", "The main job: IMU (simulated on a pseudo-terminal, or --port) + camera (synthetic, or "
+              "--camera) + every estimator, live dashboard, report");
+  add_domain_option(demo, &o->domain);
+  demo->add_option("--duration", o->duration_s, "Run time, s")->check(CLI::PositiveNumber)->capture_default_str();
+  demo->add_option("--rate", o->rate_hz, "Simulated IMU rate, Hz")->check(CLI::Range(10.0, 2000.0))->capture_default_str();
+  demo->add_option("--scenario", o->scenario, "Simulator scenario (tour, demo, static_magnet, fast_motion, random_motion)")
       ->capture_default_str();
-  demo->add_option("--rate", options->rate_hz, "IMU rate, Hz")
-      ->check(CLI::Range(1.0, 2000.0))
-      ->capture_default_str();
-  demo->callback([options] { run_demo(*options); });
+  demo->add_option("--seed", o->seed, "Simulator seed")->capture_default_str();
+  demo->add_option("--port", o->port, "Real IMU serial port (e.g. /dev/ttyUSB0) instead of the simulator");
+  demo->add_option("--imu-config", o->imu_config, "Driver YAML for --port (calibration, axes)")->check(CLI::ExistingFile);
+  demo->add_option("--camera", o->camera, "Real camera source (e.g. /dev/video0) instead of the synthetic one");
+  demo->add_option("--intrinsics", o->intrinsics, "Camera intrinsics YAML (with --camera)")->check(CLI::ExistingFile);
+  demo->add_option("--tags", o->tags, "Tag map YAML (with --camera)")->check(CLI::ExistingFile);
+  demo->add_flag("--no-camera", o->no_camera, "Run without a camera (no selective EKF)");
+  demo->add_option("--out", o->out, "Report directory")->capture_default_str();
+  demo->add_flag("--plain", o->plain, "Print status blocks instead of redrawing the screen");
+  demo->callback([o] { run_demo(*o); });
 }
 
 }  // namespace poise::cli

@@ -91,7 +91,7 @@ double SimConfig::cycle_s() const {
 }
 
 std::vector<std::string> scenario_names() {
-  return {"static_magnet", "fast_motion", "random_motion", "demo"};
+  return {"static_magnet", "fast_motion", "random_motion", "demo", "tour"};
 }
 
 SimConfig make_scenario(const std::string& name, double rate_hz, uint64_t seed) {
@@ -174,6 +174,43 @@ SimConfig make_scenario(const std::string& name, double rate_hz, uint64_t seed) 
     attached.start_s = 30.0;
     attached.ramp_s = 1.0;
     attached.hold_s = 6.0;
+    attached.field_ut = Eigen::Vector3d(0.0, 25.0, 10.0);
+    attached.body_fixed = true;
+    c.magnets = {near, attached};
+  } else if (name == "tour") {
+    // Every episode of the demo in one 30 s cycle: rest, handheld motion with a magnet brought
+    // near and taken away, stairs up and down (1.5 m), a magnet attached to the device.
+    rest.duration_s = 3.0;
+    MotionSegment walk;
+    walk.name = "handheld";
+    walk.duration_s = 8.0;
+    walk.rotation_amplitude_rps = 0.8;
+    walk.rotation_freq_hz = 0.25;
+    walk.level_gain_per_s = 0.5;
+    walk.accel_amplitude_mps2 = 1.5;
+    walk.accel_freq_hz = 0.8;
+    MotionSegment pause = rest;
+    pause.duration_s = 2.0;
+    MotionSegment up = walk;
+    up.name = "stairs_up";
+    up.duration_s = 6.0;
+    up.climb_rate_mps = 0.25;  // 1.5 m in 6 s
+    MotionSegment down = up;
+    down.name = "stairs_down";
+    down.climb_rate_mps = -0.25;
+    MotionSegment end = rest;
+    end.duration_s = 3.0;
+    c.segments = {rest, walk, pause, up, pause, down, end};  // 3+8+2+6+2+6+3 = 30 s
+    c.duration_s = 0.0;
+    MagnetEpisode near;
+    near.start_s = 5.0;
+    near.ramp_s = 1.5;
+    near.hold_s = 4.0;
+    near.field_ut = Eigen::Vector3d(30.0, 10.0, -20.0);
+    MagnetEpisode attached;
+    attached.start_s = 22.0;
+    attached.ramp_s = 1.0;
+    attached.hold_s = 4.0;
     attached.field_ut = Eigen::Vector3d(0.0, 25.0, 10.0);
     attached.body_fixed = true;
     c.magnets = {near, attached};

@@ -6,6 +6,9 @@
 namespace poise::nodes {
 void register_parallel_kf_node(runtime::ComponentRegistry& registry);
 void register_gauss_newton_node(runtime::ComponentRegistry& registry);
+void register_selective_ekf_node(runtime::ComponentRegistry& registry);
+void register_altitude_node(runtime::ComponentRegistry& registry);
+void register_vehicle_node(runtime::ComponentRegistry& registry);
 }  // namespace poise::nodes
 
 namespace poise::runtime {

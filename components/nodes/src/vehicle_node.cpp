@@ -1,0 +1,99 @@
+// Component `vehicle`: vehicle attitude (paper 001: TRIAD when static, EKF with the roll/pitch
+// model when driving) on DDS.
+//   in:  imu (longitudinal/lateral specific force = body x/y, yaw rate = body z, magnetometer),
+//        vehicle_input (speed; the latest valid one is used with each IMU sample)
+//   out: attitude/vehicle (AttitudeEstimate), diagnostics
+//   params: filter_file (YAML of VehicleParams), diagnostics_every
+// Body frame: x forward, y left, z up (the vehicle's axes; remap the IMU in the driver's YAML).
+#include "poise/nodes/imu_node.h"
+#include "poise/nodes/register.h"
+#include "poise/vehicle/vehicle_estimator.h"
+
+#include <poise/msg/estimates.h>
+#include <poise/msg/imuPubSubTypes.h>
+
+namespace poise::nodes {
+namespace {
+
+VehicleParams load_params(const runtime::ComponentSpec& spec) {
+  std::vector<std::string> known = NodeParams::keys();
+  known.emplace_back("filter_file");
+  runtime::check_known_params(spec, known);
+  const auto file = runtime::param<std::string>(spec, "filter_file", "");
+  try {
+    return file.empty() ? VehicleParams{} : load_vehicle_params(file);
+  } catch (const std::exception& e) {
+    throw runtime::ConfigError(spec.origin + ": " + e.what());
+  }
+}
+
+class VehicleNode : public ImuAttitudeNode {
+ public:
+  VehicleNode(const runtime::ComponentSpec& spec, runtime::HostContext& host)
+      : ImuAttitudeNode(spec, host, "vehicle"), estimator_(load_params(spec)) {}
+
+  void start() override {
+    ImuAttitudeNode::start();
+    if (!speed_reader_) {
+      speed_reader_ = std::make_unique<dds::Reader<msg::VehicleInputPubSubType>>(
+          host().participant, host().topics.vehicle_input, dds::QosKind::kSensor,
+          [this](const msg::VehicleInput& m, const auto&) {
+            std::lock_guard<std::mutex> lock(mutex());
+            has_speed_ = m.speed_valid();
+            speed_mps_ = m.speed_mps();
+          });
+    }
+  }
+  void stop() override {
+    speed_reader_.reset();
+    ImuAttitudeNode::stop();
+  }
+
+ protected:
+  bool step(const ImuSample& s, AttitudeReport& report, DiagnosticsReport& diag) override {
+    VehicleSample v;
+    v.stamp_ns = s.stamp_ns;
+    v.accel_lon_mps2 = s.accel_mps2.x();
+    v.accel_lat_mps2 = s.accel_mps2.y();
+    v.yaw_rate_rps = s.gyro_rps.z();
+    v.mag_ut = s.mag_ut;
+    v.has_mag = s.has_mag;
+    v.speed_mps = speed_mps_;  // validated (negative, NaN) and counted by the estimator
+    v.has_speed = has_speed_;
+    if (!estimator_.update(v) || !estimator_.estimate().valid) {
+      return false;
+    }
+    const VehicleEstimate& e = estimator_.estimate();
+    report.stamp_ns = s.stamp_ns;
+    report.seq = s.seq;
+    report.q_world_body = e.q_world_body;
+    report.mag_trusted = s.has_mag;
+    report.sources_fused = msg::SOURCE_ACCEL | msg::SOURCE_MAG | msg::SOURCE_SPEED |
+                           (e.from_triad ? 0U : msg::SOURCE_GYRO);
+    const VehicleRejects& r = estimator_.rejects();
+    diag.counters = {{"rejected_non_finite_input", r.non_finite_input},
+                     {"rejected_bad_speed", r.bad_speed},
+                     {"missing_mag", r.missing_mag},
+                     {"rejected_disturbed_mag", r.disturbed_mag},
+                     {"rejected_non_monotonic_stamp", r.non_monotonic_stamp}};
+    diag.metrics = {{"static", e.is_static ? 1.0 : 0.0, ""}, {"from_triad", e.from_triad ? 1.0 : 0.0, ""}};
+    return true;
+  }
+
+ private:
+  VehicleEstimator estimator_;
+  std::unique_ptr<dds::Reader<msg::VehicleInputPubSubType>> speed_reader_;
+  bool has_speed_ = false;
+  double speed_mps_ = 0.0;
+};
+
+}  // namespace
+
+void register_vehicle_node(runtime::ComponentRegistry& registry) {
+  registry.add({"vehicle", "Vehicle attitude: TRIAD when static, roll/pitch-model EKF when driving",
+                [](const runtime::ComponentSpec& spec, runtime::HostContext& host) {
+                  return std::make_unique<VehicleNode>(spec, host);
+                }});
+}
+
+}  // namespace poise::nodes
