@@ -284,9 +284,10 @@ void run_sim_imu(const SimImuOptions& o) {
   bool had_reader = false;
   int64_t next_disconnect_ns =
       spec.disconnect_every_s > 0 ? start_ns + static_cast<int64_t>(spec.disconnect_every_s * 1e9) : 0;
+  int64_t paused_ns = 0;  // time spent disconnected: the schedule resumes after it, no catch-up
   for (uint64_t k = 0; !stop_requested(); ++k) {
     if (o.count > 0 && k >= o.count) break;
-    const int64_t t_ns = start_ns + static_cast<int64_t>(k) * period_ns;
+    const int64_t t_ns = start_ns + paused_ns + static_cast<int64_t>(k) * period_ns;
     if (o.duration_s > 0 && static_cast<double>(t_ns - start_ns) * 1e-9 >= o.duration_s) break;
     sleep_until_ns(t_ns);
     if (stop_requested()) break;
@@ -303,7 +304,8 @@ void run_sim_imu(const SimImuOptions& o) {
         throw Error(e.what());
       }
       had_reader = false;  // power-cycled: it boots again when the reader reopens the port
-      next_disconnect_ns = t_ns + static_cast<int64_t>(spec.disconnect_every_s * 1e9);
+      paused_ns += imu::monotonic_now_ns() - t_ns;
+      next_disconnect_ns = imu::monotonic_now_ns() + static_cast<int64_t>(spec.disconnect_every_s * 1e9);
       if (!o.quiet) std::fprintf(stderr, "poise sim-imu: reconnected at %s\n", link->slave_name().c_str());
       continue;
     }
