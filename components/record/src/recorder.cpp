@@ -100,6 +100,11 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
       }
     }
 
+    void on_subscription_matched(fdds::DataReader* /*reader*/,
+                                 const fdds::SubscriptionMatchedStatus& info) override {
+      impl_->owner.matched_.fetch_add(info.current_count_change);
+    }
+
    private:
     Impl* impl_;
     size_t index_;
@@ -314,8 +319,9 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
     subs.push_back(std::move(s));
     by_topic[d.topic] = index;
     Sub& sub = *subs.back();
-    sub.reader = subscriber->create_datareader(sub.dds_topic, qos, sub.listener.get(),
-                                               fdds::StatusMask::data_available());
+    sub.reader = subscriber->create_datareader(
+        sub.dds_topic, qos, sub.listener.get(),
+        fdds::StatusMask::data_available() << fdds::StatusMask::subscription_matched());
     if (sub.reader == nullptr) {
       throw dds::DdsError("cannot create a reader on '" + d.topic + "'");
     }

@@ -69,6 +69,8 @@ class Recorder {
   [[nodiscard]] int subscribed() const { return subscribed_.load(); }
   /// Messages written so far (thread-safe).
   [[nodiscard]] uint64_t written() const { return written_.load(); }
+  /// Remote writers currently matched by the recorder's readers, all topics (thread-safe).
+  [[nodiscard]] int matched_writers() const { return matched_.load(); }
 
  private:
   struct Impl;
@@ -77,6 +79,7 @@ class Recorder {
   std::atomic<bool> stop_{false};
   std::atomic<int> subscribed_{0};
   std::atomic<uint64_t> written_{0};
+  std::atomic<int> matched_{0};
 };
 
 /// FILE.mcap -> FILE_<index>.mcap (3 digits) for split recordings.
