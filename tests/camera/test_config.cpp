@@ -46,6 +46,14 @@ tags:
     EXPECT_LT((z - Eigen::Vector3d(0, -1, 0)).norm(), 1e-9) << "id " << id;
   }
   EXPECT_EQ(m.find(3), nullptr);
+  // docs/CAMERA.md: [90, 0, 90] faces east, [90, 0, -90] west; y stays up.
+  const TagMap walls = parse_tag_map(
+      "tags:\n  - {id: 1, size_m: 0.1, position_m: [0,0,0], rpy_deg: [90, 0, 90]}\n"
+      "  - {id: 2, size_m: 0.1, position_m: [0,0,0], rpy_deg: [90, 0, -90]}\n",
+      "walls.yaml");
+  EXPECT_LT((walls.find(1)->T_world_tag.linear().col(2) - Eigen::Vector3d::UnitX()).norm(), 1e-9);
+  EXPECT_LT((walls.find(2)->T_world_tag.linear().col(2) + Eigen::Vector3d::UnitX()).norm(), 1e-9);
+  EXPECT_LT((walls.find(1)->T_world_tag.linear().col(1) - Eigen::Vector3d::UnitZ()).norm(), 1e-9);
 }
 
 TEST(TagMap, MistakesAreClearErrors) {
