@@ -2,6 +2,10 @@
 // (GIVEN/WHEN/THEN, seeded, simulated time).
 #include "poise/selective_ekf/selective_ekf.h"
 #include "poise/selective_ekf/vision_synth.h"
+#include "poise/selective_ekf/eval_plugin.h"
+#include "poise/eval/broad.h"
+#include "poise/eval/runner.h"
+#include "poise/testing/testing.h"
 
 #include "poise/sim/sensor_simulator.h"
 
@@ -593,6 +597,36 @@ TEST(SelectiveEkfConfig, GivenBadYamlWhenLoadedThenErrorNamesTheKey) {
   expect_error("selective_ekf:\n  q_body_camera: [2, 0, 0, 0]\n", "q_body_camera");
   expect_error("selective_ekf:\n  gauss_newton:\n    max_iterations: 0\n", "max_iterations");
   expect_error("other: 1\n", "selective_ekf");
+}
+
+}  // namespace
+}  // namespace poise
+
+// ------------------------------------------------------------------ BROAD replay (real IMU data)
+namespace poise {
+namespace {
+
+constexpr double kBroadGatedMaxDeg = 1.0;   // trial 32 gated total RMSE (measured 0.64 deg)
+constexpr double kBroadUngatedMinRatio = 5.0;  // ungated at least this many times worse
+
+TEST(SelectiveEkfBroad, GivenAttachedMagnetTrialWhenGatedThenBeatsUngatedWithHybridVision) {
+  POISE_REQUIRE_SHARED_DIR(shared);
+  // GIVEN BROAD trial 32 (magnet attached at 1 cm) and the hybrid benchmark's vision
+  const eval::BroadTrial trial =
+      eval::load_broad(shared + "/broad/32_disturbed_attached_magnet_1cm.hdf5");
+  SelectiveEkfParams ungated;
+  ungated.gating_enabled = false;
+  // WHEN the selective EKF runs with and without gating
+  SelectiveEvalFilter g(SelectiveEkfParams{}, hybrid_benchmark_vision());
+  SelectiveEvalFilter u(ungated, hybrid_benchmark_vision());
+  const eval::TrialErrors eg = eval::broad_errors(eval::run_filter(g, trial), trial);
+  const eval::TrialErrors eu = eval::broad_errors(eval::run_filter(u, trial), trial);
+  std::printf("trial 32 total RMSE: gated %.3f deg, ungated %.3f deg\n", eg.total_deg, eu.total_deg);
+  // THEN the gated filter stays near the vision level and the ungated one follows the magnet
+  EXPECT_LT(eg.total_deg, kBroadGatedMaxDeg);
+  EXPECT_GT(eu.total_deg, kBroadUngatedMinRatio * eg.total_deg);
+  EXPECT_GT(g.core().mag_status().untrusted_samples, 0u);
+  EXPECT_GT(g.core().vision_counters().replayed_imu_samples, 0u);
 }
 
 }  // namespace
