@@ -166,8 +166,12 @@ void CameraNode::run() {
     try {
       r = pipeline_->process(frame);
     } catch (const ConfigError& e) {
-      std::lock_guard<std::mutex> lock(status_mutex_);
-      error_ = e.what();
+      {
+        std::lock_guard<std::mutex> lock(status_mutex_);
+        error_ = e.what();
+      }
+      failed_.store(true);
+      log(e.what());
       break;  // a setup mismatch (resolution): every further frame would fail the same way
     }
     frames_.fetch_add(1);

@@ -81,6 +81,7 @@ void run_camera(const CameraCliOptions& o) {
     }
   }
   node->stop();
+  const bool failed = node->failed();
   const std::string error = node->error();
   if (!o.quiet) {
     std::fprintf(stderr, "poise camera: stopped after %llu frames, %llu poses published\n",
@@ -90,7 +91,7 @@ void run_camera(const CameraCliOptions& o) {
   node.reset();
   context.reset();
   participant.reset();
-  if (!error.empty() && error.find("frame is ") != std::string::npos) {
+  if (failed) {
     throw Error(error);
   }
 }

@@ -57,6 +57,8 @@ class CameraNode : public runtime::Component {
   /// True once the source has ended (file/list/synthetic done) or failed; error() says why.
   [[nodiscard]] bool finished() const { return finished_.load(); }
   [[nodiscard]] std::string error() const;
+  /// True when processing stopped on a setup error (e.g. frame size differs from the calibration).
+  [[nodiscard]] bool failed() const { return failed_.load(); }
   [[nodiscard]] uint64_t frames() const { return frames_.load(); }
   [[nodiscard]] uint64_t poses_published() const { return poses_.load(); }
   [[nodiscard]] const std::string& sensor_id() const { return sensor_id_; }
@@ -76,6 +78,7 @@ class CameraNode : public runtime::Component {
   dds::Writer<msg::FilterDiagnosticsPubSubType> diag_writer_;
   std::atomic<bool> stop_{false};
   std::atomic<bool> finished_{false};
+  std::atomic<bool> failed_{false};
   std::atomic<uint64_t> frames_{0};
   std::atomic<uint64_t> poses_{0};
   std::thread thread_;
