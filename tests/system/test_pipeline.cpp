@@ -9,6 +9,7 @@
 #include <cmath>
 #include <csignal>
 #include <fstream>
+#include <limits>
 
 namespace poise::testing {
 namespace {
@@ -36,7 +37,8 @@ std::string write_host(const std::string& link) {
 }
 
 double rmse(const demo::FilterStats& s) {
-  return s.compared ? std::sqrt(s.sum_sq_error / static_cast<double>(s.compared)) : NAN;
+  return s.compared ? std::sqrt(s.sum_sq_error / static_cast<double>(s.compared))
+                    : std::numeric_limits<double>::quiet_NaN();
 }
 
 TEST(Pipeline, EstimatesFromAnotherProcessAgreeWithTheSimulatedTruth) {

@@ -1,8 +1,9 @@
 // Component `altitude`: height and vertical velocity from IMU + barometer (paper 003) on DDS.
 //   in:  imu (ImuSample with pressure)     out: altitude (AltitudeEstimate), diagnostics
 //   params: filter_file (YAML of AltitudeParams), method (overrides the file: pi_cf_zupt, cf_zupt,
-//           pi_cf, two_step_kf), relative_to_start (report heights above the first valid baro
-//           height instead of above the reference pressure level; default false),
+//           pi_cf, two_step_kf), relative_to_start (report heights above the start: the mean
+//           barometric height over the first second; nothing is published during that second;
+//           default false: heights above the reference pressure level),
 //           diagnostics_every
 #include "poise/altitude/altitude_filter.h"
 #include "poise/dds/convert.h"
@@ -79,7 +80,18 @@ class AltitudeNode : public runtime::Component {
       return;
     }
     if (relative_ && !offset_) {
-      offset_ = e.baro_height_m;
+      // Zero = mean barometric height over the first second (one sample is ~0.3 m noisy).
+      if (e.baro_fresh) {
+        start_sum_m_ += e.baro_height_m;
+        ++start_n_;
+      }
+      if (start_stamp_ns_ == 0) {
+        start_stamp_ns_ = sample.stamp_ns;
+      }
+      if (sample.stamp_ns - start_stamp_ns_ < kStartWindowNs || start_n_ == 0) {
+        return;
+      }
+      offset_ = start_sum_m_ / static_cast<double>(start_n_);
     }
     const double offset = relative_ ? *offset_ : 0.0;
     msg::AltitudeEstimate out;
@@ -128,7 +140,11 @@ class AltitudeNode : public runtime::Component {
   NodeParams node_;
   bool relative_;
   AltitudeFilter filter_;
+  static constexpr int64_t kStartWindowNs = 1'000'000'000;
   std::optional<double> offset_;
+  double start_sum_m_ = 0.0;
+  int start_n_ = 0;
+  int64_t start_stamp_ns_ = 0;
   dds::Writer<msg::AltitudeEstimatePubSubType> writer_;
   dds::Writer<msg::FilterDiagnosticsPubSubType> diagnostics_;
   std::unique_ptr<dds::Reader<msg::ImuSamplePubSubType>> reader_;

@@ -197,7 +197,8 @@ void register_sim_imu(runtime::ComponentRegistry& registry) {
                 "Simulated serial IMU on a pseudo-terminal (poise protocol) + simulated truth topics",
                 [](const runtime::ComponentSpec& spec, runtime::HostContext& host) {
                   return std::make_unique<SimImu>(spec, host);
-                }});
+                },
+                /*standalone_command=*/false});  // `poise sim-imu` (drivers/imu) runs it alone
 }
 
 }  // namespace poise::simnodes
