@@ -23,7 +23,7 @@ namespace {
 
 using namespace std::chrono_literals;
 constexpr double kMaxAttitudeErrorDeg = 3.0;  // static + slow rotation after convergence
-constexpr int kSamples = 1500;                 // 15 s at 100 Hz (published faster than real time)
+constexpr int kSamples = 1500;                 // 15 s of 100 Hz data, published at 1 kHz
 
 TEST(ParallelKfNode, EstimatesMatchSimulatedTruth) {
   auto& registry = runtime::ComponentRegistry::instance();
@@ -58,9 +58,7 @@ TEST(ParallelKfNode, EstimatesMatchSimulatedTruth) {
     s.imu.seq = seq++;
     truth[s.imu.seq] = s.truth.q_world_body;
     writer.write(dds::to_msg(s.imu, "sim"));
-    if (seq % 5 == 0) {
-      sleep_ms(1);  // let the reliable reader keep up
-    }
+    sleep_ms(1);  // paced like a 1 kHz sensor: the node's input is best-effort, bursts would drop
   }
   // The node's imu input is best-effort (as sensor streams are): on a starved machine some
   // samples may be dropped. Wait until every estimate arrived or none arrived for 2 s.
