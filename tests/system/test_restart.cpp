@@ -48,9 +48,10 @@ TEST(Restart, KilledFusionProcessResumesAndTheOthersKeepRunning) {
   sleep_ms(500);
   const uint64_t estimates_after_kill = estimates.load();
   const uint64_t imu_after_kill = imu.load();
-  sleep_ms(1500);
+  // The IMU stream goes on (bounded wait: a loaded machine can stall it briefly).
+  EXPECT_TRUE(wait_until([&] { return imu.load() - imu_after_kill > 100; }, 10s))
+      << "the IMU side stopped when fusion died";
   EXPECT_LE(estimates.load() - estimates_after_kill, 5U) << "estimates kept coming after the kill";
-  EXPECT_GT(imu.load() - imu_after_kill, 100U) << "the IMU side stopped when fusion died";
 
   // WHEN it is restarted THEN estimates resume within the bound.
   const auto restart = std::chrono::steady_clock::now();
