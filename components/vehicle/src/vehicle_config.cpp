@@ -2,6 +2,8 @@
 // defaults apply); unknown keys and bad values are startup errors naming the file and the key.
 #include "poise/vehicle/vehicle_estimator.h"
 
+#include "poise/core/yaml_params.h"
+
 #include <yaml-cpp/yaml.h>
 
 #include <set>
@@ -10,83 +12,11 @@
 #include <vector>
 
 namespace poise {
-namespace {
-
-class Reader {
- public:
-  Reader(const YAML::Node& node, std::string path, std::string prefix)
-      : node_(node), path_(std::move(path)), prefix_(std::move(prefix)) {
-    present_ = node_.IsDefined() && !node_.IsNull();
-    if (present_ && !node_.IsMap()) {
-      fail(prefix_.empty() ? "the document" : prefix_, "must be a mapping");
-    }
-  }
-
-  template <typename T>
-  void get(const std::string& key, T& out) {
-    known_.insert(key);
-    if (!present_) {
-      return;
-    }
-    const YAML::Node v = static_cast<const YAML::Node&>(node_)[key];
-    if (!v.IsDefined() || v.IsNull()) {
-      return;
-    }
-    try {
-      out = v.as<T>();
-    } catch (const YAML::Exception&) {
-      fail(name(key), "has the wrong type");
-    }
-  }
-
-  Reader child(const std::string& key) {
-    known_.insert(key);
-    if (!present_) {
-      return Reader(YAML::Node(), path_, name(key));
-    }
-    return Reader(static_cast<const YAML::Node&>(node_)[key], path_, name(key));
-  }
-
-  void finish() const {
-    if (!present_) {
-      return;
-    }
-    for (const auto& kv : node_) {
-      const auto key = kv.first.as<std::string>();
-      if (known_.count(key) == 0) {
-        fail(name(key), "is not a known key (check the spelling against config/filters/vehicle.yaml)");
-      }
-    }
-  }
-
-  [[noreturn]] void fail(const std::string& key, const std::string& what) const {
-    throw std::runtime_error(path_ + ": " + key + " " + what);
-  }
-  [[nodiscard]] std::string name(const std::string& key) const {
-    return prefix_.empty() ? key : prefix_ + "." + key;
-  }
-
- private:
-  YAML::Node node_;
-  std::string path_;
-  std::string prefix_;
-  std::set<std::string> known_;
-  bool present_ = false;
-};
-
-}  // namespace
 
 VehicleParams load_vehicle_params(const std::string& path) {
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    throw std::runtime_error(path + ": cannot open the vehicle estimator configuration");
-  } catch (const YAML::Exception& e) {
-    throw std::runtime_error(path + ": invalid YAML: " + e.what());
-  }
+  const YAML::Node root = load_yaml_file(path, "vehicle estimator configuration");
   VehicleParams p;
-  Reader r(root, path, "");
+  YamlParamReader r(root, path, "", "config/filters/vehicle.yaml");
   std::string mode = to_string(p.mode);
   r.get("mode", mode);
   if (!parse_vehicle_mode(mode, p.mode)) {
@@ -102,7 +32,7 @@ VehicleParams load_vehicle_params(const std::string& path) {
   }
   p.mag_world_ut = Eigen::Vector3d(h[0], h[1], h[2]);
 
-  Reader m = r.child("model");
+  YamlParamReader m = r.child("model");
   m.get("i_x_kgm2", p.model.i_x_kgm2);
   m.get("i_y_kgm2", p.model.i_y_kgm2);
   m.get("k_x_nm_per_rad", p.model.k_x_nm_per_rad);
@@ -113,13 +43,13 @@ VehicleParams load_vehicle_params(const std::string& path) {
   m.get("h_s_m", p.model.h_s_m);
   m.finish();
 
-  Reader sw = r.child("switching");
+  YamlParamReader sw = r.child("switching");
   sw.get("static_yaw_rate_max_rps", p.static_yaw_rate_max_rps);
   sw.get("static_speed_max_mps", p.static_speed_max_mps);
   sw.get("static_average", p.static_average);
   sw.finish();
 
-  Reader ekf = r.child("ekf");
+  YamlParamReader ekf = r.child("ekf");
   ekf.get("q_roll_rad2_per_s", p.q_roll_rad2_per_s);
   ekf.get("q_pitch_rad2_per_s", p.q_pitch_rad2_per_s);
   ekf.get("q_yaw_rad2_per_s", p.q_yaw_rad2_per_s);
