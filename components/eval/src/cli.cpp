@@ -2,6 +2,7 @@
 #include "poise/cli/common.h"
 #include "poise/eval/broad.h"
 #include "poise/eval/filter_registry.h"
+#include "poise/eval/imu_delay.h"
 #include "poise/eval/runner.h"
 #include "poise/sim/sensor_simulator.h"
 
@@ -168,9 +169,68 @@ void run_bench(const std::string& file_arg, const std::string& broad_dir, int re
   }
 }
 
+/// `poise calibrate imu-delay`: the IMU's group delay against each trial's optical reference.
+int run_imu_delay(const std::vector<std::string>& files, int window) {
+  std::vector<double> delays_ms;
+  std::cout << std::left << std::setw(48) << "trial" << std::right << std::setw(12) << "delay ms"
+            << std::setw(10) << "samples" << std::setw(14) << "rms@delay" << std::setw(12) << "rms@0"
+            << std::setw(10) << "windows" << "\n";
+  for (const auto& path : files) {
+    if (stop_requested()) {
+      break;
+    }
+    eval::BroadTrial trial;
+    try {
+      trial = eval::load_broad(path);
+    } catch (const std::exception& e) {
+      throw Error(std::string(e.what()));
+    }
+    eval::ImuDelayOptions o;
+    o.rate_hz = trial.rate_hz;
+    o.window_samples = window;
+    const eval::ImuDelayEstimate est = eval::estimate_imu_delay(trial.gyr_rps, trial.opt_quat_wxyz, trial.movement, o);
+    std::cout << std::left << std::setw(48) << trial.stem << std::right << std::fixed;
+    if (!est.ok) {
+      std::cout << "  no estimate: " << est.why << "\n";
+      continue;
+    }
+    std::cout << std::setprecision(3) << std::setw(12) << est.delay_s * 1e3 << std::setprecision(2)
+              << std::setw(10) << est.delay_samples << std::setprecision(3) << std::setw(14)
+              << est.rms_at_delay_deg << std::setw(12) << est.rms_at_zero_deg << std::setw(10) << est.windows
+              << "\n";
+    delays_ms.push_back(est.delay_s * 1e3);
+  }
+  if (delays_ms.empty()) {
+    std::cerr << "poise calibrate imu-delay: no trial gave an estimate (needs motion with a valid reference)\n";
+    return 1;
+  }
+  std::sort(delays_ms.begin(), delays_ms.end());
+  const size_t m = delays_ms.size();
+  const double median = m % 2 == 1 ? delays_ms[m / 2] : 0.5 * (delays_ms[m / 2 - 1] + delays_ms[m / 2]);
+  std::cout << std::setprecision(3) << "\nmedian over " << m << " trials: " << median << " ms (range "
+            << delays_ms.front() << " to " << delays_ms.back() << ")\n"
+            << "selective EKF parameter: imu_delay_s: " << std::setprecision(5) << median * 1e-3 << "\n";
+  return 0;
+}
+
 }  // namespace
 
 void register_eval_cli(CLI::App& app) {
+  CLI::App* calibrate = subcommand_group(app, "calibrate", "Guided sensor calibration");
+  CLI::App* delay = calibrate->add_subcommand(
+      "imu-delay", "IMU group delay against an optical reference (BROAD-layout HDF5: imu_gyr, opt_quat, movement)");
+  auto delay_files = std::make_shared<std::vector<std::string>>();
+  auto window = std::make_shared<int>(20);
+  delay->add_option("files", *delay_files, "HDF5 recordings with gyro and reference")->required()->check(CLI::ExistingFile);
+  delay->add_option("--window", *window, "Gyro integration window, samples")->check(CLI::Range(2, 1000))->capture_default_str();
+  delay->callback([=]() {
+    install_stop_handlers();
+    const int rc = run_imu_delay(*delay_files, *window);
+    if (rc != 0) {
+      throw ExitCode{rc};
+    }
+  });
+
   CLI::App* eval_group = subcommand_group(app, "eval", "Evaluate estimators on recorded data");
   CLI::App* broad = eval_group->add_subcommand(
       "broad", "Run an attitude filter over BROAD HDF5 trials; write DIR/<stem>.csv and print the RMSE table");

@@ -126,7 +126,7 @@ class SelectiveEkfNode : public ImuAttitudeNode {
     pose.header(dds::make_header(sample.stamp_ns, sample.seq, "world"));
     pose.sensor_id(sensor_id());
     pose.filter_id("selective_ekf");
-    pose.position_m(dds::to_msg(x.t_m));
+    pose.position_m(dds::to_msg(ekf_.position_m()));
     pose.velocity_mps(dds::to_msg(x.v_mps));
     pose.q_world_body(dds::to_msg(report.q_world_body));
     // 9x9 [p v theta] from the filter's 12x12 [w theta t v].

@@ -74,6 +74,7 @@ void validate(const SelectiveEkfParams& p) {
   need(p.vision_reset_after_rejections >= 1, "vision_reset_after_rejections must be >= 1");
   need(p.history_s > 0.0 && p.history_s <= 5.0, "history_s must be in (0, 5]");
   need(std::abs(p.vision_time_offset_s) <= 0.2, "vision_time_offset_s must be in [-0.2, 0.2]");
+  need(p.imu_delay_s >= 0.0 && p.imu_delay_s <= 0.05, "imu_delay_s must be in [0, 0.05]");
   need(finite_quat(p.q_body_camera), "q_body_camera must be a finite unit quaternion");
   need(p.p_body_camera_m.allFinite(), "p_body_camera_m must be finite");
   need(p.init_sigma_attitude_deg > 0.0 && p.init_sigma_rate_rps > 0.0 &&
@@ -84,6 +85,7 @@ void validate(const SelectiveEkfParams& p) {
 SelectiveEkf::SelectiveEkf(const SelectiveEkfParams& params) : p_(params), gn_(params.gauss_newton) {
   validate(p_);
   p_.q_body_camera.normalize();
+  imu_delay_ns_ = seconds_to_ns(p_.imu_delay_s);
   // The dip reference and input limits are shared with the Gauss-Newton source.
   if (std::isfinite(p_.dip_deg) && !std::isfinite(p_.gauss_newton.dip_deg)) {
     p_.gauss_newton.dip_deg = p_.dip_deg;
@@ -122,6 +124,18 @@ void SelectiveEkf::reset() {
   newest_vision_capture_ns_ = -1;
 }
 
+Eigen::Quaterniond SelectiveEkf::q_world_body() const {
+  if (imu_delay_ns_ == 0) {
+    return quat_canonical(x_.q_world_body);
+  }
+  const double d = static_cast<double>(imu_delay_ns_) * kNsToS;
+  return quat_canonical((x_.q_world_body * quat_exp(x_.w_rps * d)).normalized());
+}
+
+Eigen::Vector3d SelectiveEkf::position_m() const {
+  return x_.t_m + x_.v_mps * (static_cast<double>(imu_delay_ns_) * kNsToS);
+}
+
 Eigen::Vector3d SelectiveEkf::attitude_sigma_deg() const {
   return x_.P.diagonal().segment<3>(kTh).cwiseMax(0.0).cwiseSqrt() * kDegPerRad;
 }
@@ -142,16 +156,34 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
   x_.t_m += x_.v_mps * h;                                  // t <- t + v h (3)
 
   // P <- F P F^T + Q (4), F applied by blocks: F P F^T = F (F P)^T for symmetric P.
+  // F is block-diagonal between [w, th] and [t, v]; while P has no cross-covariance between the
+  // two (no lever-arm position fix yet, x_.coupled false) each 6x6 block is propagated alone.
   const Eigen::Matrix3d a = dq.toRotationMatrix().transpose();  // J_dth'_dth = Exp(w h)^T
   const Eigen::Matrix3d b = so3_right_jacobian(wh) * h;         // J_dth'_dw
-  auto apply_f = [&](const Mat& m) {
-    Mat out = m;
-    out.middleRows<3>(kTh) = a * m.middleRows<3>(kTh) + b * m.middleRows<3>(kW);
-    out.middleRows<3>(kT) += h * m.middleRows<3>(kV);
-    return out;
-  };
-  const Mat fp = apply_f(x_.P);
-  x_.P = apply_f(fp.transpose());
+  if (x_.coupled) {
+    auto apply_f = [&](const Mat& m) {
+      Mat out = m;
+      out.middleRows<3>(kTh) = a * m.middleRows<3>(kTh) + b * m.middleRows<3>(kW);
+      out.middleRows<3>(kT) += h * m.middleRows<3>(kV);
+      return out;
+    };
+    const Mat fp = apply_f(x_.P);
+    x_.P = apply_f(fp.transpose());
+  } else {
+    using Mat6 = Eigen::Matrix<double, 6, 6>;
+    Mat6 att = x_.P.topLeftCorner<6, 6>();  // [w, th]: th' = a th + b w
+    auto apply_att = [&](const Mat6& m) {
+      Mat6 out = m;
+      out.bottomRows<3>() = a * m.bottomRows<3>() + b * m.topRows<3>();
+      return out;
+    };
+    const Mat6 fa = apply_att(att);
+    x_.P.topLeftCorner<6, 6>() = apply_att(fa.transpose());
+    Mat6 tr = x_.P.bottomRightCorner<6, 6>();  // [t, v]: t' = t + h v
+    tr.topRows<3>() += h * tr.bottomRows<3>();
+    tr.leftCols<3>() += h * tr.rightCols<3>();
+    x_.P.bottomRightCorner<6, 6>() = tr;
+  }
   const double qw = p_.sigma_angular_accel * p_.sigma_angular_accel * h;
   const double qth = p_.sigma_attitude_walk * p_.sigma_attitude_walk * h;
   const double qv = p_.sigma_linear_accel * p_.sigma_linear_accel * h;
@@ -174,19 +206,24 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
 }
 
 // ------------------------------------------------------------------------------------ update
-double SelectiveEkf::fuse3(int col, const Eigen::Matrix3d* h_th, const Eigen::Vector3d& innov,
-                           const Eigen::Vector3d& r_diag, double gate_sigma, bool gate,
-                           SourceStatus& st, bool* accepted) {
-  // H = [I at `col`] (+ h_th at kTh when given): H P and P H^T are then column blocks of P, so
-  // every product below is 12x3 or 3x3 (about 1/4 of the dense 12x12 work).
-  Eigen::Matrix<double, kN, 3> pht = x_.P.middleCols<3>(col);  // P H^T
+namespace {
+
+/// Joseph-form update of 3 rows on an N-state covariance `p`: H = [I at column `col`] plus `h_th`
+/// at column `th_col` when non-null. H P and P H^T are then column blocks of P, so every product
+/// is Nx3 or 3x3. Leaves `p` and `dx` untouched when the gate rejects.
+template <int N>
+double joseph3(Eigen::Matrix<double, N, N>& p, int col, const Eigen::Matrix3d* h_th, int th_col,
+               const Eigen::Vector3d& innov, const Eigen::Vector3d& r_diag, double gate_sigma, bool gate,
+               SourceStatus& st, bool* accepted, Eigen::Matrix<double, N, 1>& dx) {
+  using MatN3 = Eigen::Matrix<double, N, 3>;
+  MatN3 pht = p.template middleCols<3>(col);  // P H^T
   if (h_th != nullptr) {
-    pht.noalias() += x_.P.middleCols<3>(kTh).lazyProduct(h_th->transpose());
+    pht.noalias() += p.template middleCols<3>(th_col).lazyProduct(h_th->transpose());
   }
-  auto h_times = [&](const auto& m) {  // H m for a 12x3 m
+  auto h_times = [&](const MatN3& m) {  // H m
     Eigen::Matrix3d out = m.template middleRows<3>(col);
     if (h_th != nullptr) {
-      out.noalias() += h_th->lazyProduct(m.template middleRows<3>(kTh));
+      out.noalias() += h_th->lazyProduct(m.template middleRows<3>(th_col));
     }
     return out;
   };
@@ -203,21 +240,50 @@ double SelectiveEkf::fuse3(int col, const Eigen::Matrix3d* h_th, const Eigen::Ve
     *accepted = false;
     return ratio;
   }
-  const Eigen::Matrix<double, kN, 3> k = pht.lazyProduct(s.inverse());  // (5)
-  const Vec dx = k.lazyProduct(innov);                                  // (6)
+  const MatN3 k = pht.lazyProduct(s.inverse());  // (5)
+  dx = k.lazyProduct(innov);                     // (6)
   // Joseph form of (7): P = (I - K H) P (I - K H)^T + K R K^T, using H P = (P H^T)^T.
-  Mat ap = x_.P;
-  ap.noalias() -= k.lazyProduct(pht.transpose());                 // (I - K H) P
-  Eigen::Matrix<double, kN, 3> apht = ap.middleCols<3>(col);      // (I - K H) P H^T
+  Eigen::Matrix<double, N, N> ap = p;
+  ap.noalias() -= k.lazyProduct(pht.transpose());  // (I - K H) P
+  MatN3 apht = ap.template middleCols<3>(col);      // (I - K H) P H^T
   if (h_th != nullptr) {
-    apht.noalias() += ap.middleCols<3>(kTh).lazyProduct(h_th->transpose());
+    apht.noalias() += ap.template middleCols<3>(th_col).lazyProduct(h_th->transpose());
   }
   ap.noalias() -= apht.lazyProduct(k.transpose());
-  const Eigen::Matrix<double, kN, 3> kr = k * r_diag.asDiagonal();
+  const MatN3 kr = k * r_diag.asDiagonal();
   ap.noalias() += kr.lazyProduct(k.transpose());
-  x_.P = 0.5 * (ap + ap.transpose());
-  inject(dx);
+  p = 0.5 * (ap + ap.transpose());
   *accepted = true;
+  return ratio;
+}
+
+}  // namespace
+
+double SelectiveEkf::fuse3(int col, const Eigen::Matrix3d* h_th, const Eigen::Vector3d& innov,
+                           const Eigen::Vector3d& r_diag, double gate_sigma, bool gate,
+                           SourceStatus& st, bool* accepted) {
+  Vec dx = Vec::Zero();
+  double ratio = 0.0;
+  if (h_th == nullptr && !x_.coupled) {
+    // No cross-covariance between [w, th] and [t, v]: the rows touch one 6x6 block only (the
+    // rest of K is exactly zero), a quarter of the 12-state work with the same result.
+    const int base = col < kT ? 0 : kT;
+    Eigen::Matrix<double, 6, 6> block = x_.P.block<6, 6>(base, base);
+    Eigen::Matrix<double, 6, 1> dx6;
+    ratio = joseph3<6>(block, col - base, nullptr, 0, innov, r_diag, gate_sigma, gate, st, accepted, dx6);
+    if (*accepted) {
+      x_.P.block<6, 6>(base, base) = block;
+      dx.segment<6>(base) = dx6;
+    }
+  } else {
+    if (h_th != nullptr) {
+      x_.coupled = true;  // a lever-arm position fix correlates attitude and position from now on
+    }
+    ratio = joseph3<kN>(x_.P, col, h_th, kTh, innov, r_diag, gate_sigma, gate, st, accepted, dx);
+  }
+  if (*accepted) {
+    inject(dx);
+  }
   return ratio;
 }
 
@@ -428,7 +494,7 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
   if (c.reanchor) {
     // Time gap: keep the state, restart time here; the history cannot span the gap.
     last_imu_stamp_ns_ = s.stamp_ns;
-    x_.stamp_ns = s.stamp_ns;
+    x_.stamp_ns = s.stamp_ns - imu_delay_ns_;
     history_.clear();
     vision_log_.clear();
     return false;
@@ -437,7 +503,7 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
     return false;
   }
   ImuInput in;
-  in.stamp_ns = s.stamp_ns;
+  in.stamp_ns = s.stamp_ns - imu_delay_ns_;  // state time: when the measured motion happened
   in.gyro = s.gyro_rps;
   in.accel = s.accel_mps2;
   in.mag = s.mag_ut;
@@ -521,7 +587,8 @@ bool SelectiveEkf::update_vision(const VisionPose& v_in) {
                               [](int64_t t, const VisionPose& e) { return t < e.capture_stamp_ns; });
   const auto fresh = static_cast<size_t>(pos - vision_log_.begin());
   vision_log_.insert(pos, v);
-  if (v.capture_stamp_ns > last_imu_stamp_ns_) {
+  const int64_t state_now_ns = last_imu_stamp_ns_ - imu_delay_ns_;
+  if (v.capture_stamp_ns > state_now_ns) {
     ++vc_.future;  // applied when the IMU reaches its capture stamp
     return true;
   }
@@ -547,7 +614,7 @@ bool SelectiveEkf::update_vision(const VisionPose& v_in) {
     history_[i].post = x_;
     ++vc_.replayed_imu_samples;
   }
-  for (; vi < vision_log_.size() && vision_log_[vi].capture_stamp_ns <= last_imu_stamp_ns_; ++vi) {
+  for (; vi < vision_log_.size() && vision_log_[vi].capture_stamp_ns <= state_now_ns; ++vi) {
     predict_to(vision_log_[vi].capture_stamp_ns);
     process_vision(vision_log_[vi], vi == fresh);
   }

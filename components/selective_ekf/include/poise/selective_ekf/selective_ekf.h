@@ -111,6 +111,12 @@ struct SelectiveEkfParams {
   /// timeshift convention, negative when the camera clock lags). Calibrated, e.g. by matching
   /// gyro-integrated rotation to the camera's rotation (docs/SELECTIVE_EKF.md). 0 = in sync.
   double vision_time_offset_s = 0.0;
+  /// IMU group delay, s: the IMU's measurements describe the motion this long before their stamp
+  /// (the sensor's internal low-pass filter; MPU6050 DLPF_CFG 3: ~4.8 ms; calibrated with
+  /// `poise calibrate imu-delay` against a reference). The filter runs at stamp - delay, fuses
+  /// vision at its (true) capture time, and outputs the attitude predicted to the sample stamp
+  /// with the estimated rate. 0 = the stamps are the sampling instants of the motion.
+  double imu_delay_s = 0.0;
   Eigen::Quaterniond q_body_camera = Eigen::Quaterniond::Identity();  ///< camera -> IMU body
   Eigen::Vector3d p_body_camera_m{0.0, 0.0, 0.0};  ///< camera origin in the body frame, m
 
@@ -217,6 +223,9 @@ struct SelectiveEkfState {
   int64_t q_error_fail_since_ns = -1;    ///< start of the current quaternion-error failure run
   int64_t last_vision_fused_ns = -1;
   bool vision_aligned = false;           ///< first vision has aligned the attitude
+  /// P has cross-covariance between [w, th] and [t, v] (after a lever-arm position fix); while
+  /// false the two 6x6 blocks are propagated and updated separately (exactly, at 1/4 the cost).
+  bool coupled = false;
   bool position_aligned = false;
   int vision_consecutive_rejects = 0;
   int vision_pos_consecutive_rejects = 0;
@@ -243,7 +252,11 @@ class SelectiveEkf {
 
   [[nodiscard]] bool initialized() const { return initialized_; }
   [[nodiscard]] const SelectiveEkfState& state() const { return x_; }
-  [[nodiscard]] Eigen::Quaterniond q_world_body() const { return quat_canonical(x_.q_world_body); }
+  /// The attitude at the stamp of the last IMU sample: the state predicted over imu_delay_s with
+  /// the estimated rate (the state itself when the delay is 0).
+  [[nodiscard]] Eigen::Quaterniond q_world_body() const;
+  /// The position at the stamp of the last IMU sample (predicted like q_world_body()).
+  [[nodiscard]] Eigen::Vector3d position_m() const;
   [[nodiscard]] const SourceStatus& status(Source s) const {
     return status_[static_cast<size_t>(s)];
   }
@@ -286,7 +299,8 @@ class SelectiveEkf {
   GaussNewton gn_;
   SelectiveEkfState x_;
   bool initialized_ = false;
-  int64_t last_imu_stamp_ns_ = -1;
+  int64_t last_imu_stamp_ns_ = -1;   ///< stamp of the last accepted IMU sample (sensor clock)
+  int64_t imu_delay_ns_ = 0;         ///< state time = IMU stamp - imu_delay_ns_
   RejectCounters rejections_;
   std::array<SourceStatus, static_cast<size_t>(Source::kCount)> status_{};
   MagStatus mag_;
