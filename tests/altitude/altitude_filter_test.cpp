@@ -256,5 +256,57 @@ TEST(AltitudeConfig, UnknownKeysAndBadValuesAreErrors) {
   EXPECT_THROW(load_altitude_params(path + ".missing"), std::runtime_error);
 }
 
+TEST(StartZero, GivenBaroHeightsWhenTheFirstSecondHasPassedThenTheZeroIsTheirMean) {
+  // GIVEN estimates every 10 ms with a fresh baro height on every other one: 100 m +/- 0.3 m
+  StartZero zero;
+  AltitudeEstimate e;
+  e.valid = true;
+  double sum = 0.0;
+  int n = 0;
+  std::optional<double> z;
+  for (int k = 0; k <= 150; ++k) {
+    e.stamp_ns = 5'000'000'000 + int64_t{k} * 10'000'000;
+    e.baro_fresh = k % 2 == 0;
+    e.baro_height_m = 100.0 + ((k / 2) % 2 == 0 ? 0.3 : -0.3);
+    const bool before_window_end = e.stamp_ns - 5'000'000'000 < 1'000'000'000;
+    if (e.baro_fresh && before_window_end) {
+      sum += e.baro_height_m;
+      ++n;
+    } else if (e.baro_fresh && !z) {
+      sum += e.baro_height_m;  // the sample that closes the window counts too
+      ++n;
+    }
+    z = zero.add(e);
+    // THEN nothing before 1 s, the mean of the window's heights from then on (fixed)
+    if (before_window_end) {
+      ASSERT_FALSE(z.has_value()) << k;
+    } else {
+      ASSERT_TRUE(z.has_value()) << k;
+      EXPECT_NEAR(*z, sum / n, 1e-12);
+    }
+  }
+  EXPECT_NEAR(*z, 100.0, 0.02);
+}
+
+TEST(StartZero, GivenNoBaroOrInvalidEstimatesThenNoZeroYet) {
+  StartZero zero;
+  AltitudeEstimate e;
+  e.valid = false;  // filter not initialised: ignored
+  e.baro_fresh = true;
+  e.baro_height_m = 50.0;
+  e.stamp_ns = 0;
+  EXPECT_FALSE(zero.add(e).has_value());
+  e.valid = true;
+  e.baro_fresh = false;  // valid but no barometer for 2 s: the zero waits for one
+  for (int k = 0; k < 200; ++k) {
+    e.stamp_ns = int64_t{k} * 10'000'000;
+    EXPECT_FALSE(zero.add(e).has_value());
+  }
+  e.baro_fresh = true;
+  e.stamp_ns = 2'000'000'000;
+  ASSERT_TRUE(zero.add(e).has_value());
+  EXPECT_DOUBLE_EQ(*zero.zero(), 50.0);
+}
+
 }  // namespace
 }  // namespace poise

@@ -79,21 +79,11 @@ class AltitudeNode : public runtime::Component {
     if (!e.valid) {
       return;
     }
-    if (relative_ && !offset_) {
-      // Zero = mean barometric height over the first second (one sample is ~0.3 m noisy).
-      if (e.baro_fresh) {
-        start_sum_m_ += e.baro_height_m;
-        ++start_n_;
-      }
-      if (start_stamp_ns_ == 0) {
-        start_stamp_ns_ = sample.stamp_ns;
-      }
-      if (sample.stamp_ns - start_stamp_ns_ < kStartWindowNs || start_n_ == 0) {
-        return;
-      }
-      offset_ = start_sum_m_ / static_cast<double>(start_n_);
+    const std::optional<double> zero = relative_ ? start_zero_.add(e) : std::optional<double>(0.0);
+    if (!zero) {
+      return;  // relative_to_start: the zero is still being averaged
     }
-    const double offset = relative_ ? *offset_ : 0.0;
+    const double offset = *zero;
     msg::AltitudeEstimate out;
     out.header(dds::make_header(sample.stamp_ns, sample.seq, "world"));
     out.sensor_id(sensor_id_);
@@ -140,11 +130,7 @@ class AltitudeNode : public runtime::Component {
   NodeParams node_;
   bool relative_;
   AltitudeFilter filter_;
-  static constexpr int64_t kStartWindowNs = 1'000'000'000;
-  std::optional<double> offset_;
-  double start_sum_m_ = 0.0;
-  int start_n_ = 0;
-  int64_t start_stamp_ns_ = 0;
+  StartZero start_zero_;
   dds::Writer<msg::AltitudeEstimatePubSubType> writer_;
   dds::Writer<msg::FilterDiagnosticsPubSubType> diagnostics_;
   std::unique_ptr<dds::Reader<msg::ImuSamplePubSubType>> reader_;

@@ -27,22 +27,6 @@ ParallelKfParams load_params(const runtime::ComponentSpec& spec) {
   }
 }
 
-/// First-order world-frame attitude covariance from the two KFs' direction covariances: tilt
-/// errors about world x/y from the up vector's, heading error from the field direction's
-/// horizontal part (divided by cos(dip)^2).
-Eigen::Matrix3d attitude_covariance(const ParallelKf& kf, const ParallelKfOutput& out) {
-  const Eigen::Matrix3d r = out.q_world_body.toRotationMatrix();
-  const Eigen::Matrix3d p_up = r * kf.tilt_covariance().topLeftCorner<3, 3>() * r.transpose();
-  const Eigen::Matrix3d p_field = r * kf.heading_covariance().topLeftCorner<3, 3>() * r.transpose();
-  const double c = std::max(std::cos(out.dip_rad), 0.1);
-  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  cov(0, 0) = p_up(1, 1);
-  cov(1, 1) = p_up(0, 0);
-  cov(0, 1) = cov(1, 0) = -p_up(0, 1);
-  cov(2, 2) = p_field(0, 0) / (c * c);
-  return cov;
-}
-
 class ParallelKfNode : public ImuAttitudeNode {
  public:
   ParallelKfNode(const runtime::ComponentSpec& spec, runtime::HostContext& host)
@@ -58,7 +42,7 @@ class ParallelKfNode : public ImuAttitudeNode {
     report.stamp_ns = sample.stamp_ns;
     report.seq = sample.seq;
     report.q_world_body = out.q_world_body;
-    report.covariance = attitude_covariance(kf_, out);
+    report.covariance = kf_.attitude_covariance(out);
     report.ext_accel_body_mps2 = out.ext_accel_body_mps2;
     report.ext_accel_world_mps2 = out.ext_accel_world_mps2;
     report.mag_disturbance_body_ut = out.mag_dist_body_ut;

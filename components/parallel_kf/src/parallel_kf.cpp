@@ -362,4 +362,19 @@ ParallelKfOutput ParallelKf::output() const {
   return o;
 }
 
+Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) const {
+  const Eigen::Matrix3d r = out.q_world_body.toRotationMatrix();
+  const Eigen::Matrix3d p_up = r * tilt_covariance().topLeftCorner<3, 3>() * r.transpose();
+  const Eigen::Matrix3d p_field = r * heading_covariance().topLeftCorner<3, 3>() * r.transpose();
+  const double c = std::max(std::cos(out.dip_rad), 0.1);
+  // A small rotation phi moves the up axis e_z by phi x e_z = (phi_y, -phi_x, 0): the tilt
+  // angles are read off the up vector's x/y errors; heading from the field's east component.
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  cov(0, 0) = p_up(1, 1);
+  cov(1, 1) = p_up(0, 0);
+  cov(0, 1) = cov(1, 0) = -p_up(0, 1);
+  cov(2, 2) = p_field(0, 0) / (c * c);
+  return cov;
+}
+
 }  // namespace poise

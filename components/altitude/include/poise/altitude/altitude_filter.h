@@ -38,6 +38,7 @@
 #include <Eigen/Core>
 
 #include <cstdint>
+#include <optional>
 #include <string>
 
 namespace poise {
@@ -202,6 +203,42 @@ class AltitudeFilter {
   double prev_y_b_ = 0.0;
   bool prev_baro_ok_ = false;
   double still_time_s_ = 0.0;            // how long every sample has been "still"
+};
+
+/// Heights relative to the start: the zero is the mean barometric height of the valid estimates
+/// over the first `window_ns` (one BMP180 sample is ~0.3 m noisy; 1 s averages ~30-100 of them).
+/// Pure: fed the filter's estimates with their stamps.
+class StartZero {
+ public:
+  explicit StartZero(int64_t window_ns = 1'000'000'000) : window_ns_(window_ns) {}
+  /// Adds one estimate; returns the zero once the window has passed with at least one fresh
+  /// barometric height (then fixed for good), nullopt before.
+  std::optional<double> add(const AltitudeEstimate& e) {
+    if (zero_ || !e.valid) {
+      return zero_;
+    }
+    if (e.baro_fresh) {
+      sum_m_ += e.baro_height_m;
+      ++n_;
+    }
+    if (!started_) {
+      started_ = true;
+      start_ns_ = e.stamp_ns;
+    }
+    if (e.stamp_ns - start_ns_ >= window_ns_ && n_ > 0) {
+      zero_ = sum_m_ / static_cast<double>(n_);
+    }
+    return zero_;
+  }
+  [[nodiscard]] std::optional<double> zero() const { return zero_; }
+
+ private:
+  int64_t window_ns_;
+  bool started_ = false;
+  int64_t start_ns_ = 0;
+  double sum_m_ = 0.0;
+  int n_ = 0;
+  std::optional<double> zero_;
 };
 
 }  // namespace poise

@@ -159,6 +159,11 @@ class ParallelKf {
   [[nodiscard]] bool initialized() const { return initialized_; }
   /// Everything reported (computed on demand from the state).
   [[nodiscard]] ParallelKfOutput output() const;
+  /// First-order covariance of the world-frame attitude error (rad^2, rotation vector about ENU
+  /// x, y, z) of `out` (= output()): tilt errors about world x/y from the up vector's covariance,
+  /// heading error from the horizontal part of the field direction's (divided by cos(dip)^2, dip
+  /// clamped to cos >= 0.1). Not coupled between the two KFs (they are independent by design).
+  [[nodiscard]] Eigen::Matrix3d attitude_covariance(const ParallelKfOutput& out) const;
   /// q_world_body (ENU) from sZ and sX' (2); the last valid one if they are (anti)parallel.
   [[nodiscard]] Eigen::Quaterniond q_world_body() const;
   [[nodiscard]] const Eigen::Matrix<double, 6, 6>& tilt_covariance() const { return kf1_.covariance(); }
