@@ -77,6 +77,12 @@ void draw_panel(cv::Mat& img, const Panel& panel, const cv::Rect& area, double x
     return plot.y + plot.height - static_cast<int>(std::lround((c - y_lo) / (y_hi - y_lo) * plot.height));
   };
 
+  // Bands first, then their labels left to right, each on the first row where it does not run
+  // into an earlier label (overlapping episodes, e.g. "stairs down" during "magnet attached",
+  // stack instead of overprinting).
+  constexpr double kBandLabelScale = 0.42;
+  constexpr int kBandLabelRowPx = 16;
+  std::vector<std::pair<int, const std::string*>> labels;  // x of the band start, label
   for (const auto& band : panel.bands) {
     const int a = std::clamp(px(band.x0), plot.x, plot.x + plot.width);
     const int b = std::clamp(px(band.x1), plot.x, plot.x + plot.width);
@@ -84,8 +90,26 @@ void draw_panel(cv::Mat& img, const Panel& panel, const cv::Rect& area, double x
       cv::Mat roi = img(cv::Rect(a, plot.y, b - a, plot.height));
       cv::Mat fill(roi.size(), roi.type(), bgr(band.rgb));
       cv::addWeighted(fill, 0.35, roi, 0.65, 0.0, roi);
-      text(img, band.label, {a + 4, plot.y + 16}, 0.42);
+      if (!band.label.empty()) {
+        labels.emplace_back(a, &band.label);
+      }
     }
+  }
+  std::stable_sort(labels.begin(), labels.end(),
+                   [](const auto& l, const auto& r) { return l.first < r.first; });
+  std::vector<int> label_row_end;
+  for (const auto& [a, label] : labels) {
+    int baseline = 0;
+    const int width = cv::getTextSize(*label, cv::FONT_HERSHEY_SIMPLEX, kBandLabelScale, 1, &baseline).width;
+    size_t row = 0;
+    while (row < label_row_end.size() && label_row_end[row] > a) {
+      ++row;
+    }
+    if (row == label_row_end.size()) {
+      label_row_end.push_back(0);
+    }
+    label_row_end[row] = a + 4 + width + 6;
+    text(img, *label, {a + 4, plot.y + kBandLabelRowPx * static_cast<int>(row + 1)}, kBandLabelScale);
   }
   const auto y_ticks = nice_ticks(y_lo, y_hi, 5);
   const double y_step = y_ticks.size() > 1 ? y_ticks[1] - y_ticks[0] : 1.0;
