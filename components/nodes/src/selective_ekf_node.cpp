@@ -2,7 +2,8 @@
 //   in:  imu (ImuSample), vision_pose (VisionPose: pose_world_camera at its capture time)
 //   out: attitude/selective_ekf (AttitudeEstimate), pose/selective_ekf (PoseEstimate), diagnostics
 //   params: filter_file (YAML of SelectiveEkfParams), q_body_camera [w,x,y,z] and
-//           p_body_camera_m [x,y,z] (camera-to-IMU extrinsic; override the file), diagnostics_every
+//           p_body_camera_m [x,y,z] (camera-to-IMU extrinsic; override the file), imu_delay_s
+//           (the IMU's group delay, s; overrides the file), diagnostics_every
 // The EKF applies its own camera-to-body extrinsic to the camera pose (the message's body pose is
 // not used), so the extrinsic is configured in one place for the filter.
 #include "poise/dds/convert.h"
@@ -20,7 +21,7 @@ namespace {
 
 SelectiveEkfParams load_params(const runtime::ComponentSpec& spec) {
   std::vector<std::string> known = NodeParams::keys();
-  known.insert(known.end(), {"filter_file", "q_body_camera", "p_body_camera_m"});
+  known.insert(known.end(), {"filter_file", "q_body_camera", "p_body_camera_m", "imu_delay_s"});
   runtime::check_known_params(spec, known);
   SelectiveEkfParams p;
   const auto file = runtime::param<std::string>(spec, "filter_file", "");
@@ -42,6 +43,7 @@ SelectiveEkfParams load_params(const runtime::ComponentSpec& spec) {
       }
       p.p_body_camera_m = Eigen::Vector3d(t[0], t[1], t[2]);
     }
+    p.imu_delay_s = runtime::param<double>(spec, "imu_delay_s", p.imu_delay_s);
     validate(p);
   } catch (const std::exception& e) {
     throw runtime::ConfigError(spec.origin + ": " + e.what());

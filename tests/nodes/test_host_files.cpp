@@ -1,0 +1,65 @@
+// The shipped host files (config/hosts/*.yaml) parse, and every estimator component in them is
+// created with its parameters validated (drivers need their devices and are left out here).
+#include "poise/runtime/host.h"
+#include "poise/testing/testing.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <set>
+
+namespace poise::runtime {
+void register_estimator_nodes(ComponentRegistry& registry);
+}
+
+namespace poise::testing {
+namespace {
+
+void register_nodes() {
+  auto& registry = runtime::ComponentRegistry::instance();
+  if (registry.find("selective_ekf") == nullptr) {
+    runtime::register_estimator_nodes(registry);
+  }
+}
+
+TEST(HostFiles, GivenEachShippedHostFileWhenLoadedThenItsEstimatorsAreCreated) {
+  register_nodes();
+  const std::set<std::string> estimators{"parallel_kf", "selective_ekf", "gauss_newton", "altitude", "vehicle"};
+  int files = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(source_path("config/hosts"))) {
+    if (entry.path().extension() != ".yaml") {
+      continue;
+    }
+    SCOPED_TRACE(entry.path().string());
+    runtime::HostSpec spec = runtime::load_host_file(entry.path().string());
+    std::vector<runtime::ComponentSpec> kept;
+    for (const auto& c : spec.components) {
+      if (estimators.count(c.type) != 0) {
+        kept.push_back(c);
+      }
+    }
+    // Move, not copy-assign: ComponentSpec holds YAML::Node, whose operator= writes through to the
+    // node it refers to (yaml-cpp reference semantics) and would overwrite other specs' params.
+    spec.components = std::move(kept);
+    DomainLease domain;
+    EXPECT_NO_THROW(runtime::Host(spec, domain.id()));
+    ++files;
+  }
+  EXPECT_GE(files, 4);
+}
+
+TEST(HostFiles, GivenAnImuDelayOutOfRangeWhenCreatedThenConfigErrorNamesIt) {
+  register_nodes();
+  DomainLease domain;
+  const runtime::HostSpec spec = runtime::parse_host(
+      YAML::Load("components: [{type: selective_ekf, name: s, params: {imu_delay_s: 0.5}}]"), "test", ".");
+  try {
+    runtime::Host host(spec, domain.id());
+    ADD_FAILURE() << "no error for imu_delay_s 0.5";
+  } catch (const runtime::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("imu_delay_s"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace poise::testing
