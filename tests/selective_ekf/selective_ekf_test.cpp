@@ -671,6 +671,8 @@ TEST(SelectiveEkfConfig, GivenShippedYamlFilesWhenLoadedThenValidAndDistinct) {
   const SelectiveEkfParams broad_off = load_selective_ekf_params(dir + "selective_ekf_broad_nogating.yaml");
   EXPECT_GT(broad.imu_delay_s, 0.0);
   EXPECT_EQ(broad.imu_delay_s, broad_off.imu_delay_s);
+  EXPECT_EQ(broad.imu_delay_s, kBroadImuDelayS);  // what `poise eval broad` uses without --config
+  EXPECT_EQ(broad_sensor_params().imu_delay_s, kBroadImuDelayS);
   EXPECT_TRUE(broad.gating_enabled);
   EXPECT_FALSE(broad_off.gating_enabled);
   EXPECT_EQ(broad.sigma_imu_quat_deg, on.sigma_imu_quat_deg);

@@ -34,6 +34,16 @@ class SelectiveEvalFilter : public SelectiveEkfFilter, public eval::TrialInputs 
 /// 30 Hz, 50 ms, 1 deg, 1 cm, 30 % dropout, seed 1.
 VisionSynthParams hybrid_benchmark_vision();
 
+/// BROAD's IMU lags its optical reference by this much (its internal filter): the median of
+/// `poise calibrate imu-delay` over the undisturbed trials 01-18 (4.06-4.45 ms). The evaluation
+/// filters use it unless a --config is given; config/filters/selective_ekf_broad.yaml holds the
+/// same value (a test keeps the two equal).
+inline constexpr double kBroadImuDelayS = 0.00418;
+
+/// The selective EKF's defaults with BROAD's IMU delay: what `poise eval broad --filter selective`
+/// runs without --config.
+SelectiveEkfParams broad_sensor_params();
+
 namespace cli {
 /// Registers the filters and the `poise eval broad --vision-*` options.
 void register_selective_ekf_cli(CLI::App& app);
