@@ -5,12 +5,14 @@
 #include "poise/selective_ekf/eval_plugin.h"
 #include "poise/eval/broad.h"
 #include "poise/eval/imu_delay.h"
+#include "poise/eval/filter_registry.h"
 #include "poise/eval/runner.h"
 #include "poise/testing/testing.h"
 
 #include "poise/sim/sensor_simulator.h"
 
 #include <Eigen/Eigenvalues>
+#include <CLI/CLI.hpp>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -676,6 +678,22 @@ TEST(SelectiveEkfConfig, GivenShippedYamlFilesWhenLoadedThenValidAndDistinct) {
   EXPECT_TRUE(broad.gating_enabled);
   EXPECT_FALSE(broad_off.gating_enabled);
   EXPECT_EQ(broad.sigma_imu_quat_deg, on.sigma_imu_quat_deg);
+}
+
+TEST(SelectiveEkfConfig, GivenTheFilterTableThenOnlyBroadEvaluationsGetTheBroadImuDelay) {
+  CLI::App app{"poise"};
+  cli::register_selective_ekf_cli(app);
+  auto delay_of = [](const std::unique_ptr<AttitudeFilter>& f) {
+    const auto* s = dynamic_cast<const SelectiveEkfFilter*>(f.get());
+    return s == nullptr ? -1.0 : s->core().params().imu_delay_s;
+  };
+  // `poise eval broad` / `poise bench filters` without --config: BROAD's sensor
+  EXPECT_EQ(delay_of(eval::make_filter_for_broad("selective")), kBroadImuDelayS);
+  EXPECT_EQ(delay_of(eval::make_filter_for_broad("selective_vision30")), kBroadImuDelayS);
+  // anything else (`poise process`) and an explicit config: no BROAD assumption
+  EXPECT_EQ(delay_of(eval::make_filter("selective")), 0.0);
+  const std::string file = std::string(POISE_SOURCE_DIR) + "/config/filters/selective_ekf.yaml";
+  EXPECT_EQ(delay_of(eval::make_filter_for_broad("selective", file)), 0.0);
 }
 
 TEST(SelectiveEkfConfig, GivenBadYamlWhenLoadedThenErrorNamesTheKey) {

@@ -39,7 +39,7 @@ std::string filter_list() {
 
 std::unique_ptr<AttitudeFilter> make_or_throw(const std::string& name, const std::string& config) {
   try {
-    return eval::make_filter(name, config);
+    return eval::make_filter_for_broad(name, config);
   } catch (const std::exception& e) {
     throw Error(std::string(e.what()) + "; filters:" + filter_list());
   }
@@ -143,7 +143,7 @@ void run_bench(const std::string& file_arg, const std::string& broad_dir, int re
     if (!only.empty() && std::find(only.begin(), only.end(), entry.name) == only.end()) {
       continue;
     }
-    auto f = entry.factory("");
+    auto f = entry.broad_default ? entry.broad_default() : entry.factory("");
     double best_cpu = 1e300;
     double best_wall = 1e300;
     double sink = 0.0;

@@ -15,18 +15,21 @@ std::vector<FilterEntry>& table() {
                  [](const std::string& cfg) -> std::unique_ptr<AttitudeFilter> {
                    return std::make_unique<GaussNewtonFilter>(cfg.empty() ? GaussNewtonParams{}
                                                                           : load_gauss_newton_params(cfg));
-                 }});
+                 },
+                 nullptr});
     v.push_back({"parallel_kf", "parallel Kalman filter, shipped default configuration (paper 000 + extensions)",
                  [](const std::string& cfg) -> std::unique_ptr<AttitudeFilter> {
                    return std::make_unique<ParallelKfFilter>(cfg.empty() ? ParallelKfParams::defaults()
                                                                          : load_parallel_kf_params(cfg));
-                 }});
+                 },
+                 nullptr});
     v.push_back({"parallel_kf_paper", "parallel Kalman filter, paper-faithful configuration (eqs. 1-11)",
                  [](const std::string& cfg) -> std::unique_ptr<AttitudeFilter> {
                    return std::make_unique<ParallelKfFilter>(
                        cfg.empty() ? ParallelKfParams::paper()
                                    : load_parallel_kf_params(cfg, ParallelKfParams::paper()));
-                 }});
+                 },
+                 nullptr});
     return v;
   }();
   return t;
@@ -34,15 +37,17 @@ std::vector<FilterEntry>& table() {
 
 }  // namespace
 
-void register_filter(const std::string& name, const std::string& description, FilterFactory factory) {
+void register_filter(const std::string& name, const std::string& description, FilterFactory factory,
+                     std::function<std::unique_ptr<AttitudeFilter>()> broad_default) {
   for (auto& e : table()) {
     if (e.name == name) {
       e.description = description;
       e.factory = std::move(factory);
+      e.broad_default = std::move(broad_default);
       return;
     }
   }
-  table().push_back({name, description, std::move(factory)});
+  table().push_back({name, description, std::move(factory), std::move(broad_default)});
 }
 
 std::vector<FilterEntry> registered_filters() { return table(); }
@@ -51,6 +56,15 @@ std::unique_ptr<AttitudeFilter> make_filter(const std::string& name, const std::
   for (const auto& e : table()) {
     if (e.name == name) {
       return e.factory(config_path);
+    }
+  }
+  return make_filter_for_broad(name, config_path);  // unknown: the same error
+}
+
+std::unique_ptr<AttitudeFilter> make_filter_for_broad(const std::string& name, const std::string& config_path) {
+  for (const auto& e : table()) {
+    if (e.name == name) {
+      return config_path.empty() && e.broad_default ? e.broad_default() : e.factory(config_path);
     }
   }
   std::string known;

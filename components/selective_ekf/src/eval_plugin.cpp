@@ -84,11 +84,16 @@ void register_selective_ekf_cli(CLI::App& app) {
   vision->rate_hz = 0.0;  // no vision unless asked for
   vision->noise_deg = 0.0;
   vision->noise_m = 0.0;
-  // These filters run on BROAD: without --config they get BROAD's IMU delay (a property of the
-  // dataset's sensor, like a calibration file), said once on stderr so no figure hides it.
   auto make = [](const std::string& cfg, const VisionSynthParams& v) -> std::unique_ptr<AttitudeFilter> {
+    const SelectiveEkfParams p = cfg.empty() ? SelectiveEkfParams{} : load_selective_ekf_params(cfg);
+    return std::make_unique<SelectiveEvalFilter>(p, v);
+  };
+  // On BROAD (`poise eval broad`, `poise bench filters`) without --config: BROAD's IMU delay (a
+  // property of the dataset's sensor, like a calibration file), said once on stderr so no figure
+  // hides it. `poise process` and other users of the table get the plain defaults.
+  auto make_broad = [](const VisionSynthParams& v) -> std::unique_ptr<AttitudeFilter> {
     static bool said = false;
-    if (cfg.empty() && !said) {
+    if (!said) {
       said = true;
       std::fprintf(stderr,
                    "selective EKF: BROAD's IMU delay applied, imu_delay_s = %.5f s (measured on trials "
@@ -96,19 +101,20 @@ void register_selective_ekf_cli(CLI::App& app) {
                    "runs without it\n",
                    kBroadImuDelayS);
     }
-    const SelectiveEkfParams p = cfg.empty() ? broad_sensor_params() : load_selective_ekf_params(cfg);
-    return std::make_unique<SelectiveEvalFilter>(p, v);
+    return std::make_unique<SelectiveEvalFilter>(broad_sensor_params(), v);
   };
   eval::register_filter(
       "selective",
       "selective EKF (paper 002): gyro + Gauss-Newton quaternion + vision, magnetometer gated; "
-      "vision from --vision-* options of `poise eval broad`; BROAD's IMU delay unless --config",
-      [vision, make](const std::string& cfg) { return make(cfg, *vision); });
+      "vision from --vision-* options of `poise eval broad`; on BROAD without --config, BROAD's IMU delay",
+      [vision, make](const std::string& cfg) { return make(cfg, *vision); },
+      [vision, make_broad] { return make_broad(*vision); });
   eval::register_filter(
       "selective_vision30",
       "selective EKF with the hybrid benchmark's vision (30 Hz, 50 ms, 1 deg, 1 cm, 30 % dropout, "
       "seed 1)",
-      [make](const std::string& cfg) { return make(cfg, hybrid_benchmark_vision()); });
+      [make](const std::string& cfg) { return make(cfg, hybrid_benchmark_vision()); },
+      [make_broad] { return make_broad(hybrid_benchmark_vision()); });
 
   CLI::App* eval_group = subcommand_group(app, "eval", "Evaluate estimators on recorded data");
   CLI::App* broad = nullptr;

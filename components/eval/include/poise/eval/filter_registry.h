@@ -20,13 +20,19 @@ struct FilterEntry {
   std::string name;
   std::string description;
   FilterFactory factory;
+  /// Optional: the filter for BROAD's sensor when no config is given (e.g. with BROAD's measured
+  /// IMU delay). Used by `poise eval broad` and `poise bench filters` only; null = factory("").
+  std::function<std::unique_ptr<AttitudeFilter>()> broad_default;
 };
 
 /// Adds (or replaces) a named filter.
-void register_filter(const std::string& name, const std::string& description, FilterFactory factory);
+void register_filter(const std::string& name, const std::string& description, FilterFactory factory,
+                     std::function<std::unique_ptr<AttitudeFilter>()> broad_default = nullptr);
 /// All registered filters, in registration order (built-ins first).
 std::vector<FilterEntry> registered_filters();
 /// Creates filter `name`; throws std::invalid_argument listing the known names.
 std::unique_ptr<AttitudeFilter> make_filter(const std::string& name, const std::string& config_path = "");
+/// As make_filter, but for BROAD data: without a config, the entry's broad_default when it has one.
+std::unique_ptr<AttitudeFilter> make_filter_for_broad(const std::string& name, const std::string& config_path = "");
 
 }  // namespace poise::eval
