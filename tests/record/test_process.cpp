@@ -193,5 +193,26 @@ TEST(Process, CliRunsRealFiltersFromAHostFileAndIsReproducible) {
   EXPECT_NE(bad.output.find("no_such_filter"), std::string::npos) << bad.output;
 }
 
+TEST(Process, SelectiveEkfComponentRunsOfflineOnTheImuAndSaysWhatIsLeftOut) {
+  const std::string dir = testing::cases_dir("process-selective");
+  const std::string input = dir + "/input.mcap";
+  write_input(input);
+  const std::string host = dir + "/host.yaml";
+  std::ofstream(host) << "components:\n"
+                         "  - type: selective_ekf\n    name: sekf\n    params: {imu_delay_s: 0.004}\n";
+  const std::string out = dir + "/out.mcap";
+  const auto r = poise::testing::run({poise::testing::bin("poise"), "process", input, "-o", out, "--host", host}, 60s);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("'sekf' (selective_ekf) runs on the IMU only"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("imu_delay_s are not applied offline"), std::string::npos) << r.output;
+  const McapReader reader = McapReader::open_file(out);
+  uint64_t estimates = 0;
+  MessageCursor cursor = reader.messages();
+  while (const MessageView* m = cursor.next()) {
+    estimates += m->channel->topic == "processed/attitude/sekf" ? 1 : 0;
+  }
+  EXPECT_GT(estimates, 0u);
+}
+
 }  // namespace
 }  // namespace poise::record

@@ -95,6 +95,13 @@ void run_process(const ProcessArgs& a) {
           runtime::param<std::string>(c, "preset", "default") == "paper") {
         name = "parallel_kf_paper";
       }
+      if (name == "selective_ekf") {
+        name = "selective";
+        std::cerr << "poise process: component '" << c.name
+                  << "' (selective_ekf) runs on the IMU only, from its filter_file: recorded vision "
+                     "poses and the host's q_body_camera / p_body_camera_m / imu_delay_s are not "
+                     "applied offline\n";
+      }
       if (offline.count(name) == 0) {
         std::cerr << "poise process: component '" << c.name << "' (" << c.type
                   << ") has no offline attitude filter: skipped\n";
