@@ -1,6 +1,7 @@
 // Property tests of the attitude-math layer (closed forms, round trips, Jacobians vs numerical
 // perturbation). Seeded randomness; the seed is printed on failure via SCOPED_TRACE.
 #include "poise/core/attitude.h"
+#include "poise/core/sample_check.h"
 
 #include <gtest/gtest.h>
 
@@ -189,6 +190,18 @@ TEST(Attitude, WrapAngle) {
   EXPECT_NEAR(wrap_angle(3.0 * kPi), kPi, 1e-12);
   EXPECT_NEAR(wrap_angle(-kPi / 2.0), -kPi / 2.0, 1e-15);
   EXPECT_NEAR(wrap_angle(2.0 * kPi + 0.1), 0.1, 1e-12);
+}
+
+TEST(TimeStep, FirstOkNonMonotonicAndGapAreTold) {
+  EXPECT_EQ(time_step(5, -1, 0.5).kind, TimeStep::kFirst);
+  const TimeStep ok = time_step(1'010'000'000, 1'000'000'000, 0.5);
+  EXPECT_EQ(ok.kind, TimeStep::kOk);
+  EXPECT_DOUBLE_EQ(ok.dt_s, 0.01);
+  EXPECT_EQ(time_step(1'000'000'000, 1'000'000'000, 0.5).kind, TimeStep::kNonMonotonic);
+  EXPECT_EQ(time_step(900'000'000, 1'000'000'000, 0.5).kind, TimeStep::kNonMonotonic);
+  const TimeStep gap = time_step(1'600'000'000, 1'000'000'000, 0.5);
+  EXPECT_EQ(gap.kind, TimeStep::kGap);
+  EXPECT_NEAR(gap.dt_s, 0.6, 1e-12);
 }
 
 }  // namespace

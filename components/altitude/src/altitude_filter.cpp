@@ -1,5 +1,7 @@
 #include "poise/altitude/altitude_filter.h"
 
+#include "poise/core/sample_check.h"
+
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -194,18 +196,15 @@ bool AltitudeFilter::update(const ImuSample& s) {
     ++rejects_.non_finite_imu;
     return false;
   }
-  double dt_s = 0.0;
-  bool gap = false;
-  if (have_stamp_) {
-    if (s.stamp_ns <= last_stamp_ns_) {
-      ++rejects_.non_monotonic_stamp;
-      return false;
-    }
-    dt_s = static_cast<double>(s.stamp_ns - last_stamp_ns_) * 1e-9;
-    if (dt_s > params_.max_dt_s) {
-      ++rejects_.dt_gap;
-      gap = true;
-    }
+  const TimeStep step = time_step(s.stamp_ns, have_stamp_ ? last_stamp_ns_ : -1, params_.max_dt_s);
+  if (step.kind == TimeStep::kNonMonotonic) {
+    ++rejects_.non_monotonic_stamp;
+    return false;
+  }
+  const double dt_s = step.dt_s;
+  const bool gap = step.kind == TimeStep::kGap;
+  if (gap) {
+    ++rejects_.dt_gap;
   }
   last_stamp_ns_ = s.stamp_ns;
 

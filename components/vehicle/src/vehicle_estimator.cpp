@@ -1,6 +1,7 @@
 #include "poise/vehicle/vehicle_estimator.h"
 
 #include "poise/core/attitude.h"
+#include "poise/core/sample_check.h"
 
 #include <cmath>
 #include <sstream>
@@ -223,18 +224,15 @@ bool VehicleEstimator::update(const VehicleSample& s) {
     ++rejects_.non_finite_input;
     return false;
   }
-  double dt_s = 0.0;
-  bool gap = false;
-  if (have_stamp_) {
-    if (s.stamp_ns <= last_stamp_ns_) {
-      ++rejects_.non_monotonic_stamp;
-      return false;
-    }
-    dt_s = static_cast<double>(s.stamp_ns - last_stamp_ns_) * 1e-9;
-    if (dt_s > params_.max_dt_s) {
-      ++rejects_.dt_gap;
-      gap = true;
-    }
+  const TimeStep step = time_step(s.stamp_ns, have_stamp_ ? last_stamp_ns_ : -1, params_.max_dt_s);
+  if (step.kind == TimeStep::kNonMonotonic) {
+    ++rejects_.non_monotonic_stamp;
+    return false;
+  }
+  const double dt_s = step.dt_s;
+  const bool gap = step.kind == TimeStep::kGap;
+  if (gap) {
+    ++rejects_.dt_gap;
   }
   last_stamp_ns_ = s.stamp_ns;
 

@@ -79,6 +79,27 @@ struct SampleCheck {
   double dt_s = 0.0;        ///< > 0 when accept and not the first sample
 };
 
+/// One stamp against the previous accepted one: the time check every estimator core shares.
+struct TimeStep {
+  enum Kind : uint8_t { kFirst, kOk, kNonMonotonic, kGap } kind = kFirst;
+  double dt_s = 0.0;  ///< stamp - previous, s (kOk and kGap)
+};
+/// `last_stamp_ns` < 0: no previous sample (kFirst). A stamp not after the previous one is
+/// kNonMonotonic (reject it); dt above `max_dt_s` is kGap (restart time here, do not integrate).
+inline TimeStep time_step(int64_t stamp_ns, int64_t last_stamp_ns, double max_dt_s) {
+  TimeStep t;
+  if (last_stamp_ns < 0) {
+    return t;
+  }
+  if (stamp_ns <= last_stamp_ns) {
+    t.kind = TimeStep::kNonMonotonic;
+    return t;
+  }
+  t.dt_s = static_cast<double>(stamp_ns - last_stamp_ns) * 1e-9;
+  t.kind = t.dt_s > max_dt_s ? TimeStep::kGap : TimeStep::kOk;
+  return t;
+}
+
 /// Validates `s`; counts every problem found in `counters`. `last_stamp_ns` < 0 means "no
 /// previous sample". Non-monotonic stamps are rejected; a gap above max_dt_s is rejected
 /// (counted) with reanchor = true so the caller can restart time at this stamp.
@@ -105,19 +126,17 @@ inline SampleCheck check_imu_sample(const ImuSample& s, int64_t last_stamp_ns,
     counters.add(RejectReason::kZeroAccel);
     return out;
   }
-  if (last_stamp_ns >= 0) {
-    if (s.stamp_ns <= last_stamp_ns) {
-      counters.add(RejectReason::kNonMonotonicStamp);
-      return out;
-    }
-    out.dt_s = static_cast<double>(s.stamp_ns - last_stamp_ns) * 1e-9;
-    if (out.dt_s > lim.max_dt_s) {
-      counters.add(RejectReason::kTimeGap);
-      out.reanchor = true;
-      out.dt_s = 0.0;
-      return out;
-    }
+  const TimeStep step = time_step(s.stamp_ns, last_stamp_ns, lim.max_dt_s);
+  if (step.kind == TimeStep::kNonMonotonic) {
+    counters.add(RejectReason::kNonMonotonicStamp);
+    return out;
   }
+  if (step.kind == TimeStep::kGap) {
+    counters.add(RejectReason::kTimeGap);
+    out.reanchor = true;
+    return out;
+  }
+  out.dt_s = step.dt_s;
   out.accept = true;
   if (s.has_mag) {
     if (!s.mag_ut.allFinite()) {
