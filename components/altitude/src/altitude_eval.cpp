@@ -1,20 +1,12 @@
 #include "poise/altitude/altitude_eval.h"
 
+#include "poise/core/bench.h"
+
 #include <algorithm>
-#include <chrono>
 #include <cmath>
-#include <ctime>
+#include <memory>
 
 namespace poise {
-namespace {
-
-int64_t thread_cpu_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
-
-}  // namespace
 
 AltitudeScore score_altitude(const AltitudeSimConfig& sim, const AltitudeParams& params) {
   const auto samples = simulate_altitude(sim);
@@ -63,35 +55,24 @@ AltitudeBenchFigures bench_altitude(int n, int repeats, const AltitudeParams& pa
   AltitudeSimConfig sim;
   sim.profile = "random";
   const auto samples = simulate_altitude(sim);
-  AltitudeBenchFigures best{1e300, 1e300};
-  if (samples.empty() || n <= 0) {
+  if (samples.empty()) {
     return {};
   }
   const std::size_t len = samples.size();
   const int64_t span_ns = samples.back().imu.stamp_ns - samples.front().imu.stamp_ns + 10'000'000;
   double sink = 0.0;
-  for (int r = 0; r < std::max(1, repeats); ++r) {
-    AltitudeFilter filter(params);
-    const int64_t c0 = thread_cpu_ns();
-    const auto t0 = std::chrono::steady_clock::now();
-    for (int i = 0; i < n; ++i) {
-      const auto idx = static_cast<std::size_t>(i) % len;
-      ImuSample s = samples[idx].imu;
+  const BenchFigures f = best_of_runs(n, repeats, [&] {
+    auto filter = std::make_shared<AltitudeFilter>(params);
+    return [&, filter](int i) {
+      ImuSample s = samples[static_cast<std::size_t>(i) % len].imu;  // the profile, repeated in time
       s.stamp_ns += static_cast<int64_t>(static_cast<std::size_t>(i) / len) * span_ns;
-      filter.update(s);
-      sink += filter.estimate().vertical_velocity_mps;
-    }
-    const auto t1 = std::chrono::steady_clock::now();
-    const int64_t c1 = thread_cpu_ns();
-    const auto dn = static_cast<double>(n);
-    best.cpu_ns_per_sample = std::min(best.cpu_ns_per_sample, static_cast<double>(c1 - c0) / dn);
-    best.wall_ns_per_sample = std::min(
-        best.wall_ns_per_sample,
-        static_cast<double>(std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count()) / dn);
-  }
+      filter->update(s);
+      sink += filter->estimate().vertical_velocity_mps;
+    };
+  });
   volatile double keep = sink;
   (void)keep;
-  return best;
+  return f;
 }
 
 }  // namespace poise

@@ -1,5 +1,6 @@
 // `poise eval broad` and `poise bench filters`.
 #include "poise/cli/common.h"
+#include "poise/core/bench.h"
 #include "poise/eval/broad.h"
 #include "poise/eval/filter_registry.h"
 #include "poise/eval/imu_delay.h"
@@ -21,13 +22,6 @@
 
 namespace poise::cli {
 namespace {
-
-// CPU time of the calling thread, ns: immune to other processes competing for the cores.
-int64_t thread_cpu_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
 
 std::string filter_list() {
   std::string s;
@@ -144,26 +138,19 @@ void run_bench(const std::string& file_arg, const std::string& broad_dir, int re
       continue;
     }
     auto f = entry.broad_default ? entry.broad_default() : entry.factory("");
-    double best_cpu = 1e300;
-    double best_wall = 1e300;
     double sink = 0.0;
-    const double n = static_cast<double>(samples.size());
-    for (int r = 0; r < repeats && !stop_requested(); ++r) {
+    const BenchFigures best = best_of_runs(static_cast<int>(samples.size()), repeats, [&] {
       f->reset();
       if (auto* inputs = dynamic_cast<eval::TrialInputs*>(f.get())) {
         inputs->begin_trial(trial);  // e.g. selective_vision30: vision synthesised from the reference
       }
-      const int64_t c0 = thread_cpu_ns();
-      const auto t0 = std::chrono::steady_clock::now();
-      for (const auto& s : samples) {
-        f->update(s);
+      return [&](int i) {
+        f->update(samples[static_cast<size_t>(i)]);
         sink += f->q_world_body().w();
-      }
-      const auto t1 = std::chrono::steady_clock::now();
-      const int64_t c1 = thread_cpu_ns();
-      best_wall = std::min(best_wall, static_cast<double>(std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count()) / n);
-      best_cpu = std::min(best_cpu, static_cast<double>(c1 - c0) / n);
-    }
+      };
+    });
+    const double best_cpu = best.cpu_ns_per_sample;
+    const double best_wall = best.wall_ns_per_sample;
     std::cout << std::left << std::setw(22) << entry.name << std::right << std::fixed << std::setprecision(1)
               << std::setw(16) << best_cpu << std::setw(16) << best_wall << (sink == 12345.0 ? " " : "") << "\n";
   }

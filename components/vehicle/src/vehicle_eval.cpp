@@ -1,21 +1,17 @@
 #include "poise/vehicle/vehicle_eval.h"
 
 #include "poise/core/attitude.h"
+#include "poise/core/bench.h"
 
 #include <algorithm>
 #include <chrono>
 #include <ctime>
 #include <cmath>
+#include <memory>
 #include <vector>
 
 namespace poise {
 namespace {
-
-int64_t thread_cpu_ns() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1'000'000'000 + ts.tv_nsec;
-}
 
 struct Acc {
   double r = 0.0;
@@ -123,35 +119,24 @@ VehicleBenchFigures bench_vehicle(int n, int repeats, const VehicleParams& param
   VehicleSimConfig sim;
   sim.scenario = "mountain_road";
   const auto samples = simulate_vehicle(sim);
-  if (samples.empty() || n <= 0) {
+  if (samples.empty()) {
     return {};
   }
-  VehicleBenchFigures best{1e300, 1e300};
   const std::size_t len = samples.size();
   const int64_t span_ns = samples.back().input.stamp_ns - samples.front().input.stamp_ns + 10'000'000;
   double sink = 0.0;
-  for (int r = 0; r < std::max(1, repeats); ++r) {
-    VehicleEstimator est(params);
-    const int64_t c0 = thread_cpu_ns();
-    const auto t0 = std::chrono::steady_clock::now();
-    for (int i = 0; i < n; ++i) {
-      const auto idx = static_cast<std::size_t>(i) % len;
-      VehicleSample s = samples[idx].input;
+  const BenchFigures f = best_of_runs(n, repeats, [&] {
+    auto est = std::make_shared<VehicleEstimator>(params);
+    return [&, est](int i) {
+      VehicleSample s = samples[static_cast<std::size_t>(i) % len].input;  // the drive, repeated in time
       s.stamp_ns += static_cast<int64_t>(static_cast<std::size_t>(i) / len) * span_ns;
-      est.update(s);
-      sink += est.estimate().roll_rad;
-    }
-    const auto t1 = std::chrono::steady_clock::now();
-    const int64_t c1 = thread_cpu_ns();
-    const auto dn = static_cast<double>(n);
-    best.cpu_ns_per_sample = std::min(best.cpu_ns_per_sample, static_cast<double>(c1 - c0) / dn);
-    best.wall_ns_per_sample = std::min(
-        best.wall_ns_per_sample,
-        static_cast<double>(std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count()) / dn);
-  }
+      est->update(s);
+      sink += est->estimate().roll_rad;
+    };
+  });
   volatile double keep = sink;
   (void)keep;
-  return best;
+  return f;
 }
 
 }  // namespace poise

@@ -5,6 +5,7 @@
 
 #include "poise/altitude/altitude_filter.h"
 #include "poise/altitude/altitude_sim.h"
+#include "poise/core/bench.h"
 
 #include <cstdint>
 #include <string>
@@ -28,12 +29,8 @@ struct AltitudeScore {
 /// Simulates `sim` and runs a filter with `params` over it.
 AltitudeScore score_altitude(const AltitudeSimConfig& sim, const AltitudeParams& params);
 
-/// Cost of one update, ns per sample: thread CPU time (what the filter costs) and wall time
-/// (inflated when other processes share the cores).
-struct AltitudeBenchFigures {
-  double cpu_ns_per_sample = 0.0;
-  double wall_ns_per_sample = 0.0;
-};
+/// Cost of one update, ns per sample (thread CPU and wall time).
+using AltitudeBenchFigures = BenchFigures;
 
 /// Times AltitudeFilter::update over `n` simulated samples (profile "random", method of `params`),
 /// best of `repeats` runs. For `poise bench filters`.

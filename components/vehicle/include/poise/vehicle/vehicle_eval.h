@@ -2,6 +2,7 @@
 // and scores it against the truth; the per-sample timing for `poise bench filters`.
 #pragma once
 
+#include "poise/core/bench.h"
 #include "poise/vehicle/vehicle_estimator.h"
 #include "poise/vehicle/vehicle_sim.h"
 
@@ -36,10 +37,7 @@ struct VehicleScore {
 VehicleScore score_vehicle(const VehicleSimConfig& sim, const VehicleParams& params);
 
 /// Cost of one update, ns per sample: thread CPU time and wall time.
-struct VehicleBenchFigures {
-  double cpu_ns_per_sample = 0.0;
-  double wall_ns_per_sample = 0.0;
-};
+using VehicleBenchFigures = BenchFigures;
 
 /// Times VehicleEstimator::update over `n` samples of the mountain_road case (mode of `params`,
 /// switched by default), best of `repeats` runs. For `poise bench filters`.
