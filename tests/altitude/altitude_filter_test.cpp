@@ -308,5 +308,39 @@ TEST(StartZero, GivenNoBaroOrInvalidEstimatesThenNoZeroYet) {
   EXPECT_DOUBLE_EQ(*zero.zero(), 50.0);
 }
 
+// The baro source: fused with its innovation eps (15), rejected when bad, not available without.
+TEST(AltitudeSources, BaroDecisionsAndInnovation) {
+  AltitudeFilter f;
+  ImuSample s;
+  s.accel_mps2 = Eigen::Vector3d(0, 0, 9.80665);
+  s.has_pressure = true;
+  s.pressure_pa = 100000.0;
+  for (int i = 0; i < 10; ++i) {
+    s.stamp_ns = 1'000'000'000 + i * 10'000'000;
+    ASSERT_TRUE(f.update(s));
+  }
+  SourceReports r = f.sources();
+  ASSERT_EQ(r.size(), 4U);
+  EXPECT_STREQ(r[2].source, "baro");
+  EXPECT_EQ(r[2].decision, SourceDecision::kFused);
+  ASSERT_EQ(r[2].innovation.size(), 1);
+  EXPECT_NEAR(r[2].innovation[0], f.estimate().baro_height_m - f.estimate().height_m, 1e-12);
+  s.stamp_ns += 10'000'000;
+  s.pressure_pa = -1.0;
+  ASSERT_TRUE(f.update(s));
+  EXPECT_EQ(f.sources()[2].decision, SourceDecision::kRejected);
+  EXPECT_STREQ(f.sources()[2].reason, "bad_pressure");
+  s.stamp_ns += 10'000'000;
+  s.has_pressure = false;
+  ASSERT_TRUE(f.update(s));
+  EXPECT_EQ(f.sources()[2].decision, SourceDecision::kNotAvailable);
+  s.stamp_ns -= 5'000'000;  // back in time: the whole sample is rejected
+  EXPECT_FALSE(f.update(s));
+  for (const SourceReport& src : f.sources()) {
+    EXPECT_EQ(src.decision, SourceDecision::kRejected) << src.source;
+    EXPECT_STREQ(src.reason, "non_monotonic_stamp");
+  }
+}
+
 }  // namespace
 }  // namespace poise

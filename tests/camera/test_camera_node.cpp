@@ -99,18 +99,20 @@ TEST(CameraMsgs, VisionPoseRoundTripsThroughTheEstimatorConversion) {
   EXPECT_FALSE(m.body_valid());
   EXPECT_NEAR(m.covariance()[5], 2e-5, kExact);  // row 0, col 5 (row-major)
   EXPECT_EQ(m.tag_ids(), std::vector<int32_t>{4});
-  const PoseMeasurement pm = dds::from_msg(m);
-  const PoseMeasurement direct = CameraPipeline::to_measurement(r);
+  EXPECT_FALSE(dds::body_pose_from_msg(m).has_value()) << "no extrinsic: no body pose";
+  const CameraPoseMeasurement pm = dds::camera_pose_from_msg(m);
+  const PoseMeasurement direct = CameraPipeline::to_measurement(r);  // the camera's, no extrinsic
   EXPECT_EQ(pm.stamp_ns, direct.stamp_ns);
-  EXPECT_LT((pm.p_world_body_m - direct.p_world_body_m).norm(), kExact);
+  EXPECT_LT((pm.p_world_camera_m - direct.p_world_body_m).norm(), kExact);
   EXPECT_LT((pm.covariance - direct.covariance).norm(), kExact);
   // With an extrinsic, the body pose and its covariance are sent.
   r.body_valid = true;
   r.T_world_body.translation() = Eigen::Vector3d(1.1, 2, 3);
   r.covariance_body = r.world.covariance * 2.0;
-  const PoseMeasurement body = dds::from_msg(to_vision_pose_msg(r, "cam0", 4));
-  EXPECT_NEAR(body.p_world_body_m.x(), 1.1, kExact);
-  EXPECT_NEAR(body.covariance(0, 0), 2e-4, kExact);
+  const std::optional<PoseMeasurement> body = dds::body_pose_from_msg(to_vision_pose_msg(r, "cam0", 4));
+  ASSERT_TRUE(body.has_value());
+  EXPECT_NEAR(body->p_world_body_m.x(), 1.1, kExact);
+  EXPECT_NEAR(body->covariance(0, 0), 2e-4, kExact);
 }
 
 TEST(CameraNodeParams, MissingAndUnknownParametersAreClearErrors) {

@@ -58,7 +58,8 @@ TEST(Convert, MatrixArraysAreRowMajor) {
   EXPECT_EQ((from_array<2, 3>(a)), m);
 }
 
-TEST(Convert, VisionPoseUsesBodyPoseWhenValid) {
+// The body pose only when the camera had an extrinsic; never the camera pose in its place.
+TEST(Convert, VisionPoseBodyOnlyWhenValidCameraAlways) {
   msg::VisionPose v;
   v.capture_stamp_ns(77);
   msg::Pose camera;
@@ -71,11 +72,19 @@ TEST(Convert, VisionPoseUsesBodyPoseWhenValid) {
   v.pose_world_body(body);
   v.covariance()[0] = 0.01;
   v.body_valid(true);
-  EXPECT_EQ(from_msg(v).p_world_body_m, Eigen::Vector3d(4, 5, 6));
-  EXPECT_EQ(from_msg(v).stamp_ns, 77);
-  EXPECT_EQ(from_msg(v).covariance(0, 0), 0.01);
+  const std::optional<PoseMeasurement> body_pose = body_pose_from_msg(v);
+  ASSERT_TRUE(body_pose.has_value());
+  EXPECT_EQ(body_pose->p_world_body_m, Eigen::Vector3d(4, 5, 6));
+  EXPECT_EQ(body_pose->q_world_body.coeffs(), Eigen::Quaterniond(0, 1, 0, 0).coeffs());
+  EXPECT_EQ(body_pose->stamp_ns, 77);
+  EXPECT_EQ(body_pose->covariance(0, 0), 0.01);
   v.body_valid(false);
-  EXPECT_EQ(from_msg(v).p_world_body_m, Eigen::Vector3d(1, 2, 3));
+  EXPECT_FALSE(body_pose_from_msg(v).has_value()) << "no extrinsic: a rejection, not the camera pose";
+  const CameraPoseMeasurement camera_pose = camera_pose_from_msg(v);
+  EXPECT_EQ(camera_pose.p_world_camera_m, Eigen::Vector3d(1, 2, 3));
+  EXPECT_EQ(camera_pose.q_world_camera.coeffs(), Eigen::Quaterniond(1, 0, 0, 0).coeffs());
+  EXPECT_EQ(camera_pose.stamp_ns, 77);
+  EXPECT_EQ(camera_pose.covariance(0, 0), 0.01);
 }
 
 TEST(Convert, FiniteChecksCatchNan) {

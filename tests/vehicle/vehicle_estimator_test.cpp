@@ -277,5 +277,57 @@ TEST(VehicleConfig, UnknownKeysAndBadValuesAreErrors) {
   EXPECT_THROW(VehicleEstimator{bad}, std::invalid_argument);
 }
 
+// The IMU's body axes are the vehicle's: a_x, a_y = accel x, y; r = gyro z.
+TEST(VehicleSampleFromImu, TakesTheVehicleAxesAndTheSpeedInput) {
+  ImuSample imu;
+  imu.stamp_ns = 5;
+  imu.accel_mps2 = Eigen::Vector3d(1, 2, 3);
+  imu.gyro_rps = Eigen::Vector3d(4, 5, 6);
+  imu.mag_ut = Eigen::Vector3d(7, 8, 9);
+  imu.has_mag = false;
+  const VehicleSample v = vehicle_sample_from_imu(imu, true, 12.5);
+  EXPECT_EQ(v.stamp_ns, 5);
+  EXPECT_EQ(v.accel_lon_mps2, 1.0);
+  EXPECT_EQ(v.accel_lat_mps2, 2.0);
+  EXPECT_EQ(v.yaw_rate_rps, 6.0);
+  EXPECT_EQ(v.mag_ut, Eigen::Vector3d(7, 8, 9));
+  EXPECT_FALSE(v.has_mag);
+  EXPECT_TRUE(v.has_speed);
+  EXPECT_EQ(v.speed_mps, 12.5);
+}
+
+// The core says what it did with the magnetometer and the speed (the node only maps it).
+TEST(VehicleSources, DisturbedMagAndBadSpeedAreReportedRejected) {
+  VehicleEstimator est;
+  VehicleSample s;
+  s.stamp_ns = 1'000'000'000;
+  s.accel_lat_mps2 = 0.0;
+  s.mag_ut = VehicleParams{}.mag_world_ut;
+  s.speed_mps = 0.0;
+  ASSERT_TRUE(est.update(s));
+  SourceReports r = est.sources();
+  ASSERT_EQ(r.size(), 4U);
+  EXPECT_STREQ(r[2].source, "mag");
+  EXPECT_EQ(r[2].decision, SourceDecision::kFused);
+  EXPECT_EQ(r[3].decision, SourceDecision::kFused);
+  s.stamp_ns += kStepNs;
+  s.mag_ut *= 2.0;  // |B| = 2 |H|: outside (1 +- 0.5) |H|
+  s.speed_mps = -1.0;
+  ASSERT_TRUE(est.update(s));
+  r = est.sources();
+  EXPECT_EQ(r[2].decision, SourceDecision::kRejected);
+  EXPECT_STREQ(r[2].reason, "disturbed_mag");
+  EXPECT_NEAR(r[2].test_ratio, 4.0, 1e-9) << "(|H| / (0.5 |H|))^2";
+  EXPECT_EQ(r[3].decision, SourceDecision::kRejected);
+  EXPECT_STREQ(r[3].reason, "bad_speed");
+  s.stamp_ns += kStepNs;
+  s.has_mag = false;
+  s.has_speed = false;
+  ASSERT_TRUE(est.update(s));
+  r = est.sources();
+  EXPECT_EQ(r[2].decision, SourceDecision::kNotAvailable);
+  EXPECT_EQ(r[3].decision, SourceDecision::kNotAvailable);
+}
+
 }  // namespace
 }  // namespace poise

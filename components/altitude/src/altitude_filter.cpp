@@ -134,6 +134,10 @@ void AltitudeFilter::reset() {
   prev_y_b_ = 0.0;
   prev_baro_ok_ = false;
   still_time_s_ = 0.0;
+  gyro_ = source_named("gyro");
+  accel_ = source_named("accel");
+  baro_ = source_named("baro");
+  zupt_ = source_named("zupt");
 }
 
 bool AltitudeFilter::uses_zupt() const { return params_.method != AltitudeMethod::kPiCf; }
@@ -194,11 +198,13 @@ void AltitudeFilter::step_kf(double dt_s, bool baro_available, double y_b) {
 bool AltitudeFilter::update(const ImuSample& s) {
   if (!s.has_accel || !s.has_gyro || !s.accel_mps2.allFinite() || !s.gyro_rps.allFinite()) {
     ++rejects_.non_finite_imu;
+    reject_sample("non_finite_imu");
     return false;
   }
   const TimeStep step = time_step(s.stamp_ns, have_stamp_ ? last_stamp_ns_ : -1, params_.max_dt_s);
   if (step.kind == TimeStep::kNonMonotonic) {
     ++rejects_.non_monotonic_stamp;
+    reject_sample("non_monotonic_stamp");
     return false;
   }
   const double dt_s = step.dt_s;
@@ -223,13 +229,17 @@ bool AltitudeFilter::update(const ImuSample& s) {
       est_.baro_height_m = last_baro_m_;
     } else {
       ++rejects_.bad_pressure;
+      baro_.mark_rejected("bad_pressure");
     }
+  } else {
+    baro_.mark_not_available("no_sample");
   }
   const bool baro_ok =
       have_baro_ && static_cast<double>(s.stamp_ns - last_baro_stamp_ns_) * 1e-9 <=
                         params_.max_baro_age_s;
 
-  if (!have_stamp_ || gap || !tilt_.initialized()) {
+  const bool propagated = have_stamp_ && !gap && tilt_.initialized();
+  if (!propagated) {
     // First sample or re-anchored time: (re)start the tilt from the accelerometer when needed and
     // propagate nothing.
     have_stamp_ = true;
@@ -287,7 +297,35 @@ bool AltitudeFilter::update(const ImuSample& s) {
   est_.vertical_velocity_mps = x_(1);
   est_.vertical_accel_mps2 = a_z;
   est_.integral_sum_m = integral_;
+  report_sources(s, propagated);
   return true;
+}
+
+void AltitudeFilter::reject_sample(const char* why) {
+  for (SourceReport* r : {&gyro_, &accel_, &baro_, &zupt_}) {
+    r->mark_rejected(why);
+  }
+}
+
+void AltitudeFilter::report_sources(const ImuSample& s, bool propagated) {
+  if (propagated) {
+    gyro_.mark_fused(s.stamp_ns);
+  } else {
+    gyro_.mark_not_available("time_anchor");
+  }
+  accel_.mark_fused(s.stamp_ns);
+  if (est_.baro_fresh) {
+    const double var = params_.sigma_baro_m * params_.sigma_baro_m +
+                       (params_.method == AltitudeMethod::kTwoStepKf ? p_kf_(0, 0) : 0.0);
+    baro_.set_innovation(InnovationVector::Constant(1, last_baro_m_ - x_(0)),  // (15)
+                         InnovationVector::Constant(1, var));
+    baro_.mark_fused(s.stamp_ns);
+  }
+  if (est_.zupt_applied) {
+    zupt_.mark_fused(s.stamp_ns);
+  } else {
+    zupt_.mark_not_available(!uses_zupt() ? "not_used_by_method" : !est_.valid ? "not_initialised" : "moving");
+  }
 }
 
 }  // namespace poise

@@ -69,12 +69,23 @@ ImuSample from_msg(const msg::ImuSample& sample) {
   return out;
 }
 
-PoseMeasurement from_msg(const msg::VisionPose& pose) {
+std::optional<PoseMeasurement> body_pose_from_msg(const msg::VisionPose& pose) {
+  if (!pose.body_valid()) {
+    return std::nullopt;
+  }
   PoseMeasurement out;
   out.stamp_ns = pose.capture_stamp_ns();
-  const msg::Pose& p = pose.body_valid() ? pose.pose_world_body() : pose.pose_world_camera();
-  out.p_world_body_m = from_msg(p.position_m());
-  out.q_world_body = from_msg(p.orientation());
+  out.p_world_body_m = from_msg(pose.pose_world_body().position_m());
+  out.q_world_body = from_msg(pose.pose_world_body().orientation());
+  out.covariance = from_array<6, 6>(pose.covariance());
+  return out;
+}
+
+CameraPoseMeasurement camera_pose_from_msg(const msg::VisionPose& pose) {
+  CameraPoseMeasurement out;
+  out.stamp_ns = pose.capture_stamp_ns();
+  out.p_world_camera_m = from_msg(pose.pose_world_camera().position_m());
+  out.q_world_camera = from_msg(pose.pose_world_camera().orientation());
   out.covariance = from_array<6, 6>(pose.covariance());
   return out;
 }

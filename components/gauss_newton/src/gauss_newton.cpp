@@ -24,6 +24,8 @@ void GaussNewton::reset() {
   dip_rad_ = std::isfinite(p_.dip_deg) ? p_.dip_deg * kRadPerDeg : 0.0;
   last_stamp_ns_ = -1;
   rejections_ = RejectCounters{};
+  accel_ = source_named("accel");
+  mag_ = source_named("mag");
 }
 
 GaussNewtonResult GaussNewton::solve(const Eigen::Vector3d& accel, const Eigen::Vector3d& mag,
@@ -70,7 +72,18 @@ bool GaussNewton::update(const ImuSample& s) {
   if (c.reanchor) {
     last_stamp_ns_ = s.stamp_ns;
   }
-  if (!c.accept || !c.mag_ok) {
+  if (!c.accept) {
+    accel_.mark_rejected(to_string(c.reject));
+    mag_.mark_rejected(to_string(c.reject));
+    return false;
+  }
+  if (!c.mag_ok) {  // the solution needs both vectors
+    accel_.mark_rejected("no_mag");
+    if (s.has_mag) {
+      mag_.mark_rejected(to_string(c.mag_reject));
+    } else {
+      mag_.mark_not_available("no_sample");
+    }
     return false;
   }
   last_stamp_ns_ = s.stamp_ns;
@@ -91,6 +104,8 @@ bool GaussNewton::update(const ImuSample& s) {
   }
   result_ = solve(s.accel_mps2, s.mag_ut, start, dip_rad_);
   initialized_ = true;
+  accel_.mark_fused(s.stamp_ns);
+  mag_.mark_fused(s.stamp_ns);
   return true;
 }
 

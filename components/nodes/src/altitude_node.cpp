@@ -10,13 +10,9 @@
 #include "poise/nodes/imu_node.h"
 #include "poise/nodes/register.h"
 
-#include <poise/msg/diagnosticsPubSubTypes.h>
 #include <poise/msg/estimatesPubSubTypes.h>
-#include <poise/msg/imuPubSubTypes.h>
 
-#include <atomic>
 #include <optional>
-#include <sstream>
 
 namespace poise::nodes {
 namespace {
@@ -42,102 +38,60 @@ AltitudeParams load_params(const runtime::ComponentSpec& spec) {
   return p;
 }
 
-class AltitudeNode : public runtime::Component {
+/// The message of an estimate; heights relative to `zero_m` (0: above the reference level).
+msg::AltitudeEstimate to_altitude_msg(const AltitudeEstimate& e, const AltitudeParams& p, double zero_m,
+                                      const ImuSample& sample, const std::string& sensor_id) {
+  msg::AltitudeEstimate out;
+  out.header(dds::make_header(sample.stamp_ns, sample.seq, "world"));
+  out.sensor_id(sensor_id);
+  out.filter_id("altitude");
+  out.method(to_string(p.method));
+  out.height_m(e.height_m - zero_m);
+  out.vertical_velocity_mps(e.vertical_velocity_mps);
+  out.vertical_accel_mps2(e.vertical_accel_mps2);
+  out.stationary(e.stationary);
+  out.baro_valid(e.baro_fresh);
+  out.baro_height_m(e.baro_height_m - zero_m);
+  out.reference_pressure_pa(p.reference_pressure_pa);
+  return out;
+}
+
+class AltitudeNode : public ImuEstimatorNode {
  public:
   AltitudeNode(const runtime::ComponentSpec& spec, runtime::HostContext& host)
-      : host_(host),
-        sensor_id_(spec.name),
-        node_(node_params(spec)),
+      : ImuEstimatorNode(spec, host, "altitude"),
         relative_(runtime::param<bool>(spec, "relative_to_start", false)),
         filter_(load_params(spec)),
-        writer_(host.participant, host.topics.altitude, dds::QosKind::kEstimate),
-        diagnostics_(host.participant, host.topics.diagnostics, dds::QosKind::kEstimate) {}
-  ~AltitudeNode() override { AltitudeNode::stop(); }
+        writer_(host.participant, host.topics.altitude, dds::QosKind::kEstimate) {}
 
-  void start() override {
-    if (!reader_) {
-      reader_ = std::make_unique<dds::Reader<msg::ImuSamplePubSubType>>(
-          host_.participant, host_.topics.imu, dds::QosKind::kSensor,
-          [this](const msg::ImuSample& m, const auto&) { on_imu(m); });
-    }
-  }
-  void stop() override { reader_.reset(); }
-  [[nodiscard]] std::string status() const override {
-    std::ostringstream os;
-    os << "imu in " << received_.load() << ", estimates out " << published_.load() << ", rejected "
-       << filter_rejected_.load();
-    return os.str();
-  }
-
- private:
-  void on_imu(const msg::ImuSample& m) {
-    received_.fetch_add(1);
-    const ImuSample sample = dds::from_msg(m);
-    filter_.update(sample);
-    filter_rejected_.store(filter_.rejects().total());
+ protected:
+  bool step(const ImuSample& sample) override { return filter_.update(sample); }
+  bool publish_estimate(const ImuSample& sample) override {
     const AltitudeEstimate& e = filter_.estimate();
     if (!e.valid) {
-      return;
+      return false;
     }
     const std::optional<double> zero = relative_ ? start_zero_.add(e) : std::optional<double>(0.0);
     if (!zero) {
-      return;  // relative_to_start: the zero is still being averaged
+      return false;  // relative_to_start: the zero is still being averaged
     }
-    const double offset = *zero;
-    msg::AltitudeEstimate out;
-    out.header(dds::make_header(sample.stamp_ns, sample.seq, "world"));
-    out.sensor_id(sensor_id_);
-    out.filter_id("altitude");
-    out.method(to_string(filter_.params().method));
-    out.height_m(e.height_m - offset);
-    out.vertical_velocity_mps(e.vertical_velocity_mps);
-    out.vertical_accel_mps2(e.vertical_accel_mps2);
-    out.stationary(e.stationary);
-    out.baro_valid(e.baro_fresh);
-    out.baro_height_m(e.baro_height_m - offset);
-    out.reference_pressure_pa(filter_.params().reference_pressure_pa);
-    writer_.write(out);
-    published_.fetch_add(1);
-    if (++since_diagnostics_ >= static_cast<uint64_t>(node_.diagnostics_every)) {
-      since_diagnostics_ = 0;
-      const AltitudeRejects& r = filter_.rejects();
-      DiagnosticsReport d;
-      d.stamp_ns = sample.stamp_ns;
-      d.seq = sample.seq;
-      d.component = "altitude";
-      SourceReport baro;
-      baro.source = "baro";
-      baro.fresh = sample.has_pressure;
-      baro.fused = e.baro_fresh;
-      baro.reason = e.baro_fresh ? "" : (sample.has_pressure ? "rejected_pressure" : "no_sample");
-      SourceReport zupt;
-      zupt.source = "zupt";
-      zupt.fresh = true;
-      zupt.fused = e.zupt_applied;
-      zupt.reason = e.zupt_applied ? "" : "moving";
-      d.sources = {baro, zupt};
-      d.counters = {{"rejected_non_finite_imu", r.non_finite_imu},
-                    {"rejected_non_monotonic_stamp", r.non_monotonic_stamp},
-                    {"time_gap", r.dt_gap},
-                    {"rejected_bad_pressure", r.bad_pressure}};
-      d.metrics = {{"latency", static_cast<double>(monotonic_ns() - sample.stamp_ns) * 1e-6, "ms"}};
-      diagnostics_.write(to_diagnostics_msg(d, sensor_id_));
-    }
+    writer_.write(to_altitude_msg(e, filter_.params(), *zero, sample, sensor_id()));
+    return true;
+  }
+  void diagnostics(DiagnosticsReport& diag) const override {
+    const AltitudeRejects& r = filter_.rejects();
+    diag.sources = filter_.sources();
+    diag.counters = {{"rejected_non_finite_imu", r.non_finite_imu},
+                     {"rejected_non_monotonic_stamp", r.non_monotonic_stamp},
+                     {"time_gap", r.dt_gap},
+                     {"rejected_bad_pressure", r.bad_pressure}};
   }
 
-  runtime::HostContext& host_;
-  std::string sensor_id_;
-  NodeParams node_;
+ private:
   bool relative_;
   AltitudeFilter filter_;
   StartZero start_zero_;
   dds::Writer<msg::AltitudeEstimatePubSubType> writer_;
-  dds::Writer<msg::FilterDiagnosticsPubSubType> diagnostics_;
-  std::unique_ptr<dds::Reader<msg::ImuSamplePubSubType>> reader_;
-  std::atomic<uint64_t> received_{0};
-  std::atomic<uint64_t> published_{0};
-  std::atomic<uint64_t> filter_rejected_{0};
-  uint64_t since_diagnostics_ = 0;
 };
 
 }  // namespace

@@ -28,19 +28,21 @@ class GaussNewtonNode : public ImuAttitudeNode {
       : ImuAttitudeNode(spec, host, "gauss_newton"), gn_(load_params(spec)) {}
 
  protected:
-  bool step(const ImuSample& sample, AttitudeReport& report, DiagnosticsReport& diag) override {
-    if (!gn_.update(sample) || !gn_.initialized()) {
+  bool step(const ImuSample& sample) override { return gn_.update(sample); }
+  bool attitude(AttitudeReport& report) const override {
+    if (!gn_.initialized()) {
       return false;
     }
-    report.stamp_ns = sample.stamp_ns;
-    report.seq = sample.seq;
     report.q_world_body = gn_.result().q_world_body;
     report.mag_trusted = true;  // the baseline always uses the magnetometer
     report.sources_fused = msg::SOURCE_ACCEL | msg::SOURCE_MAG;
+    return true;
+  }
+  void diagnostics(DiagnosticsReport& diag) const override {
+    diag.sources = gn_.sources();
     diag.counters = gn_.rejections().to_map();
     diag.metrics = {{"iterations", static_cast<double>(gn_.result().iterations), ""},
                     {"residual", gn_.result().residual, ""}};
-    return true;
   }
 
  private:

@@ -27,18 +27,16 @@ NodeParams node_params(const runtime::ComponentSpec& spec) {
   return p;
 }
 
-ImuAttitudeNode::ImuAttitudeNode(const runtime::ComponentSpec& spec, runtime::HostContext& host,
-                                 std::string filter_id)
-    : host_(host), sensor_id_(spec.name), filter_id_(std::move(filter_id)), params_(node_params(spec)) {
-  attitude_writer_ = std::make_unique<dds::Writer<msg::AttitudeEstimatePubSubType>>(
-      host.participant, host.topics.attitude(filter_id_), dds::QosKind::kEstimate);
+ImuEstimatorNode::ImuEstimatorNode(const runtime::ComponentSpec& spec, runtime::HostContext& host,
+                                   std::string component)
+    : host_(host), sensor_id_(spec.name), component_(std::move(component)), params_(node_params(spec)) {
   diagnostics_writer_ = std::make_unique<dds::Writer<msg::FilterDiagnosticsPubSubType>>(
       host.participant, host.topics.diagnostics, dds::QosKind::kEstimate);
 }
 
-ImuAttitudeNode::~ImuAttitudeNode() { ImuAttitudeNode::stop(); }
+ImuEstimatorNode::~ImuEstimatorNode() { ImuEstimatorNode::stop(); }
 
-void ImuAttitudeNode::start() {
+void ImuEstimatorNode::start() {
   running_.store(true);
   if (!imu_reader_) {
     imu_reader_ = std::make_unique<dds::Reader<msg::ImuSamplePubSubType>>(
@@ -47,51 +45,62 @@ void ImuAttitudeNode::start() {
   }
 }
 
-void ImuAttitudeNode::stop() {
+void ImuEstimatorNode::stop() {
   running_.store(false);
   imu_reader_.reset();  // no callback runs after this returns
 }
 
-void ImuAttitudeNode::on_imu(const msg::ImuSample& m) {
+void ImuEstimatorNode::on_imu(const msg::ImuSample& m) {
   if (!running_.load()) {
     return;
   }
   received_.fetch_add(1);
   const ImuSample sample = dds::from_msg(m);
-  AttitudeReport report;
-  DiagnosticsReport diag;
   std::lock_guard<std::mutex> lock(mutex_);
-  if (!step(sample, report, diag)) {
+  if (!step(sample)) {
     rejected_.fetch_add(1);
+  } else if (publish_estimate(sample)) {
+    published_.fetch_add(1);
+    last_latency_ns_.store(monotonic_ns() - sample.stamp_ns);
+  }
+  if (++since_diagnostics_ < static_cast<uint64_t>(params_.diagnostics_every)) {
     return;
   }
-  const bool with_diagnostics = ++since_diagnostics_ >= static_cast<uint64_t>(params_.diagnostics_every);
-  publish(report, diag, with_diagnostics);
+  since_diagnostics_ = 0;
+  DiagnosticsReport diag;
+  diagnostics(diag);
+  diag.stamp_ns = sample.stamp_ns;
+  diag.seq = sample.seq;
+  diag.component = component_;
+  diag.metrics.push_back({"latency", static_cast<double>(last_latency_ns_.load()) * 1e-6, "ms"});
+  diag.counters["samples_received"] = received_.load();
+  diag.counters["samples_rejected"] = rejected_.load();
+  diag.counters["estimates_published"] = published_.load();
+  diagnostics_writer_->write(to_diagnostics_msg(diag, sensor_id_));
 }
 
-void ImuAttitudeNode::publish(const AttitudeReport& report, DiagnosticsReport& diag, bool with_diagnostics) {
-  attitude_writer_->write(to_attitude_msg(report, sensor_id_, filter_id_));
-  published_.fetch_add(1);
-  const int64_t latency = monotonic_ns() - report.stamp_ns;
-  last_latency_ns_.store(latency);
-  if (with_diagnostics) {
-    since_diagnostics_ = 0;
-    diag.stamp_ns = report.stamp_ns;
-    diag.seq = report.seq;
-    diag.component = filter_id_;
-    diag.metrics.push_back({"latency", static_cast<double>(latency) * 1e-6, "ms"});
-    diag.counters["samples_received"] = received_.load();
-    diag.counters["estimates_published"] = published_.load();
-    diagnostics_writer_->write(to_diagnostics_msg(diag, sensor_id_));
-  }
-}
-
-std::string ImuAttitudeNode::status() const {
+std::string ImuEstimatorNode::status() const {
   std::ostringstream os;
   os << "imu in " << received_.load() << ", estimates out " << published_.load() << ", rejected "
      << rejected_.load() << ", last latency " << static_cast<double>(last_latency_ns_.load()) * 1e-3
      << " us";
   return os.str();
+}
+
+ImuAttitudeNode::ImuAttitudeNode(const runtime::ComponentSpec& spec, runtime::HostContext& host,
+                                 std::string filter_id)
+    : ImuEstimatorNode(spec, host, filter_id),
+      attitude_writer_(host.participant, host.topics.attitude(filter_id), dds::QosKind::kEstimate) {}
+
+bool ImuAttitudeNode::publish_estimate(const ImuSample& sample) {
+  report_ = AttitudeReport{};
+  if (!attitude(report_)) {
+    return false;
+  }
+  report_.stamp_ns = sample.stamp_ns;
+  report_.seq = sample.seq;
+  attitude_writer_.write(to_attitude_msg(report_, sensor_id(), component()));
+  return true;
 }
 
 }  // namespace poise::nodes

@@ -7,7 +7,6 @@
 
 #include <poise/msg/estimates.h>
 
-#include <cmath>
 
 namespace poise::nodes {
 namespace {
@@ -33,48 +32,34 @@ class ParallelKfNode : public ImuAttitudeNode {
       : ImuAttitudeNode(spec, host, "parallel_kf"), kf_(load_params(spec)) {}
 
  protected:
-  bool step(const ImuSample& sample, AttitudeReport& report, DiagnosticsReport& diag) override {
-    const uint64_t gated_before = kf_.mag_gated_count();
-    if (!kf_.update(sample) || !kf_.initialized()) {
+  bool step(const ImuSample& sample) override { return kf_.update(sample); }
+  bool attitude(AttitudeReport& report) const override {
+    if (!kf_.initialized()) {
       return false;
     }
     const ParallelKfOutput out = kf_.output();
-    report.stamp_ns = sample.stamp_ns;
-    report.seq = sample.seq;
     report.q_world_body = out.q_world_body;
     report.covariance = kf_.attitude_covariance(out);
     report.ext_accel_body_mps2 = out.ext_accel_body_mps2;
     report.ext_accel_world_mps2 = out.ext_accel_world_mps2;
     report.mag_disturbance_body_ut = out.mag_dist_body_ut;
     report.mag_disturbance_world_ut = out.mag_dist_world_ut;
-    report.mag_trusted = out.mag_used;
     report.gyro_bias_rps = out.gyro_bias_rps;
-    report.sources_fused = msg::SOURCE_GYRO | msg::SOURCE_ACCEL | (out.mag_used ? msg::SOURCE_MAG : 0U);
-
-    SourceReport accel;
-    accel.source = "accel";
-    accel.fresh = true;
-    accel.fused = true;
-    SourceReport mag;
-    mag.source = "mag";
-    mag.fresh = sample.has_mag;
-    mag.fused = out.mag_used;
-    if (!out.mag_used) {
-      mag.reason = !sample.has_mag ? "no_sample"
-                   : kf_.mag_gated_count() != gated_before ? "disturbed"
-                   : !out.field_learnt ? "learning_field"
-                                        : "not_used";
-    }
-    mag.rejected_count = kf_.mag_gated_count();
-    diag.sources = {accel, mag};
+    report.sources_fused = sources_fused_bits(kf_.sources());
+    report.mag_trusted = (report.sources_fused & msg::SOURCE_MAG) != 0;
+    return true;
+  }
+  void diagnostics(DiagnosticsReport& diag) const override {
+    const ParallelKfOutput out = kf_.output();
+    diag.sources = kf_.sources();
     diag.counters = kf_.rejections().to_map();
     diag.counters["mag_gated_disturbed"] = kf_.mag_gated_count();
+    diag.counters["mag_forced"] = kf_.mag_forced_count();
     diag.counters["field_reacquired"] = kf_.field_reacquired_count();
     diag.metrics = {{"field_magnitude", out.field_magnitude_ut, "uT"},
-                    {"dip", out.dip_rad * 180.0 / M_PI, "deg"},
+                    {"dip", out.dip_rad, "rad"},
                     {"disturbance_norm", out.mag_dist_norm_ut, "uT"},
                     {"rest", out.rest ? 1.0 : 0.0, ""}};
-    return true;
   }
 
  private:

@@ -4,6 +4,8 @@
 #include "poise/dds/convert.h"
 
 #include <algorithm>
+#include <cstring>
+#include <utility>
 
 namespace poise::nodes {
 namespace {
@@ -12,6 +14,27 @@ constexpr std::size_t kMaxCounters = 64;
 constexpr std::size_t kMaxMetrics = 32;
 constexpr std::size_t kMaxInnovation = 6;
 }  // namespace
+
+uint32_t sources_fused_bits(const SourceReports& sources) {
+  static const std::pair<const char*, uint32_t> kBits[] = {
+      {"gyro", msg::SOURCE_GYRO},         {"yaw_rate", msg::SOURCE_GYRO},
+      {"accel", msg::SOURCE_ACCEL},       {"mag", msg::SOURCE_MAG},
+      {"imu_quat", msg::SOURCE_IMU_QUAT}, {"vision_attitude", msg::SOURCE_VISION},
+      {"vision_position", msg::SOURCE_VISION}, {"baro", msg::SOURCE_BARO},
+      {"speed", msg::SOURCE_SPEED}};
+  uint32_t bits = 0;
+  for (const SourceReport& s : sources) {
+    if (!s.fused()) {
+      continue;
+    }
+    for (const auto& [name, bit] : kBits) {
+      if (std::strcmp(name, s.source) == 0) {
+        bits |= bit;
+      }
+    }
+  }
+  return bits;
+}
 
 msg::AttitudeEstimate to_attitude_msg(const AttitudeReport& r, const std::string& sensor_id,
                                       const std::string& filter_id) {
@@ -51,17 +74,19 @@ msg::FilterDiagnostics to_diagnostics_msg(const DiagnosticsReport& r, const std:
     }
     msg::SourceStatus status;
     status.source(s.source);
-    status.fresh(s.fresh);
-    status.fused(s.fused);
-    status.reason(s.reason);
-    const std::size_t n = std::min(s.innovation.size(), kMaxInnovation);
-    const std::size_t nv = std::min(s.innovation_variance.size(), kMaxInnovation);
-    truncated += (s.innovation.size() - n) + (s.innovation_variance.size() - nv);
-    status.innovation(std::vector<double>(s.innovation.begin(), s.innovation.begin() + static_cast<long>(n)));
-    status.innovation_variance(std::vector<double>(s.innovation_variance.begin(),
-                                                   s.innovation_variance.begin() + static_cast<long>(nv)));
+    status.fresh(s.decision != SourceDecision::kNotAvailable);
+    status.fused(s.fused());
+    status.reason(*s.reason == '\0' && !s.fused() ? to_string(s.decision) : s.reason);
+    const auto size = static_cast<std::size_t>(s.innovation.size());
+    const auto size_var = static_cast<std::size_t>(s.innovation_variance.size());
+    const std::size_t n = std::min(size, kMaxInnovation);
+    const std::size_t nv = std::min(size_var, kMaxInnovation);
+    truncated += (size - n) + (size_var - nv);
+    status.innovation(std::vector<double>(s.innovation.data(), s.innovation.data() + n));
+    status.innovation_variance(
+        std::vector<double>(s.innovation_variance.data(), s.innovation_variance.data() + nv));
     status.test_ratio(s.test_ratio);
-    status.last_fused_stamp_ns(s.last_fused_stamp_ns);
+    status.last_fused_stamp_ns(std::max<int64_t>(0, s.last_fused_stamp_ns));
     status.fused_count(s.fused_count);
     status.rejected_count(s.rejected_count);
     m.sources().push_back(status);

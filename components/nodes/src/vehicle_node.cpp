@@ -50,34 +50,31 @@ class VehicleNode : public ImuAttitudeNode {
   }
 
  protected:
-  bool step(const ImuSample& s, AttitudeReport& report, DiagnosticsReport& diag) override {
-    VehicleSample v;
-    v.stamp_ns = s.stamp_ns;
-    v.accel_lon_mps2 = s.accel_mps2.x();
-    v.accel_lat_mps2 = s.accel_mps2.y();
-    v.yaw_rate_rps = s.gyro_rps.z();
-    v.mag_ut = s.mag_ut;
-    v.has_mag = s.has_mag;
-    v.speed_mps = speed_mps_;  // validated (negative, NaN) and counted by the estimator
-    v.has_speed = has_speed_;
-    if (!estimator_.update(v) || !estimator_.estimate().valid) {
+  bool step(const ImuSample& s) override {
+    return estimator_.update(vehicle_sample_from_imu(s, has_speed_, speed_mps_));
+  }
+  bool attitude(AttitudeReport& report) const override {
+    const VehicleEstimate& e = estimator_.estimate();
+    if (!e.valid) {
       return false;
     }
-    const VehicleEstimate& e = estimator_.estimate();
-    report.stamp_ns = s.stamp_ns;
-    report.seq = s.seq;
+    const SourceReports sources = estimator_.sources();
     report.q_world_body = e.q_world_body;
-    report.mag_trusted = s.has_mag;
-    report.sources_fused = msg::SOURCE_ACCEL | msg::SOURCE_MAG | msg::SOURCE_SPEED |
-                           (e.from_triad ? 0U : msg::SOURCE_GYRO);
+    report.sources_fused = sources_fused_bits(sources);
+    report.mag_trusted = (report.sources_fused & msg::SOURCE_MAG) != 0;
+    return true;
+  }
+  void diagnostics(DiagnosticsReport& diag) const override {
+    const VehicleEstimate& e = estimator_.estimate();
     const VehicleRejects& r = estimator_.rejects();
+    diag.sources = estimator_.sources();
     diag.counters = {{"rejected_non_finite_input", r.non_finite_input},
                      {"rejected_bad_speed", r.bad_speed},
                      {"missing_mag", r.missing_mag},
                      {"rejected_disturbed_mag", r.disturbed_mag},
-                     {"rejected_non_monotonic_stamp", r.non_monotonic_stamp}};
+                     {"rejected_non_monotonic_stamp", r.non_monotonic_stamp},
+                     {"time_gap", r.dt_gap}};
     diag.metrics = {{"static", e.is_static ? 1.0 : 0.0, ""}, {"from_triad", e.from_triad ? 1.0 : 0.0, ""}};
-    return true;
   }
 
  private:

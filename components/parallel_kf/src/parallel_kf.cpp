@@ -118,10 +118,11 @@ void ParallelKf::reset() {
   rest_time_s_ = 0.0;
   rest_ = false;
   lp_init_ = false;
+  reset_report();
 }
 
-bool ParallelKf::update(const ImuSample& s) {
-  const SampleCheck c = check_imu_sample(s, last_stamp_ns_, p_.limits, rejections_);
+bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
+  c = check_imu_sample(s, last_stamp_ns_, p_.limits, rejections_);
   if (c.reanchor) {
     last_stamp_ns_ = s.stamp_ns;  // restart time after a gap; attitude kept
     return false;
@@ -248,6 +249,7 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
     heading_initialized_ = true;
   }
   if (!field_learnt_) {
+    mag_use_ = MagUse::kLearning;
     learn_field(accel, mag, dt);
   } else if (p_.mag_gating) {
     const double norm = mag.norm();
@@ -255,6 +257,7 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
     // [sin(alpha - tol), sin(alpha + tol)] (sin is monotonic on [-90, 90] deg): no atan2 per sample.
     const Eigen::Vector3d& up = kf1_.up_body();
     const double sin_dip = -up.dot(mag) / (norm * up.norm());
+    record_mag_gate(norm, sin_dip);
     if (field_dip_ != gate_dip_) {  // bounds recomputed only when the reference changes
       const double tol = p_.mag_dip_tol_deg * kRadPerDeg;
       gate_sin_lo_ = std::sin(std::max(field_dip_ - tol, -0.5 * kPi));
@@ -271,9 +274,11 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
     }
     const bool forced = disturbed && p_.mag_max_reject_s > 0.0 && rejected_s_ >= p_.mag_max_reject_s;
     if (forced) {
+      mag_use_ = MagUse::kForced;
       ++mag_forced_;
     }
     if (disturbed && !forced) {
+      mag_use_ = MagUse::kGated;
       ++mag_gated_;
       rejected_s_ += dt;
       // the disturbance seen through the propagated heading: sd = s_M - m sX'

@@ -296,6 +296,7 @@ void SelectiveEkf::inject(const Vec& dx) {
 
 void SelectiveEkf::record(SourceStatus& st, Decision d, int64_t stamp_ns, bool first_pass) const {
   st.last = d;
+  st.last_stamp_ns = stamp_ns;
   const bool fused = d == Decision::kFused || d == Decision::kFusedInflated || d == Decision::kReset;
   if (fused) {
     st.last_fused_stamp_ns = stamp_ns;

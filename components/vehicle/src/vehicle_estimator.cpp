@@ -136,6 +136,10 @@ void VehicleEstimator::reset() {
   static_mag_sum_.setZero();
   static_ay_sum_ = 0.0;
   static_count_ = 0;
+  yaw_rate_ = source_named("yaw_rate");
+  accel_ = source_named("accel");
+  mag_ = source_named("mag");
+  speed_ = source_named("speed");
 }
 
 void VehicleEstimator::ekf_init(const Eigen::Vector3d& euler) {
@@ -218,15 +222,30 @@ void VehicleEstimator::set_output(const Eigen::Vector3d& euler, bool from_triad)
   est_.valid = true;
 }
 
+VehicleSample vehicle_sample_from_imu(const ImuSample& imu, bool has_speed, double speed_mps) {
+  VehicleSample v;
+  v.stamp_ns = imu.stamp_ns;
+  v.accel_lon_mps2 = imu.accel_mps2.x();
+  v.accel_lat_mps2 = imu.accel_mps2.y();
+  v.yaw_rate_rps = imu.gyro_rps.z();
+  v.mag_ut = imu.mag_ut;
+  v.has_mag = imu.has_mag;
+  v.speed_mps = speed_mps;
+  v.has_speed = has_speed;
+  return v;
+}
+
 bool VehicleEstimator::update(const VehicleSample& s) {
   if (!std::isfinite(s.accel_lon_mps2) || !std::isfinite(s.accel_lat_mps2) ||
       !std::isfinite(s.yaw_rate_rps)) {
     ++rejects_.non_finite_input;
+    reject_sample("non_finite_input");
     return false;
   }
   const TimeStep step = time_step(s.stamp_ns, have_stamp_ ? last_stamp_ns_ : -1, params_.max_dt_s);
   if (step.kind == TimeStep::kNonMonotonic) {
     ++rejects_.non_monotonic_stamp;
+    reject_sample("non_monotonic_stamp");
     return false;
   }
   const double dt_s = step.dt_s;
@@ -238,17 +257,33 @@ bool VehicleEstimator::update(const VehicleSample& s) {
 
   if (s.has_speed && std::isfinite(s.speed_mps) && s.speed_mps >= 0.0) {
     last_speed_mps_ = s.speed_mps;
+    speed_.mark_fused(s.stamp_ns);
   } else {
     ++rejects_.bad_speed;
+    if (s.has_speed) {
+      speed_.mark_rejected("bad_speed");
+    } else {
+      speed_.mark_not_available("no_sample");
+    }
   }
   bool mag_ok = s.has_mag && s.mag_ut.allFinite();
   if (!mag_ok) {
     ++rejects_.missing_mag;
+    if (s.has_mag) {
+      mag_.mark_rejected("non_finite_mag");
+    } else {
+      mag_.mark_not_available("no_sample");
+    }
   } else {
-    const double ratio = s.mag_ut.norm() / params_.mag_world_ut.norm();
-    if (std::abs(ratio - 1.0) > params_.mag_norm_tolerance) {
+    // The disturbance test as a gate: |B| - |H| against tolerance |H| (uT).
+    const double h_ut = params_.mag_world_ut.norm();
+    const double tol_ut = params_.mag_norm_tolerance * h_ut;
+    mag_.set_innovation(InnovationVector::Constant(1, s.mag_ut.norm() - h_ut),
+                        InnovationVector::Constant(1, tol_ut * tol_ut));
+    if (mag_.test_ratio > 1.0) {
       ++rejects_.disturbed_mag;
       mag_ok = false;
+      mag_.mark_rejected("disturbed_mag");
     }
   }
 
@@ -303,10 +338,38 @@ bool VehicleEstimator::update(const VehicleSample& s) {
     set_output(triad_euler, true);
   }
 
+  // What the step used: TRIAD uses a_y and B; the EKF propagates with a_x, a_y, r and corrects
+  // with B (after the first fix).
+  const bool ekf_ran = !use_triad && ekf_init_;
+  if (ekf_ran && propagate) {
+    yaw_rate_.mark_fused(s.stamp_ns);
+  } else {
+    yaw_rate_.mark_not_available(use_triad ? "static_triad" : "no_previous_sample");
+  }
+  const bool fixed = use_triad ? triad_ok : (ekf_ran || triad_ok);
+  if (fixed) {
+    accel_.mark_fused(s.stamp_ns);
+  } else {
+    accel_.mark_not_available("no_mag_fix");
+  }
+  if (mag_ok) {
+    if (fixed) {
+      mag_.mark_fused(s.stamp_ns);
+    } else {
+      mag_.mark_rejected("triad_degenerate");
+    }
+  }
+
   prev_ax_ = s.accel_lon_mps2;
   prev_ay_ = s.accel_lat_mps2;
   prev_r_ = s.yaw_rate_rps;
   return true;
+}
+
+void VehicleEstimator::reject_sample(const char* why) {
+  for (SourceReport* r : {&yaw_rate_, &accel_, &mag_, &speed_}) {
+    r->mark_rejected(why);
+  }
 }
 
 }  // namespace poise

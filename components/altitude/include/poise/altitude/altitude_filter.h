@@ -32,6 +32,7 @@
 // rejected and counted; a bad pressure (<= 0, NaN, out of range) rejects only the pressure.
 #pragma once
 
+#include "poise/core/source_report.h"
 #include "poise/core/types.h"
 #include "poise/parallel_kf/tilt_kf.h"
 
@@ -174,6 +175,11 @@ class AltitudeFilter {
   [[nodiscard]] const Eigen::Vector2d& cf_gain() const { return k_c_; }
   /// Covariance of [h; v] (method 1 only; zero otherwise).
   [[nodiscard]] const Eigen::Matrix2d& kf_covariance() const { return p_kf_; }
+  /// Per source for the last sample, in this order: gyro (tilt propagation), accel (tilt
+  /// correction and a_z), baro (innovation eps (15) = h_b - h, m, variance s_b^2 (+ P_hh for the
+  /// two-step KF); rejected "bad_pressure"), zupt (fused when v was forced to 0; not available
+  /// "moving" or "not_used_by_method").
+  [[nodiscard]] SourceReports sources() const { return {gyro_, accel_, baro_, zupt_}; }
 
  private:
   void step_cf(double dt_s);
@@ -203,6 +209,13 @@ class AltitudeFilter {
   double prev_y_b_ = 0.0;
   bool prev_baro_ok_ = false;
   double still_time_s_ = 0.0;            // how long every sample has been "still"
+  // Per-source reports of the last sample.
+  SourceReport gyro_ = source_named("gyro");
+  SourceReport accel_ = source_named("accel");
+  SourceReport baro_ = source_named("baro");
+  SourceReport zupt_ = source_named("zupt");
+  void reject_sample(const char* why);
+  void report_sources(const ImuSample& s, bool propagated);
 };
 
 /// Heights relative to the start: the zero is the mean barometric height of the valid estimates

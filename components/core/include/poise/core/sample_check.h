@@ -77,6 +77,10 @@ struct SampleCheck {
   bool mag_ok = false;      ///< magnetometer usable (only meaningful when accept)
   bool reanchor = false;    ///< time gap: restart time from this stamp, do not integrate
   double dt_s = 0.0;        ///< > 0 when accept and not the first sample
+  /// Why the sample was refused (kCount: accepted), and why its magnetometer was (kCount: usable
+  /// or absent); the reasons the cores report per source.
+  RejectReason reject = RejectReason::kCount;
+  RejectReason mag_reject = RejectReason::kCount;
 };
 
 /// One stamp against the previous accepted one: the time check every estimator core shares.
@@ -107,32 +111,39 @@ inline SampleCheck check_imu_sample(const ImuSample& s, int64_t last_stamp_ns,
                                     const SampleLimits& lim, RejectCounters& counters) {
   SampleCheck out;
   if (!s.has_gyro) {
-    counters.add(RejectReason::kMissingGyro);
+    out.reject = RejectReason::kMissingGyro;
+    counters.add(out.reject);
     return out;
   }
   if (!s.has_accel) {
-    counters.add(RejectReason::kMissingAccel);
+    out.reject = RejectReason::kMissingAccel;
+    counters.add(out.reject);
     return out;
   }
   if (!s.gyro_rps.allFinite()) {
-    counters.add(RejectReason::kNonFiniteGyro);
+    out.reject = RejectReason::kNonFiniteGyro;
+    counters.add(out.reject);
     return out;
   }
   if (!s.accel_mps2.allFinite()) {
-    counters.add(RejectReason::kNonFiniteAccel);
+    out.reject = RejectReason::kNonFiniteAccel;
+    counters.add(out.reject);
     return out;
   }
   if (!(s.accel_mps2.norm() >= lim.min_accel_norm_mps2)) {
-    counters.add(RejectReason::kZeroAccel);
+    out.reject = RejectReason::kZeroAccel;
+    counters.add(out.reject);
     return out;
   }
   const TimeStep step = time_step(s.stamp_ns, last_stamp_ns, lim.max_dt_s);
   if (step.kind == TimeStep::kNonMonotonic) {
-    counters.add(RejectReason::kNonMonotonicStamp);
+    out.reject = RejectReason::kNonMonotonicStamp;
+    counters.add(out.reject);
     return out;
   }
   if (step.kind == TimeStep::kGap) {
-    counters.add(RejectReason::kTimeGap);
+    out.reject = RejectReason::kTimeGap;
+    counters.add(out.reject);
     out.reanchor = true;
     return out;
   }
@@ -140,9 +151,11 @@ inline SampleCheck check_imu_sample(const ImuSample& s, int64_t last_stamp_ns,
   out.accept = true;
   if (s.has_mag) {
     if (!s.mag_ut.allFinite()) {
-      counters.add(RejectReason::kNonFiniteMag);
+      out.mag_reject = RejectReason::kNonFiniteMag;
+      counters.add(out.mag_reject);
     } else if (!(s.mag_ut.norm() >= lim.min_mag_norm_ut)) {
-      counters.add(RejectReason::kZeroMag);
+      out.mag_reject = RejectReason::kZeroMag;
+      counters.add(out.mag_reject);
     } else {
       out.mag_ok = true;
     }

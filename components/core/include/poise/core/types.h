@@ -43,6 +43,17 @@ struct PoseMeasurement {
                                                 ///< small-angle error)], row-major order p, theta
 };
 
+/// A camera pose in the world (e.g. the AprilTag camera's, before any camera-to-body extrinsic),
+/// at its capture time.
+struct CameraPoseMeasurement {
+  int64_t stamp_ns = 0;                                      ///< capture instant, ns
+  Eigen::Vector3d p_world_camera_m{0, 0, 0};                 ///< camera origin, world (ENU), m
+  Eigen::Quaterniond q_world_camera{1, 0, 0, 0};             ///< camera attitude, Hamilton
+  Eigen::Matrix<double, 6, 6> covariance =
+      Eigen::Matrix<double, 6, 6>::Identity();  ///< [position m^2 | rotation rad^2 (world-frame
+                                                ///< small-angle error)]
+};
+
 /// Vehicle speed input (vehicle estimator).
 struct VehicleSpeed {
   int64_t stamp_ns = 0;

@@ -15,6 +15,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 
 namespace poise::dds {
@@ -33,9 +34,15 @@ msg::Header make_header(int64_t stamp_ns, uint32_t seq, const std::string& frame
 msg::ImuSample to_msg(const ImuSample& sample, const std::string& sensor_id);
 ImuSample from_msg(const msg::ImuSample& sample);
 
-/// A vision pose message -> the body pose measurement the estimators take. Uses pose_world_body
-/// when body_valid, else the camera pose (the caller must then apply its own extrinsic).
-PoseMeasurement from_msg(const msg::VisionPose& pose);
+/// A vision pose message -> the body pose measurement. nullopt when the message carries no body
+/// pose (body_valid false: no camera-to-body extrinsic configured at the camera): the caller counts
+/// it as a rejection, it never substitutes the camera pose for the body's.
+std::optional<PoseMeasurement> body_pose_from_msg(const msg::VisionPose& pose);
+
+/// A vision pose message -> the camera pose (for estimators that apply their own extrinsic). The
+/// covariance is the message's: of the body pose when body_valid (its rotation block is the
+/// camera's too; its position block ignores the lever arm's share).
+CameraPoseMeasurement camera_pose_from_msg(const msg::VisionPose& pose);
 
 /// Row-major copy of a fixed-size Eigen matrix into an IDL array, and back.
 template <int R, int C, std::size_t N>

@@ -18,6 +18,7 @@
 #include "poise/core/attitude.h"
 #include "poise/core/attitude_filter.h"
 #include "poise/core/sample_check.h"
+#include "poise/core/source_report.h"
 #include "poise/core/types.h"
 
 #include <Eigen/Core>
@@ -61,6 +62,8 @@ class GaussNewton {
   [[nodiscard]] bool initialized() const { return initialized_; }
   [[nodiscard]] double dip_rad() const { return dip_rad_; }
   [[nodiscard]] const RejectCounters& rejections() const { return rejections_; }
+  /// Per source (accel, mag) for the last sample: both fused together, or the sample's reason.
+  [[nodiscard]] SourceReports sources() const { return {accel_, mag_}; }
   void reset();
 
  private:
@@ -72,6 +75,8 @@ class GaussNewton {
   int dip_n_ = 0;
   int64_t last_stamp_ns_ = -1;
   RejectCounters rejections_;
+  SourceReport accel_ = source_named("accel");
+  SourceReport mag_ = source_named("mag");
 };
 
 /// AttitudeFilter adapter.

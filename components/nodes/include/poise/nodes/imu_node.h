@@ -1,7 +1,7 @@
-// The shape every IMU-driven estimator node shares: take an ImuSample from `imu` -> check it ->
-// convert -> step the core -> publish AttitudeEstimate on `attitude/<filter>` and
-// FilterDiagnostics on `diagnostics`. Subclasses only implement step() (the core call and the
-// report), which keeps each node a thin adapter.
+// The shape every IMU-driven estimator node shares (altitude included): take an ImuSample from
+// `imu` -> convert -> step the core -> publish its estimate and FilterDiagnostics on
+// `diagnostics`. Subclasses only call the core and map its outputs, which keeps each node a thin
+// adapter; decisions about sources are the core's (poise/core/source_report.h).
 #pragma once
 
 #include "poise/core/types.h"
@@ -26,33 +26,38 @@ struct NodeParams {
 };
 NodeParams node_params(const runtime::ComponentSpec& spec);
 
-class ImuAttitudeNode : public runtime::Component {
+/// The one node shape of every IMU-driven estimator: on each `imu` sample convert -> step the
+/// core -> publish the estimate (when the core has one) -> publish diagnostics every
+/// `diagnostics_every` input samples, rejected samples included (a core that rejects everything
+/// is reported, never silent). Subclasses only call their core and convert its outputs.
+class ImuEstimatorNode : public runtime::Component {
  public:
-  ImuAttitudeNode(const runtime::ComponentSpec& spec, runtime::HostContext& host, std::string filter_id);
-  ~ImuAttitudeNode() override;
+  ImuEstimatorNode(const runtime::ComponentSpec& spec, runtime::HostContext& host, std::string component);
+  ~ImuEstimatorNode() override;
   void start() override;
   void stop() override;
   [[nodiscard]] std::string status() const override;
 
  protected:
-  /// Steps the core with one IMU sample; fills `report` and `diag` when it returns true (publish).
-  /// Called with the node's mutex held (from the DDS thread), one sample at a time.
-  virtual bool step(const ImuSample& sample, AttitudeReport& report, DiagnosticsReport& diag) = 0;
+  /// Steps the core with one sample; false when the core rejected it. Called with mutex() held.
+  virtual bool step(const ImuSample& sample) = 0;
+  /// Converts the core's estimate for `sample` and writes it; false when the core has none yet.
+  virtual bool publish_estimate(const ImuSample& sample) = 0;
+  /// The core's per-source report, counters and metrics, 1:1 (sources, counters, metrics).
+  virtual void diagnostics(DiagnosticsReport& diag) const = 0;
 
   /// The lock that serialises step() with other inputs of a subclass (e.g. vision).
   std::mutex& mutex() { return mutex_; }
   [[nodiscard]] const std::string& sensor_id() const { return sensor_id_; }
-  [[nodiscard]] const std::string& filter_id() const { return filter_id_; }
+  [[nodiscard]] const std::string& component() const { return component_; }
   runtime::HostContext& host() { return host_; }
-  /// Publishes a report (used by subclasses with extra inputs).
-  void publish(const AttitudeReport& report, DiagnosticsReport& diag, bool with_diagnostics);
 
  private:
   void on_imu(const msg::ImuSample& m);
 
   runtime::HostContext& host_;
   std::string sensor_id_;
-  std::string filter_id_;
+  std::string component_;
   NodeParams params_;
   std::mutex mutex_;
   std::atomic<bool> running_{false};
@@ -61,9 +66,25 @@ class ImuAttitudeNode : public runtime::Component {
   std::atomic<uint64_t> rejected_{0};
   std::atomic<int64_t> last_latency_ns_{0};
   uint64_t since_diagnostics_ = 0;
-  std::unique_ptr<dds::Writer<msg::AttitudeEstimatePubSubType>> attitude_writer_;
   std::unique_ptr<dds::Writer<msg::FilterDiagnosticsPubSubType>> diagnostics_writer_;
   std::unique_ptr<dds::Reader<msg::ImuSamplePubSubType>> imu_reader_;
+};
+
+/// An attitude estimator's node: publishes AttitudeEstimate on `attitude/<filter>`.
+class ImuAttitudeNode : public ImuEstimatorNode {
+ public:
+  ImuAttitudeNode(const runtime::ComponentSpec& spec, runtime::HostContext& host, std::string filter_id);
+
+ protected:
+  /// The core's attitude for `sample` (stamp and seq are filled here); false when it has none.
+  virtual bool attitude(AttitudeReport& report) const = 0;
+  bool publish_estimate(const ImuSample& sample) override;
+  /// The report last published (for subclasses that publish more, e.g. a pose).
+  [[nodiscard]] const AttitudeReport& last_report() const { return report_; }
+
+ private:
+  AttitudeReport report_;
+  dds::Writer<msg::AttitudeEstimatePubSubType> attitude_writer_;
 };
 
 /// The host's monotonic clock in ns (CLOCK_MONOTONIC: the domain of sample stamps). Adapters

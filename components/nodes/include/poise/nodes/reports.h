@@ -2,6 +2,8 @@
 // every estimator node (so each node stays a thin adapter: sample -> core -> report -> write).
 #pragma once
 
+#include "poise/core/source_report.h"
+
 #include <poise/msg/diagnostics.h>
 #include <poise/msg/estimates.h>
 
@@ -31,23 +33,13 @@ struct AttitudeReport {
   Eigen::Vector3d gyro_bias_rps{0, 0, 0};
 };
 
+/// msg::SOURCE_* bits of the sources a core fused at this step (by source name: gyro/yaw_rate,
+/// accel, mag, imu_quat, vision_*, baro, speed; other names carry no bit).
+uint32_t sources_fused_bits(const SourceReports& sources);
+
 /// Builds the message (roll/pitch/yaw ZYX from q, disturbance norm from the vector).
 msg::AttitudeEstimate to_attitude_msg(const AttitudeReport& report, const std::string& sensor_id,
                                       const std::string& filter_id);
-
-/// One source's fusion status (mirrors msg::SourceStatus).
-struct SourceReport {
-  std::string source;
-  bool fresh = false;
-  bool fused = false;
-  std::string reason;
-  std::vector<double> innovation;
-  std::vector<double> innovation_variance;
-  double test_ratio = 0.0;
-  int64_t last_fused_stamp_ns = 0;
-  uint64_t fused_count = 0;
-  uint64_t rejected_count = 0;
-};
 
 struct MetricReport {
   std::string name;
@@ -59,12 +51,15 @@ struct DiagnosticsReport {
   int64_t stamp_ns = 0;
   uint32_t seq = 0;
   std::string component;
-  std::vector<SourceReport> sources;
+  SourceReports sources;  ///< the core's report, mapped 1:1 (see to_diagnostics_msg)
   std::map<std::string, uint64_t> counters;
   std::vector<MetricReport> metrics;
 };
 
-/// Builds the message; sequences longer than the IDL bounds are truncated and the truncation is
+/// Builds the message. Each SourceReport maps 1:1 onto msg::SourceStatus: fresh = a sample was
+/// there (decision != not available), fused = decision fused, reason = the core's reason
+/// ("not_available" when a not-available report gives none), last_fused_stamp_ns 0 = never.
+/// Sequences longer than the IDL bounds are truncated and the truncation is
 /// itself counted ("diagnostics_truncated"), never silently dropped.
 msg::FilterDiagnostics to_diagnostics_msg(const DiagnosticsReport& report, const std::string& sensor_id);
 

@@ -42,6 +42,7 @@
 #include "poise/core/attitude.h"
 #include "poise/core/attitude_filter.h"
 #include "poise/core/sample_check.h"
+#include "poise/core/source_report.h"
 #include "poise/core/types.h"
 #include "poise/parallel_kf/direction_kf.h"
 #include "poise/parallel_kf/tilt_kf.h"
@@ -176,8 +177,20 @@ class ParallelKf {
   /// Magnetometer samples used although gated, because rejection lasted mag_max_reject_s.
   [[nodiscard]] uint64_t mag_forced_count() const { return mag_forced_; }
   [[nodiscard]] const ParallelKfParams& params() const { return p_; }
+  /// Per source for the last sample (parallel_kf_report.cpp), in this order:
+  ///   gyro   fused when it propagated both KFs (not available on the first sample / after a gap);
+  ///   accel  KF1's correction: innovation s_A - H1 x1 (m/s^2; of the low-passed accelerometer when
+  ///          accel_lowpass_tau_s > 0), variance diag(H1 P1 H1^T) + sigma_A^2 with P1 after the
+  ///          update (the filter keeps no prior), never gated;
+  ///   mag    KF2's heading update: innovation [|s_M| - m (uT), dip - alpha (rad)], variance the
+  ///          squared gate tolerances, so test ratio > 1 <=> outside the gate. Rejected
+  ///          "disturbed" (gated), fused "forced_after_max_reject" (used although gated, after
+  ///          mag_max_reject_s), not available "learning_field" / "no_sample", rejected with the
+  ///          sample check's reason (non_finite_mag, zero_mag) or the whole sample's.
+  [[nodiscard]] SourceReports sources() const { return {gyro_src_, accel_src_, mag_src_}; }
 
  private:
+  bool step(const ImuSample& s, SampleCheck& c);  ///< update() without the reporting
   void initialize(const ImuSample& s, bool mag_ok);
   void learn_field(const Eigen::Vector3d& accel, const Eigen::Vector3d& mag, double dt);
   void update_rest_and_bias(const Eigen::Vector3d& gyro_raw, const Eigen::Vector3d& accel, double dt);
@@ -229,6 +242,21 @@ class ParallelKf {
   double rest_time_s_ = 0.0;
   bool rest_ = false;
   bool lp_init_ = false;
+
+  // Reporting (parallel_kf_report.cpp): what the last sample's heading step did with s_M.
+  enum class MagUse : uint8_t { kNone, kLearning, kGated, kForced };
+  void record_mag_gate(double norm_ut, double sin_dip) {
+    gate_norm_ut_ = norm_ut;
+    gate_sin_dip_ = sin_dip;
+  }
+  void report(const ImuSample& s, const SampleCheck& c, bool accepted, bool was_initialized);
+  void reset_report();
+  MagUse mag_use_ = MagUse::kNone;
+  double gate_norm_ut_ = std::nan("");  ///< |s_M| at the gate (NaN: not gated this sample)
+  double gate_sin_dip_ = 0.0;           ///< sin(dip) at the gate
+  SourceReport gyro_src_ = source_named("gyro");
+  SourceReport accel_src_ = source_named("accel");
+  SourceReport mag_src_ = source_named("mag");
 };
 
 /// AttitudeFilter adapter.

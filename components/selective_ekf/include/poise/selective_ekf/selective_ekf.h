@@ -42,6 +42,7 @@
 #include "poise/core/attitude.h"
 #include "poise/core/attitude_filter.h"
 #include "poise/core/sample_check.h"
+#include "poise/core/source_report.h"
 #include "poise/core/types.h"
 #include "poise/gauss_newton/gauss_newton.h"
 
@@ -181,6 +182,7 @@ struct SourceStatus {
   uint64_t fused = 0;        ///< counters count first-pass decisions (not replays)
   uint64_t rejected = 0;
   int64_t last_fused_stamp_ns = -1;
+  int64_t last_stamp_ns = -1;  ///< stamp of the last decision (any), -1 = none
   std::array<uint64_t, static_cast<size_t>(Decision::kCount)> by_decision{};
 };
 
@@ -316,6 +318,34 @@ class SelectiveEkf {
   std::deque<VisionPose> vision_log_;    ///< applied or queued, sorted by capture stamp
   int64_t newest_vision_capture_ns_ = -1;
 };
+
+// ---- Reporting (selective_ekf_report.cpp): the core's outputs in the shapes every node maps 1:1.
+
+/// Per source after the last step, in this order:
+///   gyro, imu_quat, vision_attitude, vision_position: the core's SourceStatus (innovation rad/s,
+///     rad or m; the decision's reason: fused "inflated" / "reset", rejected "disturbance",
+///     "quat_error", "gate", "bad_input", "too_old"; not available "no_mag" / "no_sample").
+///     A vision source whose last sample is older than vision_anchor_s before the state time is
+///     not available ("no_recent_sample": e.g. the tag was lost).
+///   mag: the selective test of the magnetometer (eqs. 8-10): innovation [theta_m - theta_ref,
+///     theta_q] (rad), variance the squared thresholds (test ratio > 1 = a test failed); rejected
+///     "disturbance_angle", "field_norm", "quat_error" or "untrusted_hold" while untrusted, not
+///     available "no_mag" / "learning_reference". Its counts are the IMU quaternion's fused at full
+///     weight and the untrusted samples; its last fused stamp is the IMU quaternion's (while trusted).
+SourceReports selective_ekf_sources(const SelectiveEkf& ekf);
+
+/// World-frame attitude covariance (rad^2, small angles about ENU x, y, z): R P_thth R^T of the
+/// body-frame error state, R = R(q_world_body()).
+Eigen::Matrix3d attitude_covariance_world(const SelectiveEkf& ekf);
+
+/// The 9x9 covariance [p, v, theta] (m^2, (m/s)^2, rad^2; theta world-frame small angles) of the
+/// 12x12 error state [w, theta(body), t, v]: blocks reordered, theta rotated by R(q).
+Eigen::Matrix<double, 9, 9> pose_covariance_world(const SelectiveEkfState& x, const Eigen::Quaterniond& q_world_body);
+
+/// The filter's vision input from a camera pose measurement: per-axis std from the mean of the
+/// covariance's position and rotation diagonals (NaN when not positive and finite: the params'
+/// defaults then apply).
+VisionPose to_vision_pose(const CameraPoseMeasurement& m);
 
 /// AttitudeFilter adapter (IMU-only path; vision goes through core().update_vision()).
 class SelectiveEkfFilter : public AttitudeFilter {

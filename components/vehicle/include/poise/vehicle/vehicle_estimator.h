@@ -36,6 +36,9 @@
 //   underestimated while driving (measured in docs/ESTIMATORS_ALTITUDE_VEHICLE.md).
 #pragma once
 
+#include "poise/core/source_report.h"
+#include "poise/core/types.h"
+
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
@@ -110,6 +113,10 @@ struct VehicleSample {
   bool has_speed = true;
 };
 
+/// The vehicle sample of an IMU sample whose body axes are the vehicle's (x forward, y left, z up),
+/// with the latest speed input: a_x, a_y = accel x, y; r = gyro z; B = mag (has_mag kept).
+VehicleSample vehicle_sample_from_imu(const ImuSample& imu, bool has_speed, double speed_mps);
+
 struct VehicleEstimate {
   int64_t stamp_ns = 0;
   double roll_rad = 0.0;
@@ -161,12 +168,18 @@ class VehicleEstimator {
   [[nodiscard]] const Vector5& ekf_state() const { return x_; }
   [[nodiscard]] const Matrix5& ekf_covariance() const { return p_; }
   [[nodiscard]] bool ekf_initialized() const { return ekf_init_; }
+  /// Per source for the last sample, in this order: yaw_rate (the EKF's propagation input), accel
+  /// (a_x, a_y: EKF input and TRIAD's virtual gravity), mag (innovation: |B| - |H|, uT, against
+  /// the disturbance tolerance: test ratio > 1 = rejected "disturbed_mag"), speed (the switching
+  /// input; rejected "bad_speed" when negative or NaN, the last valid speed is then kept).
+  [[nodiscard]] SourceReports sources() const { return {yaw_rate_, accel_, mag_, speed_}; }
 
  private:
   void ekf_init(const Eigen::Vector3d& euler);
   void ekf_predict(double a_x, double a_y, double r, double dt_s);
   void ekf_correct(const Eigen::Vector3d& mag_ut);
   void set_output(const Eigen::Vector3d& euler, bool from_triad);
+  void reject_sample(const char* why);
 
   VehicleParams params_;
   VehicleEstimate est_;
@@ -185,6 +198,11 @@ class VehicleEstimator {
   double prev_ax_ = 0.0;
   double prev_ay_ = 0.0;
   double prev_r_ = 0.0;
+  // Per-source reports of the last sample.
+  SourceReport yaw_rate_ = source_named("yaw_rate");
+  SourceReport accel_ = source_named("accel");
+  SourceReport mag_ = source_named("mag");
+  SourceReport speed_ = source_named("speed");
 };
 
 }  // namespace poise

@@ -1,0 +1,90 @@
+// ParallelKf::update() and the per-source report (kept apart from the filter's mathematics in
+// parallel_kf.cpp: the step records what it did with each input, this file turns it into the
+// SourceReport shape of poise/core/source_report.h).
+#include "poise/parallel_kf/parallel_kf.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace poise {
+
+bool ParallelKf::update(const ImuSample& s) {
+  const bool was_initialized = initialized_;
+  mag_use_ = MagUse::kNone;
+  gate_norm_ut_ = std::nan("");
+  SampleCheck c;
+  const bool accepted = step(s, c);
+  report(s, c, accepted, was_initialized);
+  return accepted;
+}
+
+void ParallelKf::reset_report() {
+  mag_use_ = MagUse::kNone;
+  gate_norm_ut_ = std::nan("");
+  gyro_src_ = source_named("gyro");
+  accel_src_ = source_named("accel");
+  mag_src_ = source_named("mag");
+}
+
+void ParallelKf::report(const ImuSample& s, const SampleCheck& c, bool accepted, bool was_initialized) {
+  if (!accepted) {
+    const char* why = to_string(c.reject);
+    gyro_src_.mark_rejected(why);
+    accel_src_.mark_rejected(why);
+    mag_src_.mark_rejected(why);
+    return;
+  }
+  if (was_initialized) {
+    gyro_src_.mark_fused(s.stamp_ns);
+  } else {
+    gyro_src_.mark_not_available("initialising");
+  }
+
+  // KF1: H1 = [g I | I], M1 = sigma_A^2 I (7f), (7h)
+  const Eigen::Matrix<double, 6, 6>& p1 = kf1_.covariance();
+  const double g = p_.tilt.gravity_mps2;
+  InnovationVector var_a(3);
+  for (int i = 0; i < 3; ++i) {
+    var_a[i] = g * g * p1(i, i) + 2.0 * g * p1(i, 3 + i) + p1(3 + i, 3 + i) +
+               p_.tilt.sigma_accel_mps2 * p_.tilt.sigma_accel_mps2;
+  }
+  accel_src_.set_innovation(kf1_.last_innovation(), var_a);
+  accel_src_.mark_fused(s.stamp_ns);
+
+  // KF2's magnetometer
+  if (!c.mag_ok) {
+    if (s.has_mag) {
+      mag_src_.mark_rejected(to_string(c.mag_reject));
+    } else {
+      mag_src_.mark_not_available("no_sample");
+    }
+    return;
+  }
+  if (std::isfinite(gate_norm_ut_)) {
+    const double dip = std::asin(std::clamp(gate_sin_dip_, -1.0, 1.0));
+    const double tol_norm_ut = p_.mag_norm_tol * field_m_;
+    const double tol_dip_rad = p_.mag_dip_tol_deg * kRadPerDeg;
+    InnovationVector innov(2);
+    innov << gate_norm_ut_ - field_m_, dip - field_dip_;
+    InnovationVector var(2);
+    var << tol_norm_ut * tol_norm_ut, tol_dip_rad * tol_dip_rad;
+    mag_src_.set_innovation(innov, var);
+  } else {
+    mag_src_.innovation.resize(0);
+    mag_src_.innovation_variance.resize(0);
+    mag_src_.test_ratio = 0.0;
+  }
+  switch (mag_use_) {
+    case MagUse::kGated: mag_src_.mark_rejected("disturbed"); return;
+    case MagUse::kForced: mag_src_.mark_fused(s.stamp_ns, "forced_after_max_reject"); return;
+    case MagUse::kLearning: mag_src_.mark_not_available("learning_field"); return;
+    case MagUse::kNone: break;
+  }
+  if (out_.mag_used) {
+    mag_src_.mark_fused(s.stamp_ns);
+  } else {
+    mag_src_.mark_not_available(was_initialized ? "not_used" : "initialising");
+  }
+}
+
+}  // namespace poise

@@ -1,0 +1,121 @@
+// The selective EKF's outputs in the shapes every node maps 1:1 (per-source report, world-frame
+// covariances, the vision input of a camera pose). Pure functions of the filter's public state,
+// apart from its mathematics in selective_ekf.cpp.
+#include "poise/selective_ekf/selective_ekf.h"
+
+#include <cmath>
+
+namespace poise {
+namespace {
+
+/// The decision of one SourceStatus in the shared shape.
+SourceReport from_status(const char* name, const SourceStatus& st) {
+  SourceReport r = source_named(name);
+  r.fused_count = st.fused;
+  r.rejected_count = st.rejected;
+  r.last_fused_stamp_ns = st.last_fused_stamp_ns;
+  r.innovation = st.innovation;
+  r.innovation_variance = st.innovation_variance;
+  r.test_ratio = st.test_ratio;
+  switch (st.last) {
+    case Decision::kNone: r.decision = SourceDecision::kNotAvailable; r.reason = "no_sample"; break;
+    case Decision::kFused: r.decision = SourceDecision::kFused; break;
+    case Decision::kFusedInflated: r.decision = SourceDecision::kFused; r.reason = "inflated"; break;
+    case Decision::kReset: r.decision = SourceDecision::kFused; r.reason = "reset"; break;
+    case Decision::kRejectedDisturbance: r.decision = SourceDecision::kRejected; r.reason = "disturbance"; break;
+    case Decision::kRejectedQuatError: r.decision = SourceDecision::kRejected; r.reason = "quat_error"; break;
+    case Decision::kRejectedNoMag: r.decision = SourceDecision::kNotAvailable; r.reason = "no_mag"; break;
+    case Decision::kRejectedGate: r.decision = SourceDecision::kRejected; r.reason = "gate"; break;
+    case Decision::kRejectedBadInput: r.decision = SourceDecision::kRejected; r.reason = "bad_input"; break;
+    case Decision::kRejectedTooOld: r.decision = SourceDecision::kRejected; r.reason = "too_old"; break;
+    case Decision::kCount: break;
+  }
+  if (r.decision == SourceDecision::kNotAvailable) {
+    r.innovation.resize(0);
+    r.innovation_variance.resize(0);
+    r.test_ratio = 0.0;
+  }
+  return r;
+}
+
+}  // namespace
+
+SourceReports selective_ekf_sources(const SelectiveEkf& ekf) {
+  const SelectiveEkfParams& p = ekf.params();
+  const int64_t now = ekf.state().stamp_ns;
+  const auto recent_ns = static_cast<int64_t>(std::llround(p.vision_anchor_s * 1e9));
+  SourceReports out;
+  out.reserve(5);
+  out.push_back(from_status("gyro", ekf.status(Source::kGyro)));
+  const SourceStatus& quat = ekf.status(Source::kImuQuat);
+  out.push_back(from_status("imu_quat", quat));
+
+  const MagStatus& m = ekf.mag_status();
+  SourceReport mag = source_named("mag");
+  mag.fused_count = quat.by_decision[static_cast<size_t>(Decision::kFused)];
+  mag.rejected_count = m.untrusted_samples;
+  if (quat.last == Decision::kNone || quat.last == Decision::kRejectedNoMag) {
+    mag.mark_not_available("no_mag");
+  } else if (!m.reference_ready) {
+    mag.mark_not_available("learning_reference");
+  } else {
+    const double thr_angle = p.disturbance_angle_threshold_deg * kRadPerDeg;
+    const double thr_q = p.quat_error_threshold_deg * kRadPerDeg;
+    InnovationVector innov(2);
+    innov << (m.disturbance_angle_deg - m.reference_angle_deg) * kRadPerDeg, m.quat_error_deg * kRadPerDeg;
+    InnovationVector var(2);
+    var << thr_angle * thr_angle, thr_q * thr_q;
+    mag.set_innovation(innov, var);
+    if (m.trusted) {
+      mag.decision = SourceDecision::kFused;
+      mag.last_fused_stamp_ns = quat.last_fused_stamp_ns;
+    } else {
+      mag.decision = SourceDecision::kRejected;
+      mag.reason = m.angle_test_failed        ? "disturbance_angle"
+                   : m.norm_test_failed       ? "field_norm"
+                   : m.quat_error_test_failed ? "quat_error"
+                                              : "untrusted_hold";
+    }
+  }
+  out.push_back(mag);
+
+  for (const auto& [name, source] : {std::pair{"vision_attitude", Source::kVisionAttitude},
+                                     std::pair{"vision_position", Source::kVisionPosition}}) {
+    const SourceStatus& st = ekf.status(source);
+    SourceReport r = from_status(name, st);
+    if (st.last != Decision::kNone && now - st.last_stamp_ns > recent_ns) {
+      r.mark_not_available("no_recent_sample");
+    }
+    out.push_back(r);
+  }
+  return out;
+}
+
+Eigen::Matrix3d attitude_covariance_world(const SelectiveEkf& ekf) {
+  const Eigen::Matrix3d r = ekf.q_world_body().toRotationMatrix();
+  return r * ekf.state().P.block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh) * r.transpose();
+}
+
+Eigen::Matrix<double, 9, 9> pose_covariance_world(const SelectiveEkfState& x,
+                                                   const Eigen::Quaterniond& q_world_body) {
+  // J maps the error state [w, th_body, t, v] to [p, v, th_world]: th_world = R th_body.
+  Eigen::Matrix<double, 9, SelectiveEkf::kN> j = Eigen::Matrix<double, 9, SelectiveEkf::kN>::Zero();
+  j.block<3, 3>(0, SelectiveEkf::kT).setIdentity();
+  j.block<3, 3>(3, SelectiveEkf::kV).setIdentity();
+  j.block<3, 3>(6, SelectiveEkf::kTh) = q_world_body.normalized().toRotationMatrix();
+  return j * x.P * j.transpose();
+}
+
+VisionPose to_vision_pose(const CameraPoseMeasurement& m) {
+  VisionPose v;
+  v.capture_stamp_ns = m.stamp_ns;
+  v.q_world_camera = m.q_world_camera;
+  v.p_world_camera_m = m.p_world_camera_m;
+  const double var_p = m.covariance.diagonal().head<3>().mean();
+  const double var_r = m.covariance.diagonal().tail<3>().mean();
+  v.sigma_m = var_p > 0.0 && std::isfinite(var_p) ? std::sqrt(var_p) : std::nan("");
+  v.sigma_rad = var_r > 0.0 && std::isfinite(var_r) ? std::sqrt(var_r) : std::nan("");
+  return v;
+}
+
+}  // namespace poise

@@ -1,0 +1,83 @@
+// ParallelKf::sources(): the heading update's decision for each magnetometer sample, from the
+// core itself (gated, forced after mag_max_reject_s, learning, missing), never inferred outside.
+#include "poise/parallel_kf/parallel_kf.h"
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+
+namespace poise {
+namespace {
+
+constexpr int64_t kStepNs = 10'000'000;  // 100 Hz
+
+ImuSample rest(int i, double mag_scale) {
+  ImuSample s;
+  s.stamp_ns = 1'000'000'000 + i * kStepNs;
+  s.accel_mps2 = Eigen::Vector3d(0, 0, 9.81);
+  s.gyro_rps.setZero();
+  s.mag_ut = mag_scale * Eigen::Vector3d(0, 20, -40);
+  return s;
+}
+
+SourceReport mag_of(const ParallelKf& kf) {
+  const SourceReports r = kf.sources();
+  EXPECT_EQ(r.size(), 3U);
+  EXPECT_STREQ(r[2].source, "mag");
+  return r[2];
+}
+
+TEST(ParallelKfReport, MagDecisionsFollowTheGateIncludingTheForcedCase) {
+  ParallelKfParams p;
+  p.mag_reacquire_s = 0.0;   // no new reference: the rejection lasts
+  p.mag_max_reject_s = 1.0;  // then the magnetometer is used regardless
+  ParallelKf kf(p);
+  int i = 0;
+  kf.update(rest(i++, 1.0));
+  EXPECT_STREQ(mag_of(kf).reason, "initialising");
+  kf.update(rest(i++, 1.0));
+  EXPECT_EQ(mag_of(kf).decision, SourceDecision::kNotAvailable);
+  EXPECT_STREQ(mag_of(kf).reason, "learning_field");
+  for (; i < 150; ++i) {  // start-up window (1 s) passes
+    kf.update(rest(i, 1.0));
+  }
+  EXPECT_EQ(mag_of(kf).decision, SourceDecision::kFused);
+  EXPECT_LT(mag_of(kf).test_ratio, 1.0);
+  EXPECT_EQ(mag_of(kf).last_fused_stamp_ns, rest(i - 1, 1.0).stamp_ns);
+  const int64_t last_fused = mag_of(kf).last_fused_stamp_ns;
+  kf.update(rest(i++, 1.5));  // |s_M| 50 % high: outside mag_norm_tol
+  EXPECT_EQ(mag_of(kf).decision, SourceDecision::kRejected);
+  EXPECT_STREQ(mag_of(kf).reason, "disturbed");
+  EXPECT_GT(mag_of(kf).test_ratio, 1.0);
+  EXPECT_NEAR(mag_of(kf).innovation[0], 0.5 * std::sqrt(20.0 * 20 + 40 * 40), 0.5) << "uT over m";
+  EXPECT_EQ(mag_of(kf).last_fused_stamp_ns, last_fused);
+  for (int k = 0; k < 110; ++k) {  // 1.1 s of rejection
+    kf.update(rest(i++, 1.5));
+  }
+  EXPECT_EQ(mag_of(kf).decision, SourceDecision::kFused) << "used again after mag_max_reject_s";
+  EXPECT_STREQ(mag_of(kf).reason, "forced_after_max_reject");
+  EXPECT_GT(mag_of(kf).test_ratio, 1.0) << "still outside the gate";
+  EXPECT_EQ(mag_of(kf).rejected_count, kf.mag_gated_count());
+}
+
+TEST(ParallelKfReport, MissingAndRejectedSamplesSayWhy) {
+  ParallelKf kf;
+  ImuSample s = rest(0, 1.0);
+  s.has_mag = false;
+  kf.update(s);
+  EXPECT_EQ(mag_of(kf).decision, SourceDecision::kNotAvailable);
+  EXPECT_STREQ(mag_of(kf).reason, "no_sample");
+  s = rest(1, 1.0);
+  s.accel_mps2.x() = std::nan("");
+  EXPECT_FALSE(kf.update(s));
+  for (const SourceReport& r : kf.sources()) {
+    EXPECT_EQ(r.decision, SourceDecision::kRejected) << r.source;
+    EXPECT_STREQ(r.reason, "non_finite_accel") << r.source;
+  }
+  kf.reset();
+  EXPECT_EQ(mag_of(kf).decision, SourceDecision::kNotAvailable);
+  EXPECT_EQ(mag_of(kf).rejected_count, 0U);
+}
+
+}  // namespace
+}  // namespace poise
