@@ -11,7 +11,7 @@ namespace {
 
 constexpr double kExact = 1e-12;  // pure reordering / rotation of given numbers
 
-// Identity attitude: [p v theta] is the [t v theta] block reorder of the 12x12 P.
+// Identity attitude: [p v theta] is the [t v theta] block reorder of the 15x15 P.
 TEST(SelectiveEkfReport, PoseCovarianceReordersBlocksAtIdentityAttitude) {
   SelectiveEkfState x;
   for (int i = 0; i < SelectiveEkf::kN; ++i) {
@@ -20,7 +20,10 @@ TEST(SelectiveEkfReport, PoseCovarianceReordersBlocksAtIdentityAttitude) {
     }
   }
   const Eigen::Matrix<double, 9, 9> c = pose_covariance_world(x, Eigen::Quaterniond::Identity());
-  const int from[9] = {6, 7, 8, 9, 10, 11, 3, 4, 5};  // t, v, theta in the error state
+  constexpr int kT = SelectiveEkf::kT;
+  constexpr int kV = SelectiveEkf::kV;
+  constexpr int kTh = SelectiveEkf::kTh;
+  const int from[9] = {kT, kT + 1, kT + 2, kV, kV + 1, kV + 2, kTh, kTh + 1, kTh + 2};
   for (int i = 0; i < 9; ++i) {
     for (int j = 0; j < 9; ++j) {
       EXPECT_NEAR(c(i, j), x.P(from[i], from[j]), kExact) << i << "," << j;
@@ -62,7 +65,7 @@ TEST(SelectiveEkfReport, VisionInputTakesMeanStdAndNanWhenUnusable) {
 TEST(SelectiveEkfReport, BeforeAnySampleEverySourceIsNotAvailable) {
   const SelectiveEkf ekf;
   const SourceReports r = selective_ekf_sources(ekf);
-  ASSERT_EQ(r.size(), 5U);
+  ASSERT_EQ(r.size(), 8U);  // gyro, imu_quat, mag, vision x2, accel_tilt, mag_heading, zero_rate
   for (const SourceReport& s : r) {
     EXPECT_EQ(s.decision, SourceDecision::kNotAvailable) << s.source;
   }

@@ -87,7 +87,7 @@ struct Step {
   double err_deg = 0.0;     // filter vs truth
   double gn_err_deg = 0.0;  // Gauss-Newton q_imu vs truth
   bool mag_trusted = true;
-  bool angle_failed = false;
+  bool angle_failed = false;  // disturbance tests: dip (8) or |m|
   Decision imu_quat = Decision::kNone;
   double rate_err_rps = 0.0;
   double sigma_deg = 0.0;
@@ -107,6 +107,7 @@ struct RunOptions {
 std::vector<Step> run(const sim::SimConfig& cfg, const RunOptions& o) {
   sim::SensorSimulator simu(cfg);
   SelectiveEkf ekf(o.params);
+  GaussNewton gn(ekf.params().gauss_newton);  // the paper's q_imu, for reference (kSplit skips it)
   VisionSynthesizer synth(o.vision);
   std::vector<Step> out;
   std::deque<ImuSample> lagged;  // IMU samples waiting out the sensor's group delay
@@ -122,6 +123,7 @@ std::vector<Step> run(const sim::SimConfig& cfg, const RunOptions& o) {
     lagged.pop_front();
     reading.stamp_ns = s.imu.stamp_ns;
     ekf.update_imu(reading);
+    gn.update(reading);
     for (VisionPose v : synth.pop_arrived(s.imu.stamp_ns)) {
       if (o.stamp_at_arrival) {
         v.capture_stamp_ns = s.imu.stamp_ns;
@@ -134,11 +136,9 @@ std::vector<Step> run(const sim::SimConfig& cfg, const RunOptions& o) {
     st.t_s = s.truth.t_s;
     st.q = ekf.q_world_body();
     st.err_deg = quat_angle_between(st.q, s.truth.q_world_body) * kDegPerRad;
-    st.gn_err_deg =
-        quat_angle_between(ekf.gauss_newton().result().q_world_body, s.truth.q_world_body) *
-        kDegPerRad;
+    st.gn_err_deg = quat_angle_between(gn.result().q_world_body, s.truth.q_world_body) * kDegPerRad;
     st.mag_trusted = ekf.mag_status().trusted;
-    st.angle_failed = ekf.mag_status().angle_test_failed;
+    st.angle_failed = ekf.mag_status().angle_test_failed || ekf.mag_status().norm_test_failed;
     st.imu_quat = ekf.status(Source::kImuQuat).last;
     st.rate_err_rps = (ekf.state().w_rps - s.truth.omega_body_rps).norm();
     st.sigma_deg = ekf.attitude_sigma_deg().maxCoeff();
@@ -378,6 +378,8 @@ TEST(SelectiveEkfVision, GivenImuDelayWhenOutputThenStatePredictedByTheEstimated
   for (int k = 0; k < 200; ++k) {
     ImuSample s = level_sample(int64_t{1'000'000'000} + k * int64_t{10'000'000});
     s.gyro_rps = Eigen::Vector3d(0.0, 0.0, 1.0);
+    // the magnetometer turns with the device (consistent with the gyro)
+    s.mag_ut = quat_exp(Eigen::Vector3d(0.0, 0.0, 0.01 * k)).conjugate() * s.mag_ut;
     ekf.update_imu(s);
   }
   // THEN q_world_body() = state (x) exp(w * delay), and the state itself is not advanced
@@ -570,12 +572,18 @@ TEST(SelectiveEkfInput, GivenBadImuSamplesWhenFedThenRejectedCountedAndStateUnto
   EXPECT_EQ(f.imu_rejections().count(RejectReason::kNonMonotonicStamp), 1u);
   EXPECT_EQ(f.state().stamp_ns, before.stamp_ns);
   EXPECT_EQ((f.state().P - before.P).norm(), 0.0);
-  // A NaN magnetometer keeps the sample (gyro) but gives no q_imu.
-  ImuSample nan_mag = level_sample(t);
-  nan_mag.mag_ut.y() = std::numeric_limits<double>::quiet_NaN();
-  EXPECT_TRUE(f.update_imu(nan_mag));
-  EXPECT_EQ(f.imu_rejections().count(RejectReason::kNonFiniteMag), 1u);
-  EXPECT_EQ(f.status(Source::kImuQuat).last, Decision::kRejectedNoMag);
+  // A NaN magnetometer keeps the sample (gyro, accelerometer tilt) but gives no heading row.
+  // (tilt and heading are fused every aiding_period_s: feed NaN magnetometers for longer)
+  const int nan_samples = 1 + static_cast<int>(f.params().aiding_period_s / 0.01);
+  for (int k = 0; k < nan_samples; ++k) {
+    t += 10'000'000;
+    ImuSample nan_mag = level_sample(t);
+    nan_mag.mag_ut.y() = std::numeric_limits<double>::quiet_NaN();
+    EXPECT_TRUE(f.update_imu(nan_mag));
+  }
+  EXPECT_EQ(f.imu_rejections().count(RejectReason::kNonFiniteMag), static_cast<uint64_t>(nan_samples));
+  EXPECT_EQ(f.status(Source::kHeading).last, Decision::kRejectedNoMag);
+  EXPECT_EQ(f.status(Source::kTilt).last, Decision::kFused);
   // A huge gap re-anchors time without integrating across it.
   t += 10'000'000;
   EXPECT_FALSE(f.update_imu(level_sample(t + 5'000'000'000LL)));
@@ -634,28 +642,54 @@ TEST(SelectiveEkfCore, GivenManyUpdatesThenCovarianceStaysSymmetricPositiveDefin
   EXPECT_GT(synth.frames_dropped(), 0u);
 }
 
-TEST(SelectiveEkfCore, GivenQuatErrorLockoutWhenNoVisionThenImuQuatAcceptedAgain) {
-  // GIVEN a filter whose attitude is 30 deg off in heading (no vision to anchor it)
-  SelectiveEkfParams p;
+// A level device whose magnetometer says the heading is 30 deg off from where the filter starts
+// (the device truly yawed, the gyro missed it), no vision to anchor the heading.
+struct HeadingOffRun {
+  bool quat_error_rejection_seen = false;
+  bool any_distrust_seen = false;
+  bool trusted_at_end = false;
+  double final_error_deg = 0.0;
+};
+HeadingOffRun run_heading_off(SelectiveEkfParams p, int samples) {
   p.dip_deg = 60.0;
   SelectiveEkf f(p);
   int64_t t = 1'000'000'000;
   f.update_imu(level_sample(t));
-  // Rotate the world under it: the device truly yawed 30 deg but the gyro missed it.
   const Eigen::Quaterniond yaw = quat_from_euler_zyx(0.0, 0.0, 30.0 * kRadPerDeg);
-  bool rejected_seen = false;
-  for (int k = 1; k <= 600; ++k) {
+  HeadingOffRun r;
+  for (int k = 1; k <= samples; ++k) {
     t += 10'000'000;
     ImuSample s = level_sample(t);
     s.mag_ut = yaw.conjugate() * s.mag_ut;
     f.update_imu(s);
-    rejected_seen |= !f.mag_status().trusted && f.mag_status().quat_error_test_failed;
+    r.quat_error_rejection_seen |= !f.mag_status().trusted && f.mag_status().quat_error_test_failed;
+    r.any_distrust_seen |= !f.mag_status().trusted;
   }
+  r.trusted_at_end = f.mag_status().trusted;
+  r.final_error_deg = quat_angle_between(f.q_world_body(), yaw) * kDegPerRad;
+  return r;
+}
+
+TEST(SelectiveEkfCore, GivenQuatErrorLockoutWhenNoVisionThenImuQuatAcceptedAgain) {
+  // GIVEN the 30 deg heading offset with the paper's Gauss-Newton quaternion (kSplit applies the
+  // quaternion-error test only while vision anchors the heading: see the next test)
+  SelectiveEkfParams p;
+  p.imu_measurement = ImuMeasurement::kQuaternion;
+  const HeadingOffRun r = run_heading_off(p, 600);
   // THEN the quaternion-error test first distrusts q_imu, then the lock-out release lets the
   // undisturbed magnetometer pull the heading back
-  EXPECT_TRUE(rejected_seen);
-  EXPECT_TRUE(f.mag_status().trusted);
-  EXPECT_LT(quat_angle_between(f.q_world_body(), yaw) * kDegPerRad, 2.0);
+  EXPECT_TRUE(r.quat_error_rejection_seen);
+  EXPECT_TRUE(r.trusted_at_end);
+  EXPECT_LT(r.final_error_deg, 2.0);
+}
+
+TEST(SelectiveEkfCore, GivenHeadingOffWithoutVisionWhenSplitThenMagnetometerTrustedAndPullsBack) {
+  // GIVEN the same offset with the split measurements (default), 60 s (several time constants)
+  const HeadingOffRun r = run_heading_off(SelectiveEkfParams{}, 6000);
+  // THEN the undisturbed magnetometer (dip and |m| unchanged) is never distrusted for disagreeing
+  // with a prediction nothing anchors, and the heading converges
+  EXPECT_FALSE(r.any_distrust_seen);
+  EXPECT_LT(r.final_error_deg, 2.0);
 }
 
 TEST(SelectiveEkfConfig, GivenShippedYamlFilesWhenLoadedThenValidAndDistinct) {
@@ -722,8 +756,11 @@ TEST(SelectiveEkfConfig, GivenBadYamlWhenLoadedThenErrorNamesTheKey) {
 namespace poise {
 namespace {
 
-constexpr double kBroadGatedMaxDeg = 1.0;   // trial 32 gated total RMSE (measured 0.64 deg)
-constexpr double kBroadUngatedMinRatio = 5.0;  // ungated at least this many times worse
+constexpr double kBroadGatedMaxDeg = 1.0;   // trial 32 gated total RMSE (measured 0.58 deg)
+// Gating gains at least this much. With the split measurements the magnet can only pull the
+// heading, weakly next to vision (the paper's Gauss-Newton quaternion also pulled the tilt:
+// 71.7 deg ungated then; now 0.77 deg ungated vs 0.58 gated).
+constexpr double kBroadGatingGainMinDeg = 0.1;
 
 TEST(SelectiveEkfBroad, GivenAttachedMagnetTrialWhenGatedThenBeatsUngatedWithHybridVision) {
   POISE_REQUIRE_SHARED_DIR(shared);
@@ -740,7 +777,7 @@ TEST(SelectiveEkfBroad, GivenAttachedMagnetTrialWhenGatedThenBeatsUngatedWithHyb
   std::printf("trial 32 total RMSE: gated %.3f deg, ungated %.3f deg\n", eg.total_deg, eu.total_deg);
   // THEN the gated filter stays near the vision level and the ungated one follows the magnet
   EXPECT_LT(eg.total_deg, kBroadGatedMaxDeg);
-  EXPECT_GT(eu.total_deg, kBroadUngatedMinRatio * eg.total_deg);
+  EXPECT_GT(eu.total_deg, eg.total_deg + kBroadGatingGainMinDeg);
   EXPECT_GT(g.core().mag_status().untrusted_samples, 0u);
   EXPECT_GT(g.core().vision_counters().replayed_imu_samples, 0u);
 }
@@ -768,6 +805,161 @@ TEST(SelectiveEkfBroad, GivenTheMeasuredImuDelayWhenConfiguredThenCloserToTheRef
   EXPECT_GT(delay.delay_s, kBroadImuDelayMinS);
   EXPECT_LT(delay.delay_s, kBroadImuDelayMaxS);
   EXPECT_LT(eb.total_deg, ea.total_deg - kBroadDelayGainDeg);
+}
+
+// ------------------------------------------------------------------ IMU only (issue 21)
+// Tolerances with their reasons (deg unless stated).
+constexpr double kExtAccelTiltMaxDeg = 3.0;   // tilt under 12 m/s^2 external accelerations: the
+                                               // low-passed gravity direction, not the raw accel
+constexpr double kMagnetTiltMaxDeg = 0.5;     // tilt of a static device while a magnet is near:
+                                               // the magnetometer has no tilt row in kSplit
+constexpr double kBiasErrorMaxDps = 0.1;      // bias estimate vs the simulator's 0.44 deg/s bias
+constexpr double kBlackoutMaxDeg = 3.0;       // error during a 20 s vision blackout (IMU only)
+constexpr double kReturnStepMarginDeg = 1.0;  // output step at vision return beyond the error
+                                               // accumulated during the blackout: one vision
+                                               // noise sigma (the first frame's own error)
+
+double inclination_deg(const Eigen::Quaterniond& est, const Eigen::Quaterniond& truth) {
+  return heading_inclination_of_world_error(est * truth.conjugate()).inclination_rad * kDegPerRad;
+}
+
+TEST(SelectiveEkfImuOnly, GivenLargeExternalAccelerationsWhenSplitThenTiltStaysNearTruth) {
+  SCOPED_TRACE(::testing::Message() << "seed " << kSeed);
+  // GIVEN the simulator's fast_motion scenario (up to 12 m/s^2 per axis, 230 deg/s), no magnet,
+  // no vision: the accelerometer is far from gravity most of the time
+  const sim::SimConfig cfg = sim::make_scenario("fast_motion", kRateHz, kSeed);
+  auto run_tilt = [&cfg](ImuMeasurement m) {
+    sim::SensorSimulator simu(cfg);
+    SelectiveEkfParams p;
+    p.imu_measurement = m;
+    SelectiveEkf ekf(p);
+    double worst = 0.0;
+    while (!simu.done()) {
+      const auto s = simu.next();
+      ekf.update_imu(s.imu);
+      if (s.truth.t_s > 2.0) {
+        worst = std::max(worst, inclination_deg(ekf.q_world_body(), s.truth.q_world_body));
+      }
+    }
+    return worst;
+  };
+  // WHEN the filter runs with the split tilt/heading measurements and with the paper's quaternion
+  const double split = run_tilt(ImuMeasurement::kSplit);
+  const double paper = run_tilt(ImuMeasurement::kQuaternion);
+  std::printf("fast_motion max tilt error: split %.2f deg, Gauss-Newton quaternion %.2f deg\n", split,
+              paper);
+  // THEN the tilt stays near the truth and clearly better than with the raw-accelerometer quaternion
+  EXPECT_LT(split, kExtAccelTiltMaxDeg);
+  EXPECT_GT(paper, split);
+}
+
+TEST(SelectiveEkfImuOnly, GivenMagnetNearStaticDeviceWhenSplitThenTiltUnaffected) {
+  // GIVEN the static_magnet scenario (a 35 uT magnet 15-36 s), no vision
+  sim::SimConfig cfg = sim::make_scenario("static_magnet", kRateHz, kSeed);
+  cfg.duration_s = 45.0;
+  sim::SensorSimulator simu(cfg);
+  SelectiveEkf ekf;
+  double worst_tilt = 0.0;
+  int flagged = 0;
+  int n = 0;
+  while (!simu.done()) {
+    const auto s = simu.next();
+    ekf.update_imu(s.imu);
+    if (s.truth.t_s >= 15.0 && s.truth.t_s < 36.0) {
+      worst_tilt = std::max(worst_tilt, inclination_deg(ekf.q_world_body(), s.truth.q_world_body));
+      flagged += ekf.mag_status().trusted ? 0 : 1;
+      ++n;
+    }
+  }
+  std::printf("static magnet: max tilt error %.3f deg, magnetometer untrusted %.3f of the episode\n",
+              worst_tilt, static_cast<double>(flagged) / n);
+  // THEN the tilt does not move (the magnetometer only measures heading) and the magnet is flagged
+  EXPECT_LT(worst_tilt, kMagnetTiltMaxDeg);
+  EXPECT_GT(static_cast<double>(flagged) / n, 0.5);
+}
+
+TEST(SelectiveEkfImuOnly, GivenGyroBiasWhenRestsAndMotionThenBiasEstimated) {
+  // GIVEN the random_motion scenario (gyro bias (0.3, -0.2, 0.25) deg/s, rests between motion)
+  const sim::SimConfig cfg = sim::make_scenario("random_motion", kRateHz, kSeed);
+  sim::SensorSimulator simu(cfg);
+  SelectiveEkf ekf;
+  while (!simu.done()) {
+    ekf.update_imu(simu.next().imu);
+  }
+  // THEN the bias state holds the simulator's bias
+  const Eigen::Vector3d err = ekf.state().b_rps - cfg.noise.gyro_bias_rps;
+  std::printf("bias estimate (%.3f, %.3f, %.3f) deg/s, truth (%.3f, %.3f, %.3f), error %.3f deg/s\n",
+              ekf.state().b_rps.x() * kDegPerRad, ekf.state().b_rps.y() * kDegPerRad,
+              ekf.state().b_rps.z() * kDegPerRad, cfg.noise.gyro_bias_rps.x() * kDegPerRad,
+              cfg.noise.gyro_bias_rps.y() * kDegPerRad, cfg.noise.gyro_bias_rps.z() * kDegPerRad,
+              err.norm() * kDegPerRad);
+  EXPECT_LT(err.norm() * kDegPerRad, kBiasErrorMaxDps);
+  EXPECT_GT(ekf.status(Source::kZeroRate).fused, 0u);
+}
+
+TEST(SelectiveEkfImuOnly, GivenVisionBlackoutWhenVisionReturnsThenNoStepBeyondTheDrift) {
+  SCOPED_TRACE(::testing::Message() << "seed " << kSeed);
+  // GIVEN a handheld device (no magnet) with the tag visible, then hidden for 20 s (10-30 s)
+  Episode none;
+  none.start_s = 100.0;
+  RunOptions o;
+  o.vision = tag(50.0);
+  o.hide_from_s = 10.0;
+  o.hide_to_s = 30.0;
+  // WHEN the filter runs through the blackout and the return
+  const auto steps = run(handheld_with_magnet(none, 40.0), o);
+  // THEN the IMU alone keeps the attitude during the blackout...
+  const Window dark = window(steps, o.hide_from_s, o.hide_to_s);
+  EXPECT_LT(dark.max_err, kBlackoutMaxDeg);
+  // ... and the output step when vision returns (rotation not explained by the truth's own
+  // motion between samples) is no larger than the error accumulated in the dark plus the noise
+  // of a frame
+  double err_at_return = 0.0;
+  double max_step = 0.0;
+  sim::SensorSimulator truth_sim(handheld_with_magnet(none, 40.0));
+  std::vector<Eigen::Quaterniond> truth;
+  while (!truth_sim.done()) {
+    truth.push_back(truth_sim.next().truth.q_world_body);
+  }
+  ASSERT_EQ(truth.size(), steps.size());
+  for (size_t i = 1; i < steps.size(); ++i) {
+    if (steps[i].t_s < o.hide_to_s) {
+      err_at_return = steps[i].err_deg;
+    } else if (steps[i].t_s < o.hide_to_s + 1.0) {
+      const Eigen::Quaterniond moved = truth[i - 1].conjugate() * truth[i];  // body-frame motion
+      max_step = std::max(max_step,
+                          quat_angle_between(steps[i].q, steps[i - 1].q * moved) * kDegPerRad);
+    }
+  }
+  std::printf("blackout: max error %.2f deg, error at return %.2f deg, largest step %.3f deg\n",
+              dark.max_err, err_at_return, max_step);
+  EXPECT_LT(max_step, err_at_return + kReturnStepMarginDeg);
+  const Window back = window(steps, o.hide_to_s + 2.0, 40.0);
+  EXPECT_LT(back.max_err, kFollowVisionMaxDeg);
+}
+
+TEST(SelectiveEkfVision, GivenBlackoutOptionsWhenSynthesisedThenNoFrameInsideTheBlackouts) {
+  // GIVEN 30 Hz vision with 3 s blackouts every 10 s, no random dropouts
+  VisionSynthParams v = tag(0.0);
+  v.blackout_s = 3.0;
+  v.blackout_every_s = 10.0;
+  VisionSynthesizer synth(v);
+  int inside = 0;
+  int outside = 0;
+  for (int k = 0; k < 3000; ++k) {  // 30 s at 100 Hz
+    const int64_t t = int64_t{10'000'000} * k;
+    synth.push_truth(t, Eigen::Quaterniond::Identity(), Eigen::Vector3d::Zero(), true);
+    for (const VisionPose& f : synth.pop_arrived(t)) {
+      const double phase = std::fmod(static_cast<double>(f.capture_stamp_ns) * 1e-9, 10.0);
+      (phase >= 7.0 ? inside : outside) += 1;
+    }
+  }
+  // THEN every frame falls outside [7, 10) s of each 10 s, and the rest is delivered (30 Hz x 21 s)
+  EXPECT_EQ(inside, 0);
+  EXPECT_NEAR(outside, 30 * 21, 3);
+  // AND inconsistent options are refused
+  v.blackout_every_s = 2.0;
+  EXPECT_THROW(VisionSynthesizer{v}, std::invalid_argument);
 }
 
 }  // namespace

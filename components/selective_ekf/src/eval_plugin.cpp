@@ -9,6 +9,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cstdio>
 #include <memory>
 #include <stdexcept>
@@ -28,16 +29,39 @@ SelectiveEvalFilter::SelectiveEvalFilter(const SelectiveEkfParams& p, const Visi
   }
 }
 
+SelectiveEvalFilter::~SelectiveEvalFilter() { say_return_steps(); }
+
+void SelectiveEvalFilter::say_return_steps() const {
+  if (synth_ && steps_.returns > 0) {
+    std::fprintf(stderr,
+                 "selective: %s: %d vision returns after gaps >= %.0f s (longest %.1f s): largest "
+                 "output step within %.0f s of a return %.3f deg\n",
+                 trial_name_.c_str(), steps_.returns, VisionReturnSteps::kVisionGapS, steps_.max_gap_s,
+                 VisionReturnSteps::kReturnWindowS, steps_.max_step_deg);
+  }
+}
+
 void SelectiveEvalFilter::reset() {
+  say_return_steps();
   SelectiveEkfFilter::reset();
   trial_ = nullptr;
   synth_.reset();
   k_ = 0;
+  steps_ = VisionReturnSteps{};
+  last_frame_ns_ = -1;
+  return_until_ns_ = -1;
+  prev_stamp_ns_ = -1;
 }
 
 void SelectiveEvalFilter::begin_trial(const eval::BroadTrial& trial) {
+  say_return_steps();
   trial_ = &trial;
+  trial_name_ = trial.stem;
   k_ = 0;
+  steps_ = VisionReturnSteps{};
+  last_frame_ns_ = -1;
+  return_until_ns_ = -1;
+  prev_stamp_ns_ = -1;
   synth_.reset();
   if (vision_.rate_hz > 0.0) {
     synth_ = std::make_unique<VisionSynthesizer>(vision_);
@@ -54,6 +78,27 @@ bool SelectiveEvalFilter::update(const ImuSample& s) {
     for (VisionPose v : synth_->pop_arrived(s.stamp_ns)) {
       v.has_position = has_pos;
       core().update_vision(v);
+      if (last_frame_ns_ >= 0) {
+        const double gap_s = static_cast<double>(s.stamp_ns - last_frame_ns_) * 1e-9;
+        if (gap_s >= VisionReturnSteps::kVisionGapS) {
+          ++steps_.returns;
+          steps_.max_gap_s = std::max(steps_.max_gap_s, gap_s);
+          return_until_ns_ =
+              s.stamp_ns + static_cast<int64_t>(VisionReturnSteps::kReturnWindowS * 1e9);
+        }
+      }
+      last_frame_ns_ = s.stamp_ns;
+    }
+    // Output step not explained by the gyro, inside a return window (this sample included).
+    const Eigen::Quaterniond q = core().q_world_body();
+    if (ok && prev_stamp_ns_ >= 0 && s.stamp_ns <= return_until_ns_) {
+      const double h = static_cast<double>(s.stamp_ns - prev_stamp_ns_) * 1e-9;
+      const double step = quat_angle_between(q, prev_q_ * quat_exp(s.gyro_rps * h)) * kDegPerRad;
+      steps_.max_step_deg = std::max(steps_.max_step_deg, step);
+    }
+    if (ok) {
+      prev_q_ = q;
+      prev_stamp_ns_ = s.stamp_ns;
     }
   }
   ++k_;
@@ -144,6 +189,15 @@ void register_selective_ekf_cli(CLI::App& app) {
       ->check(CLI::Range(0.0, 0.99))
       ->capture_default_str();
   broad->add_option("--seed", vision->seed, "selective: seed of the vision noise and dropouts")
+      ->capture_default_str();
+  broad->add_option("--vision-blackout-s", vision->blackout_s,
+                    "selective: long vision blackouts of this length, s (0 = none); the largest "
+                    "output step at each return is said on stderr")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  broad->add_option("--vision-blackout-every-s", vision->blackout_every_s,
+                    "selective: one blackout (the last --vision-blackout-s) in every this many s")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
 }
 

@@ -84,7 +84,33 @@ SelectiveEkfParams load_selective_ekf_params(const std::string& path) {
       {"sigma_angular_accel", d(p.sigma_angular_accel)},
       {"sigma_linear_accel", d(p.sigma_linear_accel)},
       {"sigma_attitude_walk", d(p.sigma_attitude_walk)},
+      {"sigma_bias_walk", d(p.sigma_bias_walk)},
       {"sigma_gyro_rps", d(p.sigma_gyro_rps)},
+      {"imu_measurement",
+       [&p](const YAML::Node& n) {
+         const std::string s = n.as<std::string>();
+         if (s == "split") {
+           p.imu_measurement = ImuMeasurement::kSplit;
+         } else if (s == "quaternion") {
+           p.imu_measurement = ImuMeasurement::kQuaternion;
+         } else {
+           throw std::runtime_error("must be split or quaternion");
+         }
+       }},
+      {"accel_lowpass_tau_s", d(p.accel_lowpass_tau_s)},
+      {"sigma_tilt_rad_sqrt_s", d(p.sigma_tilt_rad_sqrt_s)},
+      {"tilt_accel_ref_mps2", d(p.tilt_accel_ref_mps2)},
+      {"gravity_mps2", d(p.gravity_mps2)},
+      {"aiding_period_s", d(p.aiding_period_s)},
+      {"heading_dip_tolerance_deg", d(p.heading_dip_tolerance_deg)},
+      {"heading_norm_tolerance", d(p.heading_norm_tolerance)},
+      {"sigma_heading_rad_sqrt_s", d(p.sigma_heading_rad_sqrt_s)},
+      {"rest_detection", b(p.rest_detection)},
+      {"rest_gyro_max_rps", d(p.rest_gyro_max_rps)},
+      {"rest_accel_max_mps2", d(p.rest_accel_max_mps2)},
+      {"rest_min_s", d(p.rest_min_s)},
+      {"rest_filter_tau_s", d(p.rest_filter_tau_s)},
+      {"sigma_rest_rate_rps", d(p.sigma_rest_rate_rps)},
       {"sigma_imu_quat_deg", d(p.sigma_imu_quat_deg)},
       {"sigma_vision_deg", d(p.sigma_vision_deg)},
       {"sigma_vision_m", d(p.sigma_vision_m)},
@@ -131,6 +157,7 @@ SelectiveEkfParams load_selective_ekf_params(const std::string& path) {
       {"p_body_camera_m", [&p](const YAML::Node& n) { p.p_body_camera_m = as_vec3(n); }},
       {"init_sigma_attitude_deg", d(p.init_sigma_attitude_deg)},
       {"init_sigma_rate_rps", d(p.init_sigma_rate_rps)},
+      {"init_sigma_bias_rps", d(p.init_sigma_bias_rps)},
       {"init_sigma_position_m", d(p.init_sigma_position_m)},
       {"init_sigma_velocity_mps", d(p.init_sigma_velocity_mps)},
       {"max_dt_s", d(p.limits.max_dt_s)},

@@ -24,6 +24,9 @@ const char* to_string(Source s) {
     case Source::kImuQuat: return "imu_quat";
     case Source::kVisionAttitude: return "vision_attitude";
     case Source::kVisionPosition: return "vision_position";
+    case Source::kTilt: return "accel_tilt";
+    case Source::kHeading: return "mag_heading";
+    case Source::kZeroRate: return "zero_rate";
     case Source::kCount: break;
   }
   return "unknown";
@@ -56,6 +59,17 @@ void validate(const SelectiveEkfParams& p) {
   need(p.sigma_linear_accel > 0.0, "sigma_linear_accel must be > 0");
   need(p.sigma_attitude_walk >= 0.0, "sigma_attitude_walk must be >= 0");
   need(p.sigma_gyro_rps > 0.0, "sigma_gyro_rps must be > 0");
+  need(p.sigma_bias_walk >= 0.0, "sigma_bias_walk must be >= 0");
+  need(p.accel_lowpass_tau_s >= 0.0, "accel_lowpass_tau_s must be >= 0 (s, 0 = raw accelerometer)");
+  need(p.sigma_tilt_rad_sqrt_s > 0.0, "sigma_tilt_rad_sqrt_s must be > 0");
+  need(p.tilt_accel_ref_mps2 >= 0.0, "tilt_accel_ref_mps2 must be >= 0 (0 = off)");
+  need(p.gravity_mps2 > 5.0 && p.gravity_mps2 < 15.0, "gravity_mps2 must be in (5, 15)");
+  need(p.aiding_period_s >= 0.0 && p.aiding_period_s <= 1.0, "aiding_period_s must be in [0, 1] s");
+  need(p.sigma_heading_rad_sqrt_s > 0.0, "sigma_heading_rad_sqrt_s must be > 0");
+  need(p.rest_gyro_max_rps > 0.0 && p.rest_accel_max_mps2 > 0.0, "rest thresholds must be > 0");
+  need(p.rest_min_s >= 0.0 && p.rest_filter_tau_s > 0.0, "rest_min_s >= 0, rest_filter_tau_s > 0");
+  need(p.sigma_rest_rate_rps > 0.0, "sigma_rest_rate_rps must be > 0");
+  need(p.init_sigma_bias_rps > 0.0, "init_sigma_bias_rps must be > 0");
   need(p.sigma_imu_quat_deg > 0.0, "sigma_imu_quat_deg must be > 0");
   need(p.sigma_vision_deg > 0.0, "sigma_vision_deg must be > 0");
   need(p.sigma_vision_m > 0.0, "sigma_vision_m must be > 0");
@@ -64,6 +78,8 @@ void validate(const SelectiveEkfParams& p) {
   need(p.startup_samples >= 1, "startup_samples must be >= 1");
   need(p.disturbance_angle_threshold_deg > 0.0, "disturbance_angle_threshold_deg must be > 0");
   need(p.mag_norm_threshold > 0.0, "mag_norm_threshold must be > 0");
+  need(p.heading_dip_tolerance_deg > 0.0, "heading_dip_tolerance_deg must be > 0");
+  need(p.heading_norm_tolerance >= 0.0, "heading_norm_tolerance must be >= 0 (0 = off)");
   need(p.quat_error_threshold_deg > 0.0 && p.quat_error_threshold_deg <= 180.0,
        "quat_error_threshold_deg must be in (0, 180]");
   need(p.inflate_factor >= 1.0, "inflate_factor must be >= 1");
@@ -102,6 +118,7 @@ void SelectiveEkf::reset() {
   const double sa = p_.init_sigma_attitude_deg * kRadPerDeg;
   x_.P.diagonal().segment<3>(kW).setConstant(p_.init_sigma_rate_rps * p_.init_sigma_rate_rps);
   x_.P.diagonal().segment<3>(kTh).setConstant(sa * sa);
+  x_.P.diagonal().segment<3>(kB).setConstant(p_.init_sigma_bias_rps * p_.init_sigma_bias_rps);
   x_.P.diagonal().segment<3>(kT).setConstant(p_.init_sigma_position_m * p_.init_sigma_position_m);
   x_.P.diagonal().segment<3>(kV).setConstant(p_.init_sigma_velocity_mps *
                                               p_.init_sigma_velocity_mps);
@@ -156,8 +173,8 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
   x_.t_m += x_.v_mps * h;                                  // t <- t + v h (3)
 
   // P <- F P F^T + Q (4), F applied by blocks: F P F^T = F (F P)^T for symmetric P.
-  // F is block-diagonal between [w, th] and [t, v]; while P has no cross-covariance between the
-  // two (no lever-arm position fix yet, x_.coupled false) each 6x6 block is propagated alone.
+  // F is block-diagonal between [w, th, b] and [t, v]; while P has no cross-covariance between
+  // the two (no lever-arm position fix yet, x_.coupled false) each block is propagated alone.
   const Eigen::Matrix3d a = dq.toRotationMatrix().transpose();  // J_dth'_dth = Exp(w h)^T
   const Eigen::Matrix3d b = so3_right_jacobian(wh) * h;         // J_dth'_dw
   if (x_.coupled) {
@@ -168,17 +185,20 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
       return out;
     };
     const Mat fp = apply_f(x_.P);
-    x_.P = apply_f(fp.transpose());
+    const Mat fpf = apply_f(fp.transpose());
+    x_.P = 0.5 * (fpf + fpf.transpose());
   } else {
     using Mat6 = Eigen::Matrix<double, 6, 6>;
-    Mat6 att = x_.P.topLeftCorner<6, 6>();  // [w, th]: th' = a th + b w
-    auto apply_att = [&](const Mat6& m) {
-      Mat6 out = m;
-      out.bottomRows<3>() = a * m.bottomRows<3>() + b * m.topRows<3>();
+    using MatA = Eigen::Matrix<double, kAttN, kAttN>;
+    const MatA att = x_.P.topLeftCorner<kAttN, kAttN>();  // [w, th, b]: th' = a th + b w
+    auto apply_att = [&](const MatA& m) {
+      MatA out = m;
+      out.middleRows<3>(kTh) = a * m.middleRows<3>(kTh) + b * m.middleRows<3>(kW);
       return out;
     };
-    const Mat6 fa = apply_att(att);
-    x_.P.topLeftCorner<6, 6>() = apply_att(fa.transpose());
+    const MatA fa = apply_att(att);
+    const MatA fpf = apply_att(fa.transpose());
+    x_.P.topLeftCorner<kAttN, kAttN>() = 0.5 * (fpf + fpf.transpose());  // exactly symmetric
     Mat6 tr = x_.P.bottomRightCorner<6, 6>();  // [t, v]: t' = t + h v
     tr.topRows<3>() += h * tr.bottomRows<3>();
     tr.leftCols<3>() += h * tr.rightCols<3>();
@@ -187,6 +207,7 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
   const double qw = p_.sigma_angular_accel * p_.sigma_angular_accel * h;
   const double qth = p_.sigma_attitude_walk * p_.sigma_attitude_walk * h;
   const double qv = p_.sigma_linear_accel * p_.sigma_linear_accel * h;
+  const double qb = p_.sigma_bias_walk * p_.sigma_bias_walk * h;
   // Q of the continuous white-noise models over h: [q h, q h^2/2; q h^2/2, q h^3/3] for each
   // (rate, attitude) and (velocity, position) pair. The cross terms let the gyro row correct the
   // attitude integrated with the previous rate (trapezoid-like, no one-sample lag).
@@ -197,6 +218,7 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
     x_.P(kTh + i, kTh + i) += qth + qw * h * h / 3.0;
     x_.P(kW + i, kTh + i) += qc_w;
     x_.P(kTh + i, kW + i) += qc_w;
+    x_.P(kB + i, kB + i) += qb;
     x_.P(kV + i, kV + i) += qv;
     x_.P(kT + i, kT + i) += qv * h * h / 3.0;
     x_.P(kV + i, kT + i) += qc_v;
@@ -208,88 +230,96 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
 // ------------------------------------------------------------------------------------ update
 namespace {
 
-/// Joseph-form update of 3 rows on an N-state covariance `p`: H = [I at column `col`] plus `h_th`
-/// at column `th_col` when non-null. H P and P H^T are then column blocks of P, so every product
-/// is Nx3 or 3x3. Leaves `p` and `dx` untouched when the gate rejects.
-template <int N>
-double joseph3(Eigen::Matrix<double, N, N>& p, int col, const Eigen::Matrix3d* h_th, int th_col,
-               const Eigen::Vector3d& innov, const Eigen::Vector3d& r_diag, double gate_sigma, bool gate,
-               SourceStatus& st, bool* accepted, Eigen::Matrix<double, N, 1>& dx) {
-  using MatN3 = Eigen::Matrix<double, N, 3>;
-  MatN3 pht = p.template middleCols<3>(col);  // P H^T
-  if (h_th != nullptr) {
-    pht.noalias() += p.template middleCols<3>(th_col).lazyProduct(h_th->transpose());
-  }
-  auto h_times = [&](const MatN3& m) {  // H m
-    Eigen::Matrix3d out = m.template middleRows<3>(col);
-    if (h_th != nullptr) {
-      out.noalias() += h_th->lazyProduct(m.template middleRows<3>(th_col));
-    }
-    return out;
-  };
-  Eigen::Matrix3d s = h_times(pht);
-  s.diagonal() += r_diag;
+/// Update with M rows of a dense H (M x N) and diagonal R, processed one row at a time (exact for
+/// a diagonal R: the same result as the batch update, at O(M N^2) instead of O(M N^3)):
+///   v_i = P h_i^T (prior), u_i = v_i - sum_{j<i} u_j (h_i . u_j) / s_j (= P_{i-1} h_i^T),
+///   s_i = h_i . u_i + r_i, dx += u_i (y_i - h_i . dx) / s_i, P -= u_i u_i^T / s_i.
+/// P - K S K^T equals the Joseph form for this (optimal) gain; each rank-one term is symmetric.
+/// The status gets the innovation, the prior innovation variance diag(H P H^T + R) and the test
+/// ratio; the gate tests the prior variance. Leaves `p` and `dx` untouched when the gate rejects
+/// or `report_only`. Returns whether the rows were applied.
+template <int N, int M, typename PMat>
+bool sequential_update(PMat&& p, const Eigen::Matrix<double, M, N>& h,
+                       const Eigen::Matrix<double, M, 1>& innov,
+                       const Eigen::Matrix<double, M, 1>& r_diag, double gate_sigma, bool gate,
+                       bool report_only, SourceStatus& st, Eigen::Matrix<double, N, 1>& dx) {
+  Eigen::Matrix<double, N, M> u = p.lazyProduct(h.transpose());  // prior P H^T
   double ratio = 0.0;
-  for (int i = 0; i < 3; ++i) {
-    ratio = std::max(ratio, innov[i] * innov[i] / (gate_sigma * gate_sigma * s(i, i)));
+  st.innovation.setZero();
+  st.innovation_variance.setZero();
+  for (int i = 0; i < M; ++i) {
+    const double s_prior = h.row(i).dot(u.col(i)) + r_diag[i];
+    st.innovation[i] = innov[i];
+    st.innovation_variance[i] = s_prior;
+    ratio = std::max(ratio, innov[i] * innov[i] / (gate_sigma * gate_sigma * s_prior));
   }
-  st.innovation = innov;
-  st.innovation_variance = s.diagonal();
   st.test_ratio = ratio;
-  if (gate && !(ratio <= 1.0)) {
-    *accepted = false;
-    return ratio;
+  if (report_only || (gate && !(ratio <= 1.0))) {
+    return false;
   }
-  const MatN3 k = pht.lazyProduct(s.inverse());  // (5)
-  dx = k.lazyProduct(innov);                     // (6)
-  // Joseph form of (7): P = (I - K H) P (I - K H)^T + K R K^T, using H P = (P H^T)^T.
-  Eigen::Matrix<double, N, N> ap = p;
-  ap.noalias() -= k.lazyProduct(pht.transpose());  // (I - K H) P
-  MatN3 apht = ap.template middleCols<3>(col);      // (I - K H) P H^T
-  if (h_th != nullptr) {
-    apht.noalias() += ap.template middleCols<3>(th_col).lazyProduct(h_th->transpose());
+  dx.setZero();
+  Eigen::Matrix<double, M, 1> s;
+  for (int i = 0; i < M; ++i) {
+    for (int j = 0; j < i; ++j) {
+      u.col(i) -= u.col(j) * (h.row(i).dot(u.col(j)) / s[j]);
+    }
+    s[i] = h.row(i).dot(u.col(i)) + r_diag[i];
+    dx += u.col(i) * ((innov[i] - h.row(i).dot(dx)) / s[i]);  // (5), (6)
   }
-  ap.noalias() -= apht.lazyProduct(k.transpose());
-  const MatN3 kr = k * r_diag.asDiagonal();
-  ap.noalias() += kr.lazyProduct(k.transpose());
-  p = 0.5 * (ap + ap.transpose());
-  *accepted = true;
-  return ratio;
+  for (int i = 0; i < M; ++i) {
+    const Eigen::Matrix<double, N, 1> w = u.col(i) / std::sqrt(s[i]);
+    p.noalias() -= w * w.transpose();  // (7), exactly symmetric
+  }
+  return true;
+}
+
+/// sequential_update on the diagonal block [Off, Off + NB) of P alone (the caller knows that H
+/// and P's cross terms outside it are zero); dx gets the block's correction.
+template <int Off, int NB, int N, int M>
+bool update_block(Eigen::Matrix<double, N, N>& p, const Eigen::Matrix<double, M, N>& h,
+                  const Eigen::Matrix<double, M, 1>& innov, const Eigen::Matrix<double, M, 1>& r_diag,
+                  double gate_sigma, bool gate, bool report_only, SourceStatus& st,
+                  Eigen::Matrix<double, N, 1>& dx) {
+  Eigen::Matrix<double, NB, 1> d;
+  const Eigen::Matrix<double, M, NB> hb = h.template middleCols<NB>(Off);
+  const bool ok = sequential_update<NB, M>(p.template block<NB, NB>(Off, Off), hb, innov, r_diag,
+                                           gate_sigma, gate, report_only, st, d);
+  if (ok) {
+    dx.template segment<NB>(Off) = d;
+  }
+  return ok;
 }
 
 }  // namespace
 
-double SelectiveEkf::fuse3(int col, const Eigen::Matrix3d* h_th, const Eigen::Vector3d& innov,
-                           const Eigen::Vector3d& r_diag, double gate_sigma, bool gate,
-                           SourceStatus& st, bool* accepted) {
+template <int M>
+bool SelectiveEkf::fuse(const Eigen::Matrix<double, M, kN>& h, const Eigen::Matrix<double, M, 1>& innov,
+                        const Eigen::Matrix<double, M, 1>& r_diag, double gate_sigma, bool gate,
+                        SourceStatus& st, bool report_only) {
+  const bool att = (h.template leftCols<kAttN>().array() != 0.0).any();
+  const bool trans = (h.template rightCols<kN - kAttN>().array() != 0.0).any();
   Vec dx = Vec::Zero();
-  double ratio = 0.0;
-  if (h_th == nullptr && !x_.coupled) {
-    // No cross-covariance between [w, th] and [t, v]: the rows touch one 6x6 block only (the
-    // rest of K is exactly zero), a quarter of the 12-state work with the same result.
-    const int base = col < kT ? 0 : kT;
-    Eigen::Matrix<double, 6, 6> block = x_.P.block<6, 6>(base, base);
-    Eigen::Matrix<double, 6, 1> dx6;
-    ratio = joseph3<6>(block, col - base, nullptr, 0, innov, r_diag, gate_sigma, gate, st, accepted, dx6);
-    if (*accepted) {
-      x_.P.block<6, 6>(base, base) = block;
-      dx.segment<6>(base) = dx6;
-    }
+  bool ok = false;
+  if (!x_.coupled && !(att && trans)) {
+    // No cross-covariance between [w, th, b] and [t, v]: rows touching one block update it alone
+    // (the rest of K is exactly zero), with the same result as the full covariance.
+    ok = att ? update_block<0, kAttN>(x_.P, h, innov, r_diag, gate_sigma, gate, report_only, st, dx)
+             : update_block<kAttN, kN - kAttN>(x_.P, h, innov, r_diag, gate_sigma, gate, report_only,
+                                               st, dx);
   } else {
-    if (h_th != nullptr) {
-      x_.coupled = true;  // a lever-arm position fix correlates attitude and position from now on
-    }
-    ratio = joseph3<kN>(x_.P, col, h_th, kTh, innov, r_diag, gate_sigma, gate, st, accepted, dx);
+    x_.coupled = x_.coupled || !report_only;  // a lever-arm fix correlates attitude and position
+    ok = sequential_update<kN, M>(x_.P, h, innov, r_diag, gate_sigma, gate, report_only, st, dx);
   }
-  if (*accepted) {
+  if (ok) {
     inject(dx);
   }
-  return ratio;
+  return ok;
 }
 
 void SelectiveEkf::inject(const Vec& dx) {
   x_.w_rps += dx.segment<3>(kW);
   x_.q_world_body = (x_.q_world_body * quat_exp(dx.segment<3>(kTh))).normalized();
+  x_.b_rps += dx.segment<3>(kB);
   x_.t_m += dx.segment<3>(kT);
   x_.v_mps += dx.segment<3>(kV);
 }
@@ -311,51 +341,77 @@ void SelectiveEkf::record(SourceStatus& st, Decision d, int64_t stamp_ns, bool f
   }
 }
 
-void SelectiveEkf::process_imu(const ImuInput& in, bool first_pass) {
+void SelectiveEkf::process_imu(const ImuInput& in_raw, bool first_pass) {
+  ImuInput in = in_raw;
+  preprocess(in);
   const int64_t now = in.stamp_ns;
-  // Gyro rows: y = w.
+  // Gyro rows: y = w + b.
   {
+    Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
+    h.middleCols<3>(kW).setIdentity();
+    h.middleCols<3>(kB).setIdentity();
     const double r = p_.sigma_gyro_rps * p_.sigma_gyro_rps;
-    bool ok = false;
-    fuse3(kW, nullptr, in.gyro - x_.w_rps, Eigen::Vector3d::Constant(r), kReportGateSigma, false,
-          status_[static_cast<size_t>(Source::kGyro)], &ok);
-    record(status_[static_cast<size_t>(Source::kGyro)], Decision::kFused, now, first_pass);
+    SourceStatus& sg = status_[static_cast<size_t>(Source::kGyro)];
+    fuse<3>(h, in.gyro - x_.w_rps - x_.b_rps, Eigen::Vector3d::Constant(r), kReportGateSigma, false, sg);
+    record(sg, Decision::kFused, now, first_pass);
   }
-
-  SourceStatus& sq = status_[static_cast<size_t>(Source::kImuQuat)];
-  if (!in.has_q_imu) {
-    record(sq, Decision::kRejectedNoMag, now, first_pass);
-    return;
+  // Zero-rate rows at rest: y = 0 = w (with the gyro row, observes b).
+  if (in.rest) {
+    Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
+    h.middleCols<3>(kW).setIdentity();
+    const double r = p_.sigma_rest_rate_rps * p_.sigma_rest_rate_rps;
+    SourceStatus& sz = status_[static_cast<size_t>(Source::kZeroRate)];
+    fuse<3>(h, -x_.w_rps, Eigen::Vector3d::Constant(r), kReportGateSigma, false, sz);
+    record(sz, Decision::kFused, now, first_pass);
   }
-  // Disturbance angle (8) and quaternion error (9)-(10).
-  // The filtered up axis is only as good as the tilt: without a recent vision fix the tilt is
-  // carried by the gyro alone (q_imu gated), and a drifting tilt would keep the test failing
-  // (self-locking), so the raw accelerometer is used until vision anchors the attitude again.
+  // The predicted up axis is only as good as the tilt: in the paper's quaternion mode without a
+  // recent vision fix the tilt is carried by the gyro alone (q_imu gated), and a drifting tilt
+  // would keep the test failing (self-locking), so the raw accelerometer is used there.
   const bool anchored = x_.last_vision_fused_ns >= 0 &&
                         now - x_.last_vision_fused_ns <= seconds_to_ns(p_.vision_anchor_s);
-  Eigen::Vector3d up = in.accel;
-  if (p_.up_source == UpSource::kFiltered && anchored) {
-    up = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
+  if (p_.imu_measurement == ImuMeasurement::kQuaternion) {
+    process_imu_quat(in, first_pass, anchored);
+  } else if (x_.last_aiding_ns < 0 || now - x_.last_aiding_ns >= seconds_to_ns(p_.aiding_period_s)) {
+    // Tilt and heading are spectral densities: fusing them every aiding_period_s with the variance
+    // of the elapsed interval carries the same information as every sample (their bandwidth is
+    // far below the aiding rate) at a fraction of the cost.
+    // (bounded: across a re-anchored time gap nothing was integrated)
+    if (x_.last_aiding_ns >= 0) {
+      in.dt_s = std::min(static_cast<double>(now - x_.last_aiding_ns) * kNsToS,
+                         p_.aiding_period_s + in.dt_s);
+    }
+    x_.last_aiding_ns = now;
+    process_tilt(in, first_pass);
+    process_heading(in, first_pass, anchored);
   }
-  const double theta_m = angle_between_vectors(in.mag, up);                 // (8)
-  const double theta_q = quat_angle_between(x_.q_world_body, in.q_imu);     // (9)-(10)
+}
+
+bool SelectiveEkf::mag_trusted(const ImuInput& in, const Eigen::Vector3d& up, double theta_q,
+                               bool anchored, bool first_pass) {
+  const int64_t now = in.stamp_ns;
+  const double theta_m = angle_between_vectors(in.mag, up);  // (8)
   mag_.disturbance_angle_deg = theta_m * kDegPerRad;
   mag_.quat_error_deg = theta_q * kDegPerRad;
+  // kSplit measures the dip against the filtered tilt (accurate without vision) and |m|; its
+  // quaternion-error test compares with a heading that only vision anchors (see the notation).
+  const bool split = p_.imu_measurement == ImuMeasurement::kSplit;
+  const double angle_tol_deg = split ? p_.heading_dip_tolerance_deg : p_.disturbance_angle_threshold_deg;
   mag_.angle_test_failed =
-      mag_.reference_ready &&
-      std::abs(theta_m - ref_angle_rad_) > p_.disturbance_angle_threshold_deg * kRadPerDeg;
+      mag_.reference_ready && std::abs(theta_m - ref_angle_rad_) > angle_tol_deg * kRadPerDeg;
   mag_.norm_test_failed = false;
-  if (p_.mag_norm_test && ref_norm_ut_ > 0.0) {
+  const double norm_tol = split ? p_.heading_norm_tolerance : (p_.mag_norm_test ? p_.mag_norm_threshold : 0.0);
+  if (norm_tol > 0.0 && ref_norm_ut_ > 0.0) {
     mag_.norm_ratio = in.mag.norm() / ref_norm_ut_;
-    mag_.norm_test_failed = std::abs(mag_.norm_ratio - 1.0) > p_.mag_norm_threshold;
+    mag_.norm_test_failed = std::abs(mag_.norm_ratio - 1.0) > norm_tol;
   }
-  bool q_fail = p_.quat_error_test && theta_q > p_.quat_error_threshold_deg * kRadPerDeg;
+  bool q_fail = p_.quat_error_test && (!split || anchored) &&
+                theta_q > p_.quat_error_threshold_deg * kRadPerDeg;
   if (q_fail) {
     if (x_.q_error_fail_since_ns < 0) {
       x_.q_error_fail_since_ns = now;
     }
     if (!anchored && now - x_.q_error_fail_since_ns > seconds_to_ns(p_.q_error_lockout_s)) {
-      q_fail = false;  // lock-out release: the prediction, not q_imu, may have drifted
+      q_fail = false;  // lock-out release: the prediction, not the measurement, may have drifted
     }
   } else {
     x_.q_error_fail_since_ns = -1;
@@ -370,6 +426,24 @@ void SelectiveEkf::process_imu(const ImuInput& in, bool first_pass) {
   if (!trusted && first_pass) {
     ++mag_.untrusted_samples;
   }
+  return trusted;
+}
+
+void SelectiveEkf::process_imu_quat(const ImuInput& in, bool first_pass, bool anchored) {
+  const int64_t now = in.stamp_ns;
+  SourceStatus& sq = status_[static_cast<size_t>(Source::kImuQuat)];
+  if (!in.has_q_imu) {
+    record(sq, Decision::kRejectedNoMag, now, first_pass);
+    return;
+  }
+  // Disturbance angle (8) and quaternion error (9)-(10).
+  Eigen::Vector3d up = in.accel;
+  if (p_.up_source == UpSource::kFiltered && anchored) {
+    up = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
+  }
+  const double theta_q = quat_angle_between(x_.q_world_body, in.q_imu);  // (9)-(10)
+  const bool trusted = mag_trusted(in, up, theta_q, anchored, first_pass);
+  const bool q_fail = mag_.quat_error_test_failed;
   const Decision reject_reason = (mag_.angle_test_failed || mag_.norm_test_failed || !q_fail)
                                      ? Decision::kRejectedDisturbance
                                      : Decision::kRejectedQuatError;
@@ -378,26 +452,77 @@ void SelectiveEkf::process_imu(const ImuInput& in, bool first_pass) {
   const Eigen::Vector3d innov = quat_log(x_.q_world_body.conjugate() * qm);
   const double sig = p_.sigma_imu_quat_deg * kRadPerDeg;
   double r = sig * sig;
+  Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
+  h.middleCols<3>(kTh).setIdentity();
   if (!trusted && p_.action == ImuQuatAction::kDrop) {
     // Report the innovation the rows would have had, then leave them out.
-    Eigen::Matrix3d s = x_.P.block<3, 3>(kTh, kTh);
-    s.diagonal().array() += r;
-    sq.innovation = innov;
-    sq.innovation_variance = s.diagonal();
-    sq.test_ratio = 0.0;
-    for (int i = 0; i < 3; ++i) {
-      sq.test_ratio = std::max(sq.test_ratio, innov[i] * innov[i] /
-                                                  (kReportGateSigma * kReportGateSigma * s(i, i)));
-    }
+    fuse<3>(h, innov, Eigen::Vector3d::Constant(r), kReportGateSigma, false, sq, true);
     record(sq, reject_reason, now, first_pass);
     return;
   }
   if (!trusted) {
     r *= p_.inflate_factor;
   }
-  bool ok = false;
-  fuse3(kTh, nullptr, innov, Eigen::Vector3d::Constant(r), kReportGateSigma, false, sq, &ok);
+  fuse<3>(h, innov, Eigen::Vector3d::Constant(r), kReportGateSigma, false, sq);
   record(sq, trusted ? Decision::kFused : Decision::kFusedInflated, now, first_pass);
+}
+
+void SelectiveEkf::process_tilt(const ImuInput& in, bool first_pass) {
+  SourceStatus& st = status_[static_cast<size_t>(Source::kTilt)];
+  if (!(in.dt_s > 0.0)) {
+    return;
+  }
+  const Eigen::Vector3d u = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();  // R^T e_z
+  // e1, e2: orthonormal, perpendicular to u. z_up x u = dth_perp (small angles), so the rows are
+  // e_i . (z_up x u) = e_i . dth.
+  const Eigen::Vector3d a = std::abs(u.x()) < 0.6 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  const Eigen::Vector3d e1 = u.cross(a).normalized();
+  const Eigen::Vector3d e2 = u.cross(e1);
+  const Eigen::Vector3d c = in.up_meas.cross(u);
+  Eigen::Matrix<double, 2, kN> h = Eigen::Matrix<double, 2, kN>::Zero();
+  h.block<1, 3>(0, kTh) = e1.transpose();
+  h.block<1, 3>(1, kTh) = e2.transpose();
+  const Eigen::Vector2d innov(e1.dot(c), e2.dot(c));
+  const double r = p_.sigma_tilt_rad_sqrt_s * p_.sigma_tilt_rad_sqrt_s / in.dt_s * in.tilt_var_scale;
+  fuse<2>(h, innov, Eigen::Vector2d::Constant(r), kReportGateSigma, false, st);
+  record(st, Decision::kFused, in.stamp_ns, first_pass);
+}
+
+void SelectiveEkf::process_heading(const ImuInput& in, bool first_pass, bool anchored) {
+  const int64_t now = in.stamp_ns;
+  SourceStatus& sh = status_[static_cast<size_t>(Source::kHeading)];
+  if (!in.has_mag || !(in.dt_s > 0.0)) {
+    record(sh, Decision::kRejectedNoMag, now, first_pass);
+    return;
+  }
+  // dpsi: the rotation about world up taking the horizontal part of R(q) m onto magnetic north
+  // (+y ENU); a world-frame rotation dpsi e_z is the body-frame rotation dpsi u.
+  const Eigen::Vector3d mw = x_.q_world_body * in.mag;
+  const double horiz = std::hypot(mw.x(), mw.y());
+  if (!(horiz > 1e-3 * in.mag.norm())) {
+    record(sh, Decision::kRejectedBadInput, now, first_pass);  // field vertical: no heading
+    return;
+  }
+  const double dpsi = wrap_angle(0.5 * kPi - std::atan2(mw.y(), mw.x()));
+  const Eigen::Vector3d u = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
+  const bool trusted = mag_trusted(in, u, std::abs(dpsi), anchored, first_pass);
+  Eigen::Matrix<double, 1, kN> h = Eigen::Matrix<double, 1, kN>::Zero();
+  h.block<1, 3>(0, kTh) = u.transpose();
+  double r = p_.sigma_heading_rad_sqrt_s * p_.sigma_heading_rad_sqrt_s / in.dt_s;
+  const Eigen::Matrix<double, 1, 1> innov(dpsi);
+  if (!trusted && p_.action == ImuQuatAction::kDrop) {
+    fuse<1>(h, innov, Eigen::Matrix<double, 1, 1>(r), kReportGateSigma, false, sh, true);
+    record(sh, mag_.quat_error_test_failed && !mag_.angle_test_failed && !mag_.norm_test_failed
+                   ? Decision::kRejectedQuatError
+                   : Decision::kRejectedDisturbance,
+           now, first_pass);
+    return;
+  }
+  if (!trusted) {
+    r *= p_.inflate_factor;
+  }
+  fuse<1>(h, innov, Eigen::Matrix<double, 1, 1>(r), kReportGateSigma, false, sh);
+  record(sh, trusted ? Decision::kFused : Decision::kFusedInflated, now, first_pass);
 }
 
 void SelectiveEkf::process_vision(const VisionPose& v, bool first_pass) {
@@ -426,9 +551,9 @@ void SelectiveEkf::process_vision(const VisionPose& v, bool first_pass) {
   } else {
     const Eigen::Quaterniond qa = quat_align_sign(q_meas, x_.q_world_body);
     const Eigen::Vector3d innov = quat_log(x_.q_world_body.conjugate() * qa);
-    bool ok = false;
-    fuse3(kTh, nullptr, innov, Eigen::Vector3d::Constant(sr * sr), p_.vision_gate_sigma, true, sa, &ok);
-    if (ok) {
+    Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
+    h.middleCols<3>(kTh).setIdentity();
+    if (fuse<3>(h, innov, Eigen::Vector3d::Constant(sr * sr), p_.vision_gate_sigma, true, sa)) {
       x_.vision_consecutive_rejects = 0;
       x_.last_vision_fused_ns = now;
       record(sa, Decision::kFused, now, first_pass);
@@ -453,13 +578,12 @@ void SelectiveEkf::process_vision(const VisionPose& v, bool first_pass) {
     record(sp, Decision::kReset, now, first_pass);
     return;
   }
-  // H = [0  -R [p_body_cam x]  I  0]
-  const Eigen::Matrix3d h_th = J_rotate_right_perturbation(x_.q_world_body, p_.p_body_camera_m);
-  const bool lever = p_.p_body_camera_m.squaredNorm() > 0.0;
+  // H = [0  -R [p_body_cam x]  0  I  0] (the attitude block is zero without a lever arm)
+  Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
+  h.middleCols<3>(kTh) = J_rotate_right_perturbation(x_.q_world_body, p_.p_body_camera_m);
+  h.middleCols<3>(kT).setIdentity();
   const Eigen::Vector3d innov = v.p_world_camera_m - (x_.t_m + rot * p_.p_body_camera_m);
-  bool ok = false;
-  fuse3(kT, lever ? &h_th : nullptr, innov, Eigen::Vector3d::Constant(sm * sm), p_.vision_gate_sigma, true, sp, &ok);
-  if (ok) {
+  if (fuse<3>(h, innov, Eigen::Vector3d::Constant(sm * sm), p_.vision_gate_sigma, true, sp)) {
     x_.vision_pos_consecutive_rejects = 0;
     record(sp, Decision::kFused, now, first_pass);
   } else if (++x_.vision_pos_consecutive_rejects >= p_.vision_reset_after_rejections) {
@@ -490,6 +614,44 @@ void SelectiveEkf::learn_reference(const ImuSample& s) {
   }
 }
 
+void SelectiveEkf::preprocess(ImuInput& in) {
+  // Part of the state (x_.pre), so a replay after a late vision frame re-derives it exactly.
+  SelectiveEkfPreState& pre = x_.pre;
+  const double dt_s = in.dt_s;
+  if (!(dt_s > 0.0)) {
+    pre = SelectiveEkfPreState{};
+    pre.lp_accel_i = in.accel;
+    pre.rest_gyro_lp = in.gyro;
+    pre.rest_accel_lp = in.accel;
+    in.up_meas = in.accel.normalized();
+    return;
+  }
+  // Accelerometer low-pass in the gyro-propagated (bias-corrected) frame: gravity does not move
+  // there, external accelerations average out.
+  pre.q_ib = (pre.q_ib * quat_exp((in.gyro - x_.b_rps) * dt_s)).normalized();
+  const double k = p_.accel_lowpass_tau_s > 0.0 ? dt_s / (p_.accel_lowpass_tau_s + dt_s) : 1.0;
+  pre.lp_accel_i += k * (pre.q_ib * in.accel - pre.lp_accel_i);
+  Eigen::Vector3d up;
+  in.up_meas = safe_normalize(pre.q_ib.conjugate() * pre.lp_accel_i, up) ? up : in.accel.normalized();
+  if (p_.tilt_accel_ref_mps2 > 0.0) {
+    const double dev = in.accel.norm() - p_.gravity_mps2;
+    pre.ext_accel_ms += k * (dev * dev - pre.ext_accel_ms);
+    in.tilt_var_scale = 1.0 + pre.ext_accel_ms / (p_.tilt_accel_ref_mps2 * p_.tilt_accel_ref_mps2);
+  }
+  // Rest detector (gyro and accelerometer against their low-passes).
+  if (p_.rest_detection) {
+    const double kr = dt_s / (p_.rest_filter_tau_s + dt_s);
+    pre.rest_gyro_lp += kr * (in.gyro - pre.rest_gyro_lp);
+    pre.rest_accel_lp += kr * (in.accel - pre.rest_accel_lp);
+    const bool still = (pre.rest_gyro_lp - x_.b_rps).norm() < p_.rest_gyro_max_rps &&
+                       (in.gyro - pre.rest_gyro_lp).norm() < p_.rest_gyro_max_rps &&
+                       (in.accel - pre.rest_accel_lp).norm() < p_.rest_accel_max_mps2;
+    pre.rest_time_s = still ? pre.rest_time_s + dt_s : 0.0;
+    pre.rest = pre.rest_time_s >= p_.rest_min_s;
+  }
+  in.rest = pre.rest;
+}
+
 bool SelectiveEkf::update_imu(const ImuSample& s) {
   const SampleCheck c = check_imu_sample(s, last_imu_stamp_ns_, p_.limits, rejections_);
   if (c.reanchor) {
@@ -508,19 +670,33 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
   in.gyro = s.gyro_rps;
   in.accel = s.accel_mps2;
   in.mag = s.mag_ut;
+  in.has_mag = c.mag_ok;
+  const bool split = p_.imu_measurement == ImuMeasurement::kSplit;
   if (c.mag_ok) {
     learn_reference(s);
-    if (gn_.update(s)) {
+    if (!split && gn_.update(s)) {
       in.has_q_imu = true;
       in.q_imu = gn_.result().q_world_body;
     }
   }
+  in.dt_s = initialized_ ? c.dt_s : 0.0;
   last_imu_stamp_ns_ = s.stamp_ns;
   if (!initialized_) {
+    // Tilt from the accelerometer; heading from Gauss-Newton or (kSplit) the magnetometer.
     x_.q_world_body = in.has_q_imu ? in.q_imu
                                    : quat_from_two_vectors(in.accel, Eigen::Vector3d::UnitZ());
+    if (!in.has_q_imu && in.has_mag) {
+      const Eigen::Vector3d mw = x_.q_world_body * in.mag;
+      if (std::hypot(mw.x(), mw.y()) > 1e-3 * in.mag.norm()) {
+        const double dpsi = 0.5 * kPi - std::atan2(mw.y(), mw.x());
+        x_.q_world_body =
+            (Eigen::Quaterniond(Eigen::AngleAxisd(dpsi, Eigen::Vector3d::UnitZ())) * x_.q_world_body)
+                .normalized();
+      }
+    }
     x_.w_rps = in.gyro;
     x_.stamp_ns = in.stamp_ns;
+    preprocess(in);  // starts the low-pass and rest detector
     initialized_ = true;
     history_.push_back({in, x_});
     return true;

@@ -45,10 +45,12 @@ SourceReports selective_ekf_sources(const SelectiveEkf& ekf) {
   const int64_t now = ekf.state().stamp_ns;
   const auto recent_ns = static_cast<int64_t>(std::llround(p.vision_anchor_s * 1e9));
   SourceReports out;
-  out.reserve(5);
+  out.reserve(8);
   out.push_back(from_status("gyro", ekf.status(Source::kGyro)));
-  const SourceStatus& quat = ekf.status(Source::kImuQuat);
-  out.push_back(from_status("imu_quat", quat));
+  out.push_back(from_status("imu_quat", ekf.status(Source::kImuQuat)));
+  // The magnetometer's row: the heading (kSplit) or the IMU quaternion (kQuaternion).
+  const bool split = p.imu_measurement == ImuMeasurement::kSplit;
+  const SourceStatus& quat = ekf.status(split ? Source::kHeading : Source::kImuQuat);
 
   const MagStatus& m = ekf.mag_status();
   SourceReport mag = source_named("mag");
@@ -59,7 +61,8 @@ SourceReports selective_ekf_sources(const SelectiveEkf& ekf) {
   } else if (!m.reference_ready) {
     mag.mark_not_available("learning_reference");
   } else {
-    const double thr_angle = p.disturbance_angle_threshold_deg * kRadPerDeg;
+    const double thr_angle =
+        (split ? p.heading_dip_tolerance_deg : p.disturbance_angle_threshold_deg) * kRadPerDeg;
     const double thr_q = p.quat_error_threshold_deg * kRadPerDeg;
     InnovationVector innov(2);
     innov << (m.disturbance_angle_deg - m.reference_angle_deg) * kRadPerDeg, m.quat_error_deg * kRadPerDeg;
@@ -88,6 +91,9 @@ SourceReports selective_ekf_sources(const SelectiveEkf& ekf) {
     }
     out.push_back(r);
   }
+  out.push_back(from_status("accel_tilt", ekf.status(Source::kTilt)));
+  out.push_back(from_status("mag_heading", ekf.status(Source::kHeading)));
+  out.push_back(from_status("zero_rate", ekf.status(Source::kZeroRate)));
   return out;
 }
 
@@ -98,7 +104,7 @@ Eigen::Matrix3d attitude_covariance_world(const SelectiveEkf& ekf) {
 
 Eigen::Matrix<double, 9, 9> pose_covariance_world(const SelectiveEkfState& x,
                                                    const Eigen::Quaterniond& q_world_body) {
-  // J maps the error state [w, th_body, t, v] to [p, v, th_world]: th_world = R th_body.
+  // J maps the error state [w, th_body, b, t, v] to [p, v, th_world]: th_world = R th_body.
   Eigen::Matrix<double, 9, SelectiveEkf::kN> j = Eigen::Matrix<double, 9, SelectiveEkf::kN>::Zero();
   j.block<3, 3>(0, SelectiveEkf::kT).setIdentity();
   j.block<3, 3>(3, SelectiveEkf::kV).setIdentity();

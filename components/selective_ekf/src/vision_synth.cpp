@@ -10,10 +10,12 @@ namespace poise {
 VisionSynthesizer::VisionSynthesizer(const VisionSynthParams& p) : p_(p), rng_(p.seed) {
   if (!(p_.rate_hz > 0.0) || !(p_.latency_ms >= 0.0) || !(p_.noise_deg >= 0.0) ||
       !(p_.noise_m >= 0.0) || !(p_.dropout_fraction >= 0.0 && p_.dropout_fraction < 1.0) ||
-      !(p_.burst_min_s > 0.0 && p_.burst_max_s >= p_.burst_min_s)) {
+      !(p_.burst_min_s > 0.0 && p_.burst_max_s >= p_.burst_min_s) || !(p_.blackout_s >= 0.0) ||
+      (p_.blackout_s > 0.0 && !(p_.blackout_every_s > p_.blackout_s))) {
     throw std::invalid_argument(
         "VisionSynthParams: need rate_hz > 0, latency_ms >= 0, noise >= 0, dropout_fraction in "
-        "[0, 1), 0 < burst_min_s <= burst_max_s");
+        "[0, 1), 0 < burst_min_s <= burst_max_s, blackout_s >= 0 and blackout_every_s > "
+        "blackout_s when blackouts are on");
   }
   period_ns_ = static_cast<int64_t>(std::llround(1e9 / p_.rate_hz));
   latency_ns_ = static_cast<int64_t>(std::llround(p_.latency_ms * 1e6));
@@ -51,6 +53,11 @@ void VisionSynthesizer::push_truth(int64_t stamp_ns, const Eigen::Quaterniond& q
     next_capture_ns_ = stamp_ns;
   }
   advance_visibility(stamp_ns);
+  blackout_ = false;
+  if (p_.blackout_s > 0.0) {
+    const double since_s = static_cast<double>(stamp_ns - first_ns_) * 1e-9;
+    blackout_ = std::fmod(since_s, p_.blackout_every_s) >= p_.blackout_every_s - p_.blackout_s;
+  }
   if (stamp_ns < next_capture_ns_) {
     return;
   }
@@ -58,7 +65,7 @@ void VisionSynthesizer::push_truth(int64_t stamp_ns, const Eigen::Quaterniond& q
     next_capture_ns_ += period_ns_;
   }
   ++captured_;
-  if (hidden_ || !valid || !q_world_body.coeffs().allFinite() || !p_world_body_m.allFinite()) {
+  if (hidden_ || blackout_ || !valid || !q_world_body.coeffs().allFinite() || !p_world_body_m.allFinite()) {
     ++dropped_;
     return;
   }

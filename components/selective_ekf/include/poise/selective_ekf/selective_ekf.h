@@ -2,24 +2,43 @@
 // the IMU quaternion (i.e. the magnetometer) trusted only while the disturbance tests pass.
 //
 // Notation (ESTIMATORS.md section 4; equation numbers are paper 002's)
-//   x = [w, q, t, v]     nominal state: body angular rate w (rad/s), q = q_world_body (ENU, Hamilton),
-//                        position t (m, world) and velocity v (m/s, world) of the body.
-//   dx = [dw, dth, dt, dv]  12-dim error state; attitude error is body-frame (right) perturbation
+//   x = [w, q, b, t, v]  nominal state: body angular rate w (rad/s), q = q_world_body (ENU, Hamilton),
+//                        gyro bias b (rad/s, extension: the paper has none), position t (m, world)
+//                        and velocity v (m/s, world) of the body.
+//   dx = [dw, dth, db, dt, dv]  15-dim error state; attitude error is body-frame (right) perturbation
 //                        q_true = q (x) exp(dth). This error-state form carries the same selective
 //                        behaviour as the paper's 13-dim form (accepted reading, section 4) and keeps
 //                        P free of the quaternion norm direction.
-//   Process (3)-(4):     w, v random walks; q <- q (x) exp(w h); t <- t + v h.
+//   Process (3)-(4):     w, v, b random walks; q <- q (x) exp(w h); t <- t + v h.
 //                        F: dth' = Exp(w h)^T dth + J_r(w h) h dw; dt' = dt + h dv.
 //                        Q: angular-acceleration and acceleration white noise (spectral densities),
 //                        integrated over h (first order).
-//   y = [w_gyro, q_imu, q_vision, t_vision]  (5)-(7): only rows with a fresh sample are fused.
-//     gyro:      y = w + n,                       H = [I 0 0 0]
-//     q_imu:     log(q^-1 (x) q_imu)  = dth + n,  H = [0 I 0 0]   (Gauss-Newton, eq. 2)
-//     q_vision:  log(q^-1 (x) q_vis)  = dth + n,  H = [0 I 0 0]   q_vis = q_world_cam (x) q_body_cam^-1
-//     t_vision:  p_world_cam = t + R(q) p_body_cam,  H = [0  -R [p_body_cam x]  I  0]
+//   y = [w_gyro, q_imu | (tilt, heading), q_vision, t_vision]  (5)-(7): rows only when fresh.
+//     gyro:      y = w + b + n,                   H = [I 0 I 0 0]
+//     q_imu:     log(q^-1 (x) q_imu)  = dth + n,  H = [0 I 0 0 0]  (ImuMeasurement::kQuaternion: the
+//                paper's Gauss-Newton quaternion, eq. 2)
+//     ImuMeasurement::kSplit (default) replaces q_imu by two measurements so that a disturbed
+//     magnetometer never costs tilt:
+//     tilt:      z_up = the accelerometer low-passed (accel_lowpass_tau_s) in a gyro-propagated,
+//                almost inertial frame, normalised; u = R(q)^T e_z. Two rows e_i . (z_up x u) = dth
+//                . e_i (e_1, e_2 orthonormal, perpendicular to u), H = [0 e_i^T 0 0 0]. Variance per
+//                row: spectral density sigma_tilt^2 / h, inflated by the recent external
+//                acceleration (| |a| - g | low-passed, see tilt_accel_ref_mps2).
+//     heading:   dpsi = rotation about world up taking R(q) m (horizontal part) onto magnetic north
+//                (+y ENU); one row dpsi = u . dth, H = [0 u^T 0 0 0]; variance sigma_heading^2 / h;
+//                gated by the selective tests below: dip (8) against the filtered tilt within
+//                heading_dip_tolerance_deg, |m| within heading_norm_tolerance, and quaternion
+//                error (9) = |dpsi| only while vision anchors the heading (without vision the
+//                predicted heading is the gyro's, and rejecting the magnetometer because it
+//                disagrees with a drifting prediction locks the drift in).
+//     zero rate: at rest (rest detector on the raw gyro and accelerometer), y = 0 = w + n_rest,
+//                H = [I 0 0 0 0]: with the gyro row it observes b directly.
+//     q_vision:  log(q^-1 (x) q_vis)  = dth + n,  H = [0 I 0 0 0]   q_vis = q_world_cam (x) q_body_cam^-1
+//     t_vision:  p_world_cam = t + R(q) p_body_cam,  H = [0  -R [p_body_cam x]  0  I  0]
 //     Measured quaternions are sign-aligned to the prediction before the innovation.
-//   (7) printed P - K H^T P is read as P - K H P; we use the Joseph form
-//     P = (I - K H) P (I - K H)^T + K R K^T, then symmetrise. q is renormalised after each update.
+//   (7) printed P - K H^T P is read as P - K H P. R is diagonal, so the rows are fused one at a
+//     time (exact): P <- P - u u^T / s with u = P h^T, s = h u + r (equal to the Joseph form for
+//     this gain, symmetric by construction). q is renormalised after each update.
 //   Disturbance angle (8): both vectors are rotated by the same matrix, so theta_m is the angle
 //     between m and the up vector; up is the raw accelerometer (paper) or the filter's predicted up
 //     R(q)^T e_z (UpSource::kFiltered, the VQF/PX4 improvement; only while vision anchors the tilt,
@@ -66,6 +85,12 @@ enum class UpSource : uint8_t {
                   ///< within vision_anchor_s), else the raw accelerometer
 };
 
+/// Which IMU attitude measurement is fused besides the gyro.
+enum class ImuMeasurement : uint8_t {
+  kSplit = 0,   ///< tilt from the low-passed accelerometer + heading-only magnetometer (default)
+  kQuaternion,  ///< paper: one Gauss-Newton quaternion from accelerometer and magnetometer
+};
+
 /// What happens to the IMU quaternion rows while the magnetometer is untrusted.
 enum class ImuQuatAction : uint8_t {
   kInflate = 0,  ///< measurement variance * inflate_factor
@@ -82,8 +107,44 @@ struct SelectiveEkfParams {
   /// Extra attitude process noise, rad/sqrt(s) (model error of q <- q exp(w h)). 0 = paper.
   double sigma_attitude_walk = 0.002;
 
+  /// Gyro-bias random walk, rad/s/sqrt(s) (MPU6050 bias instability is of order 0.01 deg/s over
+  /// minutes; this allows ~0.5 deg/s drift per hour-scale). 0 = bias constant.
+  double sigma_bias_walk = 2.0e-5;
+
   // ---- measurement noise (standard deviations)
   double sigma_gyro_rps = 0.01;        ///< gyro white noise, rad/s (GY-87 MPU6050 ~0.005-0.01)
+  ImuMeasurement imu_measurement = ImuMeasurement::kSplit;
+  /// kSplit: accelerometer low-pass time constant in the gyro-propagated frame, s. External
+  /// accelerations average out over it while gravity (fixed in that frame) does not.
+  double accel_lowpass_tau_s = 3.0;
+  /// kSplit: tilt measurement noise spectral density, rad sqrt(s) (per-sample variance
+  /// sigma^2 / h). With the attitude process noise this sets the tilt time constant (about
+  /// sigma_tilt / sqrt(sigma_attitude_walk^2 + sigma_gyro^2 h): ~6 s with the defaults at 100-300 Hz).
+  double sigma_tilt_rad_sqrt_s = 0.012;
+  /// kSplit: external-acceleration scale of the tilt trust, m/s^2: the tilt variance is multiplied
+  /// by 1 + (a_ext / tilt_accel_ref_mps2)^2 with a_ext the RMS of | |accel| - g | over
+  /// accel_lowpass_tau_s. 0 = constant trust.
+  double tilt_accel_ref_mps2 = 0.0;
+  double gravity_mps2 = 9.81;          ///< g for the external-acceleration measure, m/s^2
+  /// kSplit: the disturbance-angle test (8) tolerance, deg. The dip is measured against the
+  /// filter's tilt (accurate with or without vision in kSplit), so the tolerance covers the
+  /// magnetometer's calibration residue over orientations, not accelerometer contamination
+  /// (disturbance_angle_threshold_deg, 3 deg, is the paper's value for kQuaternion).
+  double heading_dip_tolerance_deg = 10.0;
+  /// kSplit: | |m| / m_ref - 1 | above this: disturbed (0 = off). kQuaternion uses mag_norm_test.
+  double heading_norm_tolerance = 0.1;
+  /// kSplit: tilt and heading are fused every aiding_period_s (variance of the elapsed interval),
+  /// not every sample: their information is in a seconds-long low-pass. 0 = every sample.
+  double aiding_period_s = 0.02;
+  /// kSplit: heading (magnetometer) measurement noise spectral density, rad sqrt(s).
+  double sigma_heading_rad_sqrt_s = 0.04;
+  // ---- rest detection (zero-rate measurement, observes the gyro bias)
+  bool rest_detection = true;
+  double rest_gyro_max_rps = 2.0 * kRadPerDeg;  ///< rest if the low-passed |gyro| stays below, rad/s
+  double rest_accel_max_mps2 = 0.5;   ///< ... and |accel - lowpass(accel)| stays below, m/s^2
+  double rest_min_s = 1.5;            ///< ... for at least this long, s
+  double rest_filter_tau_s = 0.5;     ///< low-pass time constant of the rest detector, s
+  double sigma_rest_rate_rps = 0.002; ///< zero-rate measurement noise at rest, rad/s
   double sigma_imu_quat_deg = 3.0;     ///< Gauss-Newton quaternion, per axis, deg
   double sigma_vision_deg = 1.0;       ///< vision attitude per axis, deg (if the pose carries none)
   double sigma_vision_m = 0.01;        ///< vision position per axis, m (if the pose carries none)
@@ -124,6 +185,7 @@ struct SelectiveEkfParams {
   // ---- initial uncertainty
   double init_sigma_attitude_deg = 10.0;
   double init_sigma_rate_rps = 0.1;
+  double init_sigma_bias_rps = 0.01;   ///< initial gyro-bias uncertainty, rad/s (~0.6 deg/s)
   double init_sigma_position_m = 1.0;
   double init_sigma_velocity_mps = 1.0;
 
@@ -154,7 +216,16 @@ struct VisionPose {
   double sigma_m = std::nan("");       ///< per-axis position std; NaN: params' default
 };
 
-enum class Source : uint8_t { kGyro = 0, kImuQuat, kVisionAttitude, kVisionPosition, kCount };
+enum class Source : uint8_t {
+  kGyro = 0,
+  kImuQuat,          ///< ImuMeasurement::kQuaternion only
+  kVisionAttitude,
+  kVisionPosition,
+  kTilt,             ///< ImuMeasurement::kSplit: low-passed accelerometer
+  kHeading,          ///< ImuMeasurement::kSplit: magnetometer heading (gated)
+  kZeroRate,         ///< rest detected: w = 0
+  kCount
+};
 const char* to_string(Source s);
 
 /// Why a source was or was not fused on its last sample.
@@ -195,7 +266,7 @@ struct MagStatus {
   double disturbance_angle_deg = 0.0;   ///< theta_m (8) of the last sample
   double reference_angle_deg = 0.0;     ///< 90 + dip
   double norm_ratio = 1.0;              ///< |m| / m_ref
-  double quat_error_deg = 0.0;          ///< theta_q (9)
+  double quat_error_deg = 0.0;          ///< theta_q (9); kSplit: |heading innovation|
   bool reference_ready = false;         ///< dip (and |m|) learnt
   double dip_deg = 0.0;
   uint64_t untrusted_samples = 0;       ///< first-pass count
@@ -213,36 +284,52 @@ struct VisionCounters {
   uint64_t replayed_imu_samples = 0;  ///< total IMU samples re-processed
 };
 
+/// Accelerometer low-pass (kSplit) and rest detector: filter state, so that replays reproduce it.
+struct SelectiveEkfPreState {
+  Eigen::Quaterniond q_ib = Eigen::Quaterniond::Identity();  ///< body -> almost inertial frame
+  Eigen::Vector3d lp_accel_i{0, 0, 0};  ///< low-passed accelerometer in that frame, m/s^2
+  double ext_accel_ms = 0.0;            ///< low-passed (|a| - g)^2, (m/s^2)^2
+  Eigen::Vector3d rest_gyro_lp{0, 0, 0};
+  Eigen::Vector3d rest_accel_lp{0, 0, 0};
+  double rest_time_s = 0.0;
+  bool rest = false;                    ///< rest detected at the last sample
+};
+
 /// The filter state (inspectable; one snapshot per IMU sample in the history).
 struct SelectiveEkfState {
   Eigen::Vector3d w_rps{0.0, 0.0, 0.0};
   Eigen::Quaterniond q_world_body = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d b_rps{0.0, 0.0, 0.0};  ///< gyro bias
   Eigen::Vector3d t_m{0.0, 0.0, 0.0};
   Eigen::Vector3d v_mps{0.0, 0.0, 0.0};
-  Eigen::Matrix<double, 12, 12> P = Eigen::Matrix<double, 12, 12>::Identity();
+  Eigen::Matrix<double, 15, 15> P = Eigen::Matrix<double, 15, 15>::Identity();
   int64_t stamp_ns = -1;                 ///< time of the state
   int64_t untrusted_until_ns = -1;       ///< magnetometer untrusted until (hold)
   int64_t q_error_fail_since_ns = -1;    ///< start of the current quaternion-error failure run
   int64_t last_vision_fused_ns = -1;
   bool vision_aligned = false;           ///< first vision has aligned the attitude
-  /// P has cross-covariance between [w, th] and [t, v] (after a lever-arm position fix); while
-  /// false the two 6x6 blocks are propagated and updated separately (exactly, at 1/4 the cost).
+  /// P has cross-covariance between [w, th, b] and [t, v] (after a lever-arm position fix); while
+  /// false the 9x9 and 6x6 blocks are propagated and updated separately (exactly, cheaper).
   bool coupled = false;
   bool position_aligned = false;
   int vision_consecutive_rejects = 0;
   int vision_pos_consecutive_rejects = 0;
+  SelectiveEkfPreState pre;
+  int64_t last_aiding_ns = -1;           ///< last tilt/heading fusion (kSplit)
 };
 
 class SelectiveEkf {
  public:
-  static constexpr int kN = 12;
+  static constexpr int kN = 15;
   using Mat = Eigen::Matrix<double, kN, kN>;
   using Vec = Eigen::Matrix<double, kN, 1>;
-  // error-state block offsets
+  // error-state block offsets: [w, th, b] (attitude block, kAttN) then [t, v]
   static constexpr int kW = 0;
   static constexpr int kTh = 3;
-  static constexpr int kT = 6;
-  static constexpr int kV = 9;
+  static constexpr int kB = 6;
+  static constexpr int kT = 9;
+  static constexpr int kV = 12;
+  static constexpr int kAttN = 9;
 
   explicit SelectiveEkf(const SelectiveEkfParams& params = {});
 
@@ -279,6 +366,12 @@ class SelectiveEkf {
     Eigen::Vector3d mag{0, 0, 0};
     bool has_q_imu = false;
     Eigen::Quaterniond q_imu = Eigen::Quaterniond::Identity();
+    bool has_mag = false;
+    double dt_s = 0.0;                  ///< sample interval (for spectral densities)
+    // derived by preprocess() from the state's SelectiveEkfPreState (re-derived in replays)
+    Eigen::Vector3d up_meas{0, 0, 1};   ///< kSplit: low-passed accelerometer direction (body)
+    double tilt_var_scale = 1.0;        ///< kSplit: external-acceleration inflation
+    bool rest = false;
   };
   struct HistoryEntry {
     ImuInput input;
@@ -290,10 +383,19 @@ class SelectiveEkf {
   void process_vision(const VisionPose& v, bool first_pass);
   void learn_reference(const ImuSample& s);
   void replay_from(size_t snapshot_index);
-  // Joseph-form update of 3 rows, H = [I at column `col`] plus `h_th` at kTh when non-null.
-  double fuse3(int col, const Eigen::Matrix3d* h_th, const Eigen::Vector3d& innov,
-               const Eigen::Vector3d& r_diag, double gate_sigma, bool gate, SourceStatus& st,
-               bool* accepted);
+  // Update of M rows with a dense H (M x kN) and diagonal R, one row at a time; runs on the
+  // [w, th, b] or [t, v] block alone while they are uncorrelated. False when the gate rejects.
+  template <int M>
+  bool fuse(const Eigen::Matrix<double, M, kN>& h, const Eigen::Matrix<double, M, 1>& innov,
+            const Eigen::Matrix<double, M, 1>& r_diag, double gate_sigma, bool gate,
+            SourceStatus& st, bool report_only = false);
+  void preprocess(ImuInput& in);
+  void process_imu_quat(const ImuInput& in, bool first_pass, bool anchored);
+  void process_tilt(const ImuInput& in, bool first_pass);
+  void process_heading(const ImuInput& in, bool first_pass, bool anchored);
+  // Selective tests (8)-(10) for the sample; returns whether the magnetometer is trusted.
+  bool mag_trusted(const ImuInput& in, const Eigen::Vector3d& up, double theta_q, bool anchored,
+                   bool first_pass);
   void inject(const Vec& dx);
   void record(SourceStatus& st, Decision d, int64_t stamp_ns, bool first_pass) const;
 
@@ -327,11 +429,15 @@ class SelectiveEkf {
 ///     "quat_error", "gate", "bad_input", "too_old"; not available "no_mag" / "no_sample").
 ///     A vision source whose last sample is older than vision_anchor_s before the state time is
 ///     not available ("no_recent_sample": e.g. the tag was lost).
+///   (kSplit: imu_quat is "no_sample"; mag describes the heading row, thresholds
+///   heading_dip_tolerance_deg / quat_error_threshold_deg.)
 ///   mag: the selective test of the magnetometer (eqs. 8-10): innovation [theta_m - theta_ref,
 ///     theta_q] (rad), variance the squared thresholds (test ratio > 1 = a test failed); rejected
 ///     "disturbance_angle", "field_norm", "quat_error" or "untrusted_hold" while untrusted, not
 ///     available "no_mag" / "learning_reference". Its counts are the IMU quaternion's fused at full
 ///     weight and the untrusted samples; its last fused stamp is the IMU quaternion's (while trusted).
+///   accel_tilt, mag_heading, zero_rate: the kSplit rows' SourceStatus (not available
+///     "no_sample" in kQuaternion; zero_rate only at rest).
 SourceReports selective_ekf_sources(const SelectiveEkf& ekf);
 
 /// World-frame attitude covariance (rad^2, small angles about ENU x, y, z): R P_thth R^T of the
@@ -339,7 +445,7 @@ SourceReports selective_ekf_sources(const SelectiveEkf& ekf);
 Eigen::Matrix3d attitude_covariance_world(const SelectiveEkf& ekf);
 
 /// The 9x9 covariance [p, v, theta] (m^2, (m/s)^2, rad^2; theta world-frame small angles) of the
-/// 12x12 error state [w, theta(body), t, v]: blocks reordered, theta rotated by R(q).
+/// 15x15 error state [w, theta(body), b, t, v]: blocks reordered, theta rotated by R(q).
 Eigen::Matrix<double, 9, 9> pose_covariance_world(const SelectiveEkfState& x, const Eigen::Quaterniond& q_world_body);
 
 /// The filter's vision input from a camera pose measurement: per-axis std from the mean of the

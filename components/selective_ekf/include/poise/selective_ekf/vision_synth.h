@@ -11,6 +11,9 @@
 //   [burst_min_s, burst_max_s], visible lengths exponential with the mean that makes the hidden
 //   fraction equal dropout_fraction (the tag leaving the view). Truth rows marked invalid (NaN
 //   reference) give no frame either.
+//   long blackouts (the user walks away from the tags): no frame while
+//   (t - t_first) mod blackout_every_s >= blackout_every_s - blackout_s, i.e. the last blackout_s
+//   of every blackout_every_s (first one ending at blackout_every_s); 0 = none.
 #pragma once
 
 #include "poise/selective_ekf/selective_ekf.h"
@@ -33,6 +36,8 @@ struct VisionSynthParams {
   double dropout_fraction = 0.0;   ///< [0, 1)
   double burst_min_s = 1.0;
   double burst_max_s = 5.0;
+  double blackout_s = 0.0;         ///< long blackout length, s (0 = none)
+  double blackout_every_s = 0.0;   ///< blackout period, s (> blackout_s when blackout_s > 0)
   uint64_t seed = 1;
   Eigen::Quaterniond q_body_camera = Eigen::Quaterniond::Identity();
   Eigen::Vector3d p_body_camera_m{0.0, 0.0, 0.0};
@@ -53,6 +58,8 @@ class VisionSynthesizer {
   [[nodiscard]] uint64_t frames_dropped() const { return dropped_; }
   /// True when `stamp_ns` fell in a hidden (dropout) period (after push_truth of that stamp).
   [[nodiscard]] bool hidden() const { return hidden_; }
+  /// True when `stamp_ns` fell in a long blackout (after push_truth of that stamp).
+  [[nodiscard]] bool blackout() const { return blackout_; }
 
  private:
   void advance_visibility(int64_t stamp_ns);
@@ -66,6 +73,7 @@ class VisionSynthesizer {
   int64_t latency_ns_ = 0;
   int64_t phase_end_ns_ = -1;
   bool hidden_ = false;
+  bool blackout_ = false;
   std::deque<std::pair<int64_t, VisionPose>> in_flight_;  ///< (arrival, frame)
   uint64_t captured_ = 0;
   uint64_t dropped_ = 0;
