@@ -41,8 +41,14 @@ struct DemoOptions {
   bool plain = false;      // no screen redraws (automatic when stdout is not a terminal)
 };
 
-constexpr double kTagLostStart = 9.0;  // within each scenario cycle: the tag leaves the view
+// The synthetic camera's blackouts repeat every kCameraPeriodS (two 30 s tour cycles): the tag
+// leaves the view for 4 s in the first cycle, and the camera sees nothing for 20 s in the second
+// (the user looks away / walks off: the selective EKF runs on the IMU alone).
+constexpr double kCameraPeriodS = 60.0;
+constexpr double kTagLostStart = 9.0;
 constexpr double kTagLostEnd = 13.0;
+constexpr double kBlackoutStart = 35.0;
+constexpr double kBlackoutEnd = 55.0;
 
 /// The scripted episodes of the scenario over [0, duration].
 std::vector<demo::Episode> episodes(const sim::SimConfig& config, double duration_s, bool camera) {
@@ -60,11 +66,14 @@ std::vector<demo::Episode> episodes(const sim::SimConfig& config, double duratio
       }
       t += s.duration_s;
     }
-    if (camera) {
-      out.push_back({base + kTagLostStart, base + kTagLostEnd, "tag lost", 1});
-    }
     if (cycle <= 0.0) {
       break;
+    }
+  }
+  for (double base = 0.0; camera && base < duration_s; base += kCameraPeriodS) {
+    out.push_back({base + kTagLostStart, base + kTagLostEnd, "tag lost", 1});
+    if (base + kBlackoutStart < duration_s) {
+      out.push_back({base + kBlackoutStart, base + kBlackoutEnd, "camera blackout 20 s", 1});
     }
   }
   return out;
@@ -206,7 +215,10 @@ void run_demo(const DemoOptions& o) {
       spec.components.push_back(component(
           "sim_camera", "camera0",
           map_of({{"blackouts", YAML::Load("[[" + std::to_string(kTagLostStart) + ", " +
-                                           std::to_string(kTagLostEnd) + "]]")}})));
+                                           std::to_string(kTagLostEnd) + "], [" +
+                                           std::to_string(kBlackoutStart) + ", " +
+                                           std::to_string(kBlackoutEnd) + "]]")},
+                  {"blackout_period_s", YAML::Node(kCameraPeriodS)}})));
       devices += ", synthetic camera";
     } else {
       if (o.intrinsics.empty() || o.tags.empty()) {
