@@ -2,6 +2,7 @@
 #include "poise/cli/common.h"
 #include "poise/core/bench.h"
 #include "poise/eval/broad.h"
+#include "poise/eval/crossval.h"
 #include "poise/eval/filter_registry.h"
 #include "poise/eval/imu_delay.h"
 #include "poise/eval/runner.h"
@@ -16,7 +17,10 @@
 #include <filesystem>
 #include <iomanip>
 #include <iostream>
+#include <fstream>
 #include <memory>
+#include <sstream>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -39,39 +43,147 @@ std::unique_ptr<AttitudeFilter> make_or_throw(const std::string& name, const std
   }
 }
 
-void run_eval(const std::string& filter_name, const std::string& config, const std::string& out_dir,
-              const std::vector<std::string>& files) {
-  std::error_code ec;
-  std::filesystem::create_directories(out_dir, ec);
-  if (ec) {
-    throw Error("cannot create output directory '" + out_dir + "': " + ec.message());
-  }
-  auto filter = make_or_throw(filter_name, config);
-  std::vector<eval::TrialResult> results;
+std::vector<eval::BroadTrial> load_trials(const std::vector<std::string>& files) {
+  std::vector<eval::BroadTrial> trials;
   for (size_t i = 0; i < files.size(); ++i) {
     if (stop_requested()) {
       throw Error("interrupted");
     }
-    std::cerr << "[" << (i + 1) << "/" << files.size() << "] " << files[i] << " ... " << std::flush;
-    eval::BroadTrial trial;
     try {
-      trial = eval::load_broad(files[i]);
+      trials.push_back(eval::load_broad(files[i]));
     } catch (const std::exception& e) {
-      throw Error(std::string(e.what()) + " (pass BROAD .hdf5 files, e.g. ../shared/broad/*.hdf5)");
+      throw Error(std::string(e.what()) + " (pass BROAD-layout .hdf5 files, e.g. ../shared/broad/*.hdf5)");
     }
+  }
+  return trials;
+}
+
+eval::TrialResult score(const eval::BroadTrial& trial, const std::vector<Eigen::Quaterniond>& q) {
+  eval::TrialResult r;
+  r.stem = trial.stem;
+  r.number = trial.number;
+  r.disturbed = trial.disturbed();
+  r.errors = eval::broad_errors(q, trial);
+  return r;
+}
+
+void make_dir(const std::string& dir) {
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) {
+    throw Error("cannot create output directory '" + dir + "': " + ec.message());
+  }
+}
+
+void run_eval(const std::string& filter_name, const std::string& config, const std::string& out_dir,
+              const std::vector<std::string>& files) {
+  make_dir(out_dir);
+  auto filter = make_or_throw(filter_name, config);
+  std::vector<eval::TrialResult> results;
+  for (size_t i = 0; i < files.size(); ++i) {
+    std::cerr << "[" << (i + 1) << "/" << files.size() << "] " << files[i] << " ... " << std::flush;
+    const eval::BroadTrial trial = load_trials({files[i]}).front();
     const auto q = eval::run_filter(*filter, trial);
     const std::string csv = (std::filesystem::path(out_dir) / (trial.stem + ".csv")).string();
     eval::write_quaternion_csv(csv, q, trial.rate_hz);
-    eval::TrialResult r;
-    r.stem = trial.stem;
-    r.number = trial.number;
-    r.disturbed = trial.disturbed();
-    r.errors = eval::broad_errors(q, trial);
-    results.push_back(r);
+    results.push_back(score(trial, q));
     std::cerr << trial.size() << " samples, total RMSE " << std::fixed << std::setprecision(3)
-              << r.errors.total_deg << " deg -> " << csv << "\n";
+              << results.back().errors.total_deg << " deg -> " << csv << "\n";
   }
   eval::print_table(std::cout, filter_name, results);
+}
+
+struct GridOptions {
+  std::vector<std::string> grid;
+  int folds = 0;  ///< 0 = leave one trial out
+};
+
+/// Runs every grid candidate on every trial, prints the in-sample and cross-validated figures,
+/// and returns the cross-validation (with the candidates) for `poise tune`.
+std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
+    const std::string& filter_name, const std::string& config, const std::string& out_dir,
+    const std::vector<std::string>& files, const GridOptions& g) {
+  make_dir(out_dir);
+  std::vector<eval::GridAxis> axes;
+  try {
+    axes = eval::parse_grid(g.grid);
+  } catch (const std::exception& e) {
+    throw Error(e.what());
+  }
+  const std::vector<eval::Overrides> candidates = eval::grid_points(axes);
+  if (g.folds != 0 && (g.folds < 2 || g.folds > static_cast<int>(files.size()))) {
+    throw Error("--folds must be between 2 and the number of trials (" + std::to_string(files.size()) +
+                "); 0 = leave one trial out");
+  }
+  std::cerr << "loading " << files.size() << " trial(s) ...\n";
+  const std::vector<eval::BroadTrial> trials = load_trials(files);
+  const std::string cand_dir = (std::filesystem::path(out_dir) / "candidates").string();
+  make_dir(cand_dir);
+  std::ofstream table((std::filesystem::path(out_dir) / "grid_results.csv").string());
+  table << "candidate,overrides,trial,total_deg,heading_deg,inclination_deg\n";
+  std::vector<std::vector<eval::TrialResult>> by_candidate;
+  for (size_t c = 0; c < candidates.size(); ++c) {
+    if (stop_requested()) {
+      throw Error("interrupted");
+    }
+    std::string cfg = config;
+    if (!candidates[c].empty()) {
+      cfg = (std::filesystem::path(cand_dir) / ("candidate_" + std::to_string(c) + ".yaml")).string();
+      try {
+        eval::write_config_with_overrides(config, candidates[c], cfg);
+      } catch (const std::exception& e) {
+        throw Error(e.what());
+      }
+    }
+    auto filter = make_or_throw(filter_name, cfg);
+    std::vector<eval::TrialResult> rs;
+    for (const auto& trial : trials) {
+      rs.push_back(score(trial, eval::run_filter(*filter, trial)));
+      table << c << ",\"" << eval::describe(candidates[c]) << "\"," << rs.back().stem << std::fixed
+            << std::setprecision(4) << "," << rs.back().errors.total_deg << "," << rs.back().errors.heading_deg
+            << "," << rs.back().errors.inclination_deg << "\n";
+    }
+    const eval::GroupMeans m = eval::group_means(rs);
+    std::cerr << "[candidate " << (c + 1) << "/" << candidates.size() << "] " << eval::describe(candidates[c])
+              << std::fixed << std::setprecision(3) << ": undisturbed " << m.undisturbed.total_deg
+              << ", disturbed " << m.disturbed.total_deg << " deg\n";
+    by_candidate.push_back(std::move(rs));
+  }
+  const eval::CrossValidation cv = eval::cross_validate(by_candidate, g.folds);
+  const eval::GroupMeans in = eval::group_means(cv.in_sample);
+  const eval::GroupMeans out = eval::group_means(cv.cross_validated);
+  std::cout << "filter " << filter_name << (config.empty() ? "" : " (base " + config + ")") << ", "
+            << candidates.size() << " candidate(s), " << trials.size() << " trial(s), "
+            << (g.folds == 0 ? "leave-one-trial-out" : std::to_string(cv.folds) + "-fold")
+            << " cross-validation\n"
+            << "choice: the candidate with the lowest mean of the undisturbed and disturbed mean total RMSE "
+               "on the trials outside the held-out fold\n\n";
+  std::cout << std::left << std::setw(44) << "trial" << std::right << std::setw(10) << "in-sample"
+            << std::setw(10) << "cross-val" << "  chosen without this trial's fold\n";
+  for (size_t t = 0; t < trials.size(); ++t) {
+    std::cout << std::left << std::setw(44) << trials[t].stem << std::right << std::fixed << std::setprecision(3)
+              << std::setw(10) << cv.in_sample[t].errors.total_deg << std::setw(10)
+              << cv.cross_validated[t].errors.total_deg << "  " << eval::describe(candidates[cv.choice_per_trial[t]])
+              << "\n";
+  }
+  auto row = [&](const std::string& label, const eval::GroupMeans& m) {
+    std::cout << std::left << std::setw(26) << label << std::right << std::fixed << std::setprecision(3)
+              << std::setw(10) << m.undisturbed.total_deg << std::setw(10) << m.undisturbed.inclination_deg
+              << std::setw(10) << m.disturbed.total_deg << std::setw(10) << m.disturbed.inclination_deg
+              << std::setw(10) << m.all.total_deg << std::setw(10) << m.all.inclination_deg << "\n";
+  };
+  std::cout << "\nmean RMSE, deg (" << in.n_undisturbed << " undisturbed, " << in.n_disturbed << " disturbed)\n"
+            << std::left << std::setw(26) << "" << std::right << std::setw(20) << "undisturbed" << std::setw(20)
+            << "disturbed" << std::setw(20) << "all" << "\n"
+            << std::left << std::setw(26) << "" << std::right << std::setw(10) << "total" << std::setw(10) << "incl"
+            << std::setw(10) << "total" << std::setw(10) << "incl" << std::setw(10) << "total" << std::setw(10)
+            << "incl" << "\n";
+  row("in-sample", in);
+  row("cross-validated", out);
+  std::cout << "\nin-sample choice: " << eval::describe(candidates[cv.in_sample_choice]) << "\n"
+            << "per-candidate, per-trial figures: " << (std::filesystem::path(out_dir) / "grid_results.csv").string()
+            << "\n";
+  return {cv, candidates};
 }
 
 std::string default_broad_dir() {
@@ -231,9 +343,72 @@ void register_eval_cli(CLI::App& app) {
       ->check(CLI::ExistingFile);
   broad->add_option("--out", *out, "Output directory for the per-trial CSV files")->required();
   broad->add_option("files", *files, "BROAD .hdf5 files")->required()->check(CLI::ExistingFile);
+  auto grid = std::make_shared<GridOptions>();
+  broad->add_option("--grid", grid->grid,
+                    "Parameter to choose, KEY=V1,V2,... (repeatable; YAML key of the filter, dotted for nested "
+                    "fields). Every combination runs on every trial; prints in-sample and cross-validated means")
+      ->allow_extra_args(false)
+      ->type_name("KEY=VALUES");
+  broad->add_option("--folds", grid->folds,
+                    "Cross-validation folds for --grid (trial i is in fold i mod K; 0 = leave one trial out)")
+      ->check(CLI::Range(0, 1000))
+      ->capture_default_str();
   broad->callback([=]() {
     install_stop_handlers();
-    run_eval(*filter, *config, *out, *files);
+    if (grid->grid.empty()) {
+      if (grid->folds != 0) {
+        std::cerr << "poise eval broad: --folds without --grid: no parameter is chosen, so the in-sample "
+                     "figure below is also the cross-validated one\n";
+      }
+      run_eval(*filter, *config, *out, *files);
+      return;
+    }
+    run_grid(*filter, *config, *out, *files, *grid);
+  });
+
+  CLI::App* tune = app.add_subcommand(
+      "tune", "Choose filter parameters on your own recordings with ground truth (BROAD-layout HDF5) by "
+              "cross-validation, and write the chosen YAML");
+  auto t_filter = std::make_shared<std::string>("parallel_kf");
+  auto t_config = std::make_shared<std::string>();
+  auto t_out = std::make_shared<std::string>();
+  auto t_write = std::make_shared<std::string>();
+  auto t_files = std::make_shared<std::vector<std::string>>();
+  auto t_grid = std::make_shared<GridOptions>();
+  tune->add_option("--filter", *t_filter, "Filter name (see `poise bench filters --list`)")->capture_default_str();
+  tune->add_option("--config", *t_config, "Base YAML parameter file (default: the filter's defaults)")
+      ->check(CLI::ExistingFile);
+  tune->add_option("--grid", t_grid->grid, "Parameter to choose, KEY=V1,V2,... (repeatable)")
+      ->required()
+      ->allow_extra_args(false)
+      ->type_name("KEY=VALUES");
+  tune->add_option("--folds", t_grid->folds, "Cross-validation folds (0 = leave one recording out)")
+      ->check(CLI::Range(0, 1000))
+      ->capture_default_str();
+  tune->add_option("--out", *t_out, "Working directory (candidate configs, per-candidate figures)")->required();
+  tune->add_option("--write", *t_write, "Where to write the chosen YAML")->required();
+  tune->add_option("files", *t_files,
+                   "Recordings: HDF5 with imu_gyr (rad/s), imu_acc (m/s^2), imu_mag (uT), opt_quat (reference "
+                   "q_world_body ENU [w,x,y,z]), movement (scored samples), attribute sampling_rate (Hz); "
+                   "trial numbers >= 24 in the file name count as disturbed")
+      ->required()
+      ->check(CLI::ExistingFile);
+  tune->callback([=]() {
+    install_stop_handlers();
+    const auto [cv, candidates] = run_grid(*t_filter, *t_config, *t_out, *t_files, *t_grid);
+    const eval::GroupMeans in_means = eval::group_means(cv.in_sample);
+    const eval::GroupMeans cv_means = eval::group_means(cv.cross_validated);
+    std::ostringstream header;
+    header << std::fixed << std::setprecision(3) << "written by poise tune: filter " << *t_filter << ", "
+           << t_files->size() << " recording(s)\nchosen: " << eval::describe(candidates[cv.in_sample_choice])
+           << "\nmean total RMSE deg, in-sample " << in_means.all.total_deg << ", cross-validated " << cv_means.all.total_deg
+           << " (expect the cross-validated figure on new recordings)";
+    try {
+      eval::write_config_with_overrides(*t_config, candidates[cv.in_sample_choice], *t_write, header.str());
+    } catch (const std::exception& e) {
+      throw Error(e.what());
+    }
+    std::cout << "wrote " << *t_write << "\n";
   });
 
   CLI::App* bench_group = subcommand_group(app, "bench", "Benchmarks (figures printed, not asserted)");

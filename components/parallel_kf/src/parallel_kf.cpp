@@ -26,7 +26,10 @@ ParallelKfParams ParallelKfParams::paper() {
   p.gyro_current_weight = 0.0;
   p.accel_lowpass_tau_s = 0.0;
   p.bias_estimation = false;
+  p.motion_bias_tau_s = 0.0;
   p.mag_gating = false;
+  p.accel_lowpass_order = 1;
+  p.share_tilt_correction = false;
   return p;
 }
 
@@ -70,6 +73,7 @@ void ParallelKfParams::validate() const {
   need(mag_reacquire_s >= 0.0 && mag_reacquire_tol > 0.0, "mag_reacquire_s >= 0, mag_reacquire_tol > 0");
   need(gyro_current_weight >= 0.0 && gyro_current_weight <= 1.0, "gyro_current_weight must be in [0, 1]");
   need(accel_lowpass_tau_s >= 0.0, "accel_lowpass_tau_s must be >= 0 (s, 0 = off)");
+  need(accel_lowpass_order == 1 || accel_lowpass_order == 2, "accel_lowpass_order must be 1 or 2");
   need(limits.max_dt_s > 0.0, "limits.max_dt_s must be > 0 (s)");
 }
 
@@ -154,6 +158,7 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
 
   // KF1: tilt + external acceleration (5)-(7)
   kf1_.core().predict_with_transition(a, dt);
+  const Eigen::Vector3d z_before = kf1_.up_body();
   if (p_.accel_lowpass_tau_s > 0.0) {
     // Low-pass the accelerometer in a gyro-propagated, almost inertial frame: external
     // accelerations average out there while gravity stays put; KF1 sees the filtered vector.
@@ -162,13 +167,21 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
       r_ib_ = Eigen::Quaterniond(r_ib_).normalized().toRotationMatrix();
       r_ib_steps_ = 0;
     }
-    lp_accel_i_ += (dt / (p_.accel_lowpass_tau_s + dt)) * (r_ib_ * s.accel_mps2 - lp_accel_i_);
+    if (p_.accel_lowpass_order == 2) {
+      lp_accel_i_ = accel_bw_.step(r_ib_ * s.accel_mps2, dt);
+    } else {
+      lp_accel_i_ += (dt / (p_.accel_lowpass_tau_s + dt)) * (r_ib_ * s.accel_mps2 - lp_accel_i_);
+    }
     kf1_.correct(r_ib_.transpose() * lp_accel_i_);
   } else {
     kf1_.correct(s.accel_mps2);
   }
   if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && !rest_) {
     bias_ -= kf1_.last_correction_rotvec() / p_.motion_bias_tau_s;
+  }
+  if (p_.share_tilt_correction && heading_initialized_) {
+    // the rotation that moved sZ moves sX' too (one attitude error, two world directions)
+    kf2_.set_u(quat_from_two_vectors(z_before, kf1_.up_body()) * kf2_.u());
   }
 
   // KF2: heading + magnetic disturbance (8)-(11)
@@ -195,6 +208,8 @@ void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
   r_ib_.setIdentity();
   r_ib_steps_ = 0;
   lp_accel_i_ = s.accel_mps2;
+  accel_bw_ = Butterworth2<3>(p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : 1.0);
+  accel_bw_.reset(s.accel_mps2);
   initialized_ = true;
 }
 
@@ -317,7 +332,7 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
   kf2_.correct(mag, field_m_, mag_extra_var_);  // (10b), (11f)-(11h)
   mag_extra_var_ = 0.0;
   out_.mag_used = true;
-  if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && !rest_ && field_learnt_) {
+  if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && p_.motion_bias_heading && !rest_ && field_learnt_) {
     // heading part (about sZ) of the correction rotation, sX'+ x sX'- = dtheta_perp(sX')
     const Eigen::Vector3d& z = kf1_.up_body();
     const Eigen::Vector3d corr = kf2_.u().normalized().cross(x_prior.normalized());

@@ -56,6 +56,15 @@ TrialErrors broad_errors(const std::vector<Eigen::Quaterniond>& estimates, const
 /// Errors of one sample (degrees): {total, heading, inclination}.
 Eigen::Vector3d broad_sample_errors_deg(const Eigen::Quaterniond& q_est, const Eigen::Quaterniond& q_ref);
 
+/// The trial as an IMU sampling at `rate_hz` would have recorded it (rate independence tests):
+/// the gyro is integrated at the original rate (each sample the mean rate over the preceding
+/// interval) and the new gyro samples are the mean rates of that orientation over the new
+/// intervals, so the rotation is the same at any rate; accelerometer, magnetometer and reference
+/// position are interpolated linearly, the reference orientation by slerp (NaN where either
+/// neighbour is NaN), `movement` by the nearest original sample. Throws std::invalid_argument
+/// for a rate that is not finite and positive or a trial with fewer than 2 samples.
+BroadTrial resample_trial(const BroadTrial& trial, double rate_hz);
+
 /// Leading integer of a file stem ("24_disturbed_tapping_A" -> 24), 0 if none.
 int trial_number_from_stem(const std::string& stem);
 

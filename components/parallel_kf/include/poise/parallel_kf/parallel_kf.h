@@ -41,6 +41,7 @@
 
 #include "poise/core/attitude.h"
 #include "poise/core/attitude_filter.h"
+#include "poise/core/lowpass.h"
 #include "poise/core/sample_check.h"
 #include "poise/core/source_report.h"
 #include "poise/core/types.h"
@@ -59,19 +60,28 @@ namespace poise {
 /// Parameters. The struct defaults are the shipped `default` configuration (most accurate on
 /// BROAD); `paper()` is the faithful one. Every field: unit, and what raising it does.
 struct ParallelKfParams {
-  /// KF1 defaults of the shipped configuration: sigma_G 0.086 deg/s, sigma_A 0.08 m/s^2 (a tilt
-  /// time constant of ~7 s behind the 3 s accelerometer low-pass; chosen on BROAD).
+  /// KF1 defaults of the shipped configuration. KF1 is corrected with the accelerometer
+  /// low-passed in an almost inertial frame (accel_lowpass_tau_s), so its measurement noise is the
+  /// residual of that low-pass, not the raw sensor noise: sigma_A 0.0003 m/s^2 against sigma_G
+  /// 0.086 deg/s gives KF1 a correction time constant of about 0.03 s (sqrt(2) sigma_A / (g
+  /// sigma_G)), negligible against the low-pass's 3 s, so the low-pass alone sets the tilt. c_a = 0: the
+  /// low-passed vector's external-acceleration residual is treated as white (independent of rate).
   static TiltKfParams default_tilt() {
     TiltKfParams t;
     t.sigma_gyro_rps = 0.0015;
-    t.sigma_accel_mps2 = 0.08;
+    t.sigma_accel_mps2 = 0.0003;
+    t.c_a = 0.0;
     return t;
   }
   // --- KF1 (tilt) and KF2 (heading) noise model (paper 000 Table 1 / eqs. 7, 11)
   TiltKfParams tilt = default_tilt();    ///< KF1 parameters (sigma_G, sigma_A, c_a, ...)
   double sigma_gyro_heading_rps = 0.05 * kRadPerDeg;  ///< sigma_G for KF2, rad/s (0 = same as tilt.sigma_gyro_rps). Raising: faster heading correction.
   double sigma_mag_ut = 0.4;             ///< sigma_M, uT (HMC5883L: 2 mG = 0.2 uT). Raising: slower heading correction.
-  double c_d = 0.1;                      ///< disturbance model coefficient (9b), [0, 1)
+  /// Disturbance model coefficient (9b), [0, 1), per step (see c_d_rate_hz). Default 0: the
+  /// disturbance seen by an accepted magnetometer sample is re-estimated at every sample (white),
+  /// which is the same at every rate; the paper's 0.1 per step is a time constant tied to its
+  /// 100 Hz (persistent disturbances are handled by the gating below instead).
+  double c_d = 0.0;
   double c_d_rate_hz = 0.0;              ///< > 0: c_d given at this rate and scaled to dt
   double sigma_gyro_extra_heading_rps = 0.0;  ///< extra gyro error std in Q21, rad/s
 
@@ -88,7 +98,16 @@ struct ParallelKfParams {
   // --- accelerometer low-pass in an almost inertial frame (extension)
   /// > 0: KF1 is corrected with the accelerometer low-passed with this time constant (s) in a
   /// gyro-propagated frame (external accelerations average out, gravity does not move), 0 = paper.
+  /// A ramp (e.g. a residual gyro bias) is followed with a lag of tau seconds.
   double accel_lowpass_tau_s = 3.0;
+  /// Order of that low-pass: 2 = Butterworth (-40 dB/decade, same lag), 1 = first order.
+  int accel_lowpass_order = 2;
+  /// Apply KF1's tilt correction (the small rotation that moved sZ) to KF2's field direction sX'
+  /// too: both are world directions seen in the same body, so one attitude error moves both.
+  /// Without it sX' keeps the gyro's tilt drift until the magnetometer removes it, and near the
+  /// vertical field (dip 60-70 deg) a tilt error of sX' about north turns the heading by
+  /// tan(dip) times as much. Off in the paper configuration.
+  bool share_tilt_correction = true;
 
   // --- gyro bias estimation (extension)
   bool bias_estimation = true;
@@ -97,12 +116,22 @@ struct ParallelKfParams {
   double rest_min_s = 1.5;                      ///< ... for at least this long, s
   double rest_filter_tau_s = 0.5;               ///< low-pass time constant of the rest detector, s
   double rest_bias_tau_s = 2.0;                 ///< time constant of the bias low-pass at rest, s
-  double motion_bias_tau_s = 0.0;               ///< integral time constant in motion, s (0 = off)
+  /// Integral time constant of the gyro-bias estimate in motion, s (0 = off): the part of each
+  /// tilt correction not explained by the gyro is integrated into the bias (only the two axes that
+  /// gravity makes observable). Keep it >= 20x accel_lowpass_tau_s so the two loops do not fight
+  /// (time-scale separation). Raising: slower, smoother bias tracking. Off by default: on BROAD
+  /// cross-validation did not choose it (docs/ESTIMATORS.md); VQF's authors report the same.
+  double motion_bias_tau_s = 0.0;
+  /// Also integrate the heading part (about the vertical) from accepted magnetometer updates.
+  /// Off by default: a magnetometer correction carries the room's field errors into the bias.
+  bool motion_bias_heading = false;
   double max_bias_rps = 3.0 * kRadPerDeg;       ///< clamp of the bias estimate, rad/s
 
   // --- magnetic disturbance gating of the heading update (extension)
   bool mag_gating = true;
-  double mag_norm_tol = 0.07;       ///< relative | |s_M| - m | / m above which s_M is rejected
+  /// Relative | |s_M| - m | / m above which s_M is rejected. 5 % chosen by leave-one-trial-out
+  /// cross-validation on BROAD (`poise eval broad --grid mag_norm_tol=...`; docs/ESTIMATORS.md).
+  double mag_norm_tol = 0.05;
   double mag_dip_tol_deg = 10.0;    ///< |dip - alpha| above which s_M is rejected, deg
   double mag_reacquire_s = 20.0;    ///< adopt a stable new field after this long rejected, s (0 = never)
   double mag_reacquire_tol = 0.05;  ///< relative stability of the candidate field for adoption
@@ -233,6 +262,7 @@ class ParallelKf {
   Eigen::Matrix3d r_ib_ = Eigen::Matrix3d::Identity();  ///< body -> almost inertial frame
   int r_ib_steps_ = 0;
   Eigen::Vector3d lp_accel_i_{0, 0, 0};
+  Butterworth2<3> accel_bw_;
   Eigen::Vector3d last_accel_{0, 0, 0};
 
   // bias / rest
