@@ -92,8 +92,8 @@ TEST(BroadReader, MissingFileIsAClearError) {
   }
 }
 
-// Golden figures on real recordings. Thresholds sit ~20% above the values measured when the
-// default configuration was chosen, so a regression of the filter or the metric fails here.
+// Golden figures on real recordings for the baseline (the parallel KF is held to VQF's published
+// figures instead: crossval_test.cpp). Threshold ~20% above the value measured when it was built.
 struct Golden {
   const char* file;
   const char* filter;
@@ -104,8 +104,6 @@ TEST(BroadGolden, FiltersStayWithinTheirMeasuredAccuracy) {
   POISE_REQUIRE_SHARED_DIR(shared);
   const std::string dir = shared + "/broad/";
   const Golden cases[] = {
-      {"05_undisturbed_slow_rotation_with_breaks_B.hdf5", "parallel_kf", 1.35},
-      {"32_disturbed_attached_magnet_1cm.hdf5", "parallel_kf", 2.3},
       {"05_undisturbed_slow_rotation_with_breaks_B.hdf5", "gauss_newton", 11.5},
   };
   for (const auto& c : cases) {
