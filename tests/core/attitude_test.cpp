@@ -111,6 +111,22 @@ TEST(Attitude, FromTwoVectorsMapsAndIsShortest) {
   EXPECT_LT((flip * x + x).norm(), 1e-12);
 }
 
+TEST(Attitude, RotateByShortestEqualsTheShortestRotationQuaternion) {
+  SCOPED_TRACE(::testing::Message() << "seed " << kSeed);
+  std::mt19937 rng(kSeed);
+  for (int i = 0; i < kTrials; ++i) {
+    const Eigen::Vector3d a = random_rotvec(rng, 5.0).normalized();
+    const Eigen::Vector3d b = random_rotvec(rng, 5.0).normalized();
+    const Eigen::Vector3d v = random_rotvec(rng, 5.0);
+    if (a.dot(b) < -0.999) {
+      continue;  // near anti-parallel: the axis is ill-defined for both
+    }
+    EXPECT_LT((rotate_by_shortest(a, b, v) - quat_from_two_vectors(a, b) * v).norm(), 1e-9 * (1.0 + v.norm()));
+  }
+  const Eigen::Vector3d x = Eigen::Vector3d::UnitX();
+  EXPECT_EQ(rotate_by_shortest(x, -x, Eigen::Vector3d(1, 2, 3)), Eigen::Vector3d(1, 2, 3));  // refused
+}
+
 TEST(Attitude, RightJacobianMatchesNumericalPerturbation) {
   SCOPED_TRACE(::testing::Message() << "seed " << kSeed);
   std::mt19937 rng(kSeed);

@@ -74,6 +74,8 @@ void ParallelKfParams::validate() const {
   need(gyro_current_weight >= 0.0 && gyro_current_weight <= 1.0, "gyro_current_weight must be in [0, 1]");
   need(accel_lowpass_tau_s >= 0.0, "accel_lowpass_tau_s must be >= 0 (s, 0 = off)");
   need(accel_lowpass_order == 1 || accel_lowpass_order == 2, "accel_lowpass_order must be 1 or 2");
+  need(!share_tilt_correction || (tilt.renormalize && tilt.exact_rotation),
+       "share_tilt_correction needs tilt.renormalize and tilt.exact_rotation (unit directions)");
   need(limits.max_dt_s > 0.0, "limits.max_dt_s must be > 0 (s)");
 }
 
@@ -181,7 +183,7 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   }
   if (p_.share_tilt_correction && heading_initialized_) {
     // the rotation that moved sZ moves sX' too (one attitude error, two world directions)
-    kf2_.set_u(quat_from_two_vectors(z_before, kf1_.up_body()) * kf2_.u());
+    kf2_.set_u(rotate_by_shortest(z_before, kf1_.up_body(), kf2_.u()));  // both unit (renormalised)
   }
 
   // KF2: heading + magnetic disturbance (8)-(11)

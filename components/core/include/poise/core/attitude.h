@@ -255,6 +255,20 @@ inline Eigen::Quaterniond quat_from_two_vectors(const Eigen::Vector3d& from, con
   return Eigen::Quaterniond(1.0 + d, c.x(), c.y(), c.z()).normalized();
 }
 
+/// `v` rotated by the shortest rotation that takes unit `from` to unit `to` (= quat_from_two_vectors
+/// (from, to) * v for unit inputs, without a square root): R v = d v + c x v + c (c . v) / (1 + d),
+/// c = from x to, d = from . to. Requires from . to > -1 + 1e-9 (not anti-parallel); returns v
+/// unchanged otherwise.
+inline Eigen::Vector3d rotate_by_shortest(const Eigen::Vector3d& from_unit, const Eigen::Vector3d& to_unit,
+                                          const Eigen::Vector3d& v) {
+  const double d = from_unit.dot(to_unit);
+  if (!(d > -1.0 + 1e-9)) {
+    return v;
+  }
+  const Eigen::Vector3d c = from_unit.cross(to_unit);
+  return d * v + c.cross(v) + c * (c.dot(v) / (1.0 + d));
+}
+
 /// Rotation matrix R_body_world whose columns are the world axes seen in the body frame,
 /// built from the world "up" axis and a second, non-parallel world reference (both in body
 /// coordinates), world x along the horizontal part of `forward_body` (paper 000 eq. 2 and text:
