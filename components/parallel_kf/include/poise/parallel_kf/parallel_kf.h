@@ -27,14 +27,18 @@
 //     follows s_M - m sX' so the disturbance output stays meaningful; after mag_reacquire_s of
 //     continuous rejection with a stable field, the new field is adopted as the reference, and
 //     after mag_max_reject_s the magnetometer is used again regardless (bounded heading drift);
-//   - accelerometer low-pass in an almost inertial (gyro-propagated) frame before KF1, so
-//     external accelerations average out while gravity does not move (accel_lowpass_tau_s);
+//   - accelerometer low-pass (second-order Butterworth, time constant in s) in an almost inertial
+//     (gyro-propagated) frame before KF1, so external accelerations average out while gravity
+//     does not move (accel_lowpass_tau_s); KF1 then follows the low-passed vector closely;
+//   - KF1's tilt correction applied to KF2's field direction as well (share_tilt_correction):
+//     one attitude error moves both world directions seen in the body;
 //   - propagation with the current gyro sample (gyro_current_weight; the paper uses k-1);
 //   - soft inflation of M2 as the field approaches the gate (mag_soft_weight, off: no gain);
 //   - exact rotation propagation, renormalisation, c_a/c_d defined at a reference rate.
 // Measured on the 19 BROAD trials in ../shared/broad (mean total RMSE, undisturbed / disturbed):
 //   paper 11.6 / 16.0 deg (first-order propagation lets |sZ| grow without bound at ~1000 deg/s),
-//   default 1.56 / 2.34 deg. The Gauss-Newton baseline: 34.4 / 62.4 deg.
+//   default 1.24 / 1.99 deg in-sample, 1.29 / 2.00 deg leave-one-trial-out cross-validated
+//   (docs/ESTIMATORS.md). The Gauss-Newton baseline: 34.4 / 62.4 deg.
 // Bad input (NaN, zero vectors, non-monotonic stamps, gaps) is rejected and counted; the state is
 // untouched (a gap re-anchors time).
 #pragma once
