@@ -26,12 +26,13 @@ while [ $# -gt 0 ]; do
 done
 
 # Debian 12 packages. Build: compiler, CMake, Ninja, Fast DDS + generator, Eigen, OpenCV,
-# AprilTag, yaml-cpp, CLI11, HDF5, zstd. Tests: GoogleTest, Cyclone DDS (interop), iproute2
+# AprilTag, yaml-cpp, CLI11, HDF5, zstd, nlohmann-json (the one JSON writer). Tests: GoogleTest, Cyclone DDS (interop), iproute2
 # (network namespaces), openssl (DDS Security), clang (fuzzing), Node.js + npm (MCAP validators).
 packages=(
   build-essential cmake ninja-build pkg-config
   libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools
   libeigen3-dev libopencv-dev libapriltag-dev libyaml-cpp-dev libcli11-dev libhdf5-dev libzstd-dev
+  nlohmann-json3-dev
   libgtest-dev libgmock-dev cyclonedds-dev cyclonedds-tools
   iproute2 iputils-ping openssl clang
 )

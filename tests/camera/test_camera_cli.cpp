@@ -54,10 +54,10 @@ TEST(CameraCli, RenderThenDetectFindsTheTagsAtTheTrueCorners) {
     std::string line;
     std::string found;
     while (std::getline(lines, line)) {
-      if (line.find("\"id\": " + std::to_string(id) + ",") != std::string::npos) found = line;
+      if (line.find("\"id\":" + std::to_string(id) + ",") != std::string::npos) found = line;
     }
     ASSERT_FALSE(found.empty()) << "id " << id << " not detected:\n" << d.output;
-    EXPECT_NE(found.find("\"hamming\": 0"), std::string::npos);
+    EXPECT_NE(found.find("\"hamming\":0"), std::string::npos);
     EXPECT_NE(found.find("\"decision_margin\""), std::string::npos);
     const auto corners = numbers_after(found, "\"corners_px\"");
     // Truth printed by render: "<img>  id N  true corners (x, y) ..."

@@ -34,18 +34,5 @@ TEST(IdlSchema, UnknownTypesAndWrongModulesAreNotFound) {
   EXPECT_FALSE(flattened_idl("other::msg::ImuSample").has_value());
 }
 
-TEST(IdlSchema, IncludesAreResolvedTransitivelyOnce) {
-  const std::map<std::string, std::string> files{
-      {"a.idl", "module m { struct A { long x; }; };\n"},
-      {"b.idl", "#include \"a.idl\"\nmodule m { struct B { A a; }; };\n"},
-      {"c.idl", "#include \"a.idl\"\n#include \"b.idl\"\nmodule m { struct C { B b; }; };\n"}};
-  const auto text = flattened_idl("m::C", files);
-  ASSERT_TRUE(text.has_value());
-  EXPECT_EQ(*text,
-            "// ---- a.idl\nmodule m { struct A { long x; }; };\n"
-            "// ---- b.idl\nmodule m { struct B { A a; }; };\n"
-            "// ---- c.idl\nmodule m { struct C { B b; }; };\n");
-}
-
 }  // namespace
 }  // namespace poise::record

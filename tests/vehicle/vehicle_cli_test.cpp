@@ -2,6 +2,7 @@
 #include "poise/cli/common.h"
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 #include <gtest/gtest.h>
 
 #include <string>
@@ -29,6 +30,15 @@ TEST(VehicleCli, JsonHasTheThreeEstimators) {
   for (const char* key : {"\"triad\":", "\"ekf\":", "\"switched\":", "\"roll_deg\":", "\"yaw_deg\":"}) {
     EXPECT_NE(out.find(key), std::string::npos) << key;
   }
+}
+
+// The --json output is JSON a parser accepts (undefined figures are null, never "-nan").
+TEST(VehicleCli, JsonParses) {
+  const std::string out = run_cli({"sim", "vehicle", "--case", "double_lane_change", "--json"});
+  EXPECT_EQ(out.find("nan"), std::string::npos) << out;
+  nlohmann::json j;
+  ASSERT_NO_THROW(j = nlohmann::json::parse(out)) << out;
+  EXPECT_EQ(j["switched"]["bank_samples"], 0);
 }
 
 TEST(VehicleCli, TextShowsTheBankFigure) {

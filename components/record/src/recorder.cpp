@@ -3,7 +3,8 @@
 #include "poise/dds/participant.h"
 #include "poise/dds/topics.h"
 #include "poise/record/idl_schema.h"
-#include "poise/record/raw_type.h"
+#include "poise/ddstools/cdr.h"
+#include "poise/ddstools/raw_type.h"
 
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/domain/DomainParticipantListener.hpp>
@@ -79,7 +80,7 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
    public:
     SubListener(Impl* impl, size_t index) : impl_(impl), index_(index) {}
     void on_data_available(fdds::DataReader* reader) override {
-      RawSample sample;
+      dds::RawSample sample;
       fdds::SampleInfo info;
       while (reader->take_next_sample(&sample, &info) == ReturnCode_t::RETCODE_OK) {
         if (!info.valid_data) {
@@ -90,12 +91,9 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
         p.log_ns = impl_->log_now();
         const uint64_t seq = info.sample_identity.sequence_number().to64long();
         p.sequence = static_cast<uint32_t>(seq & 0xFFFFFFFFu);
-        int64_t stamp = 0;
-        if (!header_stamp_ns(sample.bytes.data(), sample.bytes.size(), &stamp) || stamp <= 0) {
-          stamp = info.source_timestamp.to_ns();
-        }
-        p.publish_ns = stamp;
-        p.bytes = std::move(sample.bytes);
+        const std::optional<int64_t> stamp = ddstools::read_header_stamp_ns(sample.data.data(), sample.data.size());
+        p.publish_ns = stamp && *stamp > 0 ? *stamp : info.source_timestamp.to_ns();
+        p.bytes = std::move(sample.data);
         impl_->push(std::move(p), info.sample_identity.writer_guid(), seq);
       }
     }
@@ -267,9 +265,8 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
       }
       return;
     }
-    std::unique_ptr<fdds::TopicDataType> generated = make_generated_type(d.type);
     const std::optional<std::string> idl = flattened_idl(d.type);
-    if (!generated || !idl) {
+    if (!idl) {
       if (opt.all && !d.topic.empty() && d.topic[0] == '_') {
         return;  // middleware-internal topics (e.g. Fast DDS statistics): not user data
       }
@@ -288,7 +285,7 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
                    {"durability", durability_name(d.durability)},
                    {"qos_profile", dds::profile_name(kind)},
                    {"publish_time", "header.stamp_ns"}};
-    fdds::TypeSupport type(new RawPubSubType(d.type, std::move(generated)));
+    fdds::TypeSupport type(new dds::RawPubSubType(d.type, &ddstools::TypeTable::builtin()));
     if (participant->find_type(d.type).empty() &&
         type.register_type(participant) != ReturnCode_t::RETCODE_OK) {
       throw dds::DdsError("cannot register the raw type " + d.type);

@@ -2,7 +2,7 @@
 
 #include "poise/dds/participant.h"
 #include "poise/dds/topics.h"
-#include "poise/record/raw_type.h"
+#include "poise/ddstools/raw_type.h"
 
 #include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
 
@@ -36,7 +36,7 @@ std::string meta(const Channel& channel, const std::string& key) {
 struct Output {
   fdds::DataWriter* writer = nullptr;
   std::unique_ptr<dds::detail::MatchCounter> matches;
-  RawSample sample;
+  dds::RawSample sample;
 };
 
 }  // namespace
@@ -69,13 +69,13 @@ ReplayStats replay(const ReplayOptions& options) {
       log << "poise replay: skipping '" << channel.topic << "' (no DDS type or not CDR)\n";
       continue;
     }
-    auto generated = make_generated_type(type_name);
-    if (!generated) {
+    const ddstools::TypeTable& table = ddstools::TypeTable::builtin();
+    if (table.find_struct(type_name) == nullptr) {
       log << "poise replay: '" << channel.topic << "' has type " << type_name
           << " unknown to this build: published unkeyed\n";
     }
     fdds::Topic* topic = participant.topic(
-        channel.topic, fdds::TypeSupport(new RawPubSubType(type_name, std::move(generated))));
+        channel.topic, fdds::TypeSupport(new dds::RawPubSubType(type_name, &table)));
     const dds::QosKind kind = kind_from(channel);
     fdds::DataWriterQos qos = participant.publisher()->get_default_datawriter_qos();
     participant.publisher()->get_datawriter_qos_from_profile(dds::profile_name(kind), qos);
@@ -129,7 +129,7 @@ ReplayStats replay(const ReplayOptions& options) {
       return false;
     }
     Output& out = found->second;
-    out.sample.bytes.assign(m.data, m.data + m.size);
+    out.sample.data.assign(m.data, m.data + m.size);
     if (!out.writer->write(&out.sample)) {
       ++stats.write_failures;
       return false;

@@ -4,6 +4,7 @@
 #include "poise/cli/common.h"
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include <opencv2/imgcodecs.hpp>
 
@@ -25,27 +26,6 @@ namespace {
 using namespace poise::camera;
 
 constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
-
-std::string json_escape(const std::string& s) {
-  std::string out;
-  for (const char c : s) {
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\t': out += "\\t"; break;
-      default:
-        if (static_cast<unsigned char>(c) < 0x20) {
-          char buf[8];
-          std::snprintf(buf, sizeof buf, "\\u%04x", c);
-          out += buf;
-        } else {
-          out += c;
-        }
-    }
-  }
-  return out;
-}
 
 /// The default camera for tools that need one without a calibration: 640x480, f = 500 px.
 CameraIntrinsics default_vga_camera() {
@@ -126,14 +106,19 @@ void run_detect(const DetectOptions& o) {
     total += detections.size();
     for (const auto& d : detections) {
       if (o.json) {
-        std::printf("{\"image\": \"%s\", \"family\": \"%s\", \"id\": %d, \"hamming\": %d, "
-                    "\"decision_margin\": %.3f, \"corners_px\": [[%.3f, %.3f], [%.3f, %.3f], "
-                    "[%.3f, %.3f], [%.3f, %.3f]], \"center_px\": [%.3f, %.3f]}\n",
-                    json_escape(path).c_str(), json_escape(o.family).c_str(), d.id, d.hamming,
-                    d.decision_margin, d.corners_px[0].x(), d.corners_px[0].y(),
-                    d.corners_px[1].x(), d.corners_px[1].y(), d.corners_px[2].x(),
-                    d.corners_px[2].y(), d.corners_px[3].x(), d.corners_px[3].y(),
-                    d.center_px.x(), d.center_px.y());
+        nlohmann::ordered_json corners = nlohmann::ordered_json::array();
+        for (const auto& c : d.corners_px) {
+          corners.push_back({c.x(), c.y()});
+        }
+        const nlohmann::ordered_json j = {{"image", path},
+                                          {"family", o.family},
+                                          {"id", d.id},
+                                          {"hamming", d.hamming},
+                                          {"decision_margin", d.decision_margin},
+                                          {"corners_px", corners},
+                                          {"center_px", {d.center_px.x(), d.center_px.y()}}};
+        // paths need not be UTF-8: invalid bytes become U+FFFD instead of throwing
+        std::printf("%s\n", j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
       } else {
         std::printf("%s  id %d  hamming %d  margin %.1f  corners (%.2f, %.2f) (%.2f, %.2f) "
                     "(%.2f, %.2f) (%.2f, %.2f)\n",

@@ -3,6 +3,7 @@
 #include "poise/cli/common.h"
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include <cstdio>
 #include <iostream>
@@ -13,19 +14,19 @@ namespace poise::cli {
 namespace {
 
 std::string score_json(const AltitudeScore& s, const AltitudeParams& p) {
-  char buf[1024];
-  std::snprintf(buf, sizeof(buf),
-                "{\"profile\":\"%s\",\"method\":\"%s\",\"gains\":\"%s\",\"seed\":%llu,"
-                "\"samples\":%zu,\"height_rmse_m\":%.6f,\"vertical_velocity_rmse_mps\":%.6f,"
-                "\"baro_height_rmse_m\":%.6f,\"max_abs_velocity_error_mps\":%.6f,"
-                "\"stationary_fraction\":%.4f,\"true_stationary_fraction\":%.4f,"
-                "\"rejected\":%llu}",
-                s.profile.c_str(), s.method.c_str(), to_string(p.gains),
-                static_cast<unsigned long long>(s.seed), s.samples, s.height_rmse_m,
-                s.velocity_rmse_mps, s.baro_height_rmse_m, s.max_abs_velocity_error_mps,
-                s.stationary_fraction, s.stationary_true_fraction,
-                static_cast<unsigned long long>(s.rejects.total()));
-  return buf;
+  const nlohmann::ordered_json j = {{"profile", s.profile},
+                                    {"method", s.method},
+                                    {"gains", to_string(p.gains)},
+                                    {"seed", s.seed},
+                                    {"samples", s.samples},
+                                    {"height_rmse_m", s.height_rmse_m},
+                                    {"vertical_velocity_rmse_mps", s.velocity_rmse_mps},
+                                    {"baro_height_rmse_m", s.baro_height_rmse_m},
+                                    {"max_abs_velocity_error_mps", s.max_abs_velocity_error_mps},
+                                    {"stationary_fraction", s.stationary_fraction},
+                                    {"true_stationary_fraction", s.stationary_true_fraction},
+                                    {"rejected", s.rejects.total()}};
+  return j.dump();  // NaN / infinity -> null: valid JSON
 }
 
 }  // namespace

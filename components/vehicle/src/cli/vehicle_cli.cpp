@@ -4,6 +4,7 @@
 #include "poise/vehicle/vehicle_eval.h"
 
 #include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include <cstdio>
 #include <memory>
@@ -13,25 +14,22 @@
 namespace poise::cli {
 namespace {
 
-std::string rpy_json(const Rpy& r) {
-  char buf[160];
-  std::snprintf(buf, sizeof(buf), "{\"roll_deg\":%.4f,\"pitch_deg\":%.4f,\"yaw_deg\":%.4f}",
-                r.roll_deg, r.pitch_deg, r.yaw_deg);
-  return buf;
+nlohmann::ordered_json rpy_json(const Rpy& r) {
+  return {{"roll_deg", r.roll_deg}, {"pitch_deg", r.pitch_deg}, {"yaw_deg", r.yaw_deg}};
 }
 
-std::string score_json(const VehicleScore& s) {
-  std::string j = "{\"rmse\":" + rpy_json(s.rmse) + ",\"rmse_lateral\":" + rpy_json(s.rmse_lateral) +
-                  ",\"lateral_samples\":" + std::to_string(s.lateral_samples) +
-                  ",\"driving_end_abs_error\":" + rpy_json(s.driving_end_abs_error) +
-                  ",\"final_abs_error\":" + rpy_json(s.final_abs_error);
-  char buf[200];
-  std::snprintf(buf, sizeof(buf),
-                ",\"mean_roll_error_on_bank_deg\":%.4f,\"bank_samples\":%zu,\"triad_fraction\":%.4f,"
-                "\"samples\":%zu,\"rejected\":%llu}",
-                s.mean_roll_error_on_bank_deg, s.bank_samples, s.triad_fraction, s.samples,
-                static_cast<unsigned long long>(s.rejects.total()));
-  return j + buf;
+// NaN / infinity (e.g. no banked sample: mean over none) -> null: valid JSON.
+nlohmann::ordered_json score_json(const VehicleScore& s) {
+  return {{"rmse", rpy_json(s.rmse)},
+          {"rmse_lateral", rpy_json(s.rmse_lateral)},
+          {"lateral_samples", s.lateral_samples},
+          {"driving_end_abs_error", rpy_json(s.driving_end_abs_error)},
+          {"final_abs_error", rpy_json(s.final_abs_error)},
+          {"mean_roll_error_on_bank_deg", s.mean_roll_error_on_bank_deg},
+          {"bank_samples", s.bank_samples},
+          {"triad_fraction", s.triad_fraction},
+          {"samples", s.samples},
+          {"rejected", s.rejects.total()}};
 }
 
 void print_row(const char* label, const Rpy& r) {
@@ -100,11 +98,11 @@ void register_vehicle_cli(CLI::App& app) {
       scores.push_back(score_vehicle(sim, params));
     }
     if (opt->json) {
-      std::string j = "{\"case\":\"" + sim.scenario + "\",\"seed\":" + std::to_string(sim.seed);
+      nlohmann::ordered_json j = {{"case", sim.scenario}, {"seed", sim.seed}};
       for (const auto& s : scores) {
-        j += ",\"" + s.mode + "\":" + score_json(s);
+        j[s.mode] = score_json(s);
       }
-      std::printf("%s}\n", j.c_str());
+      std::printf("%s\n", j.dump().c_str());
       return;
     }
     std::printf("case %s, seed %llu, %zu samples at %.0f Hz (errors in deg: roll pitch yaw)\n",

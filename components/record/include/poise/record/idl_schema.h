@@ -1,21 +1,23 @@
-// omgidl schemas for MCAP channels: one self-contained IDL text per type, built from the project's
-// idl/*.idl (embedded at build time) without preprocessor directives.
+// omgidl schemas for MCAP channels: one self-contained IDL text per type. The one flattener and
+// the one embedded IDL table are ddstools' (poise/ddstools/idl_schema.h); this is the recorder's
+// view of them.
 #pragma once
 
-#include <map>
+#include "poise/ddstools/idl_schema.h"
+
 #include <optional>
 #include <string>
 
 namespace poise::record {
 
-/// The IDL files built into this binary: file name ("imu.idl") -> text.
-const std::map<std::string, std::string>& builtin_idl_files();
-
-/// A self-contained IDL text defining SCOPED_NAME ("poise::msg::ImuSample"): the file that
-/// defines it preceded by everything it #includes (transitively, each file once, included files
-/// first), with preprocessor lines removed. nullopt if no file defines it.
-std::optional<std::string> flattened_idl(
-    const std::string& scoped_name,
-    const std::map<std::string, std::string>& files = builtin_idl_files());
+/// The self-contained IDL text of SCOPED_NAME ("poise::msg::ImuSample") and every type it depends
+/// on (TypeTable::flatten), or nullopt when `table` has no such struct.
+inline std::optional<std::string> flattened_idl(
+    const std::string& scoped_name, const ddstools::TypeTable& table = ddstools::TypeTable::builtin()) {
+  if (table.find_struct(scoped_name) == nullptr) {
+    return std::nullopt;
+  }
+  return table.flatten(scoped_name);
+}
 
 }  // namespace poise::record
