@@ -1,6 +1,6 @@
 #include "poise/altitude/altitude_eval.h"
 
-#include "poise/core/bench.h"
+#include "poise/bench/bench.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,6 +1,6 @@
 // `poise eval broad` and `poise bench filters`.
 #include "poise/cli/common.h"
-#include "poise/core/bench.h"
+#include "poise/bench/bench.h"
 #include "poise/eval/broad.h"
 #include "poise/eval/crossval.h"
 #include "poise/eval/filter_registry.h"

@@ -1,7 +1,7 @@
 #include "poise/vehicle/vehicle_eval.h"
 
 #include "poise/core/attitude.h"
-#include "poise/core/bench.h"
+#include "poise/bench/bench.h"
 
 #include <algorithm>
 #include <chrono>

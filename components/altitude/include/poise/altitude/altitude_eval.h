@@ -5,7 +5,7 @@
 
 #include "poise/altitude/altitude_filter.h"
 #include "poise/altitude/altitude_sim.h"
-#include "poise/core/bench.h"
+#include "poise/bench/bench.h"
 
 #include <cstdint>
 #include <string>

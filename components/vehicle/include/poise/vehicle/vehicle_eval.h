@@ -2,7 +2,7 @@
 // and scores it against the truth; the per-sample timing for `poise bench filters`.
 #pragma once
 
-#include "poise/core/bench.h"
+#include "poise/bench/bench.h"
 #include "poise/vehicle/vehicle_estimator.h"
 #include "poise/vehicle/vehicle_sim.h"
 

@@ -1,4 +1,5 @@
-// Timing for the `poise bench ...` commands (not for estimator code: cores never read clocks).
+// Timing for the `poise bench ...` commands. Its own library (poise_bench), outside the cores:
+// cores never read clocks (tools/check_cores.sh checks it).
 #pragma once
 
 #include <algorithm>
