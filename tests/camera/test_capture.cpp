@@ -3,6 +3,7 @@
 #include "camera_test_util.h"
 
 #include "poise/camera/capture.h"
+#include "poise/testing/testing.h"
 #include "poise/camera/pipeline.h"
 
 #include <gtest/gtest.h>
@@ -67,7 +68,7 @@ TEST(Capture, VideoFileStampsFollowMediaTime) {
   {
     cv::VideoWriter writer(path, cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 10.0, cv::Size(64, 48), false);
     if (!writer.isOpened()) {
-      GTEST_SKIP() << "this OpenCV build cannot write MJPG/AVI";
+      POISE_SKIP("this OpenCV build cannot write MJPG/AVI");
     }
     for (int i = 0; i < 3; ++i) {
       writer.write(cv::Mat(48, 64, CV_8UC1, cv::Scalar(40 * (i + 1))));

@@ -20,7 +20,7 @@
 
 namespace poise::nettest {
 
-/// Empty when namespaces can be created here; otherwise why not (for GTEST_SKIP).
+/// Empty when namespaces can be created here; otherwise why not (for POISE_SKIP).
 std::string netlab_unavailable_reason();
 
 /// CLOCK_MONOTONIC in ns: the clock poise_net_node stamps its events with.
@@ -95,6 +95,6 @@ void stop(testing::Child& child);
   do {                                                                                     \
     const std::string netlab_reason = ::poise::nettest::netlab_unavailable_reason();       \
     if (!netlab_reason.empty()) {                                                          \
-      GTEST_SKIP() << netlab_reason;                                                       \
+      POISE_SKIP(netlab_reason);                                                           \
     }                                                                                      \
   } while (false)

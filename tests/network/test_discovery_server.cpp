@@ -94,7 +94,7 @@ TEST_P(DiscoveryServerTest, ClientsDiscoverThroughTheServerWithMulticastBlocked)
   POISE_REQUIRE_NETLAB();
   const std::string server_bin = server_binary();
   if (server_bin.empty()) {
-    GTEST_SKIP() << "fast-discovery-server not installed (apt-get install fastdds-tools)";
+    POISE_SKIP("fast-discovery-server not installed (apt-get install fastdds-tools)");
   }
   testing::DomainLease lease;
   const std::string domain = std::to_string(lease.id());
@@ -149,7 +149,7 @@ TEST(DiscoveryServer, ServerLossKeepsEstablishedFlowsAndRestartAdmitsLateJoiners
   POISE_REQUIRE_NETLAB();
   const std::string server_bin = server_binary();
   if (server_bin.empty()) {
-    GTEST_SKIP() << "fast-discovery-server not installed (apt-get install fastdds-tools)";
+    POISE_SKIP("fast-discovery-server not installed (apt-get install fastdds-tools)");
   }
   testing::DomainLease lease;
   const std::string domain = std::to_string(lease.id());

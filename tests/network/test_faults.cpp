@@ -42,7 +42,7 @@ TEST_P(FusionRestart, KilledAndRestartedResumes) {
   POISE_REQUIRE_NETLAB();
 #ifndef POISE_NET_HAVE_REAL_FUSION
   if (GetParam() == "parallel_kf") {
-    GTEST_SKIP() << "the estimator node libraries (poise_parallel_kf_node) are not in this build";
+    POISE_SKIP("the estimator node libraries (poise_parallel_kf_node) are not in this build");
   }
 #endif
   testing::DomainLease lease;

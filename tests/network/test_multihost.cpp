@@ -88,7 +88,7 @@ bool process_gone(int pid) {
 TEST(MultiHost, RealImuDriverAndParallelKfAcrossHosts) {
   POISE_REQUIRE_NETLAB();
 #if !defined(POISE_NET_HAVE_REAL_FUSION) || !defined(POISE_NET_HAVE_IMU_TOOLS)
-  GTEST_SKIP() << "the IMU driver (poise_imu_dev) or estimator node libraries are not in this build";
+  POISE_SKIP("the IMU driver (poise_imu_dev) or estimator node libraries are not in this build");
 #else
   testing::DomainLease lease;
   const std::string domain = std::to_string(lease.id());

@@ -1,6 +1,7 @@
 // MCAP writer/reader: round trips in memory, chunking on size and injected time, truncation at
 // every byte, corrupted CRCs, write failures (disk full).
 #include "poise/record/mcap.h"
+#include "poise/testing/testing.h"
 
 #include <gtest/gtest.h>
 
@@ -173,7 +174,7 @@ TEST(Mcap, RoundTripInMemoryKeepsEveryFieldAndByte) {
 
 TEST(Mcap, ZstdRoundTrip) {
   if (!zstd_available()) {
-    GTEST_SKIP() << "built without libzstd";
+    POISE_SKIP("built without libzstd");
   }
   std::mt19937 rng(kSeed);
   std::vector<uint8_t> buf;
@@ -528,7 +529,7 @@ TEST(Mcap, WriteFailureWithoutRoomForTheSummaryLeavesARecoverableFile) {
 
 TEST(Mcap, DevFullGivesAClearError) {
   if (!std::filesystem::exists("/dev/full")) {
-    GTEST_SKIP() << "/dev/full not present";
+    POISE_SKIP("/dev/full not present");
   }
   try {
     McapWriter w(open_file_sink("/dev/full"), WriterOptions{});

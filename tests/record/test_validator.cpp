@@ -4,6 +4,7 @@
 // are missing or the npm registry cannot be reached.
 #include "poise/record/idl_schema.h"
 #include "poise/record/mcap.h"
+#include "poise/testing/testing.h"
 #include "record_test_support.h"
 
 #include <gtest/gtest.h>
@@ -139,7 +140,7 @@ TEST(RecordValidator, IndependentReaderAcceptsEveryWrittenFile) {
   }
   const auto result = testing::run_node_validator(dir);
   if (!result.skip_reason.empty()) {
-    GTEST_SKIP() << result.skip_reason;
+    POISE_SKIP(result.skip_reason);
   }
   EXPECT_EQ(result.exit_code, 0) << result.output;
   EXPECT_NE(result.output.find("files valid"), std::string::npos) << result.output;

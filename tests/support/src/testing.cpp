@@ -28,6 +28,14 @@ std::string temp_dir() {
 
 void sleep_ms(int ms) { std::this_thread::sleep_for(std::chrono::milliseconds(ms)); }
 
+bool require_all() {
+  const auto set_to = [](const char* name, const char* value) {
+    const char* v = std::getenv(name);
+    return v != nullptr && std::string(v) == value;
+  };
+  return set_to("CI", "true") || set_to("POISE_REQUIRE_ALL", "1");
+}
+
 DomainLease::DomainLease() {
   const std::string dir = temp_dir() + "/poise-test-domains";
   ::mkdir(dir.c_str(), 0777);
@@ -62,9 +70,10 @@ std::optional<std::string> shared_dir() {
   const char* env = std::getenv("POISE_SHARED_DIR");
   std::vector<std::string> candidates;
   if (env != nullptr && *env != '\0') {
-    candidates.emplace_back(env);
+    candidates.emplace_back(env);  // when set, the only place looked at
+  } else {
+    candidates.emplace_back(std::string(POISE_SOURCE_DIR) + "/../shared");
   }
-  candidates.emplace_back(std::string(POISE_SOURCE_DIR) + "/../shared");
   for (const auto& c : candidates) {
     struct stat st {};
     if (::stat((c + "/broad").c_str(), &st) == 0 && S_ISDIR(st.st_mode)) {

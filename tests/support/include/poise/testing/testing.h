@@ -66,6 +66,10 @@ RunResult run(const std::vector<std::string>& argv, std::chrono::milliseconds ti
 /// Polls `predicate` every 10 ms until it is true or `timeout` elapses; returns the last value.
 void sleep_ms(int ms);
 
+/// True when a test that cannot run must fail instead of skipping: the environment has CI=true
+/// (what CI services set) or POISE_REQUIRE_ALL=1.
+bool require_all();
+
 template <typename Predicate>
 bool wait_until(Predicate predicate, std::chrono::milliseconds timeout) {
   const auto deadline = std::chrono::steady_clock::now() + timeout;
@@ -80,11 +84,24 @@ bool wait_until(Predicate predicate, std::chrono::milliseconds timeout) {
 
 }  // namespace poise::testing
 
-/// Skips the current test with a reason when the shared data directory is missing.
+/// Skips the current test with `reason` (a std::string or string literal) because something it
+/// needs is missing - or FAILS it when every test must run (require_all(): CI=true or
+/// POISE_REQUIRE_ALL=1), so CI can never go green by skipping. Every skip goes through this.
+#define POISE_SKIP(reason)                                                                 \
+  do {                                                                                     \
+    if (::poise::testing::require_all()) {                                                 \
+      FAIL() << "cannot run and skipping is not allowed (CI=true / POISE_REQUIRE_ALL=1): " \
+             << (reason);                                                                  \
+    }                                                                                      \
+    GTEST_SKIP() << (reason);                                                              \
+  } while (false)
+
+/// Skips (or, under require_all(), fails) the current test when the shared data directory is
+/// missing.
 #define POISE_REQUIRE_SHARED_DIR(var)                                                      \
   const auto var##_opt = ::poise::testing::shared_dir();                                   \
   if (!var##_opt) {                                                                        \
-    GTEST_SKIP() << "shared data directory not found (set POISE_SHARED_DIR or place "      \
-                    "shared/ beside the clone); a user's clone does not have it";          \
+    POISE_SKIP("shared data directory not found (set POISE_SHARED_DIR or place "           \
+               "shared/ beside the clone); a user's clone does not have it");              \
   }                                                                                        \
   const std::string var = *var##_opt
