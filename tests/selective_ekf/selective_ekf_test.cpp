@@ -374,6 +374,7 @@ TEST(SelectiveEkfVision, GivenImuDelayWhenOutputThenStatePredictedByTheEstimated
   // GIVEN a filter with a 5 ms IMU delay, rotating about z at 1 rad/s
   SelectiveEkfParams p;
   p.imu_delay_s = 0.005;
+  p.output_max_correction_dps = 0.0;  // the output is the state's prediction itself
   SelectiveEkf ekf(p);
   for (int k = 0; k < 200; ++k) {
     ImuSample s = level_sample(int64_t{1'000'000'000} + k * int64_t{10'000'000});
@@ -453,7 +454,7 @@ TEST(SelectiveEkfVision, GivenLateVisionWhenAllArrivedThenStateEqualsOnTimeProce
     }
   }
   // THEN both states agree to round-off and the late one replayed samples
-  EXPECT_LT(quat_angle_between(on_time.q_world_body(), late.q_world_body()) * kDegPerRad,
+  EXPECT_LT(quat_angle_between(on_time.state_output(), late.state_output()) * kDegPerRad,
             kLatencyFinalDeg);
   EXPECT_LT((on_time.state().w_rps - late.state().w_rps).norm(), 1e-9);
   EXPECT_LT((on_time.state().P - late.state().P).norm(), 1e-9);
@@ -485,7 +486,7 @@ TEST(SelectiveEkfVision, GivenOutOfOrderFramesWhenReplayedThenEqualsInOrderAndCo
   ASSERT_TRUE(reversed.update_vision(v2));
   ASSERT_TRUE(reversed.update_vision(v1));
   // THEN the states are identical and the reversed one counted an out-of-order frame
-  EXPECT_LT(quat_angle_between(in_order.q_world_body(), reversed.q_world_body()) * kDegPerRad,
+  EXPECT_LT(quat_angle_between(in_order.state_output(), reversed.state_output()) * kDegPerRad,
             kReplayExactDeg);
   EXPECT_LT((in_order.state().P - reversed.state().P).norm(), 1e-12);
   EXPECT_EQ(in_order.vision_counters().out_of_order, 0u);
@@ -547,8 +548,8 @@ TEST(SelectiveEkfVision, GivenNegatedQuaternionWhenFusedThenSameAsPositive) {
   a.update_vision(v);
   b.update_vision(vn);
   EXPECT_EQ(a.status(Source::kVisionAttitude).last, Decision::kFused);
-  EXPECT_LT(quat_angle_between(a.q_world_body(), b.q_world_body()) * kDegPerRad, kReplayExactDeg);
-  EXPECT_GT(quat_angle_between(a.q_world_body(), Eigen::Quaterniond::Identity()), 0.0);
+  EXPECT_LT(quat_angle_between(a.state_output(), b.state_output()) * kDegPerRad, kReplayExactDeg);
+  EXPECT_GT(quat_angle_between(a.state_output(), Eigen::Quaterniond::Identity()), 0.0);
 }
 
 // ------------------------------------------------------------------ bad input
@@ -815,6 +816,9 @@ constexpr double kMagnetTiltMaxDeg = 0.5;     // tilt of a static device while a
                                                // the magnetometer has no tilt row in kSplit
 constexpr double kBiasErrorMaxDps = 0.1;      // bias estimate vs the simulator's 0.44 deg/s bias
 constexpr double kBlackoutMaxDeg = 3.0;       // error during a 20 s vision blackout (IMU only)
+constexpr double kOutputStepBiasDeg = 0.01;  // output step beyond limit x dt: the output also
+                                             // turns with gyro - bias (bias < 1 deg/s x 10 ms)
+constexpr double kOutputSettleMarginS = 0.2;     // heading/tilt rows keep the state moving a bit
 constexpr double kReturnStepMarginDeg = 1.0;  // output step at vision return beyond the error
                                                // accumulated during the blackout: one vision
                                                // noise sigma (the first frame's own error)
@@ -936,6 +940,51 @@ TEST(SelectiveEkfImuOnly, GivenVisionBlackoutWhenVisionReturnsThenNoStepBeyondTh
   EXPECT_LT(max_step, err_at_return + kReturnStepMarginDeg);
   const Window back = window(steps, o.hide_to_s + 2.0, 40.0);
   EXPECT_LT(back.max_err, kFollowVisionMaxDeg);
+}
+
+TEST(SelectiveEkfVision, GivenAVisionResetWhenOutputLimitedThenTheOutputGlidesAtTheLimit) {
+  // GIVEN a level device at rest, 100 Hz, the tag seen at identity, then at 20 deg yaw (the
+  // camera re-localised: the gate rejects it 10 times, then the state resets to it)
+  SelectiveEkf f;  // output_max_correction_dps = 20 by default
+  const double limit_dps = f.params().output_max_correction_dps;
+  const Eigen::Quaterniond yaw20 = quat_from_euler_zyx(0.0, 0.0, 20.0 * kRadPerDeg);
+  Eigen::Quaterniond prev = Eigen::Quaterniond::Identity();
+  double max_step_deg = 0.0;
+  double state_jump_deg = 0.0;
+  double settled_at_s = -1.0;
+  int reset_k = -1;
+  for (int k = 0; k < 400; ++k) {
+    const int64_t t = int64_t{1'000'000'000} + k * int64_t{10'000'000};
+    f.update_imu(level_sample(t));
+    const Eigen::Quaterniond before = f.state_output();
+    if (k % 3 == 0) {
+      VisionPose v;
+      v.capture_stamp_ns = t;
+      v.q_world_camera = k < 150 ? Eigen::Quaterniond::Identity() : yaw20;
+      f.update_vision(v);
+    }
+    const double jump = quat_angle_between(before, f.state_output()) * kDegPerRad;
+    state_jump_deg = std::max(state_jump_deg, jump);
+    if (reset_k < 0 && jump > 10.0) {
+      reset_k = k;
+    }
+    if (k > 150) {
+      max_step_deg = std::max(max_step_deg, quat_angle_between(prev, f.q_world_body()) * kDegPerRad);
+    }
+    if (reset_k >= 0 && settled_at_s < 0.0 &&
+        quat_angle_between(f.q_world_body(), f.state_output()) * kDegPerRad < 0.01) {
+      settled_at_s = (k - reset_k) * 0.01;
+    }
+    prev = f.q_world_body();
+  }
+  // THEN the state jumps by degrees, the output moves at most limit x dt per sample (no gyro
+  // motion here) and catches up within the 20 deg / limit glide after the reset
+  std::printf("state jump %.2f deg, largest output step %.3f deg, settled %.2f s after it\n",
+              state_jump_deg, max_step_deg, settled_at_s);
+  EXPECT_GT(state_jump_deg, 10.0);
+  EXPECT_LE(max_step_deg, limit_dps * 0.01 + kOutputStepBiasDeg);
+  EXPECT_GT(settled_at_s, 0.0);
+  EXPECT_LT(settled_at_s, 20.0 / limit_dps + kOutputSettleMarginS);
 }
 
 TEST(SelectiveEkfVision, GivenBlackoutOptionsWhenSynthesisedThenNoFrameInsideTheBlackouts) {

@@ -153,6 +153,7 @@ SelectiveEkfParams load_selective_ekf_params(const std::string& path) {
       {"history_s", d(p.history_s)},
       {"vision_time_offset_s", d(p.vision_time_offset_s)},
       {"imu_delay_s", d(p.imu_delay_s)},
+      {"output_max_correction_dps", d(p.output_max_correction_dps)},
       {"q_body_camera", [&p](const YAML::Node& n) { p.q_body_camera = as_quat_wxyz(n); }},
       {"p_body_camera_m", [&p](const YAML::Node& n) { p.p_body_camera_m = as_vec3(n); }},
       {"init_sigma_attitude_deg", d(p.init_sigma_attitude_deg)},

@@ -7,6 +7,8 @@ namespace poise {
 namespace {
 
 constexpr double kNsToS = 1e-9;
+/// Output blending: a state-output difference above this is a reset, taken at once, rad.
+constexpr double kOutputSnapRad = 30.0 * kPi / 180.0;
 /// Gate used only to report a test ratio for sources that are never gated (gyro, q_imu), sigma.
 constexpr double kReportGateSigma = 5.0;
 
@@ -64,6 +66,7 @@ void validate(const SelectiveEkfParams& p) {
   need(p.sigma_tilt_rad_sqrt_s > 0.0, "sigma_tilt_rad_sqrt_s must be > 0");
   need(p.tilt_accel_ref_mps2 >= 0.0, "tilt_accel_ref_mps2 must be >= 0 (0 = off)");
   need(p.gravity_mps2 > 5.0 && p.gravity_mps2 < 15.0, "gravity_mps2 must be in (5, 15)");
+  need(p.output_max_correction_dps >= 0.0, "output_max_correction_dps must be >= 0 (0 = off)");
   need(p.aiding_period_s >= 0.0 && p.aiding_period_s <= 1.0, "aiding_period_s must be in [0, 1] s");
   need(p.sigma_heading_rad_sqrt_s > 0.0, "sigma_heading_rad_sqrt_s must be > 0");
   need(p.rest_gyro_max_rps > 0.0 && p.rest_accel_max_mps2 > 0.0, "rest thresholds must be > 0");
@@ -123,6 +126,7 @@ void SelectiveEkf::reset() {
   x_.P.diagonal().segment<3>(kV).setConstant(p_.init_sigma_velocity_mps *
                                               p_.init_sigma_velocity_mps);
   initialized_ = false;
+  out_ready_ = false;
   last_imu_stamp_ns_ = -1;
   rejections_ = RejectCounters{};
   status_ = {};
@@ -142,6 +146,10 @@ void SelectiveEkf::reset() {
 }
 
 Eigen::Quaterniond SelectiveEkf::q_world_body() const {
+  return p_.output_max_correction_dps > 0.0 && out_ready_ ? out_q_ : state_output();
+}
+
+Eigen::Quaterniond SelectiveEkf::state_output() const {
   if (imu_delay_ns_ == 0) {
     return quat_canonical(x_.q_world_body);
   }
@@ -714,6 +722,7 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
   for (; it != vision_log_.end() && it->capture_stamp_ns == in.stamp_ns; ++it) {
     process_vision(*it, true);
   }
+  blend_output(s.gyro_rps, c.dt_s);
   // Trim the history to history_s (keep at least the newest entry) and the vision log with it.
   const int64_t oldest = in.stamp_ns - seconds_to_ns(p_.history_s);
   while (history_.size() > 1 && history_.front().input.stamp_ns < oldest) {
@@ -724,6 +733,34 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
     vision_log_.pop_front();
   }
   return true;
+}
+
+void SelectiveEkf::blend_output(const Eigen::Vector3d& gyro_rps, double dt_s) {
+  // The output turns with the measured rate (gyro - bias) and follows the state's estimate with
+  // corrections limited to output_max_correction_dps: a large correction (vision back after a
+  // blackout) becomes a glide instead of a jump. Not part of the filter state (replays do not
+  // touch it).
+  const Eigen::Quaterniond target = state_output();
+  if (!(p_.output_max_correction_dps > 0.0)) {
+    return;
+  }
+  if (!out_ready_ || !(dt_s > 0.0)) {
+    out_q_ = target;
+    out_ready_ = true;
+    return;
+  }
+  const Eigen::Quaterniond pred = (out_q_ * quat_exp((gyro_rps - x_.b_rps) * dt_s)).normalized();
+  const Eigen::Vector3d e = quat_log(pred.conjugate() * quat_align_sign(target, pred));
+  if (e.norm() > kOutputSnapRad) {
+    out_q_ = target;  // a reset (re-alignment to vision): no point gliding
+    return;
+  }
+  // Corrections up to output_max_correction_dps pass at once (normal operation: no lag); larger
+  // ones are spread at that rate.
+  const double max_step = p_.output_max_correction_dps * kRadPerDeg * dt_s;
+  const double en = e.norm();
+  const double k = en > max_step ? max_step / en : 1.0;
+  out_q_ = quat_canonical((pred * quat_exp(e * k)).normalized());
 }
 
 bool SelectiveEkf::update_vision(const VisionPose& v_in) {

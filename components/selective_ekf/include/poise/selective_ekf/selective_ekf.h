@@ -179,6 +179,11 @@ struct SelectiveEkfParams {
   /// vision at its (true) capture time, and outputs the attitude predicted to the sample stamp
   /// with the estimated rate. 0 = the stamps are the sampling instants of the motion.
   double imu_delay_s = 0.0;
+  /// Output correction rate limit, deg/s: q_world_body() turns with the gyro (bias removed) and
+  /// follows the state's estimate with corrections of at most this rate, so a large correction
+  /// (vision back after a blackout) is a short glide, not a jump an AR renderer would show; small
+  /// ones pass at once. Differences above 30 deg (a reset) are taken at once. 0 = the state.
+  double output_max_correction_dps = 20.0;
   Eigen::Quaterniond q_body_camera = Eigen::Quaterniond::Identity();  ///< camera -> IMU body
   Eigen::Vector3d p_body_camera_m{0.0, 0.0, 0.0};  ///< camera origin in the body frame, m
 
@@ -341,9 +346,11 @@ class SelectiveEkf {
 
   [[nodiscard]] bool initialized() const { return initialized_; }
   [[nodiscard]] const SelectiveEkfState& state() const { return x_; }
-  /// The attitude at the stamp of the last IMU sample: the state predicted over imu_delay_s with
-  /// the estimated rate (the state itself when the delay is 0).
+  /// The attitude at the stamp of the last IMU sample: state_output() with its corrections
+  /// rate-limited to output_max_correction_dps (state_output() itself when 0).
   [[nodiscard]] Eigen::Quaterniond q_world_body() const;
+  /// The state predicted over imu_delay_s with the estimated rate (the state itself when 0).
+  [[nodiscard]] Eigen::Quaterniond state_output() const;
   /// The position at the stamp of the last IMU sample (predicted like q_world_body()).
   [[nodiscard]] Eigen::Vector3d position_m() const;
   [[nodiscard]] const SourceStatus& status(Source s) const {
@@ -383,6 +390,7 @@ class SelectiveEkf {
   void process_vision(const VisionPose& v, bool first_pass);
   void learn_reference(const ImuSample& s);
   void replay_from(size_t snapshot_index);
+  void blend_output(const Eigen::Vector3d& gyro_rps, double dt_s);
   // Update of M rows with a dense H (M x kN) and diagonal R, one row at a time; runs on the
   // [w, th, b] or [t, v] block alone while they are uncorrelated. False when the gate rejects.
   template <int M>
@@ -403,6 +411,8 @@ class SelectiveEkf {
   GaussNewton gn_;
   SelectiveEkfState x_;
   bool initialized_ = false;
+  bool out_ready_ = false;           ///< out_q_ holds a blended output
+  Eigen::Quaterniond out_q_ = Eigen::Quaterniond::Identity();
   int64_t last_imu_stamp_ns_ = -1;   ///< stamp of the last accepted IMU sample (sensor clock)
   int64_t imu_delay_ns_ = 0;         ///< state time = IMU stamp - imu_delay_ns_
   RejectCounters rejections_;
