@@ -65,7 +65,10 @@ void ParallelKfParams::validate() const {
   need(std::isnan(dip_deg) || std::abs(dip_deg) < 90.0, "dip_deg must be in (-90, 90) or null");
   need(startup_s > 0.0, "startup_s must be > 0 (s)");
   need(rest_gyro_max_rps > 0.0 && rest_accel_max_mps2 > 0.0, "rest thresholds must be > 0");
-  need(rest_min_s >= 0.0 && rest_filter_tau_s > 0.0 && rest_bias_tau_s > 0.0, "rest times must be > 0");
+  need(rest_min_s >= 0.0 && rest_filter_tau_s > 0.0, "rest times must be > 0");
+  need(bias_sigma_init_rps > 0.0 && bias_sigma_rest_rps > 0.0 && bias_drift_rps > 0.0 &&
+           bias_forgetting_time_s > 0.0,
+       "bias_sigma_init_rps, bias_sigma_rest_rps, bias_drift_rps and bias_forgetting_time_s must be > 0");
   need(motion_bias_tau_s >= 0.0, "motion_bias_tau_s must be >= 0 (0 = off)");
   need(max_bias_rps > 0.0, "max_bias_rps must be > 0");
   need(mag_norm_tol > 0.0 && mag_dip_tol_deg > 0.0, "mag gating tolerances must be > 0");
@@ -119,6 +122,7 @@ void ParallelKf::reset() {
   rejected_s_ = 0.0;
   gate_dip_ = std::nan("");
   bias_.setZero();
+  bias_var_ = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
   gyro_lp_.setZero();
   accel_lp_.setZero();
   rest_time_s_ = 0.0;
@@ -247,8 +251,18 @@ void ParallelKf::update_rest_and_bias(const Eigen::Vector3d& gyro_raw, const Eig
                      (accel - accel_lp_).norm() < p_.rest_accel_max_mps2;
   rest_time_s_ = still ? rest_time_s_ + dt : 0.0;
   rest_ = rest_time_s_ >= p_.rest_min_s;
+  // bias Kalman filter, per component (isotropic): predict, then measure at rest
+  const double v = p_.bias_drift_rps * p_.bias_drift_rps * dt / p_.bias_forgetting_time_s;
+  const double var_max = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
+  bias_var_ = std::min(bias_var_ + v, var_max);
   if (rest_) {
-    bias_ += (dt / (p_.rest_bias_tau_s + dt)) * (gyro_lp_ - bias_);
+    // measurement noise for which continuous rest settles at bias_sigma_rest_rps^2 (= p):
+    // steady state of P+ = (P + v) w / (P + v + w) at P+ = p gives w = p^2 / v + p
+    const double p_rest = p_.bias_sigma_rest_rps * p_.bias_sigma_rest_rps;
+    const double w = p_rest * p_rest / v + p_rest;
+    const double k = bias_var_ / (bias_var_ + w);
+    bias_ += k * (gyro_lp_ - bias_);
+    bias_var_ *= 1.0 - k;
   }
 }
 
@@ -376,6 +390,7 @@ ParallelKfOutput ParallelKf::output() const {
   o.mag_dist_world_ut = o.q_world_body * o.mag_dist_body_ut;
   o.mag_dist_norm_ut = o.mag_dist_body_ut.norm();
   o.gyro_bias_rps = bias_;
+  o.gyro_bias_sigma_rps = std::sqrt(bias_var_);
   o.rest = rest_;
   o.mag_used = out_.mag_used;
   o.field_learnt = field_learnt_;

@@ -119,7 +119,15 @@ struct ParallelKfParams {
   double rest_accel_max_mps2 = 0.5;             ///< ... and |s_A - lowpass(s_A)| stays below, m/s^2
   double rest_min_s = 1.5;                      ///< ... for at least this long, s
   double rest_filter_tau_s = 0.5;               ///< low-pass time constant of the rest detector, s
-  double rest_bias_tau_s = 2.0;                 ///< time constant of the bias low-pass at rest, s
+  // The bias estimate at rest is a Kalman filter with the low-passed gyro as its measurement: its
+  // variance starts at bias_sigma_init_rps^2 (so the first rest averages fast), grows by
+  // bias_drift_rps^2 per bias_forgetting_time_s while not observed, and its measurement noise is
+  // set so that continuous rest settles at bias_sigma_rest_rps (the low-passed samples are
+  // correlated, so they are not independent measurements). The same at every rate.
+  double bias_sigma_init_rps = 0.5 * kRadPerDeg;   ///< initial bias uncertainty, rad/s
+  double bias_sigma_rest_rps = 0.03 * kRadPerDeg;  ///< steady-state uncertainty at rest, rad/s. Raising: faster, noisier.
+  double bias_drift_rps = 0.1 * kRadPerDeg;        ///< bias change expected over bias_forgetting_time_s, rad/s
+  double bias_forgetting_time_s = 100.0;           ///< s
   /// Integral time constant of the gyro-bias estimate in motion, s (0 = off): the part of each
   /// tilt correction not explained by the gyro is integrated into the bias (only the two axes that
   /// gravity makes observable). Keep it >= 20x accel_lowpass_tau_s so the two loops do not fight
@@ -174,6 +182,7 @@ struct ParallelKfOutput {
   Eigen::Vector3d mag_dist_world_ut{0, 0, 0};      ///< ENU
   double mag_dist_norm_ut = 0.0;
   Eigen::Vector3d gyro_bias_rps{0, 0, 0};
+  double gyro_bias_sigma_rps = 0.0;  ///< standard deviation of each bias component, rad/s
   bool rest = false;              ///< rest detected (bias estimation)
   bool mag_used = false;          ///< the last magnetometer sample corrected the heading
   bool field_learnt = false;      ///< m and alpha known (configured or learnt)
@@ -273,6 +282,7 @@ class ParallelKf {
   Eigen::Vector3d bias_{0, 0, 0};
   Eigen::Vector3d gyro_lp_{0, 0, 0};
   Eigen::Vector3d accel_lp_{0, 0, 0};
+  double bias_var_ = 0.0;  ///< variance of each bias component (isotropic), rad^2/s^2
   double rest_time_s_ = 0.0;
   bool rest_ = false;
   bool lp_init_ = false;
