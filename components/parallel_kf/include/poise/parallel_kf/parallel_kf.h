@@ -37,7 +37,7 @@
 //   - exact rotation propagation, renormalisation, c_a/c_d defined at a reference rate.
 // Measured on the 19 BROAD trials in ../shared/broad (mean total RMSE, undisturbed / disturbed):
 //   paper 11.6 / 16.0 deg (first-order propagation lets |sZ| grow without bound at ~1000 deg/s),
-//   default 1.24 / 1.99 deg in-sample, 1.29 / 2.00 deg leave-one-trial-out cross-validated
+//   default 1.25 / 1.99 deg in-sample, 1.31 / 2.01 deg leave-one-trial-out cross-validated
 //   (docs/ESTIMATORS.md). The Gauss-Newton baseline: 34.4 / 62.4 deg.
 // Bad input (NaN, zero vectors, non-monotonic stamps, gaps) is rejected and counted; the state is
 // untouched (a gap re-anchors time).
