@@ -224,18 +224,39 @@ TEST(AltitudeFilter, InvalidParamsThrow) {
   EXPECT_FALSE(p.validate().empty());
 }
 
-TEST(AltitudeConfig, ShippedYamlLoadsTheDefaults) {
+// Defaults in one place: the shipped file holds only what differs from AltitudeParams{} (nothing),
+// so loading it gives exactly the struct, every field compared (a rounded copy of a default, e.g.
+// 0.000873 for 0.05 deg/s, fails here).
+TEST(AltitudeConfig, ShippedYamlIsExactlyTheDefaultsFieldByField) {
   const AltitudeParams p = load_altitude_params(testing::source_path("config/filters/altitude.yaml"));
   const AltitudeParams d;
   EXPECT_EQ(p.method, d.method);
+  EXPECT_EQ(p.gravity_mps2, d.gravity_mps2);
+  EXPECT_EQ(p.reference_pressure_pa, d.reference_pressure_pa);
+  EXPECT_EQ(p.paper_rounded_constants, d.paper_rounded_constants);
+  EXPECT_EQ(p.min_pressure_pa, d.min_pressure_pa);
+  EXPECT_EQ(p.max_pressure_pa, d.max_pressure_pa);
+  EXPECT_EQ(p.max_baro_age_s, d.max_baro_age_s);
   EXPECT_EQ(p.gains, d.gains);
-  EXPECT_DOUBLE_EQ(p.sigma_acc_mps2, d.sigma_acc_mps2);
-  EXPECT_DOUBLE_EQ(p.sigma_baro_m, d.sigma_baro_m);
-  EXPECT_DOUBLE_EQ(p.k_i, d.k_i);
+  EXPECT_EQ(p.sigma_acc_mps2, d.sigma_acc_mps2);
+  EXPECT_EQ(p.sigma_baro_m, d.sigma_baro_m);
+  EXPECT_EQ(p.k_i, d.k_i);
+  EXPECT_EQ(p.integral_velocity_only, d.integral_velocity_only);
   EXPECT_EQ(p.integral_time_scaled, d.integral_time_scaled);
-  EXPECT_DOUBLE_EQ(p.reference_pressure_pa, d.reference_pressure_pa);
+  EXPECT_EQ(p.zupt_gyro_max_rps, d.zupt_gyro_max_rps);
+  EXPECT_EQ(p.zupt_accel_dev_max_mps2, d.zupt_accel_dev_max_mps2);
+  EXPECT_EQ(p.zupt_window_s, d.zupt_window_s);
+  EXPECT_EQ(p.max_dt_s, d.max_dt_s);
+  EXPECT_EQ(p.tilt.sigma_gyro_rps, d.tilt.sigma_gyro_rps);
+  EXPECT_EQ(p.tilt.sigma_accel_mps2, d.tilt.sigma_accel_mps2);
+  EXPECT_EQ(p.tilt.c_a, d.tilt.c_a);
+  EXPECT_EQ(p.tilt.c_a_rate_hz, d.tilt.c_a_rate_hz);
+  EXPECT_EQ(p.tilt.gravity_mps2, d.tilt.gravity_mps2);
   EXPECT_EQ(p.tilt.exact_rotation, d.tilt.exact_rotation);
   EXPECT_EQ(p.tilt.renormalize, d.tilt.renormalize);
+  EXPECT_EQ(p.tilt.sigma_gyro_extra_rps, d.tilt.sigma_gyro_extra_rps);
+  EXPECT_EQ(p.tilt.initial_var_tilt, d.tilt.initial_var_tilt);
+  EXPECT_EQ(p.tilt.initial_var_accel, d.tilt.initial_var_accel);
 }
 
 TEST(AltitudeConfig, UnknownKeysAndBadValuesAreErrors) {

@@ -90,10 +90,18 @@ TEST(GaussNewton, BadInputIsRejectedAndCounted) {
 }
 
 TEST(GaussNewton, ShippedConfigLoadsAndBadConfigIsRejected) {
+  // Defaults in one place: the shipped file is exactly GaussNewtonParams{}, field by field.
   const GaussNewtonParams p =
       load_gauss_newton_params(std::string(POISE_SOURCE_DIR) + "/config/filters/gauss_newton.yaml");
-  EXPECT_EQ(p.max_iterations, 5);
-  EXPECT_TRUE(std::isnan(p.dip_deg));
+  const GaussNewtonParams d;
+  EXPECT_EQ(p.max_iterations, d.max_iterations);
+  EXPECT_EQ(p.tolerance_rad, d.tolerance_rad);
+  EXPECT_EQ(p.mag_weight, d.mag_weight);
+  EXPECT_EQ(std::isnan(p.dip_deg), std::isnan(d.dip_deg));
+  EXPECT_EQ(p.startup_samples, d.startup_samples);
+  EXPECT_EQ(p.limits.min_accel_norm_mps2, d.limits.min_accel_norm_mps2);
+  EXPECT_EQ(p.limits.min_mag_norm_ut, d.limits.min_mag_norm_ut);
+  EXPECT_EQ(p.limits.max_dt_s, d.limits.max_dt_s);
   EXPECT_THROW(load_gauss_newton_params("/nonexistent.yaml"), std::runtime_error);
 }
 

@@ -245,16 +245,33 @@ TEST(VehicleEstimator, MissingMagnetometerWhileDrivingPredictsOnly) {
   EXPECT_GT(est.ekf_covariance()(4, 4), p.initial_var_angle_rad2);
 }
 
-TEST(VehicleConfig, ShippedYamlLoadsTheDefaults) {
+// Defaults in one place: the shipped file holds only what differs from VehicleParams{} (nothing),
+// so loading it gives exactly the struct, every field compared.
+TEST(VehicleConfig, ShippedYamlIsExactlyTheDefaultsFieldByField) {
   const VehicleParams p = load_vehicle_params(testing::source_path("config/filters/vehicle.yaml"));
   const VehicleParams d;
+  EXPECT_EQ(p.model.i_x_kgm2, d.model.i_x_kgm2);
+  EXPECT_EQ(p.model.i_y_kgm2, d.model.i_y_kgm2);
+  EXPECT_EQ(p.model.k_x_nm_per_rad, d.model.k_x_nm_per_rad);
+  EXPECT_EQ(p.model.k_y_nm_per_rad, d.model.k_y_nm_per_rad);
+  EXPECT_EQ(p.model.b_x_nms_per_rad, d.model.b_x_nms_per_rad);
+  EXPECT_EQ(p.model.b_y_nms_per_rad, d.model.b_y_nms_per_rad);
+  EXPECT_EQ(p.model.m_s_kg, d.model.m_s_kg);
+  EXPECT_EQ(p.model.h_s_m, d.model.h_s_m);
   EXPECT_EQ(p.mode, d.mode);
-  EXPECT_DOUBLE_EQ(p.model.k_x_nm_per_rad, d.model.k_x_nm_per_rad);
-  EXPECT_DOUBLE_EQ(p.model.h_s_m, d.model.h_s_m);
-  EXPECT_DOUBLE_EQ(p.q_roll_rad2_per_s, d.q_roll_rad2_per_s);
-  EXPECT_TRUE(p.r_mag_ut2.isApprox(d.r_mag_ut2));
+  EXPECT_EQ(p.gravity_mps2, d.gravity_mps2);
+  EXPECT_EQ(p.mag_world_ut, d.mag_world_ut);
+  EXPECT_EQ(p.static_yaw_rate_max_rps, d.static_yaw_rate_max_rps);
+  EXPECT_EQ(p.static_speed_max_mps, d.static_speed_max_mps);
   EXPECT_EQ(p.static_average, d.static_average);
-  EXPECT_TRUE(p.mag_world_ut.isApprox(d.mag_world_ut));
+  EXPECT_EQ(p.q_roll_rad2_per_s, d.q_roll_rad2_per_s);
+  EXPECT_EQ(p.q_pitch_rad2_per_s, d.q_pitch_rad2_per_s);
+  EXPECT_EQ(p.q_yaw_rad2_per_s, d.q_yaw_rad2_per_s);
+  EXPECT_EQ(p.r_mag_ut2, d.r_mag_ut2);
+  EXPECT_EQ(p.initial_var_angle_rad2, d.initial_var_angle_rad2);
+  EXPECT_EQ(p.initial_var_rate_rad2ps2, d.initial_var_rate_rad2ps2);
+  EXPECT_EQ(p.max_dt_s, d.max_dt_s);
+  EXPECT_EQ(p.mag_norm_tolerance, d.mag_norm_tolerance);
 }
 
 TEST(VehicleConfig, UnknownKeysAndBadValuesAreErrors) {
