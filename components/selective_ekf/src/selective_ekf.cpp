@@ -7,8 +7,8 @@ namespace poise {
 namespace {
 
 constexpr double kNsToS = 1e-9;
-/// Output blending: a state-output difference above this is a reset, taken at once, rad.
-constexpr double kOutputSnapRad = 30.0 * kPi / 180.0;
+/// Output limit: a state-output difference above 30 deg is a reset, taken at once (sin(15 deg)).
+constexpr double kOutputSnapHalfSin = 0.25881904510252074;
 /// Gate used only to report a test ratio for sources that are never gated (gyro, q_imu), sigma.
 constexpr double kReportGateSigma = 5.0;
 
@@ -740,26 +740,28 @@ void SelectiveEkf::blend_output(const Eigen::Vector3d& gyro_rps, double dt_s) {
   // corrections limited to output_max_correction_dps: a large correction (vision back after a
   // blackout) becomes a glide instead of a jump. Not part of the filter state (replays do not
   // touch it).
-  const Eigen::Quaterniond target = state_output();
   if (!(p_.output_max_correction_dps > 0.0)) {
     return;
   }
+  const Eigen::Quaterniond target = state_output();
   if (!out_ready_ || !(dt_s > 0.0)) {
     out_q_ = target;
     out_ready_ = true;
     return;
   }
   const Eigen::Quaterniond pred = (out_q_ * quat_exp((gyro_rps - x_.b_rps) * dt_s)).normalized();
-  const Eigen::Vector3d e = quat_log(pred.conjugate() * quat_align_sign(target, pred));
-  if (e.norm() > kOutputSnapRad) {
-    out_q_ = target;  // a reset (re-alignment to vision): no point gliding
+  const Eigen::Quaterniond d = pred.conjugate() * quat_align_sign(target, pred);
+  // |d.vec| = sin(angle / 2): the common case (a correction within the limit) takes the target
+  // without a log/exp; a reset (above 30 deg) is taken at once as well.
+  const double half_sin = d.vec().norm();
+  const double max_step = p_.output_max_correction_dps * kRadPerDeg * dt_s;
+  if (half_sin <= 0.5 * max_step || half_sin > kOutputSnapHalfSin) {
+    out_q_ = target;
     return;
   }
-  // Corrections up to output_max_correction_dps pass at once (normal operation: no lag); larger
-  // ones are spread at that rate.
-  const double max_step = p_.output_max_correction_dps * kRadPerDeg * dt_s;
-  const double en = e.norm();
-  const double k = en > max_step ? max_step / en : 1.0;
+  // Larger corrections are spread at output_max_correction_dps.
+  const Eigen::Vector3d e = quat_log(d);
+  const double k = max_step / e.norm();
   out_q_ = quat_canonical((pred * quat_exp(e * k)).normalized());
 }
 
