@@ -40,15 +40,6 @@ void ParallelKf::report(const ImuSample& s, const SampleCheck& c, bool accepted,
     gyro_src_.mark_not_available("initialising");
   }
 
-  // KF1: H1 = [g I | I], M1 = sigma_A^2 I (7f), (7h)
-  const Eigen::Matrix<double, 6, 6>& p1 = kf1_.covariance();
-  const double g = p_.tilt.gravity_mps2;
-  InnovationVector var_a(3);
-  for (int i = 0; i < 3; ++i) {
-    var_a[i] = g * g * p1(i, i) + 2.0 * g * p1(i, 3 + i) + p1(3 + i, 3 + i) +
-               p_.tilt.sigma_accel_mps2 * p_.tilt.sigma_accel_mps2;
-  }
-  accel_src_.set_innovation(kf1_.last_innovation(), var_a);
   accel_src_.mark_fused(s.stamp_ns);
 
   // KF2's magnetometer
@@ -59,20 +50,6 @@ void ParallelKf::report(const ImuSample& s, const SampleCheck& c, bool accepted,
       mag_src_.mark_not_available("no_sample");
     }
     return;
-  }
-  if (std::isfinite(gate_norm_ut_)) {
-    const double dip = std::asin(std::clamp(gate_sin_dip_, -1.0, 1.0));
-    const double tol_norm_ut = p_.mag_norm_tol * field_m_;
-    const double tol_dip_rad = p_.mag_dip_tol_deg * kRadPerDeg;
-    InnovationVector innov(2);
-    innov << gate_norm_ut_ - field_m_, dip - field_dip_;
-    InnovationVector var(2);
-    var << tol_norm_ut * tol_norm_ut, tol_dip_rad * tol_dip_rad;
-    mag_src_.set_innovation(innov, var);
-  } else {
-    mag_src_.innovation.resize(0);
-    mag_src_.innovation_variance.resize(0);
-    mag_src_.test_ratio = 0.0;
   }
   switch (mag_use_) {
     case MagUse::kGated: mag_src_.mark_rejected("disturbed"); return;
@@ -85,6 +62,35 @@ void ParallelKf::report(const ImuSample& s, const SampleCheck& c, bool accepted,
   } else {
     mag_src_.mark_not_available(was_initialized ? "not_used" : "initialising");
   }
+}
+
+SourceReports ParallelKf::sources() const {
+  SourceReports out{gyro_src_, accel_src_, mag_src_};
+  SourceReport& accel = out[1];
+  if (accel.fused()) {
+    // KF1: H1 = [g I | I], M1 = sigma_A^2 I (7f), (7h)
+    const Eigen::Matrix<double, 6, 6>& p1 = kf1_.covariance();
+    const double g = p_.tilt.gravity_mps2;
+    InnovationVector var_a(3);
+    for (int i = 0; i < 3; ++i) {
+      var_a[i] = g * g * p1(i, i) + 2.0 * g * p1(i, 3 + i) + p1(3 + i, 3 + i) +
+                 p_.tilt.sigma_accel_mps2 * p_.tilt.sigma_accel_mps2;
+    }
+    accel.set_innovation(kf1_.last_innovation(), var_a);
+  }
+  SourceReport& mag = out[2];
+  if (mag.decision != SourceDecision::kNotAvailable && std::isfinite(gate_norm_ut_)) {
+    // The gate as a measurement: [|s_M| - m, dip - alpha] against the tolerances.
+    const double dip = std::asin(std::clamp(gate_sin_dip_, -1.0, 1.0));
+    const double tol_norm_ut = p_.mag_norm_tol * field_m_;
+    const double tol_dip_rad = p_.mag_dip_tol_deg * kRadPerDeg;
+    InnovationVector innov(2);
+    innov << gate_norm_ut_ - field_m_, dip - field_dip_;
+    InnovationVector var(2);
+    var << tol_norm_ut * tol_norm_ut, tol_dip_rad * tol_dip_rad;
+    mag.set_innovation(innov, var);
+  }
+  return out;
 }
 
 }  // namespace poise

@@ -229,7 +229,8 @@ class ParallelKf {
   ///          "disturbed" (gated), fused "forced_after_max_reject" (used although gated, after
   ///          mag_max_reject_s), not available "learning_field" / "no_sample", rejected with the
   ///          sample check's reason (non_finite_mag, zero_mag) or the whole sample's.
-  [[nodiscard]] SourceReports sources() const { return {gyro_src_, accel_src_, mag_src_}; }
+  /// Innovations and test ratios are computed here, on demand (update() only records decisions).
+  [[nodiscard]] SourceReports sources() const;
 
  private:
   bool step(const ImuSample& s, SampleCheck& c);  ///< update() without the reporting
