@@ -123,11 +123,7 @@ void ParallelKf::reset() {
   gate_dip_ = std::nan("");
   bias_.setZero();
   bias_var_ = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
-  gyro_lp_.setZero();
-  accel_lp_.setZero();
-  rest_time_s_ = 0.0;
-  rest_ = false;
-  lp_init_ = false;
+  rest_det_ = RestDetector{};
   reset_report();
 }
 
@@ -182,7 +178,7 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   } else {
     kf1_.correct(s.accel_mps2);
   }
-  if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && !rest_) {
+  if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && !rest_det_.rest) {
     bias_ -= kf1_.last_correction_rotvec() / p_.motion_bias_tau_s;
   }
   if (p_.share_tilt_correction && heading_initialized_) {
@@ -238,30 +234,19 @@ void ParallelKf::learn_field(const Eigen::Vector3d& /*accel*/, const Eigen::Vect
 
 void ParallelKf::update_rest_and_bias(const Eigen::Vector3d& gyro_raw, const Eigen::Vector3d& accel,
                                       double dt) {
-  if (!lp_init_) {
-    gyro_lp_ = gyro_raw;
-    accel_lp_ = accel;
-    lp_init_ = true;
-  }
-  const double a = dt / (p_.rest_filter_tau_s + dt);
-  gyro_lp_ += a * (gyro_raw - gyro_lp_);
-  accel_lp_ += a * (accel - accel_lp_);
-  const bool still = gyro_lp_.norm() < p_.rest_gyro_max_rps &&
-                     (gyro_raw - gyro_lp_).norm() < p_.rest_gyro_max_rps &&
-                     (accel - accel_lp_).norm() < p_.rest_accel_max_mps2;
-  rest_time_s_ = still ? rest_time_s_ + dt : 0.0;
-  rest_ = rest_time_s_ >= p_.rest_min_s;
+  const RestParams rp{p_.rest_gyro_max_rps, p_.rest_accel_max_mps2, p_.rest_min_s, p_.rest_filter_tau_s};
+  rest_det_.step(gyro_raw, accel, dt, rp);
   // bias Kalman filter, per component (isotropic): predict, then measure at rest
   const double v = p_.bias_drift_rps * p_.bias_drift_rps * dt / p_.bias_forgetting_time_s;
   const double var_max = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
   bias_var_ = std::min(bias_var_ + v, var_max);
-  if (rest_) {
+  if (rest_det_.rest) {
     // measurement noise for which continuous rest settles at bias_sigma_rest_rps^2 (= p):
     // steady state of P+ = (P + v) w / (P + v + w) at P+ = p gives w = p^2 / v + p
     const double p_rest = p_.bias_sigma_rest_rps * p_.bias_sigma_rest_rps;
     const double w = p_rest * p_rest / v + p_rest;
     const double k = bias_var_ / (bias_var_ + w);
-    bias_ += k * (gyro_lp_ - bias_);
+    bias_ += k * (rest_det_.gyro_lp - bias_);
     bias_var_ *= 1.0 - k;
   }
 }
@@ -348,7 +333,7 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
   kf2_.correct(mag, field_m_, mag_extra_var_);  // (10b), (11f)-(11h)
   mag_extra_var_ = 0.0;
   out_.mag_used = true;
-  if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && p_.motion_bias_heading && !rest_ && field_learnt_) {
+  if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && p_.motion_bias_heading && !rest_det_.rest && field_learnt_) {
     // heading part (about sZ) of the correction rotation, sX'+ x sX'- = dtheta_perp(sX')
     const Eigen::Vector3d& z = kf1_.up_body();
     const Eigen::Vector3d corr = kf2_.u().normalized().cross(x_prior.normalized());
@@ -391,7 +376,7 @@ ParallelKfOutput ParallelKf::output() const {
   o.mag_dist_norm_ut = o.mag_dist_body_ut.norm();
   o.gyro_bias_rps = bias_;
   o.gyro_bias_sigma_rps = std::sqrt(bias_var_);
-  o.rest = rest_;
+  o.rest = rest_det_.rest;
   o.mag_used = out_.mag_used;
   o.field_learnt = field_learnt_;
   o.field_magnitude_ut = field_m_;

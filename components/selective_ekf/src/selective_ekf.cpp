@@ -629,8 +629,7 @@ void SelectiveEkf::preprocess(ImuInput& in) {
   if (!(dt_s > 0.0)) {
     pre = SelectiveEkfPreState{};
     pre.lp_accel_i = in.accel;
-    pre.rest_gyro_lp = in.gyro;
-    pre.rest_accel_lp = in.accel;
+    pre.rest_detector.start(in.gyro, in.accel);
     in.up_meas = in.accel.normalized();
     return;
   }
@@ -648,16 +647,10 @@ void SelectiveEkf::preprocess(ImuInput& in) {
   }
   // Rest detector (gyro and accelerometer against their low-passes).
   if (p_.rest_detection) {
-    const double kr = dt_s / (p_.rest_filter_tau_s + dt_s);
-    pre.rest_gyro_lp += kr * (in.gyro - pre.rest_gyro_lp);
-    pre.rest_accel_lp += kr * (in.accel - pre.rest_accel_lp);
-    const bool still = (pre.rest_gyro_lp - x_.b_rps).norm() < p_.rest_gyro_max_rps &&
-                       (in.gyro - pre.rest_gyro_lp).norm() < p_.rest_gyro_max_rps &&
-                       (in.accel - pre.rest_accel_lp).norm() < p_.rest_accel_max_mps2;
-    pre.rest_time_s = still ? pre.rest_time_s + dt_s : 0.0;
-    pre.rest = pre.rest_time_s >= p_.rest_min_s;
+    const RestParams rp{p_.rest_gyro_max_rps, p_.rest_accel_max_mps2, p_.rest_min_s, p_.rest_filter_tau_s};
+    pre.rest_detector.step(in.gyro, in.accel, dt_s, rp, x_.b_rps);
   }
-  in.rest = pre.rest;
+  in.rest = pre.rest_detector.rest;
 }
 
 bool SelectiveEkf::update_imu(const ImuSample& s) {

@@ -46,6 +46,7 @@
 #include "poise/core/attitude.h"
 #include "poise/core/attitude_filter.h"
 #include "poise/core/lowpass.h"
+#include "poise/core/rest_detector.h"
 #include "poise/core/sample_check.h"
 #include "poise/core/source_report.h"
 #include "poise/core/types.h"
@@ -281,12 +282,8 @@ class ParallelKf {
 
   // bias / rest
   Eigen::Vector3d bias_{0, 0, 0};
-  Eigen::Vector3d gyro_lp_{0, 0, 0};
-  Eigen::Vector3d accel_lp_{0, 0, 0};
   double bias_var_ = 0.0;  ///< variance of each bias component (isotropic), rad^2/s^2
-  double rest_time_s_ = 0.0;
-  bool rest_ = false;
-  bool lp_init_ = false;
+  RestDetector rest_det_;
 
   // Reporting (parallel_kf_report.cpp): what the last sample's heading step did with s_M.
   enum class MagUse : uint8_t { kNone, kLearning, kGated, kForced };

@@ -59,6 +59,7 @@
 #pragma once
 
 #include "poise/core/attitude.h"
+#include "poise/core/rest_detector.h"
 #include "poise/core/attitude_filter.h"
 #include "poise/core/sample_check.h"
 #include "poise/core/source_report.h"
@@ -294,10 +295,7 @@ struct SelectiveEkfPreState {
   Eigen::Quaterniond q_ib = Eigen::Quaterniond::Identity();  ///< body -> almost inertial frame
   Eigen::Vector3d lp_accel_i{0, 0, 0};  ///< low-passed accelerometer in that frame, m/s^2
   double ext_accel_ms = 0.0;            ///< low-passed (|a| - g)^2, (m/s^2)^2
-  Eigen::Vector3d rest_gyro_lp{0, 0, 0};
-  Eigen::Vector3d rest_accel_lp{0, 0, 0};
-  double rest_time_s = 0.0;
-  bool rest = false;                    ///< rest detected at the last sample
+  RestDetector rest_detector;           ///< rest detected at the last sample: rest_detector.rest
 };
 
 /// The filter state (inspectable; one snapshot per IMU sample in the history).
