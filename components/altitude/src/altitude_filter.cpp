@@ -201,18 +201,14 @@ bool AltitudeFilter::update(const ImuSample& s) {
     reject_sample("non_finite_imu");
     return false;
   }
-  const TimeStep step = time_step(s.stamp_ns, have_stamp_ ? last_stamp_ns_ : -1, params_.max_dt_s);
-  if (step.kind == TimeStep::kNonMonotonic) {
-    ++rejects_.non_monotonic_stamp;
+  TimeStep step;
+  if (!advance_stamp(s.stamp_ns, have_stamp_, last_stamp_ns_, params_.max_dt_s, rejects_.non_monotonic_stamp,
+                     rejects_.dt_gap, step)) {
     reject_sample("non_monotonic_stamp");
     return false;
   }
   const double dt_s = step.dt_s;
   const bool gap = step.kind == TimeStep::kGap;
-  if (gap) {
-    ++rejects_.dt_gap;
-  }
-  last_stamp_ns_ = s.stamp_ns;
 
   // Barometer: a bad pressure rejects only itself.
   est_.baro_fresh = false;

@@ -104,6 +104,23 @@ inline TimeStep time_step(int64_t stamp_ns, int64_t last_stamp_ns, double max_dt
   return t;
 }
 
+/// time_step() with the bookkeeping the single-stage filters share: a non-monotonic stamp counts
+/// in `non_monotonic` and is refused (returns false: reject the sample, state untouched); a gap
+/// counts in `gaps`; otherwise `last_stamp_ns` advances to `stamp_ns` and `step` holds the step.
+inline bool advance_stamp(int64_t stamp_ns, bool have_stamp, int64_t& last_stamp_ns, double max_dt_s,
+                          uint64_t& non_monotonic, uint64_t& gaps, TimeStep& step) {
+  step = time_step(stamp_ns, have_stamp ? last_stamp_ns : -1, max_dt_s);
+  if (step.kind == TimeStep::kNonMonotonic) {
+    ++non_monotonic;
+    return false;
+  }
+  if (step.kind == TimeStep::kGap) {
+    ++gaps;
+  }
+  last_stamp_ns = stamp_ns;
+  return true;
+}
+
 /// Validates `s`; counts every problem found in `counters`. `last_stamp_ns` < 0 means "no
 /// previous sample". Non-monotonic stamps are rejected; a gap above max_dt_s is rejected
 /// (counted) with reanchor = true so the caller can restart time at this stamp.
