@@ -82,7 +82,8 @@ void ParallelKfParams::validate() const {
   need(limits.max_dt_s > 0.0, "limits.max_dt_s must be > 0 (s)");
 }
 
-ParallelKf::ParallelKf(const ParallelKfParams& params) : p_(params), kf1_(params.tilt) {
+ParallelKf::ParallelKf(const ParallelKfParams& params) : p_(params) {
+  s_.kf1 = TiltKf(params.tilt);
   p_.validate();
   DirectionKfParams d;
   d.sigma_gyro_rps = p_.sigma_gyro_heading_rps > 0.0 ? p_.sigma_gyro_heading_rps : p_.tilt.sigma_gyro_rps;
@@ -92,53 +93,53 @@ ParallelKf::ParallelKf(const ParallelKfParams& params) : p_(params), kf1_(params
   d.exact_rotation = p_.tilt.exact_rotation;
   d.renormalize = p_.tilt.renormalize;
   d.sigma_gyro_extra_rps = p_.sigma_gyro_extra_heading_rps;
-  kf2_.set_params(d);
+  s_.kf2.set_params(d);
   reset();
 }
 
 void ParallelKf::reset() {
-  kf1_ = TiltKf(p_.tilt);
-  kf2_.reset(Eigen::Vector3d::UnitX(), kInitVarDirection, kInitVarDisturbanceUt2);
-  initialized_ = false;
-  heading_initialized_ = false;
-  last_stamp_ns_ = -1;
-  prev_gyro_.setZero();
-  rejections_ = RejectCounters{};
-  mag_gated_ = 0;
-  mag_forced_ = 0;
-  reacquired_ = 0;
-  out_ = ParallelKfOutput{};
+  s_.kf1 = TiltKf(p_.tilt);
+  s_.kf2.reset(Eigen::Vector3d::UnitX(), kInitVarDirection, kInitVarDisturbanceUt2);
+  s_.initialized = false;
+  s_.heading_initialized = false;
+  s_.last_stamp_ns = -1;
+  s_.prev_gyro.setZero();
+  s_.rejections = RejectCounters{};
+  s_.mag_gated = 0;
+  s_.mag_forced = 0;
+  s_.reacquired = 0;
+  s_.out = ParallelKfOutput{};
   last_q_ = Eigen::Quaterniond::Identity();
-  field_m_ = std::isfinite(p_.field_magnitude_ut) ? p_.field_magnitude_ut : 0.0;
-  field_dip_ = std::isfinite(p_.dip_deg) ? p_.dip_deg * kRadPerDeg : 0.0;
-  field_learnt_ = std::isfinite(p_.field_magnitude_ut) && std::isfinite(p_.dip_deg);
-  learn_time_s_ = 0.0;
-  learn_norm_sum_ = 0.0;
-  learn_dip_sum_ = 0.0;
-  learn_n_ = 0;
-  cand_norm_ = 0.0;
-  cand_dip_ = 0.0;
-  cand_stable_s_ = 0.0;
-  rejected_s_ = 0.0;
-  gate_dip_ = std::nan("");
-  bias_.setZero();
-  bias_var_ = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
-  rest_det_ = RestDetector{};
+  s_.field_m = std::isfinite(p_.field_magnitude_ut) ? p_.field_magnitude_ut : 0.0;
+  s_.field_dip = std::isfinite(p_.dip_deg) ? p_.dip_deg * kRadPerDeg : 0.0;
+  s_.field_learnt = std::isfinite(p_.field_magnitude_ut) && std::isfinite(p_.dip_deg);
+  s_.learn_time_s = 0.0;
+  s_.learn_norm_sum = 0.0;
+  s_.learn_dip_sum = 0.0;
+  s_.learn_n = 0;
+  s_.cand_norm = 0.0;
+  s_.cand_dip = 0.0;
+  s_.cand_stable_s = 0.0;
+  s_.rejected_s = 0.0;
+  s_.gate_dip = std::nan("");
+  s_.bias.setZero();
+  s_.bias_var = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
+  s_.rest_det = RestDetector{};
   reset_report();
 }
 
 bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
-  c = check_imu_sample(s, last_stamp_ns_, p_.limits, rejections_);
+  c = check_imu_sample(s, s_.last_stamp_ns, p_.limits, s_.rejections);
   if (c.reanchor) {
-    last_stamp_ns_ = s.stamp_ns;  // restart time after a gap; attitude kept
+    s_.last_stamp_ns = s.stamp_ns;  // restart time after a gap; attitude kept
     return false;
   }
   if (!c.accept) {
     return false;
   }
-  last_stamp_ns_ = s.stamp_ns;
-  last_accel_ = s.accel_mps2;
-  if (!initialized_) {
+  s_.last_stamp_ns = s.stamp_ns;
+  s_.last_accel = s.accel_mps2;
+  if (!s_.initialized) {
     initialize(s, c.mag_ok);
     return true;
   }
@@ -146,8 +147,8 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   if (p_.bias_estimation) {
     update_rest_and_bias(s.gyro_rps, s.accel_mps2, dt);
   }
-  const Eigen::Vector3d gyro = s.gyro_rps - bias_;
-  const Eigen::Vector3d w = prev_gyro_ + p_.gyro_current_weight * (gyro - prev_gyro_);
+  const Eigen::Vector3d gyro = s.gyro_rps - s_.bias;
+  const Eigen::Vector3d w = s_.prev_gyro + p_.gyro_current_weight * (gyro - s_.prev_gyro);
 
   // One transition for both filters: exp(-h w) or the printed first order I - h[w x] (5a), (9a)
   Eigen::Matrix3d a;
@@ -159,193 +160,193 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   }
 
   // KF1: tilt + external acceleration (5)-(7)
-  kf1_.core().predict_with_transition(a, dt);
-  const Eigen::Vector3d z_before = kf1_.up_body();
+  s_.kf1.core().predict_with_transition(a, dt);
+  const Eigen::Vector3d z_before = s_.kf1.up_body();
   if (p_.accel_lowpass_tau_s > 0.0) {
     // Low-pass the accelerometer in a gyro-propagated, almost inertial frame: external
     // accelerations average out there while gravity stays put; KF1 sees the filtered vector.
-    r_ib_ = (r_ib_ * a.transpose()).eval();  // R_ib(k) = R_ib(k-1) exp(h w)
-    if (++r_ib_steps_ >= 256) {
-      r_ib_ = Eigen::Quaterniond(r_ib_).normalized().toRotationMatrix();
-      r_ib_steps_ = 0;
+    s_.r_ib = (s_.r_ib * a.transpose()).eval();  // R_ib(k) = R_ib(k-1) exp(h w)
+    if (++s_.r_ib_steps >= 256) {
+      s_.r_ib = Eigen::Quaterniond(s_.r_ib).normalized().toRotationMatrix();
+      s_.r_ib_steps = 0;
     }
     if (p_.accel_lowpass_order == 2) {
-      lp_accel_i_ = accel_bw_.step(r_ib_ * s.accel_mps2, dt);
+      s_.lp_accel_i = s_.accel_bw.step(s_.r_ib * s.accel_mps2, dt);
     } else {
-      lp_accel_i_ += (dt / (p_.accel_lowpass_tau_s + dt)) * (r_ib_ * s.accel_mps2 - lp_accel_i_);
+      s_.lp_accel_i += (dt / (p_.accel_lowpass_tau_s + dt)) * (s_.r_ib * s.accel_mps2 - s_.lp_accel_i);
     }
-    kf1_.correct(r_ib_.transpose() * lp_accel_i_);
+    s_.kf1.correct(s_.r_ib.transpose() * s_.lp_accel_i);
   } else {
-    kf1_.correct(s.accel_mps2);
+    s_.kf1.correct(s.accel_mps2);
   }
-  if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && !rest_det_.rest) {
-    bias_ -= kf1_.last_correction_rotvec() / p_.motion_bias_tau_s;
+  if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && !s_.rest_det.rest) {
+    s_.bias -= s_.kf1.last_correction_rotvec() / p_.motion_bias_tau_s;
   }
-  if (p_.share_tilt_correction && heading_initialized_) {
+  if (p_.share_tilt_correction && s_.heading_initialized) {
     // the rotation that moved sZ moves sX' too (one attitude error, two world directions)
-    kf2_.set_u(rotate_by_shortest(z_before, kf1_.up_body(), kf2_.u()));  // both unit (renormalised)
+    s_.kf2.set_u(rotate_by_shortest(z_before, s_.kf1.up_body(), s_.kf2.u()));  // both unit (renormalised)
   }
 
   // KF2: heading + magnetic disturbance (8)-(11)
   heading_step(a, s.accel_mps2, s.mag_ut, c.mag_ok, dt);
 
   if (p_.bias_estimation) {
-    const double bn = bias_.norm();
+    const double bn = s_.bias.norm();
     if (bn > p_.max_bias_rps) {
-      bias_ *= p_.max_bias_rps / bn;
+      s_.bias *= p_.max_bias_rps / bn;
     }
   }
-  prev_gyro_ = gyro;
+  s_.prev_gyro = gyro;
   return true;
 }
 
 void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
-  kf1_.reset(s.accel_mps2);  // sZ from the accelerometer
+  s_.kf1.reset(s.accel_mps2);  // sZ from the accelerometer
   if (mag_ok) {
-    kf2_.reset(s.mag_ut.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
-    heading_initialized_ = true;
+    s_.kf2.reset(s.mag_ut.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
+    s_.heading_initialized = true;
     learn_field(s.accel_mps2, s.mag_ut, 0.0);
   }
-  prev_gyro_ = s.gyro_rps;
-  r_ib_.setIdentity();
-  r_ib_steps_ = 0;
-  lp_accel_i_ = s.accel_mps2;
-  accel_bw_ = Butterworth2<3>(p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : 1.0);
-  accel_bw_.reset(s.accel_mps2);
-  initialized_ = true;
+  s_.prev_gyro = s.gyro_rps;
+  s_.r_ib.setIdentity();
+  s_.r_ib_steps = 0;
+  s_.lp_accel_i = s.accel_mps2;
+  s_.accel_bw = Butterworth2<3>(p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : 1.0);
+  s_.accel_bw.reset(s.accel_mps2);
+  s_.initialized = true;
 }
 
 void ParallelKf::learn_field(const Eigen::Vector3d& /*accel*/, const Eigen::Vector3d& mag, double dt) {
   // Mean |s_M| and mean dip against the filtered up sZ over the start-up window.
-  learn_norm_sum_ += mag.norm();
-  learn_dip_sum_ += angle_between_vectors(kf1_.up_body(), mag) - 0.5 * kPi;
-  ++learn_n_;
-  learn_time_s_ += dt;
+  s_.learn_norm_sum += mag.norm();
+  s_.learn_dip_sum += angle_between_vectors(s_.kf1.up_body(), mag) - 0.5 * kPi;
+  ++s_.learn_n;
+  s_.learn_time_s += dt;
   if (!std::isfinite(p_.field_magnitude_ut)) {
-    field_m_ = learn_norm_sum_ / learn_n_;
+    s_.field_m = s_.learn_norm_sum / s_.learn_n;
   }
   if (!std::isfinite(p_.dip_deg)) {
-    field_dip_ = learn_dip_sum_ / learn_n_;
+    s_.field_dip = s_.learn_dip_sum / s_.learn_n;
   }
-  if (learn_time_s_ >= p_.startup_s) {
-    field_learnt_ = true;
+  if (s_.learn_time_s >= p_.startup_s) {
+    s_.field_learnt = true;
   }
 }
 
 void ParallelKf::update_rest_and_bias(const Eigen::Vector3d& gyro_raw, const Eigen::Vector3d& accel,
                                       double dt) {
   const RestParams rp{p_.rest_gyro_max_rps, p_.rest_accel_max_mps2, p_.rest_min_s, p_.rest_filter_tau_s};
-  rest_det_.step(gyro_raw, accel, dt, rp);
+  s_.rest_det.step(gyro_raw, accel, dt, rp);
   // bias Kalman filter, per component (isotropic): predict, then measure at rest
   const double v = p_.bias_drift_rps * p_.bias_drift_rps * dt / p_.bias_forgetting_time_s;
   const double var_max = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
-  bias_var_ = std::min(bias_var_ + v, var_max);
-  if (rest_det_.rest) {
+  s_.bias_var = std::min(s_.bias_var + v, var_max);
+  if (s_.rest_det.rest) {
     // measurement noise for which continuous rest settles at bias_sigma_rest_rps^2 (= p):
     // steady state of P+ = (P + v) w / (P + v + w) at P+ = p gives w = p^2 / v + p
     const double p_rest = p_.bias_sigma_rest_rps * p_.bias_sigma_rest_rps;
     const double w = p_rest * p_rest / v + p_rest;
-    const double k = bias_var_ / (bias_var_ + w);
-    bias_ += k * (rest_det_.gyro_lp - bias_);
-    bias_var_ *= 1.0 - k;
+    const double k = s_.bias_var / (s_.bias_var + w);
+    s_.bias += k * (s_.rest_det.gyro_lp - s_.bias);
+    s_.bias_var *= 1.0 - k;
   }
 }
 
 void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& accel,
                               const Eigen::Vector3d& mag, bool mag_ok, double dt) {
-  out_.mag_used = false;
-  if (heading_initialized_) {
-    kf2_.predict_with_transition(a, dt);  // (9a), (9b), (11a)-(11e)
+  s_.out.mag_used = false;
+  if (s_.heading_initialized) {
+    s_.kf2.predict_with_transition(a, dt);  // (9a), (9b), (11a)-(11e)
   }
   if (!mag_ok) {
     return;
   }
-  if (!heading_initialized_) {
-    kf2_.reset(mag.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
-    heading_initialized_ = true;
+  if (!s_.heading_initialized) {
+    s_.kf2.reset(mag.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
+    s_.heading_initialized = true;
   }
-  if (!field_learnt_) {
+  if (!s_.field_learnt) {
     mag_use_ = MagUse::kLearning;
     learn_field(accel, mag, dt);
   } else if (p_.mag_gating) {
     const double norm = mag.norm();
     // sin(dip) = -sZ . s_M / |s_M| (sZ unit); |dip - alpha| <= tol  <=>  sin(dip) within
     // [sin(alpha - tol), sin(alpha + tol)] (sin is monotonic on [-90, 90] deg): no atan2 per sample.
-    const Eigen::Vector3d& up = kf1_.up_body();
+    const Eigen::Vector3d& up = s_.kf1.up_body();
     const double sin_dip = -up.dot(mag) / (norm * up.norm());
     record_mag_gate(norm, sin_dip);
-    if (field_dip_ != gate_dip_) {  // bounds recomputed only when the reference changes
+    if (s_.field_dip != s_.gate_dip) {  // bounds recomputed only when the reference changes
       const double tol = p_.mag_dip_tol_deg * kRadPerDeg;
-      gate_sin_lo_ = std::sin(std::max(field_dip_ - tol, -0.5 * kPi));
-      gate_sin_hi_ = std::sin(std::min(field_dip_ + tol, 0.5 * kPi));
-      gate_dip_ = field_dip_;
+      s_.gate_sin_lo = std::sin(std::max(s_.field_dip - tol, -0.5 * kPi));
+      s_.gate_sin_hi = std::sin(std::min(s_.field_dip + tol, 0.5 * kPi));
+      s_.gate_dip = s_.field_dip;
     }
-    const bool disturbed = std::abs(norm - field_m_) > p_.mag_norm_tol * field_m_ ||
-                           sin_dip < gate_sin_lo_ || sin_dip > gate_sin_hi_;
+    const bool disturbed = std::abs(norm - s_.field_m) > p_.mag_norm_tol * s_.field_m ||
+                           sin_dip < s_.gate_sin_lo || sin_dip > s_.gate_sin_hi;
     if (p_.mag_soft_weight > 0.0) {
       // inflate M2 smoothly with the gate ratios (1 at the gate)
-      const double rn = (norm - field_m_) / (p_.mag_norm_tol * field_m_);
-      const double rd = (sin_dip - std::sin(field_dip_)) / (0.5 * (gate_sin_hi_ - gate_sin_lo_));
-      mag_extra_var_ = p_.mag_soft_weight * p_.sigma_mag_ut * p_.sigma_mag_ut * (rn * rn + rd * rd);
+      const double rn = (norm - s_.field_m) / (p_.mag_norm_tol * s_.field_m);
+      const double rd = (sin_dip - std::sin(s_.field_dip)) / (0.5 * (s_.gate_sin_hi - s_.gate_sin_lo));
+      s_.mag_extra_var = p_.mag_soft_weight * p_.sigma_mag_ut * p_.sigma_mag_ut * (rn * rn + rd * rd);
     }
-    const bool forced = disturbed && p_.mag_max_reject_s > 0.0 && rejected_s_ >= p_.mag_max_reject_s;
+    const bool forced = disturbed && p_.mag_max_reject_s > 0.0 && s_.rejected_s >= p_.mag_max_reject_s;
     if (forced) {
       mag_use_ = MagUse::kForced;
-      ++mag_forced_;
+      ++s_.mag_forced;
     }
     if (disturbed && !forced) {
       mag_use_ = MagUse::kGated;
-      ++mag_gated_;
-      rejected_s_ += dt;
+      ++s_.mag_gated;
+      s_.rejected_s += dt;
       // the disturbance seen through the propagated heading: sd = s_M - m sX'
-      kf2_.set_e(mag - field_m_ * kf2_.u());
+      s_.kf2.set_e(mag - s_.field_m * s_.kf2.u());
       // candidate for a new reference: low-passed norm/dip and how long they stayed stable
       if (p_.mag_reacquire_s > 0.0) {
-        if (cand_norm_ <= 0.0) {
-          cand_norm_ = norm;
-          cand_dip_ = std::asin(std::max(-1.0, std::min(1.0, sin_dip)));
+        if (s_.cand_norm <= 0.0) {
+          s_.cand_norm = norm;
+          s_.cand_dip = std::asin(std::max(-1.0, std::min(1.0, sin_dip)));
         }
         const double dip = std::asin(std::max(-1.0, std::min(1.0, sin_dip)));
         const double k = dt / (1.0 + dt);
-        cand_norm_ += k * (norm - cand_norm_);
-        cand_dip_ += k * (dip - cand_dip_);
-        const bool stable = std::abs(norm - cand_norm_) < p_.mag_reacquire_tol * cand_norm_ &&
-                            std::abs(dip - cand_dip_) < 0.5 * p_.mag_dip_tol_deg * kRadPerDeg;
-        cand_stable_s_ = stable ? cand_stable_s_ + dt : 0.0;
-        if (rejected_s_ >= p_.mag_reacquire_s && cand_stable_s_ >= p_.mag_reacquire_s) {
-          field_m_ = cand_norm_;
-          field_dip_ = cand_dip_;
-          ++reacquired_;
-          rejected_s_ = 0.0;
-          cand_stable_s_ = 0.0;
-          cand_norm_ = 0.0;
+        s_.cand_norm += k * (norm - s_.cand_norm);
+        s_.cand_dip += k * (dip - s_.cand_dip);
+        const bool stable = std::abs(norm - s_.cand_norm) < p_.mag_reacquire_tol * s_.cand_norm &&
+                            std::abs(dip - s_.cand_dip) < 0.5 * p_.mag_dip_tol_deg * kRadPerDeg;
+        s_.cand_stable_s = stable ? s_.cand_stable_s + dt : 0.0;
+        if (s_.rejected_s >= p_.mag_reacquire_s && s_.cand_stable_s >= p_.mag_reacquire_s) {
+          s_.field_m = s_.cand_norm;
+          s_.field_dip = s_.cand_dip;
+          ++s_.reacquired;
+          s_.rejected_s = 0.0;
+          s_.cand_stable_s = 0.0;
+          s_.cand_norm = 0.0;
         }
       }
       return;
     }
     if (!disturbed) {
-      rejected_s_ = 0.0;
-      cand_stable_s_ = 0.0;
-      cand_norm_ = 0.0;
+      s_.rejected_s = 0.0;
+      s_.cand_stable_s = 0.0;
+      s_.cand_norm = 0.0;
     }
   }
-  const Eigen::Vector3d x_prior = kf2_.u();
-  kf2_.correct(mag, field_m_, mag_extra_var_);  // (10b), (11f)-(11h)
-  mag_extra_var_ = 0.0;
-  out_.mag_used = true;
-  if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && p_.motion_bias_heading && !rest_det_.rest && field_learnt_) {
+  const Eigen::Vector3d x_prior = s_.kf2.u();
+  s_.kf2.correct(mag, s_.field_m, s_.mag_extra_var);  // (10b), (11f)-(11h)
+  s_.mag_extra_var = 0.0;
+  s_.out.mag_used = true;
+  if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && p_.motion_bias_heading && !s_.rest_det.rest && s_.field_learnt) {
     // heading part (about sZ) of the correction rotation, sX'+ x sX'- = dtheta_perp(sX')
-    const Eigen::Vector3d& z = kf1_.up_body();
-    const Eigen::Vector3d corr = kf2_.u().normalized().cross(x_prior.normalized());
-    const double c2 = std::max(std::cos(field_dip_) * std::cos(field_dip_), kMinCos2Dip);
-    bias_ -= (corr.dot(z) / c2 / p_.motion_bias_tau_s) * z;
+    const Eigen::Vector3d& z = s_.kf1.up_body();
+    const Eigen::Vector3d corr = s_.kf2.u().normalized().cross(x_prior.normalized());
+    const double c2 = std::max(std::cos(s_.field_dip) * std::cos(s_.field_dip), kMinCos2Dip);
+    s_.bias -= (corr.dot(z) / c2 / p_.motion_bias_tau_s) * z;
   }
 }
 
 Eigen::Quaterniond ParallelKf::q_world_body() const {
   Eigen::Matrix3d r_body_world;  // sR = [sX sY sZ] (2), world = NWU
-  const Eigen::Vector3d fwd = heading_initialized_ ? kf2_.u() : Eigen::Vector3d::UnitX();
-  if (!initialized_ || !body_world_axes_from_up_forward(kf1_.up_body(), fwd, r_body_world)) {
+  const Eigen::Vector3d fwd = s_.heading_initialized ? s_.kf2.u() : Eigen::Vector3d::UnitX();
+  if (!s_.initialized || !body_world_axes_from_up_forward(s_.kf1.up_body(), fwd, r_body_world)) {
     return last_q_;
   }
   // R_ENU_body = R_ENU_NWU sR^T: rows -sY^T, sX^T, sZ^T (x_ENU = -y_NWU, y_ENU = x_NWU)
@@ -368,19 +369,19 @@ ParallelKfOutput ParallelKf::output() const {
   // With the inertial low-pass, KF1's sa is the residual of the filtered vector: report the
   // instantaneous external acceleration s_A - g sZ instead (4).
   o.ext_accel_body_mps2 = p_.accel_lowpass_tau_s > 0.0
-                              ? Eigen::Vector3d(last_accel_ - p_.tilt.gravity_mps2 * kf1_.up_body())
-                              : kf1_.ext_accel_body();
+                              ? Eigen::Vector3d(s_.last_accel - p_.tilt.gravity_mps2 * s_.kf1.up_body())
+                              : s_.kf1.ext_accel_body();
   o.ext_accel_world_mps2 = o.q_world_body * o.ext_accel_body_mps2;
-  o.mag_dist_body_ut = kf2_.e();
+  o.mag_dist_body_ut = s_.kf2.e();
   o.mag_dist_world_ut = o.q_world_body * o.mag_dist_body_ut;
   o.mag_dist_norm_ut = o.mag_dist_body_ut.norm();
-  o.gyro_bias_rps = bias_;
-  o.gyro_bias_sigma_rps = std::sqrt(bias_var_);
-  o.rest = rest_det_.rest;
-  o.mag_used = out_.mag_used;
-  o.field_learnt = field_learnt_;
-  o.field_magnitude_ut = field_m_;
-  o.dip_rad = field_dip_;
+  o.gyro_bias_rps = s_.bias;
+  o.gyro_bias_sigma_rps = std::sqrt(s_.bias_var);
+  o.rest = s_.rest_det.rest;
+  o.mag_used = s_.out.mag_used;
+  o.field_learnt = s_.field_learnt;
+  o.field_magnitude_ut = s_.field_m;
+  o.dip_rad = s_.field_dip;
   return o;
 }
 

@@ -9,7 +9,7 @@
 namespace poise {
 
 bool ParallelKf::update(const ImuSample& s) {
-  const bool was_initialized = initialized_;
+  const bool was_initialized = s_.initialized;
   mag_use_ = MagUse::kNone;
   gate_norm_ut_ = std::nan("");
   SampleCheck c;
@@ -57,7 +57,7 @@ void ParallelKf::report(const ImuSample& s, const SampleCheck& c, bool accepted,
     case MagUse::kLearning: mag_src_.mark_not_available("learning_field"); return;
     case MagUse::kNone: break;
   }
-  if (out_.mag_used) {
+  if (s_.out.mag_used) {
     mag_src_.mark_fused(s.stamp_ns);
   } else {
     mag_src_.mark_not_available(was_initialized ? "not_used" : "initialising");
@@ -69,23 +69,23 @@ SourceReports ParallelKf::sources() const {
   SourceReport& accel = out[1];
   if (accel.fused()) {
     // KF1: H1 = [g I | I], M1 = sigma_A^2 I (7f), (7h)
-    const Eigen::Matrix<double, 6, 6>& p1 = kf1_.covariance();
+    const Eigen::Matrix<double, 6, 6>& p1 = s_.kf1.covariance();
     const double g = p_.tilt.gravity_mps2;
     InnovationVector var_a(3);
     for (int i = 0; i < 3; ++i) {
       var_a[i] = g * g * p1(i, i) + 2.0 * g * p1(i, 3 + i) + p1(3 + i, 3 + i) +
                  p_.tilt.sigma_accel_mps2 * p_.tilt.sigma_accel_mps2;
     }
-    accel.set_innovation(kf1_.last_innovation(), var_a);
+    accel.set_innovation(s_.kf1.last_innovation(), var_a);
   }
   SourceReport& mag = out[2];
   if (mag.decision != SourceDecision::kNotAvailable && std::isfinite(gate_norm_ut_)) {
     // The gate as a measurement: [|s_M| - m, dip - alpha] against the tolerances.
     const double dip = std::asin(std::clamp(gate_sin_dip_, -1.0, 1.0));
-    const double tol_norm_ut = p_.mag_norm_tol * field_m_;
+    const double tol_norm_ut = p_.mag_norm_tol * s_.field_m;
     const double tol_dip_rad = p_.mag_dip_tol_deg * kRadPerDeg;
     InnovationVector innov(2);
-    innov << gate_norm_ut_ - field_m_, dip - field_dip_;
+    innov << gate_norm_ut_ - s_.field_m, dip - s_.field_dip;
     InnovationVector var(2);
     var << tol_norm_ut * tol_norm_ut, tol_dip_rad * tol_dip_rad;
     mag.set_innovation(innov, var);

@@ -191,6 +191,52 @@ struct ParallelKfOutput {
   double dip_rad = 0;             ///< alpha
 };
 
+/// Everything the parallel KF carries from one sample to the next (besides its parameters):
+/// inspect it, save it, restore it into a filter with the same parameters (`set_state`).
+struct ParallelKfState {
+  TiltKf kf1;
+  DirectionKf kf2;
+  bool initialized = false;
+  bool heading_initialized = false;
+  int64_t last_stamp_ns = -1;
+  Eigen::Vector3d prev_gyro{0, 0, 0};  ///< bias-corrected s_G at k-1
+  RejectCounters rejections;
+  uint64_t mag_gated = 0;
+  uint64_t mag_forced = 0;
+  uint64_t reacquired = 0;
+  ParallelKfOutput out;  ///< only mag_used is kept here (the rest is derived in output())
+
+  // field learning
+  double field_m = 0.0;
+  double field_dip = 0.0;
+  bool field_learnt = false;
+  double learn_time_s = 0.0;
+  double learn_norm_sum = 0.0;
+  double learn_dip_sum = 0.0;
+  int learn_n = 0;
+  // reacquisition candidate
+  double cand_norm = 0.0;
+  double cand_dip = 0.0;
+  double cand_stable_s = 0.0;
+  double rejected_s = 0.0;
+  double mag_extra_var = 0.0;  ///< soft-gating inflation of M2 for the current sample, uT^2
+  double gate_dip = 0.0;      ///< dip the gate bounds were computed for
+  double gate_sin_lo = 0.0;   ///< sin(alpha - tol)
+  double gate_sin_hi = 0.0;   ///< sin(alpha + tol)
+
+  // inertial low-pass of the accelerometer
+  Eigen::Matrix3d r_ib = Eigen::Matrix3d::Identity();  ///< body -> almost inertial frame
+  int r_ib_steps = 0;
+  Eigen::Vector3d lp_accel_i{0, 0, 0};
+  Butterworth2<3> accel_bw;
+  Eigen::Vector3d last_accel{0, 0, 0};
+
+  // bias / rest
+  Eigen::Vector3d bias{0, 0, 0};
+  double bias_var = 0.0;  ///< variance of each bias component (isotropic), rad^2/s^2
+  RestDetector rest_det;
+};
+
 class ParallelKf {
  public:
   explicit ParallelKf(const ParallelKfParams& params = {});
@@ -198,9 +244,18 @@ class ParallelKf {
   /// One sample. Returns false when the sample was rejected (counted in rejections()); a sample
   /// with a bad magnetometer but good gyro/accelerometer is used without its magnetometer.
   bool update(const ImuSample& s);
+  /// Back to the state of a new filter (parameters kept).
   void reset();
+  /// The filter's whole state (VQF's getState): two filters with the same parameters and the
+  /// same state give the same outputs for the same samples.
+  [[nodiscard]] const ParallelKfState& state() const { return s_; }
+  /// Restores a state taken from state() of a filter with the same parameters (setState).
+  void set_state(const ParallelKfState& state) {
+    s_ = state;
+    last_q_ = Eigen::Quaterniond::Identity();
+  }
 
-  [[nodiscard]] bool initialized() const { return initialized_; }
+  [[nodiscard]] bool initialized() const { return s_.initialized; }
   /// Everything reported (computed on demand from the state).
   [[nodiscard]] ParallelKfOutput output() const;
   /// First-order covariance of the world-frame attitude error (rad^2, rotation vector about ENU
@@ -210,15 +265,15 @@ class ParallelKf {
   [[nodiscard]] Eigen::Matrix3d attitude_covariance(const ParallelKfOutput& out) const;
   /// q_world_body (ENU) from sZ and sX' (2); the last valid one if they are (anti)parallel.
   [[nodiscard]] Eigen::Quaterniond q_world_body() const;
-  [[nodiscard]] const Eigen::Matrix<double, 6, 6>& tilt_covariance() const { return kf1_.covariance(); }
-  [[nodiscard]] const Eigen::Matrix<double, 6, 6>& heading_covariance() const { return kf2_.covariance(); }
-  [[nodiscard]] const TiltKf& tilt_kf() const { return kf1_; }
-  [[nodiscard]] const RejectCounters& rejections() const { return rejections_; }
+  [[nodiscard]] const Eigen::Matrix<double, 6, 6>& tilt_covariance() const { return s_.kf1.covariance(); }
+  [[nodiscard]] const Eigen::Matrix<double, 6, 6>& heading_covariance() const { return s_.kf2.covariance(); }
+  [[nodiscard]] const TiltKf& tilt_kf() const { return s_.kf1; }
+  [[nodiscard]] const RejectCounters& rejections() const { return s_.rejections; }
   /// Magnetometer samples not used for the heading: gated as disturbed.
-  [[nodiscard]] uint64_t mag_gated_count() const { return mag_gated_; }
-  [[nodiscard]] uint64_t field_reacquired_count() const { return reacquired_; }
+  [[nodiscard]] uint64_t mag_gated_count() const { return s_.mag_gated; }
+  [[nodiscard]] uint64_t field_reacquired_count() const { return s_.reacquired; }
   /// Magnetometer samples used although gated, because rejection lasted mag_max_reject_s.
-  [[nodiscard]] uint64_t mag_forced_count() const { return mag_forced_; }
+  [[nodiscard]] uint64_t mag_forced_count() const { return s_.mag_forced; }
   [[nodiscard]] const ParallelKfParams& params() const { return p_; }
   /// Per source for the last sample (parallel_kf_report.cpp), in this order:
   ///   gyro   fused when it propagated both KFs (not available on the first sample / after a gap);
@@ -242,48 +297,9 @@ class ParallelKf {
                     const Eigen::Vector3d& mag, bool mag_ok, double dt);
 
   ParallelKfParams p_;
-  TiltKf kf1_;
-  DirectionKf kf2_;
-  bool initialized_ = false;
-  bool heading_initialized_ = false;
-  int64_t last_stamp_ns_ = -1;
-  Eigen::Vector3d prev_gyro_{0, 0, 0};  ///< bias-corrected s_G at k-1
-  RejectCounters rejections_;
-  uint64_t mag_gated_ = 0;
-  uint64_t mag_forced_ = 0;
-  uint64_t reacquired_ = 0;
-  ParallelKfOutput out_;  ///< only mag_used is kept here (the rest is derived in output())
+  ParallelKfState s_;
+  /// the last valid q_world_body (returned while sZ and sX' are parallel); a cache, not state
   mutable Eigen::Quaterniond last_q_ = Eigen::Quaterniond::Identity();
-
-  // field learning
-  double field_m_ = 0.0;
-  double field_dip_ = 0.0;
-  bool field_learnt_ = false;
-  double learn_time_s_ = 0.0;
-  double learn_norm_sum_ = 0.0;
-  double learn_dip_sum_ = 0.0;
-  int learn_n_ = 0;
-  // reacquisition candidate
-  double cand_norm_ = 0.0;
-  double cand_dip_ = 0.0;
-  double cand_stable_s_ = 0.0;
-  double rejected_s_ = 0.0;
-  double mag_extra_var_ = 0.0;  ///< soft-gating inflation of M2 for the current sample, uT^2
-  double gate_dip_ = 0.0;      ///< dip the gate bounds were computed for
-  double gate_sin_lo_ = 0.0;   ///< sin(alpha - tol)
-  double gate_sin_hi_ = 0.0;   ///< sin(alpha + tol)
-
-  // inertial low-pass of the accelerometer
-  Eigen::Matrix3d r_ib_ = Eigen::Matrix3d::Identity();  ///< body -> almost inertial frame
-  int r_ib_steps_ = 0;
-  Eigen::Vector3d lp_accel_i_{0, 0, 0};
-  Butterworth2<3> accel_bw_;
-  Eigen::Vector3d last_accel_{0, 0, 0};
-
-  // bias / rest
-  Eigen::Vector3d bias_{0, 0, 0};
-  double bias_var_ = 0.0;  ///< variance of each bias component (isotropic), rad^2/s^2
-  RestDetector rest_det_;
 
   // Reporting (parallel_kf_report.cpp): what the last sample's heading step did with s_M.
   enum class MagUse : uint8_t { kNone, kLearning, kGated, kForced };
