@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdint>
 #include <cstdio>
 #include <string>
 
@@ -168,8 +169,12 @@ TEST(ParallelKf, BadInputIsRejectedCountedAndLeavesTheStateUntouched) {
   bad = s;
   bad.stamp_ns = s.stamp_ns + 5'000'000'000;  // 5 s gap
   expect_rejected(bad, RejectReason::kTimeGap);
-  // after the gap, time restarts at the gap sample: the next sample is used again
+  // after the gap, time restarts once a second sample agrees with the first (a lone wild stamp
+  // costs one sample): the second re-anchors, the third is used again
   s.stamp_ns = bad.stamp_ns + 10'000'000;
+  EXPECT_FALSE(kf.update(s));
+  EXPECT_EQ(kf.rejections().count(RejectReason::kTimeGap), 2u);
+  s.stamp_ns += 10'000'000;
   EXPECT_TRUE(kf.update(s));
   // a bad magnetometer alone: gyro and accelerometer still used, magnetometer counted
   ImuSample no_mag = s;
@@ -389,6 +394,72 @@ TEST(ParallelKf, GivenAStateTakenMidRunWhenRestoredIntoAnotherFilterThenBothGive
   EXPECT_EQ(a.state().initialized, fresh.state().initialized);
   EXPECT_EQ(a.state().bias_var, fresh.state().bias_var);
   EXPECT_EQ(a.state().rejections.total(), 0u);
+}
+
+}  // namespace
+}  // namespace poise
+
+namespace poise {
+namespace {
+
+// One hostile sample among valid ones: finite but impossible values (1e308, 1e20) and a stamp far
+// in the future. Oracle: a filter that never saw that sample.
+TEST(ParallelKf, GivenOneImpossibleSampleWhenFilteredThenItIsRejectedCountedAndTheFilterGoesOn) {
+  constexpr double kSameAsCleanDeg = 0.01;  // the one missing sample only lengthens one step
+  struct Case {
+    const char* name;
+    RejectReason reason;
+    void (*spoil)(ImuSample&);
+  };
+  const Case cases[] = {
+      {"gyro 1e308", RejectReason::kGyroOutOfRange, [](ImuSample& s) { s.gyro_rps.x() = 1e308; }},
+      {"accel 1e20", RejectReason::kAccelOutOfRange, [](ImuSample& s) { s.accel_mps2.x() = 1e20; }},
+      {"stamp +1e15 ns", RejectReason::kTimeGap, [](ImuSample& s) { s.stamp_ns += 1'000'000'000'000'000; }},
+      {"stamp INT64_MAX", RejectReason::kTimeGap, [](ImuSample& s) { s.stamp_ns = INT64_MAX; }},
+  };
+  for (const Case& c : cases) {
+    sim::SensorSimulator sim_a(sim::make_scenario("fast_motion", 100.0, 4));
+    sim::SensorSimulator sim_b(sim::make_scenario("fast_motion", 100.0, 4));
+    ParallelKf hit;
+    ParallelKf clean;
+    for (int k = 0; k < 3000; ++k) {
+      ImuSample s = sim_a.next().imu;
+      const ImuSample s_clean = sim_b.next().imu;
+      if (k == 1500) {
+        c.spoil(s);
+        EXPECT_FALSE(hit.update(s)) << c.name;
+        continue;  // the clean filter never sees this sample
+      }
+      hit.update(s);
+      clean.update(s_clean);
+      ASSERT_TRUE(hit.q_world_body().coeffs().allFinite()) << c.name << " at " << k;
+    }
+    EXPECT_EQ(hit.rejections().count(c.reason), 1u) << c.name;
+    EXPECT_EQ(hit.rejections().total(), 1u) << c.name;
+    EXPECT_TRUE(hit.tilt_covariance().allFinite() && hit.heading_covariance().allFinite()) << c.name;
+    EXPECT_LT(quat_angle_between(hit.q_world_body(), clean.q_world_body()) * kDegPerRad, kSameAsCleanDeg) << c.name;
+  }
+}
+
+TEST(ParallelKf, GivenTheSensorClockRestartsWhenTwoSamplesAgreeThenTimeRestartsAndTheFilterGoesOn) {
+  ParallelKf kf;
+  ImuSample s;
+  s.gyro_rps = Eigen::Vector3d(0.0, 0.0, 0.01);
+  s.accel_mps2 = Eigen::Vector3d(0.0, 0.0, 9.81);
+  s.mag_ut = Eigen::Vector3d(0.0, 20.0, -40.0);
+  for (int k = 0; k < 200; ++k) {
+    s.stamp_ns = 5'000'000'000 + static_cast<int64_t>(k) * 10'000'000;
+    ASSERT_TRUE(kf.update(s));
+  }
+  // the clock restarts at 0: the first sample is refused, the second confirms and re-anchors,
+  // the third is integrated again
+  s.stamp_ns = 0;
+  EXPECT_FALSE(kf.update(s));
+  s.stamp_ns = 10'000'000;
+  EXPECT_FALSE(kf.update(s));
+  s.stamp_ns = 20'000'000;
+  EXPECT_TRUE(kf.update(s));
+  EXPECT_EQ(kf.rejections().count(RejectReason::kNonMonotonicStamp), 2u);
 }
 
 }  // namespace

@@ -585,11 +585,13 @@ TEST(SelectiveEkfInput, GivenBadImuSamplesWhenFedThenRejectedCountedAndStateUnto
   EXPECT_EQ(f.imu_rejections().count(RejectReason::kNonFiniteMag), static_cast<uint64_t>(nan_samples));
   EXPECT_EQ(f.status(Source::kHeading).last, Decision::kRejectedNoMag);
   EXPECT_EQ(f.status(Source::kTilt).last, Decision::kFused);
-  // A huge gap re-anchors time without integrating across it.
+  // A huge gap re-anchors time without integrating across it, once a second sample agrees.
   t += 10'000'000;
   EXPECT_FALSE(f.update_imu(level_sample(t + 5'000'000'000LL)));
   EXPECT_EQ(f.imu_rejections().count(RejectReason::kTimeGap), 1u);
-  EXPECT_TRUE(f.update_imu(level_sample(t + 5'010'000'000LL)));
+  EXPECT_FALSE(f.update_imu(level_sample(t + 5'010'000'000LL)));
+  EXPECT_EQ(f.imu_rejections().count(RejectReason::kTimeGap), 2u);
+  EXPECT_TRUE(f.update_imu(level_sample(t + 5'020'000'000LL)));
   EXPECT_TRUE(f.state().P.allFinite());
   EXPECT_LT(f.attitude_sigma_deg().maxCoeff(), 15.0);
 }

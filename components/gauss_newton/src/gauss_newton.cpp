@@ -23,6 +23,7 @@ void GaussNewton::reset() {
   dip_n_ = 0;
   dip_rad_ = std::isfinite(p_.dip_deg) ? p_.dip_deg * kRadPerDeg : 0.0;
   last_stamp_ns_ = -1;
+  anchor_ = StampAnchor{};
   rejections_ = RejectCounters{};
   accel_ = source_named("accel");
   mag_ = source_named("mag");
@@ -69,7 +70,7 @@ GaussNewtonResult GaussNewton::solve(const Eigen::Vector3d& accel, const Eigen::
 
 bool GaussNewton::update(const ImuSample& s) {
   const SampleCheck c = check_imu_sample(s, last_stamp_ns_, p_.limits, rejections_);
-  if (c.reanchor) {
+  if (anchor_.reanchor(c, s.stamp_ns, p_.limits.max_dt_s)) {
     last_stamp_ns_ = s.stamp_ns;
   }
   if (!c.accept) {

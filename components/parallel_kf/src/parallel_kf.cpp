@@ -80,6 +80,9 @@ void ParallelKfParams::validate() const {
   need(!share_tilt_correction || (tilt.renormalize && tilt.exact_rotation),
        "share_tilt_correction needs tilt.renormalize and tilt.exact_rotation (unit directions)");
   need(limits.max_dt_s > 0.0, "limits.max_dt_s must be > 0 (s)");
+  need(limits.max_gyro_rps > 0.0 && std::isfinite(limits.max_gyro_rps) && limits.max_accel_mps2 > 0.0 &&
+           std::isfinite(limits.max_accel_mps2) && limits.max_mag_ut > 0.0 && std::isfinite(limits.max_mag_ut),
+       "limits.max_gyro_rps, max_accel_mps2 and max_mag_ut must be finite and > 0");
 }
 
 ParallelKf::ParallelKf(const ParallelKfParams& params) : p_(params) {
@@ -125,13 +128,14 @@ void ParallelKf::reset() {
   s_.bias.setZero();
   s_.bias_var = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
   s_.rest_det = RestDetector{};
+  s_.anchor = StampAnchor{};
   reset_report();
 }
 
 bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   c = check_imu_sample(s, s_.last_stamp_ns, p_.limits, s_.rejections);
-  if (c.reanchor) {
-    s_.last_stamp_ns = s.stamp_ns;  // restart time after a gap; attitude kept
+  if (s_.anchor.reanchor(c, s.stamp_ns, p_.limits.max_dt_s)) {
+    s_.last_stamp_ns = s.stamp_ns;  // restart time after a confirmed jump; attitude kept
     return false;
   }
   if (!c.accept) {

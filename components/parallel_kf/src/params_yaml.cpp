@@ -83,6 +83,9 @@ const std::vector<Field>& fields() {
       make("motion_bias_heading", &ParallelKfParams::motion_bias_heading),
       make_limits("min_accel_norm_mps2", &SampleLimits::min_accel_norm_mps2),
       make_limits("min_mag_norm_ut", &SampleLimits::min_mag_norm_ut),
+      make_limits("max_gyro_rps", &SampleLimits::max_gyro_rps),
+      make_limits("max_accel_mps2", &SampleLimits::max_accel_mps2),
+      make_limits("max_mag_ut", &SampleLimits::max_mag_ut),
       make_limits("max_dt_s", &SampleLimits::max_dt_s),
   };
   return f;

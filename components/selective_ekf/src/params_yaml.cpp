@@ -164,6 +164,9 @@ SelectiveEkfParams load_selective_ekf_params(const std::string& path) {
       {"max_dt_s", d(p.limits.max_dt_s)},
       {"min_accel_norm_mps2", d(p.limits.min_accel_norm_mps2)},
       {"min_mag_norm_ut", d(p.limits.min_mag_norm_ut)},
+      {"max_gyro_rps", d(p.limits.max_gyro_rps)},
+      {"max_accel_mps2", d(p.limits.max_accel_mps2)},
+      {"max_mag_ut", d(p.limits.max_mag_ut)},
       {"gauss_newton",
        [&](const YAML::Node& n) {
          if (!n.IsMap()) {

@@ -128,6 +128,7 @@ void SelectiveEkf::reset() {
   initialized_ = false;
   out_ready_ = false;
   last_imu_stamp_ns_ = -1;
+  anchor_ = StampAnchor{};
   rejections_ = RejectCounters{};
   status_ = {};
   mag_ = MagStatus{};
@@ -655,8 +656,8 @@ void SelectiveEkf::preprocess(ImuInput& in) {
 
 bool SelectiveEkf::update_imu(const ImuSample& s) {
   const SampleCheck c = check_imu_sample(s, last_imu_stamp_ns_, p_.limits, rejections_);
-  if (c.reanchor) {
-    // Time gap: keep the state, restart time here; the history cannot span the gap.
+  if (anchor_.reanchor(c, s.stamp_ns, p_.limits.max_dt_s)) {
+    // Confirmed time jump: keep the state, restart time here; the history cannot span it.
     last_imu_stamp_ns_ = s.stamp_ns;
     x_.stamp_ns = s.stamp_ns - imu_delay_ns_;
     history_.clear();

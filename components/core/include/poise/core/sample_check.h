@@ -22,6 +22,9 @@ enum class RejectReason : uint8_t {
   kTimeGap,          ///< dt above the maximum (the filter re-anchors time, state kept)
   kMissingGyro,
   kMissingAccel,
+  kGyroOutOfRange,   ///< |gyro| above the sensor's full scale (finite but impossible, e.g. 1e308)
+  kAccelOutOfRange,  ///< |accel| above the sensor's full scale
+  kMagOutOfRange,    ///< |mag| above the sensor's full scale
   kCount
 };
 
@@ -36,6 +39,9 @@ inline const char* to_string(RejectReason r) {
     case RejectReason::kTimeGap: return "time_gap";
     case RejectReason::kMissingGyro: return "missing_gyro";
     case RejectReason::kMissingAccel: return "missing_accel";
+    case RejectReason::kGyroOutOfRange: return "gyro_out_of_range";
+    case RejectReason::kAccelOutOfRange: return "accel_out_of_range";
+    case RejectReason::kMagOutOfRange: return "mag_out_of_range";
     case RejectReason::kCount: break;
   }
   return "unknown";
@@ -69,6 +75,12 @@ struct SampleLimits {
   double min_accel_norm_mps2 = 0.5;  ///< below: "zero" accelerometer (free fall is not usable)
   double min_mag_norm_ut = 1.0;      ///< below: "zero" magnetometer
   double max_dt_s = 0.5;             ///< larger gaps re-anchor time instead of integrating
+  /// Physical range: a finite value beyond the sensor's full scale cannot be a measurement (one
+  /// such sample would otherwise enter every state). Defaults: the MPU6050's and HMC5883L's
+  /// largest ranges (2000 deg/s, 16 g, 8.1 G) with 25 % margin for calibration scale factors.
+  double max_gyro_rps = 1.25 * 2000.0 * 3.14159265358979323846 / 180.0;
+  double max_accel_mps2 = 1.25 * 16.0 * 9.80665;
+  double max_mag_ut = 1.25 * 810.0;
 };
 
 /// Result of validating one sample against the previous accepted stamp.
@@ -123,7 +135,7 @@ inline bool advance_stamp(int64_t stamp_ns, bool have_stamp, int64_t& last_stamp
 
 /// Validates `s`; counts every problem found in `counters`. `last_stamp_ns` < 0 means "no
 /// previous sample". Non-monotonic stamps are rejected; a gap above max_dt_s is rejected
-/// (counted) with reanchor = true so the caller can restart time at this stamp.
+/// (counted) with reanchor = true. When to restart time after either: StampAnchor.
 inline SampleCheck check_imu_sample(const ImuSample& s, int64_t last_stamp_ns,
                                     const SampleLimits& lim, RejectCounters& counters) {
   SampleCheck out;
@@ -144,6 +156,16 @@ inline SampleCheck check_imu_sample(const ImuSample& s, int64_t last_stamp_ns,
   }
   if (!s.accel_mps2.allFinite()) {
     out.reject = RejectReason::kNonFiniteAccel;
+    counters.add(out.reject);
+    return out;
+  }
+  if (!(s.gyro_rps.norm() <= lim.max_gyro_rps)) {
+    out.reject = RejectReason::kGyroOutOfRange;
+    counters.add(out.reject);
+    return out;
+  }
+  if (!(s.accel_mps2.norm() <= lim.max_accel_mps2)) {
+    out.reject = RejectReason::kAccelOutOfRange;
     counters.add(out.reject);
     return out;
   }
@@ -173,11 +195,41 @@ inline SampleCheck check_imu_sample(const ImuSample& s, int64_t last_stamp_ns,
     } else if (!(s.mag_ut.norm() >= lim.min_mag_norm_ut)) {
       out.mag_reject = RejectReason::kZeroMag;
       counters.add(out.mag_reject);
+    } else if (!(s.mag_ut.norm() <= lim.max_mag_ut)) {
+      out.mag_reject = RejectReason::kMagOutOfRange;
+      counters.add(out.mag_reject);
     } else {
       out.mag_ok = true;
     }
   }
   return out;
 }
+
+/// Restarting time after a stamp jump (a gap forward or a step back), shared by the IMU filters.
+/// A jumping stamp is refused (check_imu_sample); time restarts at a stamp only when it follows
+/// the previous refused one by (0, max_dt_s]: two samples must agree. So one wild stamp (the year
+/// 292277026596, +1e15 ns) costs that one sample and the filter goes on with the next, while a
+/// real restart of the sensor clock or a real pause costs one sample more than it did before.
+struct StampAnchor {
+  bool has_candidate = false;
+  int64_t candidate_ns = 0;
+  /// Call with every check result of `stamp_ns`; true: restart time at stamp_ns (do not integrate
+  /// this sample).
+  bool reanchor(const SampleCheck& c, int64_t stamp_ns, double max_dt_s) {
+    if (c.accept) {
+      has_candidate = false;
+      return false;
+    }
+    if (c.reject != RejectReason::kNonMonotonicStamp && c.reject != RejectReason::kTimeGap) {
+      return false;  // refused for its values: says nothing about time
+    }
+    // in double: two arbitrary int64 stamps can be further apart than int64 can hold
+    const double dt_s = (static_cast<double>(stamp_ns) - static_cast<double>(candidate_ns)) * 1e-9;
+    const bool agrees = has_candidate && dt_s > 0.0 && dt_s <= max_dt_s;
+    has_candidate = !agrees;
+    candidate_ns = stamp_ns;
+    return agrees;
+  }
+};
 
 }  // namespace poise

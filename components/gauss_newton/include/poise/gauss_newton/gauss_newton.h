@@ -74,6 +74,7 @@ class GaussNewton {
   double dip_sum_rad_ = 0.0;
   int dip_n_ = 0;
   int64_t last_stamp_ns_ = -1;
+  StampAnchor anchor_;  ///< time restarts after a stamp jump only when two samples agree
   RejectCounters rejections_;
   SourceReport accel_ = source_named("accel");
   SourceReport mag_ = source_named("mag");

@@ -235,6 +235,7 @@ struct ParallelKfState {
   Eigen::Vector3d bias{0, 0, 0};
   double bias_var = 0.0;  ///< variance of each bias component (isotropic), rad^2/s^2
   RestDetector rest_det;
+  StampAnchor anchor;  ///< time restarts after a stamp jump only when two samples agree
 };
 
 class ParallelKf {

@@ -412,6 +412,7 @@ class SelectiveEkf {
   bool out_ready_ = false;           ///< out_q_ holds a blended output
   Eigen::Quaterniond out_q_ = Eigen::Quaterniond::Identity();
   int64_t last_imu_stamp_ns_ = -1;   ///< stamp of the last accepted IMU sample (sensor clock)
+  StampAnchor anchor_;               ///< time restarts after a stamp jump only when two samples agree
   int64_t imu_delay_ns_ = 0;         ///< state time = IMU stamp - imu_delay_ns_
   RejectCounters rejections_;
   std::array<SourceStatus, static_cast<size_t>(Source::kCount)> status_{};
