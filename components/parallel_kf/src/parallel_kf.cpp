@@ -10,6 +10,7 @@ namespace {
 constexpr double kInitVarDirection = 1e-2;  // P11 / P21 at (re)initialisation, unit-vector comps^2
 constexpr double kInitVarDisturbanceUt2 = 4.0;  // P22 of KF2 at initialisation, uT^2
 constexpr double kMinCos2Dip = 0.05;        // guard for the heading part of the KF2 correction
+constexpr double kBiasPeriodS = 0.04;  // the bias filter runs once per window of this length, s (25 Hz)
 
 }  // namespace
 
@@ -26,7 +27,7 @@ ParallelKfParams ParallelKfParams::paper() {
   p.gyro_current_weight = 0.0;
   p.accel_lowpass_tau_s = 0.0;
   p.bias_estimation = false;
-  p.motion_bias_tau_s = 0.0;
+  p.motion_bias_sigma_rps = 0.0;
   p.mag_gating = false;
   p.accel_lowpass_order = 1;
   p.share_tilt_correction = false;
@@ -69,7 +70,10 @@ void ParallelKfParams::validate() const {
   need(bias_sigma_init_rps > 0.0 && bias_sigma_rest_rps > 0.0 && bias_drift_rps > 0.0 &&
            bias_forgetting_time_s > 0.0,
        "bias_sigma_init_rps, bias_sigma_rest_rps, bias_drift_rps and bias_forgetting_time_s must be > 0");
-  need(motion_bias_tau_s >= 0.0, "motion_bias_tau_s must be >= 0 (0 = off)");
+  need(motion_bias_sigma_rps >= 0.0 && std::isfinite(motion_bias_sigma_rps),
+       "motion_bias_sigma_rps must be finite and >= 0 (rad/s, 0 = off)");
+  need(motion_bias_clip_rps > 0.0, "motion_bias_clip_rps must be > 0 (rad/s)");
+  need(motion_gyro_scale_error >= 0.0 && motion_gyro_scale_error < 1.0, "motion_gyro_scale_error must be in [0, 1)");
   need(max_bias_rps > 0.0, "max_bias_rps must be > 0");
   need(mag_norm_tol > 0.0 && mag_dip_tol_deg > 0.0, "mag gating tolerances must be > 0");
   need(mag_max_reject_s >= 0.0, "mag_max_reject_s must be >= 0 (s, 0 = never)");
@@ -126,7 +130,16 @@ void ParallelKf::reset() {
   s_.rejected_s = 0.0;
   s_.gate_dip = std::nan("");
   s_.bias.setZero();
-  s_.bias_var = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
+  s_.bias_cov = Eigen::Matrix3d::Identity() * (p_.bias_sigma_init_rps * p_.bias_sigma_init_rps);
+  s_.bias_lp_i.setZero();
+  s_.rate2_lp = 0.0;
+  s_.mb_rate2 = 0.0;
+  s_.mb_corr.setZero();
+  s_.mb_head = 0.0;
+  s_.mb_time = 0.0;
+  s_.mb_head_used = false;
+  s_.mb_head_trusted = true;
+  s_.c2_dip_for = std::nan("");
   s_.rest_det = RestDetector{};
   s_.anchor = StampAnchor{};
   reset_report();
@@ -149,7 +162,8 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   }
   const double dt = c.dt_s;
   if (p_.bias_estimation) {
-    update_rest_and_bias(s.gyro_rps, s.accel_mps2, dt);
+    const RestParams rp{p_.rest_gyro_max_rps, p_.rest_accel_max_mps2, p_.rest_min_s, p_.rest_filter_tau_s};
+    s_.rest_det.step(s.gyro_rps, s.accel_mps2, dt, rp);
   }
   const Eigen::Vector3d gyro = s.gyro_rps - s_.bias;
   const Eigen::Vector3d w = s_.prev_gyro + p_.gyro_current_weight * (gyro - s_.prev_gyro);
@@ -183,8 +197,10 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   } else {
     s_.kf1.correct(s.accel_mps2);
   }
-  if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && !s_.rest_det.rest) {
-    s_.bias -= s_.kf1.last_correction_rotvec() / p_.motion_bias_tau_s;
+  const bool motion_bias = p_.bias_estimation && p_.motion_bias_sigma_rps > 0.0;
+  if (motion_bias) {
+    s_.mb_corr += s_.kf1.last_correction_rotvec();
+    s_.mb_rate2 += w.squaredNorm() * dt;
   }
   if (p_.share_tilt_correction && s_.heading_initialized) {
     // the rotation that moved sZ moves sX' too (one attitude error, two world directions)
@@ -193,11 +209,14 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
 
   // KF2: heading + magnetic disturbance (8)-(11)
   heading_step(a, s.accel_mps2, s.mag_ut, c.mag_ok, dt);
-
   if (p_.bias_estimation) {
-    const double bn = s_.bias.norm();
-    if (bn > p_.max_bias_rps) {
-      s_.bias *= p_.max_bias_rps / bn;
+    s_.mb_time += dt;
+    if (s_.mb_time >= kBiasPeriodS) {
+      bias_update();
+      const double bn = s_.bias.norm();
+      if (bn > p_.max_bias_rps) {
+        s_.bias *= p_.max_bias_rps / bn;
+      }
     }
   }
   s_.prev_gyro = gyro;
@@ -237,23 +256,101 @@ void ParallelKf::learn_field(const Eigen::Vector3d& /*accel*/, const Eigen::Vect
   }
 }
 
-void ParallelKf::update_rest_and_bias(const Eigen::Vector3d& gyro_raw, const Eigen::Vector3d& accel,
-                                      double dt) {
-  const RestParams rp{p_.rest_gyro_max_rps, p_.rest_accel_max_mps2, p_.rest_min_s, p_.rest_filter_tau_s};
-  s_.rest_det.step(gyro_raw, accel, dt, rp);
-  // bias Kalman filter, per component (isotropic): predict, then measure at rest
+double ParallelKf::motion_bias_noise(double dt) const {
+  // process noise per step v; measurement noise w for which continuous measurement settles the
+  // variance at p: steady state of P+ = (P + v) w / (P + v + w) at P+ = p gives w = p^2 / v + p
   const double v = p_.bias_drift_rps * p_.bias_drift_rps * dt / p_.bias_forgetting_time_s;
+  const double p = p_.motion_bias_sigma_rps * p_.motion_bias_sigma_rps;
+  return p * p / v + p;
+}
+
+void ParallelKf::bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep) {
+  const double clip = p_.motion_bias_clip_rps;
+  const double innovation = std::max(-clip, std::min(clip, z - h.dot(s_.bias)));
+  const Eigen::Vector3d ph = s_.bias_cov * h;
+  const double s = h.dot(ph) + w;
+  Eigen::Vector3d k = ph / s;
+  if (keep != nullptr) {
+    // the component along *keep is not updated (Schmidt: considered, not estimated): a motion
+    // measurement must not move what it cannot see, however its errors correlate with it
+    k -= keep->dot(k) * *keep;
+  }
+  s_.bias += k * innovation;
+  // Joseph form (valid for any gain): P - k ph^T - ph k^T + s k k^T
+  s_.bias_cov += s * k * k.transpose() - k * ph.transpose() - ph * k.transpose();
+}
+
+void ParallelKf::motion_bias_measure() {
+  // KF1 turned sZ by dtheta (perpendicular to sZ) that the gyro did not explain: a bias error
+  // db = b_true - b drifts the attitude at -db, so y = -sum(dtheta) / t over the window measures
+  // db's horizontal part, seen through the accelerometer's low-pass. The bias itself went through
+  // that low-pass too (in the inertial frame); adding back LP(R b) - R b leaves a measurement of
+  // b_true. The window (kBiasPeriodS) only saves work: the bias moves over minutes.
+  const double t = s_.mb_time;
+  Eigen::Vector3d m = -s_.mb_corr / t;
+  if (p_.accel_lowpass_tau_s > 0.0) {
+    // first order with the same lag for a ramp (tau) as the accelerometer's low-pass
+    const double k = t / (p_.accel_lowpass_tau_s + t);
+    s_.rate2_lp += k * (s_.mb_rate2 / t - s_.rate2_lp);
+    s_.bias_lp_i += k * (s_.r_ib * s_.bias - s_.bias_lp_i);
+    m += s_.r_ib.transpose() * s_.bias_lp_i;
+  } else {
+    s_.rate2_lp += (t / (p_.rest_filter_tau_s + t)) * (s_.mb_rate2 / t - s_.rate2_lp);
+    m += s_.bias;
+  }
+  if (!s_.rest_det.rest) {  // at rest the rest measurement is better
+    const Eigen::Vector3d& up = s_.kf1.up_body();
+    int i_min = 0;  // the body axis least aligned with up spans the horizontal plane with it
+    up.cwiseAbs().minCoeff(&i_min);
+    const Eigen::Vector3d h1 = up.cross(Eigen::Vector3d::Unit(i_min)).normalized();
+    const Eigen::Vector3d h2 = up.cross(h1);
+    const double scale_rps = p_.motion_gyro_scale_error / p_.motion_bias_sigma_rps;
+    const double w_motion = motion_bias_noise(t);
+    const double w = w_motion * (1.0 + scale_rps * scale_rps * s_.rate2_lp);
+    bias_measure(h1, h1.dot(m), w, &up);  // the vertical part is unobservable from gravity
+    bias_measure(h2, h2.dot(m), w, &up);
+    if (s_.mb_head_used && s_.mb_head_trusted) {
+      // heading correction rate about sZ from the accepted magnetometer updates in the window
+      bias_measure(up, up.dot(s_.bias) - s_.mb_head / t, w, nullptr);
+    }
+  }
+}
+
+void ParallelKf::bias_update() {
+  // bias Kalman filter over the window t: predict (random walk), then measure at rest (the
+  // low-passed gyro) or in motion (motion_bias_measure)
+  const double t = s_.mb_time;
+  const double v = p_.bias_drift_rps * p_.bias_drift_rps * t / p_.bias_forgetting_time_s;
   const double var_max = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
-  s_.bias_var = std::min(s_.bias_var + v, var_max);
+  s_.bias_cov.diagonal().array() += v;
+  for (int i = 0; i < 3; ++i) {  // never less certain than at start (keeps P symmetric, PSD)
+    if (s_.bias_cov(i, i) > var_max) {
+      const double f = std::sqrt(var_max / s_.bias_cov(i, i));
+      s_.bias_cov.row(i) *= f;
+      s_.bias_cov.col(i) *= f;
+    }
+  }
   if (s_.rest_det.rest) {
     // measurement noise for which continuous rest settles at bias_sigma_rest_rps^2 (= p):
     // steady state of P+ = (P + v) w / (P + v + w) at P+ = p gives w = p^2 / v + p
     const double p_rest = p_.bias_sigma_rest_rps * p_.bias_sigma_rest_rps;
     const double w = p_rest * p_rest / v + p_rest;
-    const double k = s_.bias_var / (s_.bias_var + w);
-    s_.bias += k * (s_.rest_det.gyro_lp - s_.bias);
-    s_.bias_var *= 1.0 - k;
+    for (int i = 0; i < 3; ++i) {  // H = I, W = w I: three scalar updates, one per axis
+      const Eigen::Vector3d ph = s_.bias_cov.col(i);
+      const Eigen::Vector3d k = ph / (ph(i) + w);
+      s_.bias += k * (s_.rest_det.gyro_lp(i) - s_.bias(i));
+      s_.bias_cov -= k * ph.transpose();
+    }
   }
+  if (p_.motion_bias_sigma_rps > 0.0) {
+    motion_bias_measure();  // keeps its low-passes running at rest too
+  }
+  s_.mb_corr.setZero();
+  s_.mb_rate2 = 0.0;
+  s_.mb_head = 0.0;
+  s_.mb_time = 0.0;
+  s_.mb_head_used = false;
+  s_.mb_head_trusted = true;
 }
 
 void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& accel,
@@ -301,6 +398,7 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
     if (disturbed && !forced) {
       mag_use_ = MagUse::kGated;
       ++s_.mag_gated;
+      s_.mb_head_trusted = false;
       s_.rejected_s += dt;
       // the disturbance seen through the propagated heading: sd = s_M - m sX'
       s_.kf2.set_e(mag - s_.field_m * s_.kf2.u());
@@ -338,12 +436,22 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
   s_.kf2.correct(mag, s_.field_m, s_.mag_extra_var);  // (10b), (11f)-(11h)
   s_.mag_extra_var = 0.0;
   s_.out.mag_used = true;
-  if (p_.bias_estimation && p_.motion_bias_tau_s > 0.0 && p_.motion_bias_heading && !s_.rest_det.rest && s_.field_learnt) {
-    // heading part (about sZ) of the correction rotation, sX'+ x sX'- = dtheta_perp(sX')
-    const Eigen::Vector3d& z = s_.kf1.up_body();
-    const Eigen::Vector3d corr = s_.kf2.u().normalized().cross(x_prior.normalized());
-    const double c2 = std::max(std::cos(s_.field_dip) * std::cos(s_.field_dip), kMinCos2Dip);
-    s_.bias -= (corr.dot(z) / c2 / p_.motion_bias_tau_s) * z;
+  if (p_.bias_estimation && p_.motion_bias_sigma_rps > 0.0 && p_.motion_bias_heading && s_.field_learnt) {
+    if (mag_use_ == MagUse::kForced) {
+      s_.mb_head_trusted = false;  // used although gated: not a measurement of the bias
+      return;
+    }
+    // heading part (about sZ) of the correction rotation, sX'+ x sX'- = dtheta_perp(sX'); only
+    // cos(dip) of a heading rotation shows in sX'
+    if (s_.field_dip != s_.c2_dip_for) {
+      s_.c2_dip = std::max(std::cos(s_.field_dip) * std::cos(s_.field_dip), kMinCos2Dip);
+      s_.c2_dip_for = s_.field_dip;
+    }
+    const bool unit = p_.tilt.renormalize && p_.tilt.exact_rotation;  // both directions are unit
+    const Eigen::Vector3d corr =
+        unit ? s_.kf2.u().cross(x_prior) : s_.kf2.u().normalized().cross(x_prior.normalized());
+    s_.mb_head += corr.dot(s_.kf1.up_body()) / s_.c2_dip;
+    s_.mb_head_used = true;
   }
 }
 
@@ -380,7 +488,7 @@ ParallelKfOutput ParallelKf::output() const {
   o.mag_dist_world_ut = o.q_world_body * o.mag_dist_body_ut;
   o.mag_dist_norm_ut = o.mag_dist_body_ut.norm();
   o.gyro_bias_rps = s_.bias;
-  o.gyro_bias_sigma_rps = std::sqrt(s_.bias_var);
+  o.gyro_bias_sigma_rps = std::sqrt(s_.bias_cov.diagonal().maxCoeff());
   o.rest = s_.rest_det.rest;
   o.mag_used = s_.out.mag_used;
   o.field_learnt = s_.field_learnt;

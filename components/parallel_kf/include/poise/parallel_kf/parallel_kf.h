@@ -18,9 +18,11 @@
 // mean angle(s_A, s_M) - 90 deg) or configured, and reported.
 //
 // Extensions (each a switch in ParallelKfParams; all off in ParallelKfParams::paper()):
-//   - gyro bias estimation: at rest (low-passed gyro while rest is detected) and in motion (the
-//     part of each KF correction not explained by the gyro, integrated with time constant
-//     motion_bias_tau_s; heading part only from accepted magnetometer updates);
+//   - gyro bias estimation: one Kalman filter (3x3 covariance) measured at rest by the low-passed
+//     gyro and in motion by the rate of KF1's correction (the two components gravity makes
+//     observable; the vertical one is left alone, Schmidt-style) and, while the field is trusted,
+//     by the rate of KF2's heading correction; fast rotation inflates the motion noise by the
+//     gyro's scale-factor uncertainty;
 //   - magnetic disturbance gating: the heading update is skipped when | |s_M| - m | / m or
 //     |dip(s_M, sZ) - alpha| exceed thresholds (the dip is measured against the filtered up sZ,
 //     not the raw accelerometer, so external acceleration does not trip it); while gated, sd
@@ -129,15 +131,24 @@ struct ParallelKfParams {
   double bias_sigma_rest_rps = 0.03 * kRadPerDeg;  ///< steady-state uncertainty at rest, rad/s. Raising: faster, noisier.
   double bias_drift_rps = 0.1 * kRadPerDeg;        ///< bias change expected over bias_forgetting_time_s, rad/s
   double bias_forgetting_time_s = 100.0;           ///< s
-  /// Integral time constant of the gyro-bias estimate in motion, s (0 = off): the part of each
-  /// tilt correction not explained by the gyro is integrated into the bias (only the two axes that
-  /// gravity makes observable). Keep it >= 20x accel_lowpass_tau_s so the two loops do not fight
-  /// (time-scale separation). Raising: slower, smoother bias tracking. Off by default: on BROAD
-  /// cross-validation did not choose it (docs/ESTIMATORS.md); VQF's authors report the same.
-  double motion_bias_tau_s = 0.0;
-  /// Also integrate the heading part (about the vertical) from accepted magnetometer updates.
-  /// Off by default: a magnetometer correction carries the room's field errors into the bias.
-  bool motion_bias_heading = false;
+  /// Gyro bias in motion (0 = off): the same Kalman filter is also measured while moving, by the
+  /// rate at which KF1's correction turns sZ (the part of the attitude change that the gyro did
+  /// not explain; only the two components perpendicular to gravity are observable), with the lag
+  /// of the accelerometer low-pass compensated. Its measurement noise is set so that continuous
+  /// motion settles the bias uncertainty at this value (as bias_sigma_rest_rps at rest), rad/s:
+  /// motion is a worse bias sensor than rest, so it is larger. Raising: faster, noisier.
+  double motion_bias_sigma_rps = 0.1 * kRadPerDeg;  // VQF's published biasSigmaMotion
+  /// Also measure the component about the vertical from accepted magnetometer updates (the
+  /// heading correction rate), only while the field is trusted (not gated).
+  bool motion_bias_heading = true;
+  /// Bias disagreements larger than this (rad/s) are clipped before the motion update, so a
+  /// fast rotation with a mis-scaled gyro or an unmodelled acceleration cannot throw the bias.
+  double motion_bias_clip_rps = 2.0 * kRadPerDeg;
+  /// Relative gyro scale-factor uncertainty (after calibration). While turning at w, a scale
+  /// error shows as a "bias" of up to scale * |w|: the motion measurement's noise grows by
+  /// (motion_gyro_scale_error * |w|)^2 (|w|^2 low-passed over accel_lowpass_tau_s, the window
+  /// the measurement sees), so fast rotation barely moves the bias while slow motion still does.
+  double motion_gyro_scale_error = 0.005;
   double max_bias_rps = 3.0 * kRadPerDeg;       ///< clamp of the bias estimate, rad/s
 
   // --- magnetic disturbance gating of the heading update (extension)
@@ -183,7 +194,7 @@ struct ParallelKfOutput {
   Eigen::Vector3d mag_dist_world_ut{0, 0, 0};      ///< ENU
   double mag_dist_norm_ut = 0.0;
   Eigen::Vector3d gyro_bias_rps{0, 0, 0};
-  double gyro_bias_sigma_rps = 0.0;  ///< standard deviation of each bias component, rad/s
+  double gyro_bias_sigma_rps = 0.0;  ///< standard deviation of the least known bias component, rad/s
   bool rest = false;              ///< rest detected (bias estimation)
   bool mag_used = false;          ///< the last magnetometer sample corrected the heading
   bool field_learnt = false;      ///< m and alpha known (configured or learnt)
@@ -233,7 +244,18 @@ struct ParallelKfState {
 
   // bias / rest
   Eigen::Vector3d bias{0, 0, 0};
-  double bias_var = 0.0;  ///< variance of each bias component (isotropic), rad^2/s^2
+  Eigen::Matrix3d bias_cov = Eigen::Matrix3d::Zero();  ///< covariance of the bias estimate, rad^2/s^2
+  Eigen::Vector3d bias_lp_i{0, 0, 0};  ///< the bias in the inertial frame, low-passed as the accelerometer
+  double rate2_lp = 0.0;    ///< |s_G|^2 low-passed over accel_lowpass_tau_s, rad^2/s^2
+  // motion bias window (summed between updates)
+  Eigen::Vector3d mb_corr{0, 0, 0};  ///< KF1's correction rotations, rad (body)
+  double mb_rate2 = 0.0;             ///< integral of |s_G|^2 dt, rad^2/s
+  double mb_head = 0.0;              ///< KF2's heading corrections about sZ / cos^2(dip), rad
+  double mb_time = 0.0;              ///< s
+  bool mb_head_used = false;         ///< an accepted magnetometer update in the window
+  bool mb_head_trusted = true;       ///< no gated or forced magnetometer sample in the window
+  double c2_dip = 1.0;               ///< max(cos^2(alpha), guard), for alpha = c2_dip_for
+  double c2_dip_for = 0.0;
   RestDetector rest_det;
   StampAnchor anchor;  ///< time restarts after a stamp jump only when two samples agree
 };
@@ -293,7 +315,12 @@ class ParallelKf {
   bool step(const ImuSample& s, SampleCheck& c);  ///< update() without the reporting
   void initialize(const ImuSample& s, bool mag_ok);
   void learn_field(const Eigen::Vector3d& accel, const Eigen::Vector3d& mag, double dt);
-  void update_rest_and_bias(const Eigen::Vector3d& gyro_raw, const Eigen::Vector3d& accel, double dt);
+  void bias_update();  ///< the bias filter over the window s_.mb_time (predict, rest or motion)
+  /// One scalar bias measurement along unit h (body): value z (rad/s), noise variance w; the
+  /// component along unit *keep (if given) is left as it is.
+  void bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep);
+  void motion_bias_measure();
+  [[nodiscard]] double motion_bias_noise(double dt) const;
   void heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& accel,
                     const Eigen::Vector3d& mag, bool mag_ok, double dt);
 

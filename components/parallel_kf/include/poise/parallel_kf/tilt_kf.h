@@ -82,7 +82,11 @@ class TiltKf {
   /// Small body-frame rotation (rad) that the last correction applied to the tilt: the part of
   /// the attitude change not explained by the gyro (perpendicular to sZ). Used for bias estimation.
   [[nodiscard]] Eigen::Vector3d last_correction_rotvec() const {
-    // sZ+ = sZ- - dtheta x sZ-  =>  dtheta_perp = sZ+ x sZ- (normalised directions)
+    // sZ+ = sZ- - dtheta x sZ-  =>  dtheta_perp = sZ+ x sZ- (normalised directions; they are
+    // unit already with exact propagation and renormalisation)
+    if (params_.renormalize && params_.exact_rotation) {
+      return kf_.u().cross(z_prior_);
+    }
     return kf_.u().normalized().cross(z_prior_.normalized());
   }
 
