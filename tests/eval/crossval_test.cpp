@@ -225,6 +225,12 @@ TEST(EvalCli, GivenAGridWhenEvaluatedWithFoldsThenInSampleAndCrossValidatedMeans
                                 std::chrono::seconds(30));
   EXPECT_NE(bad.exit_code, 0);
   EXPECT_NE(bad.output.find("nokey"), std::string::npos) << bad.output;
+  // a filter whose BROAD figures use their own configuration needs it as the grid's base
+  const auto no_base = testing::run({testing::bin("poise"), "eval", "broad", "--filter", "selective", "--out", dir,
+                                     "--grid", "heading_norm_tolerance=0.05,0.1", a},
+                                    std::chrono::seconds(30));
+  EXPECT_EQ(no_base.exit_code, 1) << no_base.output;
+  EXPECT_NE(no_base.output.find("--config"), std::string::npos) << no_base.output;
 }
 
 }  // namespace

@@ -111,6 +111,17 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
     throw Error(e.what());
   }
   const std::vector<eval::Overrides> candidates = eval::grid_points(axes);
+  if (config.empty()) {
+    // Candidates are written on top of the base file; without one they would be the built-in
+    // defaults plus the grid keys, which is not what a filter with its own BROAD default runs.
+    for (const auto& entry : eval::registered_filters()) {
+      if (entry.name == filter_name && entry.broad_default) {
+        throw Error("--grid with filter '" + filter_name +
+                    "' needs --config BASE.yaml (its figures on BROAD use a configuration other than the "
+                    "built-in defaults; e.g. config/filters/selective_ekf_broad.yaml)");
+      }
+    }
+  }
   if (g.folds != 0 && (g.folds < 2 || g.folds > static_cast<int>(files.size()))) {
     throw Error("--folds must be between 2 and the number of trials (" + std::to_string(files.size()) +
                 "); 0 = leave one trial out");
