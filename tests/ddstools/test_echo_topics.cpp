@@ -142,9 +142,9 @@ TEST(Topics, GivenTwoPublishersWhenListedThenEachTopicHasItsTypeWriterAndRate) {
                      kCommandTimeout, kEnv);
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const std::regex imu_row(
-      R"re(\{"topic":"imu","type":"poise::msg::ImuSample","writers":1,"samples":(\d+),"rate_hz":([0-9.]+),"bytes_per_s":([0-9.]+)\})re");
+      R"re(\{"topic":"imu","type":"poise::msg::ImuSample","writers":1,"samples":(\d+),"rate_hz":([0-9.]+),"bytes_per_s":([0-9.]+),"malformed":0\})re");
   const std::regex diag_row(
-      R"re(\{"topic":"diagnostics","type":"poise::msg::FilterDiagnostics","writers":1,"samples":(\d+),"rate_hz":([0-9.]+),"bytes_per_s":([0-9.]+)\})re");
+      R"re(\{"topic":"diagnostics","type":"poise::msg::FilterDiagnostics","writers":1,"samples":(\d+),"rate_hz":([0-9.]+),"bytes_per_s":([0-9.]+),"malformed":0\})re");
   std::smatch m;
   ASSERT_TRUE(std::regex_search(r.output, m, imu_row)) << r.output << imu->output();
   // The publisher paces itself at 100 Hz; the band only guards against gross miscounting (e.g.
@@ -167,7 +167,7 @@ TEST(Topics, GivenTwoPublishersWhenListedThenEachTopicHasItsTypeWriterAndRate) {
   ASSERT_EQ(table.exit_code, 0) << table.output;
   EXPECT_NE(table.output.find("TOPIC"), std::string::npos) << table.output;
   EXPECT_TRUE(std::regex_search(table.output,
-                                std::regex(R"(\nimu +poise::msg::ImuSample +1 +[0-9.]+ +[0-9]+\n)")))
+                                std::regex(R"(\nimu +poise::msg::ImuSample +1 +[0-9.]+ +[0-9]+ +0\n)")))
       << table.output;
 }
 

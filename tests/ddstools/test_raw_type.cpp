@@ -77,9 +77,17 @@ TEST(RawType, GivenKeyedTopicTypesWhenKeysAreComputedThenTheyEqualTheGeneratedTy
     ASSERT_TRUE(raw.getKey(&sample, &forced, true));
     EXPECT_EQ(forced, expected);
   }
-  poise::dds::RawSample garbage{{0x00, 0x01, 0x00, 0x00, 0x01}};
-  rtps::InstanceHandle_t h;
-  EXPECT_FALSE(raw.getKey(&garbage, &h));
+  // Untrusted bytes never make getKey() fail (Fast DDS 2.9 aborts on a keyed change it cannot
+  // place): every undecodable payload, empty included, goes to the one undecodable instance.
+  for (const std::vector<std::uint8_t>& garbage :
+       {std::vector<std::uint8_t>{0x00, 0x01, 0x00, 0x00, 0x01}, std::vector<std::uint8_t>{},
+        std::vector<std::uint8_t>{0x00, 0x07, 0x00, 0x00}}) {
+    poise::dds::RawSample sample{garbage};
+    rtps::InstanceHandle_t h;
+    ASSERT_TRUE(raw.getKey(&sample, &h)) << garbage.size() << " bytes";
+    EXPECT_EQ(h, poise::dds::RawPubSubType::undecodable_instance());
+    EXPECT_TRUE(h.isDefined());
+  }
 
   poise::msg::FilterDiagnosticsPubSubType typed_diag;
   poise::dds::RawPubSubType raw_diag("poise::msg::FilterDiagnostics", &TypeTable::builtin());
@@ -93,7 +101,7 @@ TEST(RawType, GivenKeyedTopicTypesWhenKeysAreComputedThenTheyEqualTheGeneratedTy
   EXPECT_EQ(dg, de);
 }
 
-TEST(RawType, GivenAnUnknownTypeWhenCreatedThenItIsKeyedOnlyOnRequestAndCannotComputeKeys) {
+TEST(RawType, GivenAnUnknownTypeWhenCreatedThenItIsKeyedOnlyOnRequestWithOneFixedInstance) {
   poise::dds::RawPubSubType unkeyed("other::Type", &TypeTable::builtin());
   EXPECT_FALSE(unkeyed.m_isGetKeyDefined);
   EXPECT_EQ(unkeyed.m_typeSize, poise::dds::RawPubSubType::kDefaultMaxSize);
@@ -101,6 +109,10 @@ TEST(RawType, GivenAnUnknownTypeWhenCreatedThenItIsKeyedOnlyOnRequestAndCannotCo
   EXPECT_TRUE(keyed.m_isGetKeyDefined);
   EXPECT_FALSE(keyed.computes_keys());
   EXPECT_EQ(keyed.m_typeSize, 1000U);
+  poise::dds::RawSample any{{0x00, 0x01, 0x00, 0x00}};
+  rtps::InstanceHandle_t h;
+  ASSERT_TRUE(keyed.getKey(&any, &h));
+  EXPECT_EQ(h, poise::dds::RawPubSubType::undecodable_instance());
 }
 
 // GIVEN a typed poise writer WHEN the observer discovers it and subscribes with the raw type THEN

@@ -524,6 +524,19 @@ Value decode(const TypeTable& table, const std::string& type_name, const std::ui
   return v;
 }
 
+std::optional<std::string> payload_problem(const TypeTable& table, const std::string& type_name,
+                                           const std::uint8_t* data, std::size_t size) {
+  if (table.find_struct(type_name) == nullptr) {
+    return std::nullopt;
+  }
+  try {
+    (void)decode(table, type_name, data, size);
+  } catch (const DecodeError& e) {
+    return std::string(e.what());
+  }
+  return std::nullopt;
+}
+
 std::string to_json(const Value& value) {
   std::string out;
   append_json(out, value);

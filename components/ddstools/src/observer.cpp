@@ -1,6 +1,7 @@
 #include "poise/ddstools/observer.h"
 
 #include "poise/dds/participant.h"
+#include "poise/ddstools/cdr.h"
 
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/domain/DomainParticipantListener.hpp>
@@ -26,17 +27,37 @@ namespace {
 
 class RawReaderListener : public fdds::DataReaderListener {
  public:
-  explicit RawReaderListener(TopicObserver::SampleCallback callback)
-      : callback_(std::move(callback)) {}
+  // `table` null or not knowing `type`: payloads are passed on unchecked.
+  RawReaderListener(const TypeTable* table, std::string type,
+                    TopicObserver::SampleCallback callback, TopicObserver::RejectCallback rejected)
+      : table_(table),
+        type_(std::move(type)),
+        callback_(std::move(callback)),
+        rejected_(std::move(rejected)) {}
   void on_data_available(fdds::DataReader* reader) override {
     poise::dds::RawSample sample;
     fdds::SampleInfo info;
     while (reader->take_next_sample(&sample, &info) == ReturnCode_t::RETCODE_OK) {
-      if (info.valid_data) {
+      if (!info.valid_data) {
+        continue;
+      }
+      const std::optional<std::string> problem =
+          table_ != nullptr ? payload_problem(*table_, type_, sample.data.data(), sample.data.size())
+                            : std::nullopt;
+      if (problem) {
+        malformed_.fetch_add(1);
+        if (rejected_) {
+          rejected_(sample, info, *problem);
+        }
+        continue;
+      }
+      accepted_.fetch_add(1);
+      if (callback_) {
         callback_(sample, info);
       }
     }
   }
+  [[nodiscard]] TopicObserver::Counts counts() const { return {accepted_.load(), malformed_.load()}; }
   void on_subscription_matched(fdds::DataReader* /*reader*/,
                                const fdds::SubscriptionMatchedStatus& status) override {
     matched_.store(status.current_count);
@@ -44,8 +65,13 @@ class RawReaderListener : public fdds::DataReaderListener {
   [[nodiscard]] int matched() const { return matched_.load(); }
 
  private:
+  const TypeTable* table_;
+  std::string type_;
   TopicObserver::SampleCallback callback_;
+  TopicObserver::RejectCallback rejected_;
   std::atomic<int> matched_{0};
+  std::atomic<std::uint64_t> accepted_{0};
+  std::atomic<std::uint64_t> malformed_{0};
 };
 
 }  // namespace
@@ -161,7 +187,8 @@ std::optional<DiscoveredWriter> TopicObserver::wait_for_writer(
 }
 
 void TopicObserver::subscribe(const DiscoveredWriter& writer, const TypeTable* table,
-                              SampleCallback callback, const RawReaderOptions& options) {
+                              SampleCallback callback, const RawReaderOptions& options,
+                              RejectCallback rejected) {
   std::lock_guard<std::mutex> lock(impl_->subscriptions_mutex);
   if (impl_->subscriptions.count(writer.topic) != 0) {
     throw poise::dds::DdsError("topic '" + writer.topic + "' is already subscribed");
@@ -202,7 +229,8 @@ void TopicObserver::subscribe(const DiscoveredWriter& writer, const TypeTable* t
   rqos.history().depth = std::max(1, options.history_depth);
   rqos.ownership().kind = writer.exclusive_ownership ? fdds::EXCLUSIVE_OWNERSHIP_QOS
                                                      : fdds::SHARED_OWNERSHIP_QOS;
-  sub.listener = std::make_unique<RawReaderListener>(std::move(callback));
+  sub.listener = std::make_unique<RawReaderListener>(table, writer.type, std::move(callback),
+                                                     std::move(rejected));
   sub.reader = sub.subscriber->create_datareader(
       sub.topic, rqos, sub.listener.get(),
       fdds::StatusMask::data_available() << fdds::StatusMask::subscription_matched());
@@ -210,6 +238,12 @@ void TopicObserver::subscribe(const DiscoveredWriter& writer, const TypeTable* t
     throw poise::dds::DdsError("cannot create a raw reader on '" + writer.topic + "'");
   }
   impl_->subscriptions.emplace(writer.topic, std::move(sub));
+}
+
+TopicObserver::Counts TopicObserver::counts(const std::string& topic) const {
+  std::lock_guard<std::mutex> lock(impl_->subscriptions_mutex);
+  const auto it = impl_->subscriptions.find(topic);
+  return it == impl_->subscriptions.end() ? Counts{} : it->second.listener->counts();
 }
 
 int TopicObserver::matched_writers(const std::string& topic) const {

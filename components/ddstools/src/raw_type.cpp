@@ -56,9 +56,23 @@ void* RawPubSubType::createData() { return new RawSample(); }
 
 void RawPubSubType::deleteData(void* data) { delete static_cast<RawSample*>(data); }
 
+rtps::InstanceHandle_t RawPubSubType::undecodable_instance() {
+  rtps::InstanceHandle_t handle;
+  std::memset(handle.value, 0xFF, 16);
+  return handle;
+}
+
 bool RawPubSubType::getKey(void* data, rtps::InstanceHandle_t* handle, bool force_md5) {
-  if (!m_isGetKeyDefined || schema_ == nullptr) {
+  if (!m_isGetKeyDefined) {
     return false;
+  }
+  // Never fail on a keyed type: Fast DDS 2.9 stores a fully received change whose key it cannot
+  // compute in the reader history anyway, without an instance, and later aborts on it
+  // (DataReaderHistory: `vit != instances_.end()`). Every payload without a computable key goes
+  // to the one undecodable instance; the application sees it and rejects it (counted).
+  if (schema_ == nullptr) {
+    *handle = undecodable_instance();
+    return true;
   }
   const auto* sample = static_cast<const RawSample*>(data);
   std::vector<std::uint8_t> key;
@@ -66,7 +80,8 @@ bool RawPubSubType::getKey(void* data, rtps::InstanceHandle_t* handle, bool forc
     key = ddstools::serialize_key_be(*table_, schema_->name,
                                      ddstools::decode(*table_, schema_->name, sample->data));
   } catch (const std::exception&) {
-    return false;  // a payload that does not decode has no key
+    *handle = undecodable_instance();  // a payload that does not decode has no key
+    return true;
   }
   if (force_md5 || key_max_size_ > 16) {
     ::MD5 md5;  // Fast DDS 2.9 declares it in the global namespace

@@ -202,7 +202,12 @@ void run_record(const RecordArgs& a) {
   std::cerr << " in " << stats.elapsed_s << " s\n";
   for (const auto& [topic, t] : stats.topics) {
     std::cerr << "  " << topic << " (" << t.type << "): received " << t.received << ", written "
-              << t.written << ", sequence gaps " << t.gaps << "\n";
+              << t.written << ", malformed " << t.malformed << ", sequence gaps " << t.gaps
+              << "\n";
+    if (t.malformed > 0) {
+      std::cerr << "    malformed payloads were rejected, not recorded (first: " << t.first_problem
+                << ")\n";
+    }
   }
   if (stats.dropped_queue_full > 0) {
     std::cerr << "  dropped (writer could not keep up): " << stats.dropped_queue_full << "\n";

@@ -78,12 +78,21 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
   struct Sub;
   class SubListener : public fdds::DataReaderListener {
    public:
-    SubListener(Impl* impl, size_t index) : impl_(impl), index_(index) {}
+    SubListener(Impl* impl, size_t index, std::string type)
+        : impl_(impl), index_(index), type_(std::move(type)) {}
     void on_data_available(fdds::DataReader* reader) override {
       dds::RawSample sample;
       fdds::SampleInfo info;
       while (reader->take_next_sample(&sample, &info) == ReturnCode_t::RETCODE_OK) {
         if (!info.valid_data) {
+          continue;
+        }
+        const std::optional<std::string> problem = ddstools::payload_problem(
+            ddstools::TypeTable::builtin(), type_, sample.data.data(), sample.data.size());
+        if (problem) {
+          std::ostringstream from;
+          from << info.sample_identity.writer_guid();
+          impl_->reject(index_, sample.data.size(), from.str(), *problem);
           continue;
         }
         Pending p;
@@ -106,6 +115,7 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
    private:
     Impl* impl_;
     size_t index_;
+    std::string type_;
   };
   struct Sub {
     std::string topic;
@@ -175,6 +185,39 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
     }
     queue.push_back(std::move(p));
     cv.notify_one();
+  }
+
+  // A malformed payload (listener thread): counted; its reason is kept for the report.
+  void reject(size_t sub, size_t bytes, const std::string& writer, const std::string& problem) {
+    std::lock_guard<std::mutex> lock(mutex);
+    TopicStats& t = stats.topics[subs_topic_name(sub)];
+    ++t.received;
+    ++t.malformed;
+    ++stats.received;
+    ++stats.malformed;
+    if (t.first_problem.empty()) {
+      t.first_problem = std::to_string(bytes) + " bytes from writer " + writer + ": " + problem;
+    }
+  }
+
+  // Reports topics whose malformed count grew since the last call (main thread).
+  std::map<std::string, uint64_t> malformed_reported;
+  void report_malformed() {
+    std::vector<std::pair<std::string, TopicStats>> grown;
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      for (const auto& [topic, t] : stats.topics) {
+        if (t.malformed > malformed_reported[topic]) {
+          malformed_reported[topic] = t.malformed;
+          grown.emplace_back(topic, t);
+        }
+      }
+    }
+    for (const auto& [topic, t] : grown) {
+      log << "poise record: '" << topic << "': " << t.malformed
+          << " malformed payload(s) rejected so far, not recorded (first: " << t.first_problem
+          << ")\n";
+    }
   }
 
   // Topic names are copied at subscription time so listener threads never touch `subs`.
@@ -311,7 +354,7 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
       topic_names.push_back(d.topic);
       stats.topics[d.topic].type = d.type;
     }
-    s->listener = std::make_unique<SubListener>(this, index);
+    s->listener = std::make_unique<SubListener>(this, index, d.type);
     register_channel(*s);
     subs.push_back(std::move(s));
     by_topic[d.topic] = index;
@@ -401,9 +444,15 @@ RecorderStats Recorder::run() {
       const auto now = std::chrono::steady_clock::now();
       if (now - last_progress >= std::chrono::seconds(5)) {
         last_progress = now;
+        im.report_malformed();
+        uint64_t malformed = 0;
+        {
+          std::lock_guard<std::mutex> lock(im.mutex);
+          malformed = im.stats.malformed;
+        }
         im.log << "poise record: " << written_.load() << " messages on " << subscribed_.load()
                << " topics, " << im.writer->stats().bytes / 1024 << " KiB in "
-               << im.current_path() << "\n";
+               << im.current_path() << ", " << malformed << " malformed rejected\n";
         std::string waiting;
         for (const std::string& t : options_.all ? std::vector<std::string>{} : options_.topics) {
           if (im.by_topic.count(t) == 0) {

@@ -3,11 +3,14 @@
 #include "poise/dds/participant.h"
 #include "poise/dds/topics.h"
 #include "poise/ddstools/cdr.h"
+#include "poise/ddstools/malformed.h"
 #include "poise/ddstools/observer.h"
 
 #include <poise/msg/diagnosticsPubSubTypes.h>
 #include <poise/msg/estimatesPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
+
+#include <fastdds/dds/topic/TopicDataType.hpp>
 
 #include <algorithm>
 #include <chrono>
@@ -76,6 +79,7 @@ struct EchoOptions {
 struct Received {
   poise::dds::RawSample sample;
   std::int64_t source_timestamp_ns = 0;
+  std::string problem;  // non-empty: rejected as malformed (payload_problem)
 };
 
 void run_echo(const EchoOptions& o) {
@@ -109,18 +113,28 @@ void run_echo(const EchoOptions& o) {
   std::mutex mutex;
   std::condition_variable cv;
   std::deque<Received> queue;
+  std::uint64_t dropped = 0;                 // guarded by mutex
   constexpr std::size_t kMaxQueued = 10000;  // a slow terminal drops samples rather than memory
-  observer.subscribe(*writer, &table,
-                     [&](const poise::dds::RawSample& s, const eprosima::fastdds::dds::SampleInfo& info) {
-                       std::lock_guard<std::mutex> lock(mutex);
-                       if (queue.size() < kMaxQueued) {
-                         queue.push_back({s, info.source_timestamp.to_ns()});
-                       }
-                       cv.notify_one();
-                     });
+  const auto enqueue = [&](const poise::dds::RawSample& s,
+                           const eprosima::fastdds::dds::SampleInfo& info, const std::string& problem) {
+    std::lock_guard<std::mutex> lock(mutex);
+    if (queue.size() < kMaxQueued) {
+      queue.push_back({s, info.source_timestamp.to_ns(), problem});
+    } else {
+      ++dropped;
+    }
+    cv.notify_one();
+  };
+  // Malformed payloads (checked against the IDL type by the observer) arrive with their reason.
+  observer.subscribe(
+      *writer, &table,
+      [&](const poise::dds::RawSample& s, const eprosima::fastdds::dds::SampleInfo& info) {
+        enqueue(s, info, "");
+      },
+      {}, enqueue);
 
   int printed = 0;
-  int failed = 0;
+  std::uint64_t failed = 0;
   while (!stop_requested() && (o.count == 0 || printed < o.count)) {
     Received r;
     {
@@ -133,9 +147,9 @@ void run_echo(const EchoOptions& o) {
       queue.pop_front();
     }
     std::string body;
-    bool ok = true;
-    std::string error;
-    if (decodable) {
+    bool ok = r.problem.empty();
+    std::string error = r.problem;
+    if (ok && decodable) {
       try {
         const ddstools::Value v = ddstools::decode(table, writer->type, r.sample.data);
         body = o.json ? ddstools::to_json(v) : ddstools::to_text(v);
@@ -146,8 +160,8 @@ void run_echo(const EchoOptions& o) {
     }
     if (!ok) {
       ++failed;
-      std::fprintf(stderr, "poise echo: sample of %zu bytes not decoded: %s\n",
-                   r.sample.data.size(), error.c_str());
+      std::fprintf(stderr, "poise echo: malformed sample of %zu bytes rejected (#%llu): %s\n",
+                   r.sample.data.size(), static_cast<unsigned long long>(failed), error.c_str());
       continue;
     }
     ++printed;
@@ -166,9 +180,12 @@ void run_echo(const EchoOptions& o) {
     }
     std::fflush(stdout);
   }
-  if (failed > 0) {
-    std::fprintf(stderr, "poise echo: %d sample(s) could not be decoded\n", failed);
-  }
+  std::lock_guard<std::mutex> lock(mutex);
+  std::fprintf(stderr,
+               "poise echo: %d sample(s) printed, %llu malformed rejected, %llu dropped (output "
+               "too slow)\n",
+               printed, static_cast<unsigned long long>(failed),
+               static_cast<unsigned long long>(dropped));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -183,6 +200,7 @@ struct TopicsOptions {
 struct TopicStats {
   std::mutex mutex;
   std::uint64_t samples = 0;
+  std::uint64_t malformed = 0;  // rejected: not a valid payload of the topic's type
   std::uint64_t bytes = 0;
   Clock::time_point first;
   Clock::time_point last;
@@ -222,6 +240,13 @@ void run_topics(const TopicsOptions& o) {
                              s->last = now;
                              ++s->samples;
                              s->bytes += sample.data.size();
+                           },
+                           {},
+                           [s](const poise::dds::RawSample& /*sample*/,
+                               const eprosima::fastdds::dds::SampleInfo& /*info*/,
+                               const std::string& /*problem*/) {
+                             std::lock_guard<std::mutex> lock(s->mutex);
+                             ++s->malformed;
                            });
       } catch (const std::exception& e) {
         std::fprintf(stderr, "poise topics: cannot sample '%s': %s\n", w.topic.c_str(), e.what());
@@ -235,6 +260,7 @@ void run_topics(const TopicsOptions& o) {
     std::set<std::string> types;
     int writers = 0;
     std::uint64_t samples = 0;
+    std::uint64_t malformed = 0;
     double rate_hz = 0.0;
     double bytes_per_s = 0.0;
   };
@@ -253,6 +279,7 @@ void run_topics(const TopicsOptions& o) {
     std::lock_guard<std::mutex> lock(it->second->mutex);
     const TopicStats& s = *it->second;
     r.samples = s.samples;
+    r.malformed = s.malformed;
     const double span_s = std::chrono::duration<double>(s.last - s.first).count();
     if (s.samples >= 2 && span_s > 0.0) {
       // Rate over the sampled span: (n - 1) intervals; bytes/s from the mean sample size.
@@ -278,7 +305,8 @@ void run_topics(const TopicsOptions& o) {
       out += "{\"topic\":" + json_string(topic) + ",\"type\":" + json_string(join(r.types)) +
              ",\"writers\":" + std::to_string(r.writers) +
              ",\"samples\":" + std::to_string(r.samples) + ",\"rate_hz\":" + fixed(r.rate_hz, 3) +
-             ",\"bytes_per_s\":" + fixed(r.bytes_per_s, 1) + "}";
+             ",\"bytes_per_s\":" + fixed(r.bytes_per_s, 1) +
+             ",\"malformed\":" + std::to_string(r.malformed) + "}";
     }
     out += "]}\n";
     std::fputs(out.c_str(), stdout);
@@ -289,12 +317,13 @@ void run_topics(const TopicsOptions& o) {
       topic_w = std::max(topic_w, topic.size());
       type_w = std::max(type_w, join(r.types).size());
     }
-    std::printf("%-*s  %-*s  %7s  %9s  %11s\n", static_cast<int>(topic_w), "TOPIC",
-                static_cast<int>(type_w), "TYPE", "WRITERS", "RATE_HZ", "BYTES_PER_S");
+    std::printf("%-*s  %-*s  %7s  %9s  %11s  %9s\n", static_cast<int>(topic_w), "TOPIC",
+                static_cast<int>(type_w), "TYPE", "WRITERS", "RATE_HZ", "BYTES_PER_S", "MALFORMED");
     for (const auto& [topic, r] : rows) {
-      std::printf("%-*s  %-*s  %7d  %9s  %11s\n", static_cast<int>(topic_w), topic.c_str(),
+      std::printf("%-*s  %-*s  %7d  %9s  %11s  %9llu\n", static_cast<int>(topic_w), topic.c_str(),
                   static_cast<int>(type_w), join(r.types).c_str(), r.writers,
-                  fixed(r.rate_hz, 1).c_str(), fixed(r.bytes_per_s, 0).c_str());
+                  fixed(r.rate_hz, 1).c_str(), fixed(r.bytes_per_s, 0).c_str(),
+                  static_cast<unsigned long long>(r.malformed));
     }
     if (rows.empty()) {
       std::printf("(no writers discovered on domain %d)\n", o.domain);
@@ -345,9 +374,108 @@ void publish(const TestPubOptions& o, const std::string& default_topic, Fill fil
   }
 }
 
+// The full payload (encapsulation included) of a sample, as the generated type support writes it.
+template <class PubSubType>
+std::vector<std::uint8_t> serialized(typename PubSubType::type& msg) {
+  PubSubType type;
+  eprosima::fastrtps::rtps::SerializedPayload_t payload(type.m_typeSize);
+  if (!type.serialize(&msg, &payload)) {
+    throw Error("cannot serialize a sample");
+  }
+  return {payload.data, payload.data + payload.length};
+}
+
+// The type support of a careless or hostile peer: any bytes go on the wire verbatim (0 bytes
+// included) under the ImuSample name, keyed like the real type, but it never computes a key, so
+// samples carry no key hash and every reader must derive the instance from the bytes themselves.
+class CarelessImuType : public eprosima::fastdds::dds::TopicDataType {
+ public:
+  CarelessImuType() {
+    setName(poise::dds::type_names::kImuSample);
+    m_typeSize = 4096;
+    m_isGetKeyDefined = true;
+    auto_fill_type_object(false);
+    auto_fill_type_information(false);
+  }
+  bool serialize(void* data, eprosima::fastrtps::rtps::SerializedPayload_t* payload) override {
+    const auto& bytes = static_cast<poise::dds::RawSample*>(data)->data;
+    if (bytes.size() > payload->max_size) {
+      return false;
+    }
+    std::copy(bytes.begin(), bytes.end(), payload->data);
+    payload->length = static_cast<std::uint32_t>(bytes.size());
+    return true;
+  }
+  bool deserialize(eprosima::fastrtps::rtps::SerializedPayload_t* /*payload*/,
+                   void* /*data*/) override {
+    return false;  // write-only
+  }
+  std::function<std::uint32_t()> getSerializedSizeProvider(void* data) override {
+    return [data] {
+      return static_cast<std::uint32_t>(static_cast<poise::dds::RawSample*>(data)->data.size());
+    };
+  }
+  void* createData() override { return new poise::dds::RawSample(); }
+  void deleteData(void* data) override { delete static_cast<poise::dds::RawSample*>(data); }
+  bool getKey(void* /*data*/, eprosima::fastrtps::rtps::InstanceHandle_t* /*handle*/,
+              bool /*force_md5*/) override {
+    return false;
+  }
+};
+
+// Alternates a valid ImuSample (seq i, sensor_id imu0) with malformed_variants() of it (cycling),
+// on a reliable writer; count valid and count malformed samples. Waits for acknowledgments.
+void run_malformed_pub(const TestPubOptions& o) {
+  poise::dds::ParticipantOptions popts;
+  popts.domain = o.domain;
+  popts.name = "poise-dds-test-pub-malformed";
+  poise::dds::Participant participant(popts);
+  const std::string topic_name = o.topic.empty() ? "imu" : o.topic;
+  eprosima::fastdds::dds::Topic* topic =
+      participant.topic(topic_name, eprosima::fastdds::dds::TypeSupport(new CarelessImuType()));
+  poise::dds::detail::MatchCounter matches;
+  eprosima::fastdds::dds::DataWriter* writer = poise::dds::detail::create_writer(
+      participant, topic, poise::dds::QosKind::kEstimate, &matches);
+  if (o.wait_readers_s > 0.0 &&
+      !poise::dds::detail::wait_matched(
+          matches, 1, std::chrono::milliseconds(static_cast<std::int64_t>(o.wait_readers_s * 1000.0)))) {
+    throw Error("no reader of '" + topic_name + "' matched within " +
+                std::to_string(o.wait_readers_s) + " s");
+  }
+  const auto period = std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(1.0 / o.rate_hz));
+  auto next = Clock::now();
+  int valid = 0;
+  int malformed = 0;
+  for (int i = 0; i < o.count && !stop_requested(); ++i) {
+    poise::msg::ImuSample m;
+    m.header().stamp_ns(1000000000LL + 1000000LL * i);
+    m.header().seq(static_cast<std::uint32_t>(i));
+    m.header().frame_id("body");
+    m.sensor_id(o.sensor_id);
+    m.accel_mps2().z(9.81);
+    m.valid().accel(true);
+    m.valid().gyro(true);
+    poise::dds::RawSample good{serialized<poise::msg::ImuSamplePubSubType>(m)};
+    const auto variants = ddstools::malformed_variants(good.data);
+    poise::dds::RawSample bad{variants[static_cast<std::size_t>(i) % variants.size()].bytes};
+    valid += writer->write(&good) ? 1 : 0;
+    malformed += writer->write(&bad) ? 1 : 0;
+    next += period;
+    std::this_thread::sleep_until(next);
+  }
+  writer->wait_for_acknowledgments(eprosima::fastrtps::Duration_t(5, 0));
+  std::printf("published %d valid, %d malformed\n", valid, malformed);
+  std::fflush(stdout);
+  writer->set_listener(nullptr);
+  participant.publisher()->delete_datawriter(writer);
+}
+
 void run_test_pub(const TestPubOptions& o) {
   install_stop_handlers();
-  if (o.type == "imu") {
+  if (o.type == "imu-malformed") {
+    run_malformed_pub(o);
+  } else if (o.type == "imu") {
     publish<poise::msg::ImuSamplePubSubType>(o, "imu", [](poise::msg::ImuSample& m, int i) {
       m.header().frame_id("body");
       m.accel_mps2().z(9.81);
@@ -377,16 +505,6 @@ void run_test_pub(const TestPubOptions& o) {
 // ---------------------------------------------------------------------------------------------
 // poise bench decode: schema-layer decoding speed (payload -> Value -> JSON / text).
 
-template <class PubSubType>
-std::vector<std::uint8_t> bench_payload(typename PubSubType::type& msg) {
-  PubSubType type;
-  eprosima::fastrtps::rtps::SerializedPayload_t payload(type.m_typeSize);
-  if (!type.serialize(&msg, &payload)) {
-    throw Error("cannot serialize a benchmark sample");
-  }
-  return {payload.data, payload.data + payload.length};
-}
-
 void run_bench_decode(int iterations) {
   const ddstools::TypeTable& table = type_table();
   poise::msg::ImuSample imu;
@@ -408,9 +526,9 @@ void run_bench_decode(int iterations) {
     diag.counters().push_back(c);
   }
   const std::vector<std::pair<std::string, std::vector<std::uint8_t>>> cases = {
-      {"poise::msg::ImuSample", bench_payload<poise::msg::ImuSamplePubSubType>(imu)},
+      {"poise::msg::ImuSample", serialized<poise::msg::ImuSamplePubSubType>(imu)},
       {"poise::msg::FilterDiagnostics",
-       bench_payload<poise::msg::FilterDiagnosticsPubSubType>(diag)}};
+       serialized<poise::msg::FilterDiagnosticsPubSubType>(diag)}};
   std::printf("%-30s %6s %12s %12s %12s\n", "TYPE", "BYTES", "DECODE_US", "+JSON_US", "+TEXT_US");
   for (const auto& [type, payload] : cases) {
     std::size_t sink = 0;
@@ -473,8 +591,10 @@ void register_ddstools_commands(CLI::App& app) {
   auto pub = std::make_shared<TestPubOptions>();
   CLI::App* p = app.add_subcommand("dds-test-pub", "Publish deterministic test samples (for tests)");
   p->group("");  // hidden from --help
-  p->add_option("--type", pub->type, "imu | diagnostics | attitude")
-      ->check(CLI::IsMember({"imu", "diagnostics", "attitude"}))
+  p->add_option("--type", pub->type,
+                "imu | diagnostics | attitude | imu-malformed (each valid ImuSample followed by "
+                "a malformed one, reliable, no key hash)")
+      ->check(CLI::IsMember({"imu", "diagnostics", "attitude", "imu-malformed"}))
       ->capture_default_str();
   p->add_option("--topic", pub->topic, "Topic name (default: imu, diagnostics, attitude/test)");
   p->add_option("--sensor-id", pub->sensor_id, "sensor_id of every sample")->capture_default_str();

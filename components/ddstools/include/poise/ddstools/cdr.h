@@ -52,6 +52,12 @@ inline Value decode(const TypeTable& table, const std::string& type_name,
   return decode(table, type_name, payload.data(), payload.size());
 }
 
+/// Why `size` bytes are not a valid `type_name` payload (the DecodeError text), or nullopt when
+/// they decode. The one check of untrusted payloads in the tools (record, echo, topics, replay,
+/// process); nullopt as well when the table does not know the type (nothing to check against).
+std::optional<std::string> payload_problem(const TypeTable& table, const std::string& type_name,
+                                           const std::uint8_t* data, std::size_t size);
+
 /// Compact single-line JSON. Structs are objects (members in declaration order), arrays and
 /// sequences are arrays, enums are their enumerator name as a string, booleans true/false, 64-bit
 /// integers exact, doubles with round-trip precision; NaN and infinities (not representable in

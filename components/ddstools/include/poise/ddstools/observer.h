@@ -68,15 +68,29 @@ class TopicObserver {
   /// Called from a Fast DDS thread for every valid sample.
   using SampleCallback =
       std::function<void(const poise::dds::RawSample&, const eprosima::fastdds::dds::SampleInfo&)>;
+  /// Called from a Fast DDS thread for every malformed sample, with the reason (payload_problem).
+  using RejectCallback = std::function<void(const poise::dds::RawSample&,
+                                            const eprosima::fastdds::dds::SampleInfo&,
+                                            const std::string& problem)>;
 
   /// Subscribes to `writer.topic` with the raw type `writer.type`, keyed iff the writer is (keys
   /// computed from `table` when it knows the type with the same keyed-ness), in the writer's
-  /// partitions and ownership kind. `table` (may be null) must outlive the observer. At most one reader per topic; throws poise::dds::DdsError on failure or if
-  /// the topic is already subscribed.
+  /// partitions and ownership kind. `table` (may be null) must outlive the observer. When the
+  /// table knows the type, every payload is checked against it first (payload_problem()): a
+  /// malformed one is counted (counts()) and given to `rejected` (if set), never to `callback`.
+  /// At most one reader per topic; throws poise::dds::DdsError on failure or if the topic is
+  /// already subscribed.
   void subscribe(const DiscoveredWriter& writer, const TypeTable* table, SampleCallback callback,
-                 const RawReaderOptions& options = {});
+                 const RawReaderOptions& options = {}, RejectCallback rejected = {});
   /// Number of writers matched by the reader of `topic` (0 if not subscribed).
   [[nodiscard]] int matched_writers(const std::string& topic) const;
+
+  /// Samples of a subscribed topic so far: handed to the callback, and rejected as malformed.
+  struct Counts {
+    std::uint64_t accepted = 0;
+    std::uint64_t malformed = 0;
+  };
+  [[nodiscard]] Counts counts(const std::string& topic) const;
 
  private:
   struct Impl;

@@ -11,8 +11,13 @@
 // 2.3 does: the @key members serialized big-endian, MD5 of them when the key's maximum serialized
 // size exceeds 16 bytes (or when forced), else the bytes zero-padded to 16. Identical handles to
 // the generated type support (tested). Without a schema the type can still be declared keyed
-// (`keyed`), but getKey() then fails: a raw *reader* still works (Fast DDS writers send the key
-// hash inline with each sample); a raw *writer* publishes every sample with no instance handle.
+// (`keyed`): a raw reader then relies on the key hash Fast DDS writers send inline.
+//
+// Untrusted bytes: getKey() of a keyed raw type never fails. A payload that does not decode (or
+// any payload of a keyed type without a schema) gets undecodable_instance(), one fixed handle, so
+// a malformed sample from a stranger is handed to the application (which counts and rejects it)
+// instead of reaching Fast DDS 2.9's reader history without an instance, where it aborts the
+// process. deserialize() copies any length, 0 included; serialize() refuses what is not a payload.
 #pragma once
 
 #include "poise/ddstools/idl_schema.h"
@@ -48,6 +53,9 @@ class RawPubSubType : public eprosima::fastdds::dds::TopicDataType {
   void deleteData(void* data) override;
   bool getKey(void* data, eprosima::fastrtps::rtps::InstanceHandle_t* handle,
               bool force_md5 = false) override;
+
+  /// The instance of every payload whose key cannot be computed (16 bytes 0xFF).
+  static eprosima::fastrtps::rtps::InstanceHandle_t undecodable_instance();
 
   /// True when instance handles are computed from the schema.
   [[nodiscard]] bool computes_keys() const { return schema_ != nullptr && m_isGetKeyDefined; }

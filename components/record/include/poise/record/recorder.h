@@ -5,6 +5,9 @@
 //  - log_time = reception (log clock, default CLOCK_REALTIME ns); publish_time = Header.stamp_ns
 //    read from the payload (bytes 4-11), or the writer's source timestamp when it has none;
 //  - sequence = the DDS writer's sample sequence number (low 32 bits): gaps reveal losses.
+// Every payload is checked against its IDL type before it is queued (ddstools::payload_problem):
+// a malformed one from any participant is counted per topic, reported, and not written; the
+// recording goes on.
 #pragma once
 
 #include "poise/record/mcap.h"
@@ -40,6 +43,8 @@ struct TopicStats {
   uint64_t received = 0;  ///< samples handed to the recorder by DDS
   uint64_t written = 0;   ///< messages given to the MCAP writer
   uint64_t gaps = 0;      ///< samples missing according to writer sequence numbers
+  uint64_t malformed = 0;  ///< rejected: not a valid payload of `type` (never written)
+  std::string first_problem;  ///< why the first malformed payload was rejected
 };
 
 struct RecorderStats {
@@ -48,6 +53,7 @@ struct RecorderStats {
   uint64_t written = 0;
   uint64_t dropped_queue_full = 0;
   uint64_t sequence_gaps = 0;
+  uint64_t malformed = 0;  ///< all topics (see TopicStats::malformed)
   std::vector<std::string> files;
   double elapsed_s = 0.0;
   std::string error;  ///< non-empty when recording stopped on a write error

@@ -1,0 +1,154 @@
+// Tools that never trust the wire (issue 19, item 2): a peer publishes malformed payloads under
+// the ImuSample type name with no key hash (`poise dds-test-pub --type imu-malformed`: every
+// valid sample followed by one of ddstools::malformed_variants(), reliable). `poise record`,
+// `poise echo` and `poise topics` keep running, count the malformed payloads and keep every valid
+// one. Children on an exclusive loopback domain; every wait bounded.
+#include "poise/ddstools/cdr.h"
+#include "poise/ddstools/malformed.h"
+#include "poise/record/mcap.h"
+#include "poise/testing/testing.h"
+
+#include <gtest/gtest.h>
+#include <poise/msg/imuPubSubTypes.h>
+
+#include <csignal>
+#include <cstdlib>
+#include <regex>
+#include <set>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace std::chrono_literals;
+using poise::testing::Child;
+using poise::testing::DomainLease;
+using poise::testing::run;
+
+const std::vector<std::string> kEnv = {"POISE_DDS_PROFILE=poise_loopback"};
+constexpr auto kCommandTimeout = 30s;  // bound on each CLI run (discovery included)
+constexpr auto kExitTimeout = 15s;     // a stopped child finalises and exits within this
+constexpr int kPairs = 24;  // valid + malformed samples published; 2 cycles of the variants
+
+std::vector<std::string> malformed_pub(int domain, int count, double rate_hz) {
+  return {poise::testing::bin("poise"), "dds-test-pub", "--type", "imu-malformed", "--domain",
+          std::to_string(domain), "--count", std::to_string(count), "--rate",
+          std::to_string(rate_hz), "--wait-readers", "20"};
+}
+
+std::string temp_dir(const std::string& name) {
+  const std::string dir = std::string(std::getenv("TMPDIR") != nullptr ? std::getenv("TMPDIR")
+                                                                        : "/tmp") +
+                          "/poise-hostile-" + name + "-" + std::to_string(::getpid());
+  EXPECT_EQ(std::system(("rm -rf '" + dir + "' && mkdir -p '" + dir + "'").c_str()), 0);
+  return dir;
+}
+
+TEST(HostileWire, GivenMalformedVariantsWhenCheckedThenEveryOneIsAProblemAndTheOriginalIsNot) {
+  const auto& table = poise::ddstools::TypeTable::builtin();
+  poise::msg::ImuSample m;
+  m.header().frame_id("body");
+  m.sensor_id("imu0");
+  poise::msg::ImuSamplePubSubType type;
+  eprosima::fastrtps::rtps::SerializedPayload_t payload(type.m_typeSize);
+  ASSERT_TRUE(type.serialize(&m, &payload));
+  const std::vector<std::uint8_t> full(payload.data, payload.data + payload.length);
+  ASSERT_EQ(poise::ddstools::payload_problem(table, "poise::msg::ImuSample", full.data(), full.size()),
+            std::nullopt);
+  const auto variants = poise::ddstools::malformed_variants(full);
+  EXPECT_EQ(variants.size(), 12U);
+  for (const auto& v : variants) {
+    EXPECT_NE(poise::ddstools::payload_problem(table, "poise::msg::ImuSample", v.bytes.data(),
+                                               v.bytes.size()),
+              std::nullopt)
+        << v.name;
+  }
+}
+
+TEST(HostileWire, GivenMalformedImuSamplesWhenRecordedThenEveryValidOneIsKeptAndTheRestCounted) {
+  DomainLease lease;
+  const std::string dir = temp_dir("record");
+  const std::string file = dir + "/hostile.mcap";
+  Child recorder({poise::testing::bin("poise"), "record", "imu", "-o", file, "--domain",
+                  std::to_string(lease.id())},
+                 kEnv);
+  const auto pub = run(malformed_pub(lease.id(), kPairs, 100.0), kCommandTimeout, kEnv);
+  ASSERT_EQ(pub.exit_code, 0) << pub.output << "\nrecorder:\n" << recorder.output();
+  ASSERT_NE(pub.output.find("published " + std::to_string(kPairs) + " valid, " +
+                            std::to_string(kPairs) + " malformed"),
+            std::string::npos)
+      << pub.output;
+  // Reliable + acknowledged: everything has reached the recorder's reader. The recorder writes
+  // its queue every 100 ms; stop it after that and let it finalise.
+  poise::testing::sleep_ms(500);
+  recorder.signal(SIGINT);
+  const auto code = recorder.wait_for(kExitTimeout);
+  ASSERT_TRUE(code.has_value()) << recorder.output();
+  ASSERT_EQ(*code, 0) << "the recorder must survive malformed payloads\n" << recorder.output();
+  const std::string out = recorder.output();
+  EXPECT_NE(out.find("imu (poise::msg::ImuSample): received " + std::to_string(2 * kPairs) +
+                     ", written " + std::to_string(kPairs) + ", malformed " +
+                     std::to_string(kPairs)),
+            std::string::npos)
+      << out;
+  EXPECT_NE(out.find("malformed payloads were rejected, not recorded (first: "), std::string::npos)
+      << out;
+
+  const auto reader = poise::record::McapReader::open_file(file);
+  EXPECT_TRUE(reader.report().complete) << "the recording is finalised";
+  std::set<std::int64_t> seqs;
+  auto cursor = reader.messages();
+  while (const auto* m = cursor.next()) {
+    const auto v = poise::ddstools::decode(poise::ddstools::TypeTable::builtin(),
+                                           "poise::msg::ImuSample", m->data, m->size);
+    seqs.insert(static_cast<std::int64_t>(v.at("header.seq")->u));
+  }
+  EXPECT_EQ(seqs.size(), static_cast<size_t>(kPairs));
+  EXPECT_EQ(*seqs.begin(), 0);
+  EXPECT_EQ(*seqs.rbegin(), kPairs - 1);
+}
+
+TEST(HostileWire, GivenMalformedImuSamplesWhenEchoedThenValidOnesPrintAndMalformedOnesAreCounted) {
+  DomainLease lease;
+  // Echo reads best-effort: it waits for half the valid samples, so a lost one cannot hang it.
+  Child echo({poise::testing::bin("poise"), "echo", "imu", "--json", "--count",
+              std::to_string(kPairs / 2), "--domain", std::to_string(lease.id()), "--timeout",
+              "20"},
+             kEnv);
+  const auto pub = run(malformed_pub(lease.id(), kPairs, 100.0), kCommandTimeout, kEnv);
+  ASSERT_EQ(pub.exit_code, 0) << pub.output << "\necho:\n" << echo.output();
+  const auto code = echo.wait_for(kExitTimeout);
+  ASSERT_TRUE(code.has_value()) << echo.output();
+  ASSERT_EQ(*code, 0) << "echo must survive malformed payloads\n" << echo.output();
+  const std::string out = echo.output();
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(out, m, std::regex(R"((\d+) sample\(s\) printed, (\d+) malformed rejected)")))
+      << out;
+  EXPECT_EQ(std::stoi(m[1]), kPairs / 2) << out;
+  EXPECT_GE(std::stoi(m[2]), 1) << out;
+  EXPECT_NE(out.find("poise echo: malformed sample of "), std::string::npos) << out;
+  int printed = 0;
+  for (size_t at = out.find("{\"topic\":\"imu\""); at != std::string::npos;
+       at = out.find("{\"topic\":\"imu\"", at + 1)) {
+    ++printed;
+  }
+  EXPECT_EQ(printed, kPairs / 2) << out;
+}
+
+TEST(HostileWire, GivenMalformedImuSamplesWhenTopicsSamplesThemThenTheyAreCountedAsMalformed) {
+  DomainLease lease;
+  Child pub(malformed_pub(lease.id(), 1000, 100.0), kEnv);
+  const auto r = run({poise::testing::bin("poise"), "topics", "--json", "--duration", "4",
+                      "--domain", std::to_string(lease.id())},
+                     kCommandTimeout, kEnv);
+  ASSERT_EQ(r.exit_code, 0) << r.output << "\npublisher:\n" << pub.output();
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(
+      r.output, m,
+      std::regex(R"re(\{"topic":"imu","type":"poise::msg::ImuSample","writers":1,"samples":(\d+),.*"malformed":(\d+)\})re")))
+      << r.output << "\npublisher:\n" << pub.output();
+  EXPECT_GE(std::stoi(m[1]), 1) << r.output;
+  EXPECT_GE(std::stoi(m[2]), 1) << r.output;
+}
+
+}  // namespace
