@@ -31,6 +31,7 @@ ParallelKfParams ParallelKfParams::paper() {
   p.mag_gating = false;
   p.accel_lowpass_order = 1;
   p.share_tilt_correction = false;
+  p.mag_reference_tau_s = 0.0;
   return p;
 }
 
@@ -76,6 +77,8 @@ void ParallelKfParams::validate() const {
   need(motion_gyro_scale_error >= 0.0 && motion_gyro_scale_error < 1.0, "motion_gyro_scale_error must be in [0, 1)");
   need(max_bias_rps > 0.0, "max_bias_rps must be > 0");
   need(mag_norm_tol > 0.0 && mag_dip_tol_deg > 0.0, "mag gating tolerances must be > 0");
+  need(mag_reference_tau_s >= 0.0 && std::isfinite(mag_reference_tau_s),
+       "mag_reference_tau_s must be finite and >= 0 (s, 0 = fixed reference)");
   need(mag_max_reject_s >= 0.0, "mag_max_reject_s must be >= 0 (s, 0 = never)");
   need(mag_reacquire_s >= 0.0 && mag_reacquire_tol > 0.0, "mag_reacquire_s >= 0, mag_reacquire_tol > 0");
   need(gyro_current_weight >= 0.0 && gyro_current_weight <= 1.0, "gyro_current_weight must be in [0, 1]");
@@ -140,6 +143,10 @@ void ParallelKf::reset() {
   s_.mb_head_used = false;
   s_.mb_head_trusted = true;
   s_.c2_dip_for = std::nan("");
+  s_.ref_window_s = 0.0;
+  s_.ref_accepted_s = 0.0;
+  s_.ref_norm_sum = 0.0;
+  s_.ref_sin_dip_sum = 0.0;
   s_.rest_det = RestDetector{};
   s_.anchor = StampAnchor{};
   reset_report();
@@ -209,6 +216,12 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
 
   // KF2: heading + magnetic disturbance (8)-(11)
   heading_step(a, s.accel_mps2, s.mag_ut, c.mag_ok, dt);
+  if (p_.mag_reference_tau_s > 0.0) {
+    s_.ref_window_s += dt;
+    if (s_.ref_window_s >= kBiasPeriodS) {
+      follow_field_reference();
+    }
+  }
   if (p_.bias_estimation) {
     s_.mb_time += dt;
     if (s_.mb_time >= kBiasPeriodS) {
@@ -353,6 +366,23 @@ void ParallelKf::bias_update() {
   s_.mb_head_trusted = true;
 }
 
+void ParallelKf::follow_field_reference() {
+  // The reference norm and dip follow the field the gate accepted (never the rejected samples),
+  // with time constant mag_reference_tau_s over accepted time: slow changes (the sensor's
+  // temperature, another part of a building) stop looking like disturbances. Once per window.
+  if (s_.ref_accepted_s > 0.0) {
+    const double k = s_.ref_accepted_s / (p_.mag_reference_tau_s + s_.ref_accepted_s);
+    const double norm = s_.ref_norm_sum / s_.ref_accepted_s;
+    const double sin_dip = std::max(-1.0, std::min(1.0, s_.ref_sin_dip_sum / s_.ref_accepted_s));
+    s_.field_m += k * (norm - s_.field_m);
+    s_.field_dip += k * (std::asin(sin_dip) - s_.field_dip);
+  }
+  s_.ref_window_s = 0.0;
+  s_.ref_accepted_s = 0.0;
+  s_.ref_norm_sum = 0.0;
+  s_.ref_sin_dip_sum = 0.0;
+}
+
 void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& accel,
                               const Eigen::Vector3d& mag, bool mag_ok, double dt) {
   s_.out.mag_used = false;
@@ -430,6 +460,11 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
       s_.rejected_s = 0.0;
       s_.cand_stable_s = 0.0;
       s_.cand_norm = 0.0;
+      if (p_.mag_reference_tau_s > 0.0) {  // accepted: what the reference follows (field_step)
+        s_.ref_norm_sum += norm * dt;
+        s_.ref_sin_dip_sum += sin_dip * dt;
+        s_.ref_accepted_s += dt;
+      }
     }
   }
   const Eigen::Vector3d x_prior = s_.kf2.u();

@@ -76,6 +76,7 @@ const std::vector<Field>& fields() {
       make("mag_gating", &ParallelKfParams::mag_gating),
       make("mag_norm_tol", &ParallelKfParams::mag_norm_tol),
       make("mag_dip_tol_deg", &ParallelKfParams::mag_dip_tol_deg),
+      make("mag_reference_tau_s", &ParallelKfParams::mag_reference_tau_s),
       make("mag_reacquire_s", &ParallelKfParams::mag_reacquire_s),
       make("mag_reacquire_tol", &ParallelKfParams::mag_reacquire_tol),
       make("mag_max_reject_s", &ParallelKfParams::mag_max_reject_s),

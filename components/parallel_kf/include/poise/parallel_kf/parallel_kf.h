@@ -157,6 +157,10 @@ struct ParallelKfParams {
   /// cross-validation on BROAD (`poise eval broad --grid mag_norm_tol=...`; docs/ESTIMATORS.md).
   double mag_norm_tol = 0.05;
   double mag_dip_tol_deg = 10.0;    ///< |dip - alpha| above which s_M is rejected, deg
+  /// The reference norm and dip follow the accepted field with this time constant (s, over
+  /// accepted time; 0 = fixed after start-up): a slow change of the field is adopted, a fast one
+  /// is gated. 100 s chosen in every fold of leave-one-trial-out on BROAD (docs/ESTIMATORS.md).
+  double mag_reference_tau_s = 100.0;
   double mag_reacquire_s = 20.0;    ///< adopt a stable new field after this long rejected, s (0 = never)
   double mag_reacquire_tol = 0.05;  ///< relative stability of the candidate field for adoption
   /// After this long of continuous rejection the magnetometer is used again even though it fails
@@ -256,6 +260,11 @@ struct ParallelKfState {
   bool mb_head_trusted = true;       ///< no gated or forced magnetometer sample in the window
   double c2_dip = 1.0;               ///< max(cos^2(alpha), guard), for alpha = c2_dip_for
   double c2_dip_for = 0.0;
+  // field reference following (summed over a window of accepted samples)
+  double ref_window_s = 0.0;
+  double ref_accepted_s = 0.0;
+  double ref_norm_sum = 0.0;     ///< integral of |s_M| dt over accepted samples, uT s
+  double ref_sin_dip_sum = 0.0;  ///< integral of sin(dip) dt over accepted samples, s
   RestDetector rest_det;
   StampAnchor anchor;  ///< time restarts after a stamp jump only when two samples agree
 };
@@ -320,6 +329,7 @@ class ParallelKf {
   /// component along unit *keep (if given) is left as it is.
   void bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep);
   void motion_bias_measure();
+  void follow_field_reference();
   [[nodiscard]] double motion_bias_noise(double dt) const;
   void heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& accel,
                     const Eigen::Vector3d& mag, bool mag_ok, double dt);
