@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Builds the estimator cores alone (tools/cores_only: only Eigen and yaml-cpp found) and fails if
+# Builds the estimator cores alone (-DPOISE_CORES_ONLY=ON with Fast DDS, Fast CDR, OpenCV, CLI11,
+# GoogleTest and nlohmann-json made unfindable: only Eigen and yaml-cpp found) and fails if
 # any core reaches Fast DDS, OpenCV or a clock:
 #   - every core is linked into one program (a call into anything else fails to link);
 #   - no core translation unit includes a Fast DDS, Fast CDR or OpenCV header (ninja's header deps);
@@ -9,7 +10,11 @@ set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 out="${1:-$root/build-cores}"
 fail() { echo "check_cores: $*" >&2; exit 1; }
-cmake -S "$root/tools/cores_only" -B "$out" -G Ninja -DCMAKE_BUILD_TYPE=Release >/dev/null \
+no_find=()
+for pkg in fastrtps fastcdr OpenCV CLI11 GTest nlohmann_json; do
+  no_find+=(-DCMAKE_DISABLE_FIND_PACKAGE_"$pkg"=ON)
+done
+cmake -S "$root" -B "$out" -G Ninja -DCMAKE_BUILD_TYPE=Release -DPOISE_CORES_ONLY=ON --no-warn-unused-cli "${no_find[@]}" >/dev/null \
   || fail "the cores do not configure with only Eigen and yaml-cpp"
 cmake --build "$out" -j "$(nproc 2>/dev/null || echo 2)" >/dev/null \
   || fail "the cores do not build and link alone (see: cmake --build $out)"

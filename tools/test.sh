@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
 # The whole test suite: installs what is missing, builds (Release), checks that the estimator
-# cores build alone (tools/check_cores.sh), runs ctest.
+# cores build alone (tools/check_cores.sh), installs them and builds examples/embed against the
+# installed prefix (tools/test_install.sh), runs ctest.
 #   tools/test.sh [extra ctest arguments, e.g. -R Parallel]
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 "$root/tools/setup.sh"
 cd "$root"
 "$root/tools/check_cores.sh" "$root/build-cores"  # the cores build without Fast DDS / OpenCV / clocks
+"$root/tools/test_install.sh" "$root/build-install" "$root/build-cores"  # install + find_package(poise)
 exec ctest --test-dir build --output-on-failure --no-tests=error -j "$(nproc 2>/dev/null || echo 2)" "$@"

@@ -1,4 +1,4 @@
-// Steps every estimator core once, so the link pulls in their code (tools/check_cores.sh).
+// Steps every estimator core once, so the link pulls in their code (tools/check_cores.sh, -DPOISE_CORES_ONLY=ON).
 #include "poise/altitude/altitude_filter.h"
 #include "poise/gauss_newton/gauss_newton.h"
 #include "poise/parallel_kf/parallel_kf.h"

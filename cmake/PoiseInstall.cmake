@@ -1,0 +1,41 @@
+# Install rules and the exported CMake package of the estimator cores:
+#   find_package(poise) -> poise::core, poise::tilt_kf, poise::parallel_kf, poise::gauss_newton,
+#   poise::selective_ekf, poise::altitude, poise::vehicle (static libraries, headers, version file),
+# plus a pkg-config file (poise-cores.pc). The DDS side installs the `poise` executable and the
+# shipped configuration under share/poise.
+include(GNUInstallDirs)
+include(CMakePackageConfigHelpers)
+
+# The cores, in link order (a library before what it needs) and their source directories.
+set(POISE_CORE_TARGETS poise_selective_ekf poise_gauss_newton poise_parallel_kf poise_altitude
+    poise_tilt_kf poise_vehicle poise_core)
+set(POISE_CORE_DIRS core parallel_kf gauss_newton selective_ekf altitude vehicle)
+
+function(poise_install_cores)
+  foreach(t IN LISTS POISE_CORE_TARGETS)
+    string(REPLACE "poise_" "" export_name ${t})
+    set_target_properties(${t} PROPERTIES EXPORT_NAME ${export_name})
+    add_library(poise::${export_name} ALIAS ${t})
+  endforeach()
+  install(TARGETS ${POISE_CORE_TARGETS} EXPORT poiseTargets
+          ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
+          INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+  foreach(d IN LISTS POISE_CORE_DIRS)
+    install(DIRECTORY ${PROJECT_SOURCE_DIR}/components/${d}/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+  endforeach()
+  set(cmake_dir ${CMAKE_INSTALL_LIBDIR}/cmake/poise)
+  install(EXPORT poiseTargets NAMESPACE poise:: DESTINATION ${cmake_dir})
+  configure_package_config_file(${PROJECT_SOURCE_DIR}/cmake/poiseConfig.cmake.in
+                                ${PROJECT_BINARY_DIR}/poiseConfig.cmake INSTALL_DESTINATION ${cmake_dir})
+  write_basic_package_version_file(${PROJECT_BINARY_DIR}/poiseConfigVersion.cmake
+                                   VERSION ${PROJECT_VERSION} COMPATIBILITY SameMinorVersion)
+  install(FILES ${PROJECT_BINARY_DIR}/poiseConfig.cmake ${PROJECT_BINARY_DIR}/poiseConfigVersion.cmake
+          DESTINATION ${cmake_dir})
+  set(libs "")
+  foreach(t IN LISTS POISE_CORE_TARGETS)
+    string(APPEND libs " -l${t}")
+  endforeach()
+  set(POISE_PC_LIBS "${libs}")
+  configure_file(${PROJECT_SOURCE_DIR}/cmake/poise-cores.pc.in ${PROJECT_BINARY_DIR}/poise-cores.pc @ONLY)
+  install(FILES ${PROJECT_BINARY_DIR}/poise-cores.pc DESTINATION ${CMAKE_INSTALL_LIBDIR}/pkgconfig)
+endfunction()
