@@ -61,11 +61,14 @@ TEST(BroadMetric, GroupMeansArePlainMeansOfTrialFigures) {
   std::vector<TrialResult> rs(3);
   rs[0].number = 1;
   rs[0].errors.total_deg = 1.0;
+  rs[0].errors.samples = 10;
   rs[1].number = 5;
   rs[1].errors.total_deg = 2.0;
+  rs[1].errors.samples = 10;
   rs[2].number = 30;
   rs[2].disturbed = true;
   rs[2].errors.total_deg = 6.0;
+  rs[2].errors.samples = 10;
   const GroupMeans g = group_means(rs);
   EXPECT_DOUBLE_EQ(g.undisturbed.total_deg, 1.5);
   EXPECT_DOUBLE_EQ(g.disturbed.total_deg, 6.0);

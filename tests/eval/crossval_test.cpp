@@ -40,6 +40,7 @@ TrialResult result(int number, double total) {
   r.number = number;
   r.disturbed = number >= 24;
   r.errors.total_deg = total;
+  r.errors.samples = 100;  // scored
   return r;
 }
 

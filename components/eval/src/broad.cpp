@@ -7,7 +7,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <memory>
+#include <sstream>
 #include <stdexcept>
 
 namespace poise::eval {
@@ -131,6 +133,15 @@ std::vector<Eigen::Vector3d> to_vec3(const Array2& a) {
 
 }  // namespace
 
+void check_rate(double rate_hz, const std::string& what) {
+  if (!(rate_hz >= kBroadMinRateHz && rate_hz <= kBroadMaxRateHz)) {  // NaN fails too
+    std::ostringstream os;
+    os << what << " = " << rate_hz << " Hz is not a sampling rate (must be finite, between " << kBroadMinRateHz
+       << " and " << kBroadMaxRateHz << " Hz)";
+    throw std::runtime_error(os.str());
+  }
+}
+
 int trial_number_from_stem(const std::string& stem) {
   int n = 0;
   size_t i = 0;
@@ -165,9 +176,7 @@ BroadTrial load_broad(const std::string& path) {
   t.stem = dot == std::string::npos ? base : base.substr(0, dot);
   t.number = trial_number_from_stem(t.stem);
   t.rate_hz = read_rate(file.get(), path);
-  if (!(t.rate_hz > 0.0) || !std::isfinite(t.rate_hz)) {
-    throw std::runtime_error(path + ": sampling_rate must be > 0");
-  }
+  check_rate(t.rate_hz, path + ": attribute 'sampling_rate'");
   t.gyr_rps = to_vec3(read_matrix(file.get(), "imu_gyr", 3, path));
   t.acc_mps2 = to_vec3(read_matrix(file.get(), "imu_acc", 3, path));
   t.mag_ut = to_vec3(read_matrix(file.get(), "imu_mag", 3, path));
@@ -175,6 +184,10 @@ BroadTrial load_broad(const std::string& path) {
   t.opt_quat_wxyz.resize(q.rows);
   for (size_t i = 0; i < q.rows; ++i) {
     t.opt_quat_wxyz[i] = Eigen::Vector4d(q.data[4 * i], q.data[4 * i + 1], q.data[4 * i + 2], q.data[4 * i + 3]);
+    if (t.opt_quat_wxyz[i].allFinite() && !(std::abs(t.opt_quat_wxyz[i].norm() - 1.0) <= kReferenceNormTol)) {
+      t.opt_quat_wxyz[i].setConstant(std::numeric_limits<double>::quiet_NaN());
+      ++t.invalid_reference_rows;
+    }
   }
   const Array2 mv = read_matrix(file.get(), "movement", 1, path);
   t.movement.resize(mv.rows);
@@ -208,16 +221,24 @@ TrialErrors broad_errors(const std::vector<Eigen::Quaterniond>& estimates, const
   }
   Eigen::Vector3d sq = Eigen::Vector3d::Zero();
   size_t n = 0;
+  size_t nonfinite = 0;
   for (size_t k = 0; k < trial.size(); ++k) {
     if (trial.movement[k] == 0 || !trial.opt_quat_wxyz[k].allFinite()) {
       continue;
     }
-    const Eigen::Vector3d e = broad_sample_errors_deg(estimates[k], quat_from_wxyz(trial.opt_quat_wxyz[k]));
+    Eigen::Vector3d e = Eigen::Vector3d::Constant(180.0);
+    const double norm = estimates[k].coeffs().norm();
+    if (std::isfinite(norm) && norm > 0.0) {
+      e = broad_sample_errors_deg(estimates[k], quat_from_wxyz(trial.opt_quat_wxyz[k]));
+    } else {
+      ++nonfinite;
+    }
     sq += e.cwiseProduct(e);
     ++n;
   }
   TrialErrors out;
   out.samples = n;
+  out.nonfinite_estimates = nonfinite;
   if (n > 0) {
     const Eigen::Vector3d rms = (sq / static_cast<double>(n)).cwiseSqrt();
     out.total_deg = rms.x();

@@ -87,10 +87,22 @@ void run_eval(const std::string& filter_name, const std::string& config, const s
     const std::string csv = (std::filesystem::path(out_dir) / (trial.stem + ".csv")).string();
     eval::write_quaternion_csv(csv, q, trial.rate_hz);
     results.push_back(score(trial, q));
-    std::cerr << trial.size() << " samples, total RMSE " << std::fixed << std::setprecision(3)
-              << results.back().errors.total_deg << " deg -> " << csv << "\n";
+    std::cerr << trial.size() << " samples";
+    if (trial.invalid_reference_rows > 0) {
+      std::cerr << " (" << trial.invalid_reference_rows
+                << " reference rows are not unit quaternions: not scored)";
+    }
+    if (results.back().errors.scored()) {
+      std::cerr << ", total RMSE " << std::fixed << std::setprecision(3) << results.back().errors.total_deg << " deg";
+    } else {
+      std::cerr << ", no scorable samples (movement with a valid reference)";
+    }
+    std::cerr << " -> " << csv << "\n";
   }
   eval::print_table(std::cout, filter_name, results);
+  if (eval::group_means(results).unscored.size() == results.size()) {
+    throw Error("no trial has scorable samples (samples with movement and a valid reference quaternion)");
+  }
 }
 
 struct GridOptions {
@@ -160,6 +172,9 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
               << ", disturbed " << m.disturbed.total_deg << " deg\n";
     by_candidate.push_back(std::move(rs));
   }
+  if (eval::group_means(by_candidate.front()).unscored.size() == trials.size()) {
+    throw Error("no trial has scorable samples (samples with movement and a valid reference quaternion)");
+  }
   const eval::CrossValidation cv = eval::cross_validate(by_candidate, g.folds);
   const eval::GroupMeans in = eval::group_means(cv.in_sample);
   const eval::GroupMeans out = eval::group_means(cv.cross_validated);
@@ -172,10 +187,11 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
   std::cout << std::left << std::setw(44) << "trial" << std::right << std::setw(10) << "in-sample"
             << std::setw(10) << "cross-val" << "  chosen without this trial's fold\n";
   for (size_t t = 0; t < trials.size(); ++t) {
-    std::cout << std::left << std::setw(44) << trials[t].stem << std::right << std::fixed << std::setprecision(3)
-              << std::setw(10) << cv.in_sample[t].errors.total_deg << std::setw(10)
-              << cv.cross_validated[t].errors.total_deg << "  " << eval::describe(candidates[cv.choice_per_trial[t]])
-              << "\n";
+    std::cout << std::left << std::setw(44) << trials[t].stem
+              << eval::format_trial_figure(cv.in_sample[t].errors, cv.in_sample[t].errors.total_deg, 10)
+              << eval::format_trial_figure(cv.cross_validated[t].errors, cv.cross_validated[t].errors.total_deg, 10)
+              << "  " << eval::describe(candidates[cv.choice_per_trial[t]])
+              << (cv.in_sample[t].errors.scored() ? "" : "  (no scorable samples: excluded)") << "\n";
   }
   auto row = [&](const std::string& label, const eval::GroupMeans& m) {
     std::cout << std::left << std::setw(26) << label << std::right << std::fixed << std::setprecision(3)
@@ -183,7 +199,9 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
               << std::setw(10) << m.disturbed.total_deg << std::setw(10) << m.disturbed.inclination_deg
               << std::setw(10) << m.all.total_deg << std::setw(10) << m.all.inclination_deg << "\n";
   };
-  std::cout << "\nmean RMSE, deg (" << in.n_undisturbed << " undisturbed, " << in.n_disturbed << " disturbed)\n"
+  std::cout << "\nmean RMSE, deg (" << in.n_undisturbed << " undisturbed, " << in.n_disturbed << " disturbed"
+            << (in.unscored.empty() ? "" : ", " + std::to_string(in.unscored.size()) + " without scorable samples excluded")
+            << ")\n"
             << std::left << std::setw(26) << "" << std::right << std::setw(20) << "undisturbed" << std::setw(20)
             << "disturbed" << std::setw(20) << "all" << "\n"
             << std::left << std::setw(26) << "" << std::right << std::setw(10) << "total" << std::setw(10) << "incl"

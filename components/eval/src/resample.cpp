@@ -8,8 +8,10 @@
 namespace poise::eval {
 
 BroadTrial resample_trial(const BroadTrial& in, double rate_hz) {
-  if (!std::isfinite(rate_hz) || rate_hz <= 0.0 || rate_hz > 1e6) {
-    throw std::invalid_argument("resample: rate must be in (0, 1e6] Hz");
+  try {
+    check_rate(rate_hz, "resample: rate");
+  } catch (const std::runtime_error& e) {
+    throw std::invalid_argument(e.what());
   }
   const size_t n = in.size();
   if (n < 2 || !(in.rate_hz > 0.0)) {

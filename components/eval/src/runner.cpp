@@ -4,6 +4,7 @@
 #include <fstream>
 #include <iomanip>
 #include <ostream>
+#include <sstream>
 #include <stdexcept>
 
 namespace poise::eval {
@@ -39,18 +40,21 @@ void write_quaternion_csv(const std::string& path, const std::vector<Eigen::Quat
 
 GroupMeans group_means(const std::vector<TrialResult>& results) {
   GroupMeans g;
-  int n_all = 0;
   auto add = [](TrialErrors& acc, const TrialErrors& e) {
     acc.total_deg += e.total_deg;
     acc.heading_deg += e.heading_deg;
     acc.inclination_deg += e.inclination_deg;
     acc.samples += e.samples;
+    acc.nonfinite_estimates += e.nonfinite_estimates;
   };
   for (const auto& r : results) {
+    if (!r.errors.scored()) {  // no figure: excluded, never averaged in as 0
+      g.unscored.push_back(r.stem);
+      continue;
+    }
     add(r.disturbed ? g.disturbed : g.undisturbed, r.errors);
     add(g.all, r.errors);
     (r.disturbed ? g.n_disturbed : g.n_undisturbed)++;
-    ++n_all;
   }
   auto div = [](TrialErrors& e, int n) {
     if (n > 0) {
@@ -61,8 +65,19 @@ GroupMeans group_means(const std::vector<TrialResult>& results) {
   };
   div(g.undisturbed, g.n_undisturbed);
   div(g.disturbed, g.n_disturbed);
-  div(g.all, n_all);
+  div(g.all, g.n_undisturbed + g.n_disturbed);
   return g;
+}
+
+std::string format_trial_figure(const TrialErrors& e, double value, int width) {
+  std::ostringstream os;
+  os << std::right << std::setw(width);
+  if (e.scored()) {
+    os << std::fixed << std::setprecision(3) << value;
+  } else {
+    os << "-";
+  }
+  return os.str();
 }
 
 void print_table(std::ostream& os, const std::string& filter_name, const std::vector<TrialResult>& results) {
@@ -71,9 +86,17 @@ void print_table(std::ostream& os, const std::string& filter_name, const std::ve
      << "heading" << std::setw(9) << "incl" << std::setw(10) << "samples" << "\n";
   os << std::fixed << std::setprecision(3);
   for (const auto& r : results) {
-    os << std::left << std::setw(48) << r.stem << std::right << std::setw(9) << r.errors.total_deg << std::setw(9)
-       << r.errors.heading_deg << std::setw(9) << r.errors.inclination_deg << std::setw(10) << r.errors.samples
-       << "\n";
+    os << std::left << std::setw(48) << r.stem << format_trial_figure(r.errors, r.errors.total_deg, 9)
+       << format_trial_figure(r.errors, r.errors.heading_deg, 9)
+       << format_trial_figure(r.errors, r.errors.inclination_deg, 9) << std::right << std::setw(10)
+       << r.errors.samples;
+    if (!r.errors.scored()) {
+      os << "  no scorable samples (movement with a valid reference): excluded from the means";
+    }
+    if (r.errors.nonfinite_estimates > 0) {
+      os << "  " << r.errors.nonfinite_estimates << " non-finite estimate(s) scored as 180 deg";
+    }
+    os << "\n";
   }
   const GroupMeans g = group_means(results);
   auto line = [&](const std::string& label, const TrialErrors& e, int n) {
@@ -82,7 +105,14 @@ void print_table(std::ostream& os, const std::string& filter_name, const std::ve
   };
   line("mean undisturbed 01-23", g.undisturbed, g.n_undisturbed);
   line("mean disturbed 24-39", g.disturbed, g.n_disturbed);
-  line("mean all", g.all, static_cast<int>(results.size()));
+  line("mean all", g.all, g.n_undisturbed + g.n_disturbed);
+  if (!g.unscored.empty()) {
+    os << "excluded from the means: " << g.unscored.size() << " trial(s) without scorable samples:";
+    for (const auto& stem : g.unscored) {
+      os << " " << stem;
+    }
+    os << "\n";
+  }
 }
 
 }  // namespace poise::eval

@@ -14,6 +14,16 @@
 
 namespace poise::eval {
 
+/// Sampling rates a trial may declare (attribute sampling_rate), Hz: a sample interval between
+/// 1 us and 1 s. Outside it the nanosecond stamps k * 1e9 / rate lose their resolution or the
+/// filters' rate-based time constants mean nothing; load_broad() refuses such a file.
+constexpr double kBroadMinRateHz = 1.0;
+constexpr double kBroadMaxRateHz = 1e6;
+/// A reference quaternion row counts as valid when its norm is within this of 1 (optical
+/// references are stored unit-norm to float precision); other finite rows (e.g. all zeros) are
+/// not a rotation: load_broad() marks them lost (NaN) and counts them.
+constexpr double kReferenceNormTol = 1e-3;
+
 /// One BROAD trial in memory. Sample k is at t = k / rate_hz.
 struct BroadTrial {
   std::string path;
@@ -24,6 +34,9 @@ struct BroadTrial {
   std::vector<Eigen::Vector3d> acc_mps2;
   std::vector<Eigen::Vector3d> mag_ut;
   std::vector<Eigen::Vector4d> opt_quat_wxyz;  ///< reference q_world_body [w,x,y,z]; NaN rows = lost
+  /// Finite reference rows that were not unit quaternions (|norm - 1| > kReferenceNormTol), marked
+  /// lost (NaN) by load_broad(); reported by `poise eval broad`.
+  size_t invalid_reference_rows = 0;
   std::vector<uint8_t> movement;               ///< 1 while the motion phase runs
   /// Reference position of the optical body, m (dataset opt_pos); NaN rows = lost; empty when the
   /// file has none. Used to synthesise vision poses (selective EKF hybrid benchmark).
@@ -37,15 +50,25 @@ struct BroadTrial {
 
 /// Reads a BROAD HDF5 file (datasets imu_gyr, imu_acc, imu_mag, opt_quat, movement; attribute
 /// sampling_rate). Accepts N x k and k x N storage. Throws std::runtime_error with the file and
-/// dataset name on any problem.
+/// dataset or attribute name on any problem (a sampling_rate outside [kBroadMinRateHz,
+/// kBroadMaxRateHz] or not finite included). Reference rows that are finite but not unit
+/// quaternions are marked lost and counted (invalid_reference_rows).
 BroadTrial load_broad(const std::string& path);
+
+/// Throws std::runtime_error "<what> = <rate> Hz is not a sampling rate (...)" unless rate_hz is
+/// in [kBroadMinRateHz, kBroadMaxRateHz].
+void check_rate(double rate_hz, const std::string& what);
 
 /// Per-trial errors (degrees), RMS over samples with movement and a finite reference.
 struct TrialErrors {
   double total_deg = 0.0;
   double heading_deg = 0.0;
   double inclination_deg = 0.0;
-  size_t samples = 0;  ///< samples scored
+  size_t samples = 0;  ///< samples scored; 0: the trial has no figure (excluded from means)
+  /// Scored samples whose estimate was not a finite quaternion of non-zero norm: each scored as
+  /// the largest error, 180 deg in total, heading and inclination (a broken filter never looks good).
+  size_t nonfinite_estimates = 0;
+  [[nodiscard]] bool scored() const { return samples > 0; }
 };
 
 /// The benchmark metric: q_err = q_est (x) conj(q_ref) (both normalised, world frame);
@@ -62,7 +85,7 @@ Eigen::Vector3d broad_sample_errors_deg(const Eigen::Quaterniond& q_est, const E
 /// intervals, so the rotation is the same at any rate; accelerometer, magnetometer and reference
 /// position are interpolated linearly, the reference orientation by slerp (NaN where either
 /// neighbour is NaN), `movement` by the nearest original sample. Throws std::invalid_argument
-/// for a rate that is not finite and positive or a trial with fewer than 2 samples.
+/// for a rate outside [kBroadMinRateHz, kBroadMaxRateHz] or a trial with fewer than 2 samples.
 BroadTrial resample_trial(const BroadTrial& trial, double rate_hz);
 
 /// Leading integer of a file stem ("24_disturbed_tapping_A" -> 24), 0 if none.

@@ -33,12 +33,19 @@ struct TrialResult {
   TrialErrors errors;
 };
 
-/// Prints the per-trial table and the means for undisturbed (01-23), disturbed (24-39) and all.
+/// Prints the per-trial table and the means for undisturbed (01-23), disturbed (24-39) and all;
+/// a trial without scorable samples shows "-" and is named as excluded.
 void print_table(std::ostream& os, const std::string& filter_name, const std::vector<TrialResult>& results);
 
+/// `value` right-aligned in `width` with 3 decimals, or "-" when the trial has no figure.
+std::string format_trial_figure(const TrialErrors& e, double value, int width);
+
+/// Plain means of the per-trial figures. Trials without scorable samples have no figure: they
+/// are left out of every mean and counted (never averaged in as 0).
 struct GroupMeans {
   TrialErrors undisturbed, disturbed, all;
-  int n_undisturbed = 0, n_disturbed = 0;
+  int n_undisturbed = 0, n_disturbed = 0;  ///< scored trials per group
+  std::vector<std::string> unscored;       ///< stems of the trials left out
 };
 GroupMeans group_means(const std::vector<TrialResult>& results);
 
