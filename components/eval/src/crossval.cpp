@@ -1,5 +1,7 @@
 #include "poise/eval/crossval.h"
 
+#include "poise/core/yaml_params.h"
+
 #include <yaml-cpp/yaml.h>
 
 #include <fstream>
@@ -84,7 +86,7 @@ void write_config_with_overrides(const std::string& base_yaml_path, const Overri
   YAML::Node root(YAML::NodeType::Map);
   if (!base_yaml_path.empty()) {
     try {
-      root = YAML::LoadFile(base_yaml_path);
+      root = load_yaml_file(base_yaml_path, "base configuration");
     } catch (const std::exception& e) {
       throw std::runtime_error("cannot read '" + base_yaml_path + "': " + e.what());
     }
@@ -110,8 +112,8 @@ void write_config_with_overrides(const std::string& base_yaml_path, const Overri
       node.reset(child);
     }
     try {
-      node[parts.back()] = YAML::Load(value);
-    } catch (const YAML::Exception& e) {
+      node[parts.back()] = parse_yaml(value, "grid value for '" + key + "'");
+    } catch (const std::runtime_error& e) {
       throw std::runtime_error("grid value '" + value + "' for '" + key + "' is not YAML: " + e.what());
     }
   }

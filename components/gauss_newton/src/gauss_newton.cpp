@@ -1,4 +1,5 @@
 #include "poise/gauss_newton/gauss_newton.h"
+#include "poise/core/yaml_params.h"
 
 #include <yaml-cpp/yaml.h>
 
@@ -113,7 +114,7 @@ bool GaussNewton::update(const ImuSample& s) {
 GaussNewtonParams load_gauss_newton_params(const std::string& path) {
   YAML::Node root;
   try {
-    root = YAML::LoadFile(path);
+    root = load_yaml_file(path, "Gauss-Newton config");
   } catch (const std::exception& e) {
     throw std::runtime_error("cannot read Gauss-Newton config '" + path + "': " + e.what());
   }

@@ -1,6 +1,7 @@
 // YAML loading of ParallelKfParams: `preset` picks the base (paper | default), every other key
 // is a field name (tilt fields prefixed `tilt.` or nested under `tilt:`). Unknown keys are errors.
 #include "poise/parallel_kf/parallel_kf.h"
+#include "poise/core/yaml_params.h"
 
 #include <yaml-cpp/yaml.h>
 
@@ -133,7 +134,7 @@ void apply(ParallelKfParams& p, const YAML::Node& node, const std::string& prefi
 ParallelKfParams load_parallel_kf_params(const std::string& path, const ParallelKfParams& base) {
   YAML::Node root;
   try {
-    root = YAML::LoadFile(path);
+    root = load_yaml_file(path, "parallel_kf config");
   } catch (const std::exception& e) {
     throw std::runtime_error("cannot read parallel_kf config '" + path + "': " + e.what());
   }

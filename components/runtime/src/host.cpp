@@ -1,5 +1,7 @@
 #include "poise/runtime/host.h"
 
+#include "poise/core/yaml_params.h"
+
 #include <filesystem>
 #include <set>
 
@@ -45,12 +47,7 @@ YAML::Node load_param_file(const std::string& path) {
   if (!fs::exists(path)) {
     throw ConfigError("parameter file '" + path + "' does not exist");
   }
-  YAML::Node node;
-  try {
-    node = YAML::LoadFile(path);
-  } catch (const YAML::Exception& e) {
-    throw ConfigError("parameter file '" + path + "' is not valid YAML: " + e.what());
-  }
+  const YAML::Node node = load_yaml_file<ConfigError>(path, "parameter file");
   if (node.IsNull()) {
     return YAML::Node(YAML::NodeType::Map);
   }
@@ -78,20 +75,53 @@ void apply_topic_overrides(const YAML::Node& map, const std::string& origin, dds
       {"diagnostics", &names.diagnostics},
   };
   for (const auto& entry : map) {
-    const auto key = entry.first.as<std::string>();
+    const auto key = entry.first.IsScalar() ? entry.first.Scalar() : YAML::Dump(entry.first);
     const auto it = fields.find(key);
     if (it == fields.end()) {
       throw ConfigError(origin + ": unknown topic '" + key +
                         "' (known: imu, tag_detections, vision_pose, attitude_prefix, "
                         "pose_prefix, altitude, vehicle_input, diagnostics)");
     }
-    const auto value = entry.second.as<std::string>();
+    if (!entry.second.IsScalar()) {
+      throw ConfigError(origin + ": topics." + key + " must be a topic name (a string)");
+    }
+    const auto value = entry.second.Scalar();
     if (value.empty()) {
       throw ConfigError(origin + ": topic '" + key + "' must not be empty");
     }
     *it->second = value;
   }
 }
+
+namespace {
+/// One entry of a host file's `components` list (YAML type errors propagate to the caller).
+ComponentSpec parse_component(const YAML::Node& entry, const std::string& where, const std::string& base_dir) {
+  if (!entry.IsMap() || !entry["type"]) {
+    throw ConfigError(where + ": each component needs a 'type'");
+  }
+  check_keys(entry, {"type", "name", "config", "params"}, where);
+  ComponentSpec c;
+  c.type = entry["type"].as<std::string>();
+  c.name = entry["name"] ? entry["name"].as<std::string>() : c.type;
+  c.origin = where + " (" + c.name + ")";
+  YAML::Node from_file;
+  if (entry["config"]) {
+    from_file = load_param_file(resolve(base_dir, entry["config"].as<std::string>()));
+  }
+  if (entry["params"] && !entry["params"].IsMap()) {
+    throw ConfigError(where + ": 'params' must be a map");
+  }
+  c.params = merge(from_file, entry["params"]);
+  // Parameters named *_file are paths: relative ones resolve against the host file's directory.
+  for (auto param : c.params) {
+    const auto key = param.first.as<std::string>();
+    if (key.size() > 5 && key.compare(key.size() - 5, 5, "_file") == 0 && param.second.IsScalar()) {
+      c.params[key] = resolve(base_dir, param.second.as<std::string>());
+    }
+  }
+  return c;
+}
+}  // namespace
 
 HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std::string& base_dir) {
   if (!root || !root.IsMap()) {
@@ -125,35 +155,16 @@ HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std
   }
   std::set<std::string> names;
   for (std::size_t i = 0; i < list.size(); ++i) {
-    const YAML::Node entry = list[i];
     const std::string where = origin + ": components[" + std::to_string(i) + "]";
-    if (!entry.IsMap() || !entry["type"]) {
-      throw ConfigError(where + ": each component needs a 'type'");
+    try {
+      spec.components.push_back(parse_component(list[i], where, base_dir));
+    } catch (const YAML::Exception& e) {
+      throw ConfigError(where + ": " + e.msg + " (type, name and config are strings, params a map)");
     }
-    check_keys(entry, {"type", "name", "config", "params"}, where);
-    ComponentSpec c;
-    c.type = entry["type"].as<std::string>();
-    c.name = entry["name"] ? entry["name"].as<std::string>() : c.type;
-    c.origin = where + " (" + c.name + ")";
-    YAML::Node from_file;
-    if (entry["config"]) {
-      from_file = load_param_file(resolve(base_dir, entry["config"].as<std::string>()));
-    }
-    if (entry["params"] && !entry["params"].IsMap()) {
-      throw ConfigError(where + ": 'params' must be a map");
-    }
-    c.params = merge(from_file, entry["params"]);
-    // Parameters named *_file are paths: relative ones resolve against the host file's directory.
-    for (auto param : c.params) {
-      const auto key = param.first.as<std::string>();
-      if (key.size() > 5 && key.compare(key.size() - 5, 5, "_file") == 0 && param.second.IsScalar()) {
-        c.params[key] = resolve(base_dir, param.second.as<std::string>());
-      }
-    }
+    const ComponentSpec& c = spec.components.back();
     if (!names.insert(c.name).second) {
       throw ConfigError(where + ": two components are named '" + c.name + "' (names must be unique)");
     }
-    spec.components.push_back(std::move(c));
   }
   return spec;
 }
@@ -162,12 +173,7 @@ HostSpec load_host_file(const std::string& path) {
   if (!fs::exists(path)) {
     throw ConfigError("host file '" + path + "' does not exist");
   }
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::Exception& e) {
-    throw ConfigError("host file '" + path + "' is not valid YAML: " + e.what());
-  }
+  const YAML::Node root = load_yaml_file<ConfigError>(path, "host file");
   return parse_host(root, path, fs::path(path).parent_path().string());
 }
 
@@ -180,6 +186,11 @@ Host::Host(const HostSpec& spec, int domain) {
         list += (list.empty() ? "" : ", ") + n;
       }
       throw ConfigError(c.origin + ": unknown component type '" + c.type + "' (known: " + list + ")");
+    }
+    try {
+      (void)dds::checked_sensor_id(c.name, c.origin);
+    } catch (const std::invalid_argument& e) {
+      throw ConfigError(e.what());
     }
   }
   dds::ParticipantOptions options;

@@ -1,6 +1,7 @@
 // `poise run HOST.yaml` and the generated `poise <component>` commands.
 #include "poise/cli/common.h"
 #include "poise/runtime/host.h"
+#include "poise/core/yaml_params.h"
 
 #include <chrono>
 #include <cstdio>
@@ -79,8 +80,8 @@ void set_param(YAML::Node& params, const std::string& assignment) {
     throw Error("--set expects key=value, got '" + assignment + "'", kUsageExitCode);
   }
   try {
-    params[assignment.substr(0, eq)] = YAML::Load(assignment.substr(eq + 1));
-  } catch (const YAML::Exception& e) {
+    params[assignment.substr(0, eq)] = parse_yaml(assignment.substr(eq + 1), "--set " + assignment);
+  } catch (const std::runtime_error& e) {
     throw Error("--set " + assignment + ": " + e.what(), kUsageExitCode);
   }
 }

@@ -1,6 +1,7 @@
 // YAML -> SelectiveEkfParams (config/filters/selective_ekf*.yaml). Defaults live in the struct;
 // the file only overrides. Unknown keys are errors so a typo never silently keeps a default.
 #include "poise/selective_ekf/selective_ekf.h"
+#include "poise/core/yaml_params.h"
 
 #include <yaml-cpp/yaml.h>
 
@@ -61,7 +62,7 @@ void apply(const YAML::Node& node, const std::map<std::string, Setter>& setters,
 SelectiveEkfParams load_selective_ekf_params(const std::string& path) {
   YAML::Node root;
   try {
-    root = YAML::LoadFile(path);
+    root = load_yaml_file(path, "selective EKF config");
   } catch (const std::exception& e) {
     throw std::runtime_error("cannot read selective EKF config '" + path + "': " + e.what());
   }

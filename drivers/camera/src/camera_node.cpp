@@ -79,7 +79,8 @@ CameraNode::CameraNode(const CameraNodeOptions& options, const std::string& inst
       diag_writer_(host.participant, host.topics.diagnostics) {
   Loaded l = load_all(options);
   config_ = l.config;
-  sensor_id_ = (instance_name.empty() || instance_name == "camera") ? config_.sensor_id : instance_name;
+  sensor_id_ = dds::checked_sensor_id(
+      (instance_name.empty() || instance_name == "camera") ? config_.sensor_id : instance_name, "camera");
   try {
     pipeline_ = std::make_unique<CameraPipeline>(config_, l.intrinsics, l.map);
     SourceOptions so;

@@ -1,4 +1,5 @@
 #include "poise/camera/intrinsics.h"
+#include "poise/core/yaml_params.h"
 
 #include <yaml-cpp/yaml.h>
 
@@ -13,6 +14,9 @@ namespace poise::camera {
 namespace {
 
 constexpr double kMaxAspect = 4.0;  // fx/fy beyond this (or 1/this) is a unit or typing error
+// Largest image side a calibration may state: beyond any camera sensor made (the largest are
+// ~16k px); larger values are typing errors and would size per-pixel maps in gigabytes.
+constexpr int kMaxCalibratedSidePx = 32768;
 
 bool finite(double v) { return std::isfinite(v); }
 
@@ -139,12 +143,7 @@ std::vector<double> ros_matrix(const YAML::Node& root, const char* key, const st
 }
 
 CameraIntrinsics parse_ros(const std::string& text, const std::string& source) {
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::Exception& e) {
-    throw ConfigError(source + ": not valid YAML: " + e.what());
-  }
+  const YAML::Node root = parse_yaml<ConfigError>(text, source);
   if (!root.IsMap()) {
     throw ConfigError(source + ": expected a YAML map (ROS camera_info or OpenCV calibration)");
   }
@@ -206,6 +205,11 @@ void validate_intrinsics(const CameraIntrinsics& in, const std::string& source) 
     throw ConfigError(where + "image_width/image_height missing or not positive (" +
                       std::to_string(in.width_px) + "x" + std::to_string(in.height_px) +
                       "): the calibration must state the resolution it was made at");
+  }
+  if (in.width_px > kMaxCalibratedSidePx || in.height_px > kMaxCalibratedSidePx) {
+    throw ConfigError(where + "image_width/image_height " + std::to_string(in.width_px) + "x" +
+                      std::to_string(in.height_px) + " exceed " + std::to_string(kMaxCalibratedSidePx) +
+                      " px: not a camera resolution");
   }
   for (double v : {in.fx_px, in.fy_px, in.cx_px, in.cy_px, in.skew}) {
     if (!finite(v)) {

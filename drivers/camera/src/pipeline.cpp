@@ -1,4 +1,5 @@
 #include "poise/camera/pipeline.h"
+#include "poise/core/yaml_params.h"
 
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgproc.hpp>
@@ -47,12 +48,7 @@ double elapsed_ms(std::chrono::steady_clock::time_point since) {
 }  // namespace
 
 CameraConfig parse_camera_config(const std::string& yaml_text, const std::string& source) {
-  YAML::Node root;
-  try {
-    root = YAML::Load(yaml_text);
-  } catch (const YAML::Exception& e) {
-    throw ConfigError(source + ": not valid YAML: " + e.what());
-  }
+  const YAML::Node root = parse_yaml<ConfigError>(yaml_text, source);
   CameraConfig c;
   if (root.IsNull()) {
     return c;
@@ -166,17 +162,11 @@ CameraPipeline::CameraPipeline(const CameraConfig& config, const CameraIntrinsic
       k_(intrinsics.camera_matrix()),
       distortion_(intrinsics.distortion_mat()) {
   validate_intrinsics(intrinsics_, "intrinsics");
-  if (!map_.family.empty() && map_.family != config_.detector.family) {
-    throw ConfigError("the tag map is for family " + map_.family + " but the detector looks for " +
-                      config_.detector.family + ": set detector.family or fix the map");
-  }
+  check_tag_map_family(map_, config_.detector.family, "tag map");
 }
 
 void CameraPipeline::set_tag_map(const TagMap& tag_map) {
-  if (!tag_map.family.empty() && tag_map.family != config_.detector.family) {
-    throw ConfigError("the tag map is for family " + tag_map.family +
-                      " but the detector looks for " + config_.detector.family);
-  }
+  check_tag_map_family(tag_map, config_.detector.family, "tag map");
   map_ = tag_map;
 }
 

@@ -1,5 +1,7 @@
 #include "poise/camera/tag_map.h"
+#include "poise/core/yaml_params.h"
 
+#include "poise/camera/detector.h"
 #include "poise/camera/intrinsics.h"  // ConfigError
 
 #include <yaml-cpp/yaml.h>
@@ -34,12 +36,7 @@ std::vector<double> numbers(const YAML::Node& node, std::size_t n, const std::st
 }  // namespace
 
 TagMap parse_tag_map(const std::string& yaml_text, const std::string& source) {
-  YAML::Node root;
-  try {
-    root = YAML::Load(yaml_text);
-  } catch (const YAML::Exception& e) {
-    throw ConfigError(source + ": not valid YAML: " + e.what());
-  }
+  const YAML::Node root = parse_yaml<ConfigError>(yaml_text, source);
   if (!root.IsMap() || !root["tags"] || !root["tags"].IsSequence()) {
     throw ConfigError(source + ": expected a map with a 'tags' list (see docs/CAMERA.md)");
   }
@@ -107,7 +104,24 @@ TagMap parse_tag_map(const std::string& yaml_text, const std::string& source) {
   if (map.tags.empty()) {
     throw ConfigError(source + ": the tag map has no tags");
   }
+  if (!map.family.empty()) {
+    check_tag_map_family(map, map.family, source);
+  }
   return map;
+}
+
+void check_tag_map_family(const TagMap& map, const std::string& family, const std::string& source) {
+  if (!map.family.empty() && map.family != family) {
+    throw ConfigError(source + ": the tag map is for family " + map.family + " but the detector looks for " +
+                      family + ": set detector.family or fix the map");
+  }
+  const std::size_t codes = tag_family_layout(family).codes.size();
+  for (const auto& [id, tag] : map.tags) {
+    if (static_cast<std::size_t>(id) >= codes) {
+      throw ConfigError(source + ": tag id " + std::to_string(id) + " does not exist in " + family + " (ids 0.." +
+                        std::to_string(codes - 1) + "): it could never be detected");
+    }
+  }
 }
 
 TagMap load_tag_map(const std::string& path) {

@@ -1,4 +1,5 @@
 #include "poise/imu/config.h"
+#include "poise/core/yaml_params.h"
 
 #include <yaml-cpp/yaml.h>
 
@@ -119,12 +120,7 @@ bool is_supported_baud(int baud) {
 
 DriverConfig parse_driver_config(const std::string& yaml_text, const std::string& origin) {
   Reader rd(origin);
-  YAML::Node root;
-  try {
-    root = YAML::Load(yaml_text);
-  } catch (const YAML::Exception& e) {
-    throw ConfigError(origin + ": not valid YAML: " + e.what());
-  }
+  const YAML::Node root = parse_yaml<ConfigError>(yaml_text, origin);
   DriverConfig c;
   if (!root || root.IsNull()) return c;
   rd.only(root, "", {"serial", "protocol", "limits", "raw", "clock", "calibration"});

@@ -100,7 +100,7 @@ nodes::DiagnosticsReport driver_diagnostics(const DriverStats& st, const RateLat
 ImuDriverNode::ImuDriverNode(const ImuNodeOptions& options, const std::string& sensor_id,
                              runtime::HostContext& host)
     : options_(options),
-      sensor_id_(sensor_id),
+      sensor_id_(dds::checked_sensor_id(sensor_id, "imu driver")),
       host_(host),
       imu_writer_(host.participant, host.topics.imu,
                   options.reliable ? dds::QosKind::kEstimate : dds::QosKind::kSensor),

@@ -178,8 +178,21 @@ SerialPort::ReadStatus SerialPort::read(char* buf, std::size_t cap, int timeout_
   return ReadStatus::kLost;
 }
 
+void check_serial_path(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0 || S_ISCHR(st.st_mode)) {
+    return;  // absent (may appear) or a character device
+  }
+  const char* what = S_ISDIR(st.st_mode) ? "a directory" : S_ISREG(st.st_mode) ? "a regular file" : "not a device";
+  throw SerialError(path + " is " + what + ", not a serial device (pass the port, e.g. /dev/ttyUSB0, or the "
+                           "link of `poise sim-imu --link PATH`)",
+                    ENOTTY);
+}
+
 PortReader::PortReader(ReaderOptions options, ImuDriver& driver, Log log)
-    : options_(std::move(options)), driver_(driver), log_(std::move(log)) {}
+    : options_(std::move(options)), driver_(driver), log_(std::move(log)) {
+  check_serial_path(options_.path);
+}
 
 void PortReader::run(const std::function<bool()>& stop, const std::function<void(int64_t)>& on_tick) {
   double backoff_s = options_.reconnect_initial_s;
@@ -201,6 +214,13 @@ void PortReader::run(const std::function<bool()>& stop, const std::function<void
     try {
       port = std::make_unique<SerialPort>(options_.path, options_.baud);
     } catch (const SerialError& e) {
+      try {
+        check_serial_path(options_.path);
+      } catch (const SerialError& fatal) {
+        log_(std::string(fatal.what()) + ": giving up");
+        gave_up_.store(true);
+        return;
+      }
       if (e.what() != last_error) {
         log_(std::string("waiting for ") + options_.path + ": " + e.what() + "; retrying");
         last_error = e.what();

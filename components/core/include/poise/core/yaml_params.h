@@ -5,6 +5,8 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <cstddef>
+#include <map>
 #include <set>
 #include <stdexcept>
 #include <string>
@@ -12,15 +14,75 @@
 
 namespace poise {
 
-/// Loads a YAML file; std::runtime_error ("<path>: cannot open the <what>" / "invalid YAML").
-inline YAML::Node load_yaml_file(const std::string& path, const std::string& what) {
-  try {
-    return YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    throw std::runtime_error(path + ": cannot open the " + what);
-  } catch (const YAML::Exception& e) {
-    throw std::runtime_error(path + ": invalid YAML: " + e.what());
+/// What every YAML document poise reads must pass beyond the syntax (yaml-cpp accepts both and
+/// then silently uses one): no mapping key given twice, and no plain scalar that YAML reads as
+/// a non-finite number (.inf, -.inf, .nan: no parameter means "infinite"; quote it for a
+/// string). Throws std::runtime_error "<source>:<line>: ..." naming the key path. `at` is the
+/// path of `node` ("" for the document). `Error` is the exception type thrown (a loader's own
+/// configuration error type, constructible from a string).
+template <typename Error = std::runtime_error>
+void check_yaml_tree(const YAML::Node& node, const std::string& source, const std::string& at = "") {
+  auto line = [](const YAML::Node& n) { return std::to_string(n.Mark().line + 1); };
+  auto where = [&](const YAML::Node& n) { return source + ":" + line(n) + ": "; };
+  if (node.IsMap()) {
+    std::map<std::string, YAML::Node> seen;
+    for (const auto& kv : node) {
+      const std::string key = kv.first.IsScalar() ? kv.first.Scalar() : YAML::Dump(kv.first);
+      const std::string path = at.empty() ? key : at + "." + key;
+      const auto [it, fresh] = seen.emplace(key, kv.first);
+      if (!fresh) {
+        throw Error(where(kv.first) + "key '" + path + "' is given twice (first on line " +
+                                 line(it->second) + "); remove one");
+      }
+      check_yaml_tree<Error>(kv.second, source, path);
+    }
+  } else if (node.IsSequence()) {
+    for (std::size_t i = 0; i < node.size(); ++i) {
+      check_yaml_tree<Error>(node[i], source, at + "[" + std::to_string(i) + "]");
+    }
+  } else if (node.IsScalar() && node.Tag() == "?") {  // plain (unquoted) scalar
+    std::string v = node.Scalar();
+    if (!v.empty() && (v[0] == '+' || v[0] == '-')) {
+      v.erase(0, 1);
+    }
+    for (const char* bad : {".inf", ".Inf", ".INF", ".nan", ".NaN", ".NAN"}) {
+      if (v == bad) {
+        throw Error(where(node) + "'" + (at.empty() ? std::string("the document") : at) +
+                                 "' is " + node.Scalar() + ": values must be finite numbers");
+      }
+    }
   }
+}
+
+/// Parses YAML text (`source` names it in messages) and applies check_yaml_tree(): every loader
+/// (host, filter, driver, camera, intrinsics, tag map, overrides) reads YAML through here or
+/// load_yaml_file(). Throws Error "<source>: not valid YAML: ..." on a syntax error.
+template <typename Error = std::runtime_error>
+YAML::Node parse_yaml(const std::string& text, const std::string& source) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    throw Error(source + ": not valid YAML: " + e.what());
+  }
+  check_yaml_tree<Error>(root, source);
+  return root;
+}
+
+/// Loads a YAML file; Error ("<path>: cannot open the <what>" / "not valid YAML" / the checks of
+/// check_yaml_tree()).
+template <typename Error = std::runtime_error>
+YAML::Node load_yaml_file(const std::string& path, const std::string& what) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(path);
+  } catch (const YAML::BadFile&) {
+    throw Error(path + ": cannot open the " + what);
+  } catch (const YAML::Exception& e) {
+    throw Error(path + ": not valid YAML: " + e.what());
+  }
+  check_yaml_tree<Error>(root, path);
+  return root;
 }
 
 /// Reads the keys of one YAML mapping into fields, remembering which keys are known so that

@@ -1,6 +1,7 @@
 // Topic names and the QoS profile each kind of topic uses: defined once, here.
 #pragma once
 
+#include <cstddef>
 #include <string>
 
 namespace poise::dds {
@@ -24,6 +25,14 @@ struct TopicNames {
     return pose_prefix + filter_id;
   }
 };
+
+/// The IDL bound of `sensor_id` (`@key string<64>`): a longer name would be cut by the generated
+/// types, so two instances could publish under one key.
+inline constexpr std::size_t kMaxSensorIdLength = 64;
+
+/// Returns `name` when it can be a sensor_id (1 to kMaxSensorIdLength characters); otherwise
+/// throws std::invalid_argument "<where>: instance name '<name>' ..." (refused, never cut).
+const std::string& checked_sensor_id(const std::string& name, const std::string& where);
 
 /// The endpoint QoS profiles of config/qos/poise_profiles.xml.
 enum class QosKind {

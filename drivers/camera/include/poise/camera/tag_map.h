@@ -42,4 +42,10 @@ struct TagMap {
 TagMap load_tag_map(const std::string& path);
 TagMap parse_tag_map(const std::string& yaml_text, const std::string& source);
 
+/// Throws ConfigError "<source>: tag id N does not exist in <family> (ids 0..M-1)" when the map
+/// names an id the family does not have (it could never be detected), or when the map states a
+/// family other than `family`. parse_tag_map() applies it to a map that states its family; the
+/// pipeline to every map against the detector's family.
+void check_tag_map_family(const TagMap& map, const std::string& family, const std::string& source);
+
 }  // namespace poise::camera

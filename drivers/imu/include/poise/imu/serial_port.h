@@ -61,17 +61,26 @@ struct ReaderOptions {
   int poll_ms = 50;                    ///< longest wait between on_tick calls, ms
 };
 
+/// Throws SerialError when `path` exists and is not a character device (a regular file, a
+/// directory, a FIFO, a socket): that never becomes a serial port, so retrying is pointless. A
+/// path that does not exist yet passes (the board may be plugged in later).
+void check_serial_path(const std::string& path);
+
 /// Reads a port forever, feeding the driver; survives unplug/replug: on loss it resets the driver
 /// and retries opening with exponential backoff, resuming without restart. Single-threaded: the
 /// driver's sink and on_tick run on the calling thread.
 class PortReader {
  public:
   using Log = std::function<void(const std::string&)>;
+  /// Throws SerialError when the path can never be a serial port (check_serial_path()).
   PortReader(ReaderOptions options, ImuDriver& driver, Log log);
-  /// Runs until `stop()` is true. `on_tick(now_ns)` is called at least every poll_ms.
+  /// Runs until `stop()` is true, or until the path turns into something that is not a
+  /// character device (logged once; gave_up() is then true). `on_tick(now_ns)` is called at
+  /// least every poll_ms.
   void run(const std::function<bool()>& stop, const std::function<void(int64_t)>& on_tick = {});
   [[nodiscard]] bool connected() const { return connected_.load(); }
   [[nodiscard]] uint64_t connects() const { return connects_.load(); }
+  [[nodiscard]] bool gave_up() const { return gave_up_.load(); }
 
  private:
   ReaderOptions options_;
@@ -79,6 +88,7 @@ class PortReader {
   Log log_;
   std::atomic<bool> connected_{false};
   std::atomic<uint64_t> connects_{0};
+  std::atomic<bool> gave_up_{false};
 };
 
 }  // namespace poise::imu
