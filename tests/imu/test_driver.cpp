@@ -248,6 +248,72 @@ TEST(ImuDriver, RejectsSensorTimeGoingBackwardsWhileSeqAdvances) {
   EXPECT_EQ(drv.stats().rejects[static_cast<std::size_t>(RejectReason::kTimeNotMonotonic)], 1u);
 }
 
+// Issue 19 item 4: the sensor clock jumps while seq keeps counting. Oracle: the documented rule:
+// reanchor_samples (3) consecutive agreeing lines restart the time base at the last of them, the
+// ones before are rejected as time_not_monotonic, every later line is published, stamps rise.
+void expect_recovers_from_clock_jump(uint32_t t_before_us, uint32_t t_after_us) {
+  std::vector<ImuSample> out;
+  ImuDriver drv({}, {}, [&](const ImuSample& s, const SampleInfo&) { out.push_back(s); });
+  constexpr uint32_t kPeriodUs = 10000;  // 100 Hz
+  int64_t now = 1'000'000'000;
+  uint32_t seq = 0;
+  for (int i = 0; i < 50; ++i, ++seq) {
+    now += 10 * kNsPerMs;
+    drv.feed(format_imu_line(sample(seq, t_before_us + static_cast<uint32_t>(i) * kPeriodUs)), now);
+  }
+  for (int i = 0; i < 200; ++i, ++seq) {  // the clock jumped; seq counts on
+    now += 10 * kNsPerMs;
+    drv.feed(format_imu_line(sample(seq, t_after_us + static_cast<uint32_t>(i) * kPeriodUs)), now);
+  }
+  const auto not_monotonic = drv.stats().rejects[static_cast<std::size_t>(RejectReason::kTimeNotMonotonic)];
+  EXPECT_EQ(not_monotonic, 2u);                 // reanchor_samples - 1
+  EXPECT_EQ(drv.stats().clock_reanchors, 1u);
+  ASSERT_EQ(out.size(), 250u - 2u);
+  EXPECT_EQ(out.back().seq, seq - 1);
+  for (size_t k = 1; k < out.size(); ++k) {
+    ASSERT_GT(out[k].stamp_ns, out[k - 1].stamp_ns) << k;
+  }
+}
+
+TEST(ImuDriver, GivenTheSensorClockJumpsBackWhileSeqCountsThenThreeAgreeingLinesRestartTheTimeBase) {
+  expect_recovers_from_clock_jump(900'000'000u, 1'000u);
+}
+
+TEST(ImuDriver, GivenTheSensorClockJumpsForwardBy2To31UsOrMoreThenItRecoversTheSameWay) {
+  constexpr uint32_t kLastBeforeUs = 1'000u + 49u * 10'000u;  // t_us of the last line before the jump
+  expect_recovers_from_clock_jump(1'000u, kLastBeforeUs + (1u << 31));  // exactly 2^31 us ahead
+  expect_recovers_from_clock_jump(1'000u, 4'000'000'000u);
+}
+
+TEST(ImuDriver, GivenOneWildClockValueThenOnlyThatLineIsLostAndTheTimeBaseStays) {
+  std::vector<ImuSample> out;
+  ImuDriver drv({}, {}, [&](const ImuSample& s, const SampleInfo&) { out.push_back(s); });
+  int64_t now = 1'000'000'000;
+  for (uint32_t seq = 0; seq < 20; ++seq) {
+    now += 10 * kNsPerMs;
+    const uint32_t t_us = seq == 10 ? 5u : 100'000u + seq * 10'000u;  // one wild t_us
+    drv.feed(format_imu_line(sample(seq, t_us)), now);
+  }
+  EXPECT_EQ(out.size(), 19u);
+  EXPECT_EQ(drv.stats().rejects[static_cast<std::size_t>(RejectReason::kTimeNotMonotonic)], 1u);
+  EXPECT_EQ(drv.stats().clock_reanchors, 0u);
+}
+
+TEST(ImuClockJumpAnchor, RequiresConsecutiveSeqAndForwardTimeWithinTheBound) {
+  ClockJumpAnchor a(3, 1.0, 100);
+  EXPECT_FALSE(a.refused(10, 1000));
+  EXPECT_FALSE(a.refused(11, 2000));
+  EXPECT_TRUE(a.refused(12, 3000));        // third agreeing line
+  EXPECT_FALSE(a.refused(13, 4000));       // a new run starts
+  EXPECT_FALSE(a.refused(14, 3500));       // time back: run restarts at this line
+  EXPECT_FALSE(a.refused(15, 3500 + 2'000'000));  // 2 s for one seq step > 1 s: disagrees
+  EXPECT_FALSE(a.refused(16, 3500 + 2'010'000));
+  EXPECT_TRUE(a.refused(17, 3500 + 2'020'000));
+  a.clear();
+  EXPECT_FALSE(a.refused(18, 10));
+  EXPECT_FALSE(a.refused(500, 20));        // seq jumped beyond the step bound
+}
+
 TEST(ImuDriver, InfoLinesAreKeptAndNotCountedAsRejects) {
   ImuDriver drv({}, {}, nullptr);
   drv.feed("# gy87_poise v1 ready\r\n", 1);

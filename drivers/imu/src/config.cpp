@@ -199,7 +199,7 @@ DriverConfig parse_driver_config(const std::string& yaml_text, const std::string
   }
 
   const YAML::Node clock = root["clock"];
-  rd.only(clock, "clock", {"block_s", "window_blocks", "max_drift_ppm", "reset_threshold_s"});
+  rd.only(clock, "clock", {"block_s", "window_blocks", "max_drift_ppm", "reset_threshold_s", "reanchor_samples"});
   if (clock) {
     ClockSyncParams& k = c.params.clock;
     rd.number(clock["block_s"], "clock.block_s", 0.01, 60, &k.block_s);
@@ -209,6 +209,9 @@ DriverConfig parse_driver_config(const std::string& yaml_text, const std::string
     rd.number(clock["max_drift_ppm"], "clock.max_drift_ppm", 0, 100000, &k.max_drift_ppm);
     rd.number(clock["reset_threshold_s"], "clock.reset_threshold_s", 0.01, 3600,
               &k.reset_threshold_s);
+    long ra = k.reanchor_samples;
+    rd.integer(clock["reanchor_samples"], "clock.reanchor_samples", 2, 1000, &ra);
+    k.reanchor_samples = static_cast<int>(ra);
   }
 
   const YAML::Node cal = root["calibration"];
@@ -279,6 +282,7 @@ std::string to_yaml(const DriverConfig& c) {
     << "  window_blocks: " << c.params.clock.window_blocks << "\n"
     << "  max_drift_ppm: " << c.params.clock.max_drift_ppm << "\n"
     << "  reset_threshold_s: " << c.params.clock.reset_threshold_s << "\n"
+    << "  reanchor_samples: " << c.params.clock.reanchor_samples << "\n"
     << "calibration:\n"
     << "  imu_axes: \"" << c.calibration.imu_axes.to_string() << "\"\n"
     << "  mag_axes: \"" << c.calibration.mag_axes.to_string() << "\"\n"

@@ -19,7 +19,8 @@ ImuDriver::ImuDriver(const DriverParams& params, const Calibration& calibration,
       sink_(std::move(sink)),
       parser_(params.limits, params.raw),
       sequence_(params.sequence),
-      clock_(params.clock) {}
+      clock_(params.clock),
+      jump_(params.clock.reanchor_samples, params.clock.reset_threshold_s, params.sequence.max_forward_gap) {}
 
 void ImuDriver::feed(const char* data, std::size_t size, int64_t arrival_ns) {
   stats_.bytes += size;
@@ -32,6 +33,7 @@ void ImuDriver::reset() {
   sequence_.reset();
   time_.reset();
   clock_.reset();
+  jump_.clear();
   ++stats_.disconnects;
 }
 
@@ -74,11 +76,22 @@ void ImuDriver::on_line(std::string_view line) {
     case SequenceTracker::Verdict::kNext:
       break;
   }
-  const int64_t sensor_ns = time_.peek_ns(raw.t_us);
+  int64_t sensor_ns = time_.peek_ns(raw.t_us);
   if (verdict == SequenceTracker::Verdict::kNext && time_.has_last() &&
       sensor_ns <= last_sensor_ns_) {
-    on_reject(RejectReason::kTimeNotMonotonic, line.size());
-    return;
+    // t_us went back (or forward by 2^31 us or more, which unwraps as back) while seq counted on.
+    if (!jump_.refused(raw.seq, raw.t_us)) {
+      on_reject(RejectReason::kTimeNotMonotonic, line.size());
+      return;
+    }
+    // reanchor_samples consecutive lines agree on the new clock: restart the time base here
+    // (ClockSync keeps published stamps increasing across its reset).
+    ++stats_.clock_reanchors;
+    time_.reset();
+    clock_.reset();
+    sensor_ns = time_.peek_ns(raw.t_us);
+  } else {
+    jump_.clear();
   }
   sequence_.commit(raw.seq);
   time_.commit(raw.t_us);

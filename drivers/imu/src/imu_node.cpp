@@ -87,6 +87,7 @@ nodes::DiagnosticsReport driver_diagnostics(const DriverStats& st, const RateLat
   r.counters["disconnects"] = st.disconnects;
   r.counters["connects"] = connects;
   r.counters["clock_resets"] = st.clock_resets;
+  r.counters["clock_reanchors"] = st.clock_reanchors;
   r.metrics.push_back({"rate", rate.rate_hz, "Hz"});
   r.metrics.push_back({"latency_p50", rate.latency_p50_ms, "ms"});
   r.metrics.push_back({"latency_p99", rate.latency_p99_ms, "ms"});

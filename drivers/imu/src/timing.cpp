@@ -34,6 +34,21 @@ void TimeUnwrapper::commit(uint32_t t_us) {
   last_ = t_us;
 }
 
+bool ClockJumpAnchor::refused(uint32_t seq, uint32_t t_us) {
+  const uint32_t dseq = seq - last_seq_;   // modular: both counters wrap
+  const uint32_t dt_us = t_us - last_t_us_;
+  const bool agrees = run_ > 0 && dseq >= 1 && dseq <= max_seq_step_ && dt_us > 0 &&
+                      static_cast<double>(dt_us) <= max_step_us_ * static_cast<double>(dseq);
+  run_ = agrees ? run_ + 1 : 1;
+  last_seq_ = seq;
+  last_t_us_ = t_us;
+  if (run_ >= samples_) {
+    run_ = 0;
+    return true;
+  }
+  return false;
+}
+
 ClockSync::ClockSync(const ClockSyncParams& p) : params_(p) {
   params_.window_blocks = std::max(params_.window_blocks, 2);
 }

@@ -47,6 +47,7 @@ struct DriverStats {
   uint64_t sensor_restarts = 0;  ///< seq jumps treated as a sensor restart (resync)
   uint64_t disconnects = 0;  ///< reset() calls (port lost)
   uint64_t clock_resets = 0;
+  uint64_t clock_reanchors = 0;  ///< sensor clock jumps accepted after reanchor_samples agreed
   int64_t clock_offset_ns = 0;  ///< stamp - sensor time of the last sample
   double clock_drift_ppm = 0.0;
   bool clock_valid = false;
@@ -82,6 +83,7 @@ class ImuDriver : private FrameSink {
   SequenceTracker sequence_;
   TimeUnwrapper time_;
   ClockSync clock_;
+  ClockJumpAnchor jump_;
   int64_t arrival_ns_ = 0;
   int64_t last_sensor_ns_ = 0;
   DriverStats stats_;

@@ -64,6 +64,33 @@ struct ClockSyncParams {
   double max_drift_ppm = 20000.0;  ///< |drift| clamp (ceramic resonators reach 5000 ppm)
   double reset_threshold_s = 1.0;  ///< a block whose minimum departs the envelope by more than
                                    ///< this (or any point below it by more) restarts the estimate
+  /// The sensor clock jumped (back, or forward by 2^31 us or more) while seq kept counting: the
+  /// time base restarts at the N-th consecutive such sample when each follows the previous one
+  /// by 0 < dt <= reset_threshold_s per seq step (ClockJumpAnchor); the N-1 before it are
+  /// rejected as time_not_monotonic. >= 2: one wild t_us costs one line, never the time base.
+  int reanchor_samples = 3;
+};
+
+/// Decides when a sensor clock that jumped is the new truth (pure). Every line refused because
+/// its t_us did not advance while seq did is offered to refused(); the run of refused lines must
+/// be consecutive (seq forward by at most `max_seq_step`) and agree with each other (t_us forward
+/// by more than 0 and at most `max_step_s` per seq step); at the `samples`-th the time base
+/// restarts. An accepted line clears the run.
+class ClockJumpAnchor {
+ public:
+  ClockJumpAnchor(int samples, double max_step_s, uint32_t max_seq_step)
+      : samples_(samples), max_step_us_(max_step_s * 1e6), max_seq_step_(max_seq_step) {}
+  /// True: restart the time base at this line (and clear the run).
+  bool refused(uint32_t seq, uint32_t t_us);
+  void clear() { run_ = 0; }
+
+ private:
+  int samples_;
+  double max_step_us_;
+  uint32_t max_seq_step_;
+  int run_ = 0;
+  uint32_t last_seq_ = 0;
+  uint32_t last_t_us_ = 0;
 };
 
 class ClockSync {
