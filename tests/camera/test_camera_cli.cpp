@@ -88,6 +88,27 @@ TEST(CameraCli, UnreadableImagesAreReportedAndFailTheCommand) {
   EXPECT_NE(d.output.find("missing.png"), std::string::npos) << d.output;
 }
 
+// Issue 19 item 5: images too small for the detector (libapriltag crashed on 2 px high) and
+// files declaring huge sizes are refused and counted; the images after them are still detected.
+TEST(CameraCli, GivenTinyAndHugeImagesBetweenGoodOnesWhenDetectedThenTheyAreRefusedAndTheRunGoesOn) {
+  const fs::path dir = fresh_dir("limits");
+  const std::string good = (dir / "good.png").string();
+  ASSERT_EQ(run({bin("poise"), "tags", "render", "--out", good, "--ids", "3"}, 60s).exit_code, 0);
+  const std::string tiny = (dir / "tiny.pgm").string();
+  std::ofstream(tiny, std::ios::binary) << "P5\n640 2\n255\n" << std::string(1280, '\x80');
+  const std::string huge = (dir / "huge.pgm").string();  // a 20-byte file declaring 30000 x 30000
+  std::ofstream(huge, std::ios::binary) << "P5\n30000 30000\n255\n";
+  const auto d = run({bin("poise"), "tags", "detect", tiny, huge, good}, 60s);
+  EXPECT_EQ(d.exit_code, 1) << d.output;  // refused images fail the command, after the others ran
+  EXPECT_NE(d.output.find("image '" + tiny + "' refused: pnm 640x2 px is below the"), std::string::npos) << d.output;
+  EXPECT_NE(d.output.find("image '" + huge + "' refused: pnm 30000x30000 px exceeds"), std::string::npos) << d.output;
+  EXPECT_NE(d.output.find(good + "  id 3"), std::string::npos) << d.output;
+  EXPECT_NE(d.output.find("1 image(s), 1 detection(s), 2 unreadable or refused"), std::string::npos) << d.output;
+  const auto small = run({bin("poise"), "tags", "detect", good, "--max-image-pixels", "1000"}, 60s);
+  EXPECT_EQ(small.exit_code, 1) << small.output;
+  EXPECT_NE(small.output.find("exceeds the maximum of 1000 pixels"), std::string::npos) << small.output;
+}
+
 TEST(CameraCli, MissingDeviceIsAClearError) {
   DomainLease domain;
   const auto r = run({bin("poise"), "camera", "--source", "/dev/video97", "--intrinsics",

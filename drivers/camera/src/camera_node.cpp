@@ -89,6 +89,8 @@ CameraNode::CameraNode(const CameraNodeOptions& options, const std::string& inst
     so.height_px = config_.height_px;
     so.fps = config_.fps;
     so.pace = options.pace;
+    so.image_limits.max_pixels = config_.max_image_pixels;
+    so.image_limits.min_side_px = pipeline_->detector().min_image_side_px();
     SyntheticScene scene;
     scene.intrinsics = l.intrinsics;
     scene.family = config_.detector.family;

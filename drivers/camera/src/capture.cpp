@@ -1,4 +1,5 @@
 #include "poise/camera/capture.h"
+#include "poise/camera/image_file.h"
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
@@ -181,16 +182,8 @@ class ImageListSource : public FrameSource {
     frame.name = path;
     frame.index = index_++;
     frame.truth_T_world_camera.reset();
-    frame.image.release();
-    if (fs::is_regular_file(path)) {  // (imread would also log a warning for a missing file)
-      try {
-        frame.image = cv::imread(path, cv::IMREAD_GRAYSCALE);
-      } catch (const cv::Exception&) {
-        frame.image.release();
-      }
-    }
+    frame.image = read_gray_image(path, options_.image_limits, error);  // size checked before decoding
     if (frame.image.empty()) {
-      error = "cannot read image '" + path + "' (missing, unreadable or not an image)";
       return GrabStatus::kSkipped;
     }
     frame.stamp_ns = host_stamp(options_);

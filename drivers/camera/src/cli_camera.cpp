@@ -61,6 +61,7 @@ struct DetectOptions {
   int threads = 1;
   int max_hamming = 2;
   bool refine_edges = true;
+  int64_t max_image_pixels = ImageLimits{}.max_pixels;
 };
 
 void run_detect(const DetectOptions& o) {
@@ -87,18 +88,14 @@ void run_detect(const DetectOptions& o) {
   }
   int unreadable = 0;
   std::size_t total = 0;
+  ImageLimits limits;
+  limits.min_side_px = detector->min_image_side_px();
+  limits.max_pixels = o.max_image_pixels;
   for (const auto& path : paths) {
-    cv::Mat gray;
-    if (std::filesystem::is_regular_file(path)) {
-      try {
-        gray = cv::imread(path, cv::IMREAD_GRAYSCALE);
-      } catch (const cv::Exception&) {
-        gray.release();
-      }
-    }
+    std::string error;
+    const cv::Mat gray = read_gray_image(path, limits, error);
     if (gray.empty()) {
-      std::fprintf(stderr, "poise: error: cannot read image '%s' (missing, unreadable or not an image)\n",
-                   path.c_str());
+      std::fprintf(stderr, "poise: error: %s\n", error.c_str());
       ++unreadable;
       continue;
     }
@@ -130,7 +127,7 @@ void run_detect(const DetectOptions& o) {
     }
   }
   std::fflush(stdout);
-  std::fprintf(stderr, "poise tags detect: %zu image(s), %zu detection(s), %d unreadable\n",
+  std::fprintf(stderr, "poise tags detect: %zu image(s), %zu detection(s), %d unreadable or refused\n",
                paths.size() - static_cast<std::size_t>(unreadable), total, unreadable);
   if (unreadable > 0) {
     throw ExitCode{1};
@@ -360,6 +357,10 @@ void register_camera_commands(CLI::App& app) {
       ->capture_default_str();
   detect->add_option("--max-hamming", d->max_hamming, "Bit errors corrected (0-3)")
       ->check(CLI::Range(0, 3))
+      ->capture_default_str();
+  detect->add_option("--max-image-pixels", d->max_image_pixels,
+                     "Largest image accepted (width x height, checked from the file header before decoding)")
+      ->check(CLI::Range(int64_t{1}, int64_t{1} << 30))
       ->capture_default_str();
   detect->callback([d] { run_detect(*d); });
 

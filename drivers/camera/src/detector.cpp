@@ -215,9 +215,19 @@ TagDetector& TagDetector::operator=(TagDetector&&) noexcept = default;
 
 const DetectorParams& TagDetector::params() const { return impl_->params; }
 
+int TagDetector::min_image_side_px() const {
+  const int cells = std::max(impl_->family.get()->total_width, 8);
+  return static_cast<int>(std::ceil(cells * std::max(1.0, impl_->params.decimate)));
+}
+
 std::vector<TagDetection> TagDetector::detect(const cv::Mat& gray) {
   if (gray.empty() || gray.type() != CV_8UC1) {
     throw std::invalid_argument("TagDetector::detect needs a non-empty 8-bit grey image");
+  }
+  if (gray.cols < min_image_side_px() || gray.rows < min_image_side_px()) {
+    throw std::invalid_argument("TagDetector::detect: a " + std::to_string(gray.cols) + "x" +
+                                std::to_string(gray.rows) + " image is below the " +
+                                std::to_string(min_image_side_px()) + " px minimum side");
   }
   image_u8_t im{gray.cols, gray.rows, static_cast<int32_t>(gray.step[0]),
                 const_cast<uint8_t*>(gray.ptr<uint8_t>(0))};  // libapriltag only reads it

@@ -58,13 +58,14 @@ CameraConfig parse_camera_config(const std::string& yaml_text, const std::string
     read(root, "sensor_id", &c.sensor_id);
     read(root, "frame_id", &c.frame_id);
     if (const auto cap = root["capture"]) {
-      check_keys(cap, {"delay_ms", "width_px", "height_px", "fps"}, source + ": capture");
+      check_keys(cap, {"delay_ms", "width_px", "height_px", "fps", "max_image_pixels"}, source + ": capture");
       double delay_ms = c.capture_delay_s * 1e3;
       read(cap, "delay_ms", &delay_ms);
       c.capture_delay_s = delay_ms * 1e-3;
       read(cap, "width_px", &c.width_px);
       read(cap, "height_px", &c.height_px);
       read(cap, "fps", &c.fps);
+      read(cap, "max_image_pixels", &c.max_image_pixels);
     }
     if (const auto det = root["detector"]) {
       check_keys(det,
@@ -129,6 +130,9 @@ CameraConfig parse_camera_config(const std::string& yaml_text, const std::string
   }
   if (c.width_px < 0 || c.height_px < 0 || !(c.fps >= 0.0)) {
     throw ConfigError(source + ": capture width/height/fps must be >= 0");
+  }
+  if (c.max_image_pixels < 1 || c.max_image_pixels > (int64_t{1} << 30)) {
+    throw ConfigError(source + ": capture.max_image_pixels must be in [1, 2^30]");
   }
   if (!(c.unknown_tag_size_m >= 0.0)) {
     throw ConfigError(source + ": pose.unknown_tag_size_m must be >= 0");
@@ -199,6 +203,11 @@ FrameResult CameraPipeline::process(const Frame& frame) {
   } else if (frame.image.type() != CV_8UC1) {
     ++counters_["rejected_pixel_format"];
     out.world.reject_reason = "pixel_format";
+    return out;
+  }
+  if (gray->cols < detector_.min_image_side_px() || gray->rows < detector_.min_image_side_px()) {
+    ++counters_["rejected_image_size"];  // libapriltag crashes on images this small
+    out.world.reject_reason = "image_size";
     return out;
   }
   const auto detections = detector_.detect(*gray);

@@ -12,6 +12,7 @@
 // The clock is injected (SourceOptions::clock) so tests control time.
 #pragma once
 
+#include "poise/camera/image_file.h"
 #include "poise/camera/intrinsics.h"
 #include "poise/camera/renderer.h"
 
@@ -73,6 +74,7 @@ struct SourceOptions {
   int height_px = 0;
   double fps = 0.0;                     ///< requested device rate (0 = driver default)
   bool pace = false;                    ///< synthetic: sleep to hold fps (live demo)
+  ImageLimits image_limits;             ///< image files: checked from the header before decoding
   std::optional<SyntheticScene> scene;  ///< required for "synthetic"
 };
 

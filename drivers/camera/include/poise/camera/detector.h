@@ -84,8 +84,14 @@ class TagDetector {
   TagDetector(TagDetector&&) noexcept;
   TagDetector& operator=(TagDetector&&) noexcept;
 
-  /// Detects tags in an 8-bit single-channel image (no copy is made). Sorted by id.
+  /// Detects tags in an 8-bit single-channel image (no copy is made). Sorted by id. Throws
+  /// std::invalid_argument for an image with a side below min_image_side_px() (libapriltag
+  /// crashes on images 2 px high); callers check first and count such frames.
   std::vector<TagDetection> detect(const cv::Mat& gray);
+
+  /// Smallest width and height detect() accepts: after decimation one tag of the family (its
+  /// total width in cells, at least 8) must still fit at one pixel per cell.
+  [[nodiscard]] int min_image_side_px() const;
 
   [[nodiscard]] const DetectorParams& params() const;
 

@@ -2,6 +2,7 @@
 // No DDS and no clocks here (stamps come with the frame; durations measured for diagnostics only).
 #pragma once
 
+#include "poise/camera/image_file.h"
 #include "poise/camera/capture.h"
 #include "poise/camera/detector.h"
 #include "poise/camera/intrinsics.h"
@@ -28,6 +29,8 @@ struct CameraConfig {
   int width_px = 0;              ///< requested device resolution (0 = driver default)
   int height_px = 0;
   double fps = 0.0;              ///< requested device rate (0 = driver default)
+  /// Largest image file accepted by the `images` source (width x height, from the file header).
+  int64_t max_image_pixels = ImageLimits{}.max_pixels;
   DetectorParams detector;
   TagPoseParams tag_pose;
   WorldPoseParams world_pose;
