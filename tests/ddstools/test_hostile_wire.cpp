@@ -151,4 +151,34 @@ TEST(HostileWire, GivenMalformedImuSamplesWhenTopicsSamplesThemThenTheyAreCounte
   EXPECT_GE(std::stoi(m[2]), 1) << r.output;
 }
 
+// The estimator nodes read with the generated type support (poise::dds::Reader): an unknown
+// encapsulation used to escape fastcdr as BadParamException and terminate the process.
+TEST(HostileWire, GivenMalformedImuSamplesWhenAParallelKfNodeReadsThemThenItKeepsRunningAndCounts) {
+  DomainLease lease;
+  Child node({poise::testing::bin("poise"), "parallel-kf", "--domain", std::to_string(lease.id()),
+              "--status-period", "0.5"},
+             kEnv);
+  const auto pub = run(malformed_pub(lease.id(), kPairs * 4, 100.0), kCommandTimeout, kEnv);
+  ASSERT_EQ(pub.exit_code, 0) << pub.output << "\nnode:\n" << node.output();
+  poise::testing::sleep_ms(1500);  // at least two status lines after the last sample
+  ASSERT_FALSE(node.wait_for(0ms).has_value()) << "the node must keep running\n" << node.output();
+  node.signal(SIGINT);
+  const auto code = node.wait_for(kExitTimeout);
+  ASSERT_TRUE(code.has_value()) << node.output();
+  EXPECT_EQ(*code, 0) << node.output();
+  const std::string out = node.output();
+  const std::regex status(R"(imu in (\d+), .*malformed (\d+))");
+  std::smatch m;
+  for (auto it = std::sregex_iterator(out.begin(), out.end(), status);
+       it != std::sregex_iterator(); ++it) {
+    m = *it;  // the last status line
+  }
+  ASSERT_FALSE(m.empty()) << out;
+  // Best-effort sensor QoS: not every sample need arrive, but both kinds must be seen; payloads
+  // fastcdr still accepts (a frame_id without NUL, trailing bytes) count as received.
+  EXPECT_GE(std::stoi(m[1]), 1) << out;
+  EXPECT_GE(std::stoi(m[2]), 1) << out;
+  EXPECT_LE(std::stoi(m[1]) + std::stoi(m[2]), 2 * 4 * kPairs) << out;
+}
+
 }  // namespace

@@ -140,6 +140,14 @@ Participant::~Participant() {
   }
 }
 
+eprosima::fastrtps::rtps::InstanceHandle_t undecodable_instance() {
+  eprosima::fastrtps::rtps::InstanceHandle_t handle;
+  for (std::size_t k = 0; k < 16; ++k) {
+    handle.value[k] = 0xFF;
+  }
+  return handle;
+}
+
 fdds::Topic* Participant::topic(const std::string& name, const fdds::TypeSupport& type) {
   std::lock_guard<std::mutex> lock(mutex_);
   const auto found = topics_.find(name);

@@ -1,5 +1,6 @@
 #include "poise/ddstools/raw_type.h"
 
+#include "poise/dds/participant.h"
 #include "poise/ddstools/cdr.h"
 
 #include <fastrtps/utils/md5.h>
@@ -57,9 +58,7 @@ void* RawPubSubType::createData() { return new RawSample(); }
 void RawPubSubType::deleteData(void* data) { delete static_cast<RawSample*>(data); }
 
 rtps::InstanceHandle_t RawPubSubType::undecodable_instance() {
-  rtps::InstanceHandle_t handle;
-  std::memset(handle.value, 0xFF, 16);
-  return handle;
+  return poise::dds::undecodable_instance();
 }
 
 bool RawPubSubType::getKey(void* data, rtps::InstanceHandle_t* handle, bool force_md5) {

@@ -41,7 +41,7 @@ void ImuEstimatorNode::start() {
   if (!imu_reader_) {
     imu_reader_ = std::make_unique<dds::Reader<msg::ImuSamplePubSubType>>(
         host_.participant, host_.topics.imu, dds::QosKind::kSensor,
-        [this](const msg::ImuSample& m, const auto& /*info*/) { on_imu(m); });
+        [this](const msg::ImuSample& m, const auto& /*info*/) { on_imu(m); }, &malformed_);
   }
 }
 
@@ -75,6 +75,7 @@ void ImuEstimatorNode::on_imu(const msg::ImuSample& m) {
   diag.metrics.push_back({"latency", static_cast<double>(last_latency_ns_.load()) * 1e-6, "ms"});
   diag.counters["samples_received"] = received_.load();
   diag.counters["samples_rejected"] = rejected_.load();
+  diag.counters["samples_malformed"] = malformed_.load();
   diag.counters["estimates_published"] = published_.load();
   diagnostics_writer_->write(to_diagnostics_msg(diag, sensor_id_));
 }
@@ -82,7 +83,8 @@ void ImuEstimatorNode::on_imu(const msg::ImuSample& m) {
 std::string ImuEstimatorNode::status() const {
   std::ostringstream os;
   os << "imu in " << received_.load() << ", estimates out " << published_.load() << ", rejected "
-     << rejected_.load() << ", last latency " << static_cast<double>(last_latency_ns_.load()) * 1e-3
+     << rejected_.load() << ", malformed " << malformed_.load()
+     << ", last latency " << static_cast<double>(last_latency_ns_.load()) * 1e-3
      << " us";
   return os.str();
 }

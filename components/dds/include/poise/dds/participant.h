@@ -64,6 +64,10 @@ std::optional<SecurityConfig> security_from_env();
 /// DdsError naming the first file that is missing or unreadable.
 std::vector<std::pair<std::string, std::string>> security_properties(const SecurityConfig& config);
 
+/// The instance of every keyed sample whose key cannot be computed from its bytes (16 bytes 0xFF).
+/// Keyed type supports that read untrusted payloads give it instead of failing getKey().
+eprosima::fastrtps::rtps::InstanceHandle_t undecodable_instance();
+
 /// Loads the QoS profiles (once per process and file). Throws DdsError if the file is unreadable
 /// or invalid. Called by Participant; call it yourself only to fail early.
 void load_profiles(const std::string& qos_file = {});
@@ -125,6 +129,70 @@ class MatchCounter : public eprosima::fastdds::dds::DataWriterListener,
 
 /// Polls `matched()` until it reaches `count` or the timeout elapses.
 bool wait_matched(const MatchCounter& counter, int count, std::chrono::milliseconds timeout);
+
+/// Generated type support made safe for untrusted bytes. fastddsgen 2.3's deserialize() lets
+/// fastcdr's BadParamException (e.g. an unknown encapsulation) escape on a Fast DDS thread
+/// (std::terminate), and a keyed change whose getKey() fails aborts the process in Fast DDS 2.9's
+/// reader history. Here deserialize() and getKey() never throw, getKey() never fails (an
+/// undecodable key is undecodable_instance()), and failed deserialize() calls are counted per data
+/// object, so that Reader counts the samples Fast DDS then skips (Reader::malformed()) and drops
+/// one it would hand over half-filled.
+template <class PubSubType>
+class GuardedType : public PubSubType {
+ public:
+  bool deserialize(eprosima::fastrtps::rtps::SerializedPayload_t* payload, void* data) override {
+    bool ok = false;
+    try {
+      ok = payload != nullptr && PubSubType::deserialize(payload, data);
+    } catch (...) {
+      ok = false;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    Failures& f = failures_[data];
+    f.last_failed = !ok;
+    f.count += ok ? 0 : 1;
+    return ok;
+  }
+  bool getKey(void* data, eprosima::fastrtps::rtps::InstanceHandle_t* handle,
+              bool force_md5 = false) override {
+    if (!this->m_isGetKeyDefined) {
+      return false;
+    }
+    try {
+      if (PubSubType::getKey(data, handle, force_md5)) {
+        return true;
+      }
+    } catch (...) {
+    }
+    *handle = undecodable_instance();
+    return true;
+  }
+  /// True when the last deserialize() into `data` failed.
+  bool last_failed(const void* data) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const auto it = failures_.find(data);
+    return it != failures_.end() && it->second.last_failed;
+  }
+  /// Failed deserialize() calls into `data` since the last call (then forgets `data`).
+  uint64_t take_failures(const void* data) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const auto it = failures_.find(data);
+    if (it == failures_.end()) {
+      return 0;
+    }
+    const uint64_t n = it->second.count;
+    failures_.erase(it);
+    return n;
+  }
+
+ private:
+  struct Failures {
+    uint64_t count = 0;
+    bool last_failed = false;
+  };
+  std::mutex mutex_;
+  std::map<const void*, Failures> failures_;
+};
 }  // namespace detail
 
 /// A typed data writer. `PubSubType` is a fastddsgen-generated `XPubSubType`.
@@ -135,7 +203,8 @@ class Writer {
 
   Writer(Participant& participant, const std::string& topic_name, QosKind kind)
       : participant_(participant), topic_name_(topic_name) {
-    topic_ = participant.topic(topic_name, eprosima::fastdds::dds::TypeSupport(new PubSubType()));
+    topic_ = participant.topic(topic_name, eprosima::fastdds::dds::TypeSupport(
+                                               new detail::GuardedType<PubSubType>()));
     writer_ = detail::create_writer(participant, topic_, kind, &listener_);
   }
   Writer(Participant& participant, const std::string& topic_name)
@@ -175,9 +244,17 @@ class Reader {
   using Message = typename PubSubType::type;
   using Callback = std::function<void(const Message&, const eprosima::fastdds::dds::SampleInfo&)>;
 
-  Reader(Participant& participant, const std::string& topic_name, QosKind kind, Callback callback)
-      : participant_(participant), listener_(std::move(callback)) {
-    topic_ = participant.topic(topic_name, eprosima::fastdds::dds::TypeSupport(new PubSubType()));
+  /// `malformed` (optional, must outlive the reader): also counts the samples malformed() counts,
+  /// for an owner that reports them after the reader is gone.
+  Reader(Participant& participant, const std::string& topic_name, QosKind kind, Callback callback,
+         std::atomic<uint64_t>* malformed = nullptr)
+      : participant_(participant), listener_(std::move(callback), malformed) {
+    topic_ = participant.topic(topic_name, eprosima::fastdds::dds::TypeSupport(
+                                               new detail::GuardedType<PubSubType>()));
+    // The type registered first under this name is the one Fast DDS uses (poise registers the
+    // guarded type everywhere; a raw or foreign registration leaves failures undetected here).
+    listener_.guard = dynamic_cast<detail::GuardedType<PubSubType>*>(
+        participant.get()->find_type(topic_->get_type_name()).get());
     reader_ = detail::create_reader(participant, topic_, kind, &listener_);
   }
   Reader(Participant& participant, const std::string& topic_name, Callback callback)
@@ -197,27 +274,41 @@ class Reader {
   }
   /// Samples delivered to the callback so far.
   [[nodiscard]] uint64_t received() const { return listener_.received(); }
+  /// Samples dropped because their bytes did not deserialize (malformed, from any participant).
+  [[nodiscard]] uint64_t malformed() const { return listener_.malformed(); }
 
  private:
   class Listener : public detail::MatchCounter {
    public:
-    explicit Listener(Callback callback) : callback_(std::move(callback)) {}
+    Listener(Callback callback, std::atomic<uint64_t>* malformed)
+        : callback_(std::move(callback)), external_malformed_(malformed) {}
     void on_data_available(eprosima::fastdds::dds::DataReader* reader) override {
       Message message;
       eprosima::fastdds::dds::SampleInfo info;
       while (reader->take_next_sample(&message, &info) == ReturnCode::RETCODE_OK) {
-        if (info.valid_data) {
-          received_.fetch_add(1);
-          callback_(message, info);
+        if (!info.valid_data || (guard != nullptr && guard->last_failed(&message))) {
+          continue;  // a failed deserialize is counted below
         }
+        received_.fetch_add(1);
+        callback_(message, info);
+      }
+      // Samples whose bytes did not deserialize: Fast DDS skips them (or, above, we do).
+      const uint64_t failed = guard != nullptr ? guard->take_failures(&message) : 0;
+      malformed_.fetch_add(failed);
+      if (external_malformed_ != nullptr) {
+        external_malformed_->fetch_add(failed);
       }
     }
     [[nodiscard]] uint64_t received() const { return received_.load(); }
+    [[nodiscard]] uint64_t malformed() const { return malformed_.load(); }
+    detail::GuardedType<PubSubType>* guard = nullptr;  // set before the reader exists
 
    private:
     using ReturnCode = eprosima::fastrtps::types::ReturnCode_t;
     Callback callback_;
+    std::atomic<uint64_t>* external_malformed_;
     std::atomic<uint64_t> received_{0};
+    std::atomic<uint64_t> malformed_{0};
   };
 
   Participant& participant_;

@@ -64,6 +64,7 @@ class ImuEstimatorNode : public runtime::Component {
   std::atomic<uint64_t> received_{0};
   std::atomic<uint64_t> published_{0};
   std::atomic<uint64_t> rejected_{0};
+  std::atomic<uint64_t> malformed_{0};  // IMU payloads that did not deserialize (dropped)
   std::atomic<int64_t> last_latency_ns_{0};
   uint64_t since_diagnostics_ = 0;
   std::unique_ptr<dds::Writer<msg::FilterDiagnosticsPubSubType>> diagnostics_writer_;
