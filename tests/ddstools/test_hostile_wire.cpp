@@ -88,7 +88,7 @@ TEST(HostileWire, GivenMalformedImuSamplesWhenRecordedThenEveryValidOneIsKeptAnd
   const std::string out = recorder.output();
   EXPECT_NE(out.find("imu (poise::msg::ImuSample): received " + std::to_string(2 * kPairs) +
                      ", written " + std::to_string(kPairs) + ", malformed " +
-                     std::to_string(kPairs)),
+                     std::to_string(kPairs) + ", dropped 0, lost 0"),
             std::string::npos)
       << out;
   EXPECT_NE(out.find("malformed payloads were rejected, not recorded (first: "), std::string::npos)

@@ -214,5 +214,101 @@ TEST(Process, SelectiveEkfComponentRunsOfflineOnTheImuAndSaysWhatIsLeftOut) {
   EXPECT_GT(estimates, 0u);
 }
 
+/// Flips one byte inside the records of chunk `k` of `path` (its CRC no longer matches); returns
+/// the messages that chunk held.
+uint64_t damage_chunk(const std::string& path, size_t k) {
+  uint64_t offset = 0;
+  uint64_t length = 0;
+  uint64_t held = 0;
+  {
+    const McapReader r = McapReader::open_file(path);
+    EXPECT_GT(r.chunks().size(), k + 1);
+    offset = r.chunks()[k].offset;
+    length = r.chunks()[k].length;
+    MessageCursor cursor = r.messages();
+    while (const MessageView* m = cursor.next()) {
+      held += m->chunk_offset == offset ? 1 : 0;
+    }
+  }
+  std::vector<uint8_t> bytes = read_bytes(path);
+  bytes[offset + length - 5] ^= 0x40;
+  std::ofstream(path, std::ios::binary | std::ios::trunc)
+      .write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
+  return held;
+}
+
+// Issue 19 item 6: an unreadable chunk is skipped, counted and reported, and the command exits 3
+// unless --allow-damaged; a malformed payload is skipped and named by index and offset.
+TEST(Process, GivenACorruptChunkWhenProcessedThenTheRestIsProcessedAndTheDamageReported) {
+  const std::string dir = testing::cases_dir("process-damaged");
+  const std::string input = dir + "/input.mcap";
+  write_input(input);
+  const uint64_t lost = damage_chunk(input, 1);
+  ASSERT_GT(lost, 0u);
+  std::vector<ProcessFilter> filters;
+  filters.push_back({"fake", std::make_unique<FakeFilter>()});
+  ProcessOptions o;
+  o.input = input;
+  o.output = dir + "/out.mcap";
+  const ProcessStats stats = process_recording(o, filters);
+  EXPECT_EQ(stats.damaged_chunks, 1u);
+  EXPECT_TRUE(stats.input_damaged());
+  EXPECT_EQ(stats.input_messages, static_cast<uint64_t>(kImu + kImu / 10 + 1) - lost);
+  EXPECT_EQ(stats.undecodable, 1u);
+  ASSERT_EQ(stats.undecodable_details.size(), 1u);
+  // The garbage payload is the last message: #(messages read), in the last chunk.
+  EXPECT_NE(stats.undecodable_details[0].find("message #" + std::to_string(stats.input_messages) +
+                                              " (log time "),
+            std::string::npos)
+      << stats.undecodable_details[0];
+  EXPECT_NE(stats.undecodable_details[0].find("chunk at byte "), std::string::npos);
+  EXPECT_NE(stats.undecodable_details[0].find("6 bytes: payload truncated"), std::string::npos)
+      << stats.undecodable_details[0];
+
+  const std::string out = dir + "/cli.mcap";
+  const auto r = poise::testing::run(
+      {poise::testing::bin("poise"), "process", input, "-o", out, "--filter", "parallel_kf"}, 60s);
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find("the input is damaged (1 corrupt part(s) skipped)"), std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("chunk CRC mismatch"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("skipped message #"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("--allow-damaged"), std::string::npos) << r.output;
+  EXPECT_TRUE(McapReader::open_file(out).report().complete) << "the output is still finalised";
+  const auto allowed = poise::testing::run({poise::testing::bin("poise"), "process", input, "-o",
+                                            out, "--filter", "parallel_kf", "--allow-damaged"},
+                                           60s);
+  EXPECT_EQ(allowed.exit_code, 0) << allowed.output;
+}
+
+TEST(Replay, GivenACorruptChunkAndAMalformedPayloadWhenReplayedThenEveryReadableValidMessageGoesOut) {
+  const std::string dir = testing::cases_dir("replay-damaged");
+  const std::string input = dir + "/input.mcap";
+  write_input(input);
+  const uint64_t lost = damage_chunk(input, 1);
+  poise::testing::DomainLease lease;
+  const std::vector<std::string> env = {"POISE_DDS_PROFILE=poise_loopback"};
+  const std::vector<std::string> argv = {poise::testing::bin("poise"), "replay", input,
+                                         "--as-fast-as-possible", "--wait", "0", "--domain",
+                                         std::to_string(lease.id())};
+  const auto r = poise::testing::run(argv, 60s, env);
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  const uint64_t readable = static_cast<uint64_t>(kImu + kImu / 10 + 1) - lost;
+  // Every readable message except the one malformed payload is published; none stops the replay.
+  EXPECT_NE(r.output.find("published " + std::to_string(readable - 1) + " messages"),
+            std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("poise replay: skipped message #" + std::to_string(readable) +
+                          " (log time "),
+            std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("skipped 1 malformed payload(s)"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("chunk CRC mismatch"), std::string::npos) << r.output;
+  std::vector<std::string> allowed = argv;
+  allowed.emplace_back("--allow-damaged");
+  const auto ok = poise::testing::run(allowed, 60s, env);
+  EXPECT_EQ(ok.exit_code, 0) << ok.output;
+}
+
 }  // namespace
 }  // namespace poise::record

@@ -15,6 +15,7 @@
 #include <csignal>
 #include <map>
 #include <mutex>
+#include <regex>
 #include <sstream>
 #include <thread>
 
@@ -370,6 +371,63 @@ TEST(RecordCli, DiskFullAndBadFilesGiveClearErrors) {
     const auto help = poise::testing::run({tool(), cmd, "--help"}, 30s);
     EXPECT_EQ(help.exit_code, 0) << help.output;
   }
+}
+
+// Issue 19 item 7: on a full disk the counts are exact: written = what the file holds, every other
+// valid sample received is counted lost, and the exit code is 1. The limit is the child's own
+// RLIMIT_FSIZE (prlimit, SIGXFSZ ignored so that write() fails with EFBIG): no root, no device.
+TEST(RecordCli, GivenAFileSizeLimitWhenItIsReachedThenWrittenIsWhatTheFileHoldsAndTheRestIsLost) {
+  const std::string prlimit = testing::find_on_path("prlimit");
+  if (prlimit.empty()) {
+    POISE_SKIP("prlimit (util-linux) not found on PATH");
+  }
+  poise::testing::DomainLease lease;
+  const std::string dir = testing::cases_dir("fsize");
+  const std::string file = dir + "/limited.mcap";
+  constexpr int kLimitBytes = 300000;  // about one 1-second chunk of the stream below
+  constexpr int kMessages = 3000;      // at 1 kHz: 3 s, several chunks' worth
+  poise::dds::ParticipantOptions popts;
+  popts.domain = lease.id();
+  popts.profile = kProfile;
+  poise::dds::Participant participant(popts);
+  poise::dds::Writer<msg::AttitudeEstimatePubSubType> writer(participant, "attitude/full");
+  poise::testing::Child child(
+      {"/bin/sh", "-c",
+       "trap '' XFSZ; exec \"$0\" --fsize=" + std::to_string(kLimitBytes) +
+           " \"$1\" record -o \"$2\" attitude/full --domain \"$3\" --profile \"$4\"",
+       prlimit, tool(), file, std::to_string(lease.id()), kProfile});
+  ASSERT_TRUE(writer.wait_for_readers(1, kMatchTimeout)) << child.output();
+  for (int i = 0; i < kMessages && !child.wait_for(0s).has_value(); ++i) {
+    writer.write(testing::make_attitude(static_cast<uint32_t>(i), 1'000'000'000LL + i));
+    std::this_thread::sleep_for(1ms);
+  }
+  const auto code = child.wait_for(15s);
+  ASSERT_TRUE(code.has_value()) << "the recorder stops at the write error\n" << child.output();
+  EXPECT_EQ(*code, 1) << child.output();
+  const std::string out = child.output();
+  EXPECT_NE(out.find("File too large"), std::string::npos) << out;
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(
+      out, m,
+      std::regex(R"(attitude/full \(poise::msg::AttitudeEstimate\): received (\d+), written (\d+), )"
+                 R"(malformed 0, dropped 0, lost (\d+))")))
+      << out;
+  const uint64_t received = std::stoull(m[1]);
+  const uint64_t written = std::stoull(m[2]);
+  const uint64_t lost = std::stoull(m[3]);
+  EXPECT_EQ(written + lost, received) << out;
+  EXPECT_GT(lost, 0u) << out;
+  const McapReader reader = McapReader::open_file(file);
+  uint64_t in_file = 0;
+  MessageCursor cursor = reader.messages();
+  while (cursor.next() != nullptr) {
+    ++in_file;
+  }
+  EXPECT_EQ(in_file, written) << out;
+  EXPECT_NE(out.find("lost (received, not in the file because writing failed): " +
+                     std::to_string(lost)),
+            std::string::npos)
+      << out;
 }
 
 }  // namespace

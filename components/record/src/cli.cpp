@@ -45,6 +45,7 @@ struct ReplayArgs {
   double wait_s = 1.0;
   int domain = 0;
   std::string profile;
+  bool allow_damaged = false;
 };
 
 struct ProcessArgs {
@@ -53,7 +54,18 @@ struct ProcessArgs {
   std::string host;
   std::vector<std::string> filters;
   std::string imu_topic;
+  bool allow_damaged = false;
 };
+
+// Damaged input (incomplete file, unreadable chunks): the readable part was used and reported;
+// exit code 3 (as `poise info`) unless the user accepts damaged input.
+void refuse_damaged(const char* command, bool damaged, bool allow_damaged) {
+  if (damaged && !allow_damaged) {
+    std::cerr << "poise " << command
+              << ": exit code 3: the input is damaged (see above); --allow-damaged accepts it\n";
+    throw ExitCode{3};
+  }
+}
 
 std::string known_filters() {
   std::string known;
@@ -133,15 +145,27 @@ void run_process(const ProcessArgs& a) {
   } catch (const record::WriteError& e) {
     throw Error(e.what());
   }
-  if (!stats.input_complete) {
-    std::cerr << "poise process: the input was incomplete; processed the recovered part:\n";
+  if (!stats.input_problems.empty()) {
+    std::cerr << "poise process: the input is "
+              << (stats.input_damaged() ? "damaged (" + std::to_string(stats.corrupt_in_file +
+                                                                       stats.damaged_chunks) +
+                                              " corrupt part(s) skipped)"
+                                        : std::string("incomplete"))
+              << "; processed the readable part:\n";
     for (const auto& p : stats.input_problems) {
       std::cerr << "  " << p << "\n";
     }
   }
   std::cerr << "poise process: " << stats.input_messages << " messages, " << stats.imu_samples
             << " IMU samples on '" << o.imu_topic << "' (" << stats.undecodable
-            << " undecodable) -> " << a.output << "\n";
+            << " malformed, skipped) -> " << a.output << "\n";
+  for (const auto& d : stats.undecodable_details) {
+    std::cerr << "  skipped " << d << "\n";
+  }
+  if (stats.undecodable > stats.undecodable_details.size()) {
+    std::cerr << "  ... and " << stats.undecodable - stats.undecodable_details.size()
+              << " more malformed IMU payload(s)\n";
+  }
   for (const auto& f : filters) {
     std::cerr << "  " << o.output_prefix << f.name << ": " << stats.estimates[f.name]
               << " estimates, " << stats.rejected[f.name] << " samples rejected\n";
@@ -150,6 +174,7 @@ void run_process(const ProcessArgs& a) {
     throw Error("no ImuSample messages on topic '" + o.imu_topic +
                 "' in the recording (use --imu-topic; `poise info` lists the topics)");
   }
+  refuse_damaged("process", stats.input_damaged(), a.allow_damaged);
 }
 
 void run_info(const InfoArgs& a) {
@@ -202,8 +227,8 @@ void run_record(const RecordArgs& a) {
   std::cerr << " in " << stats.elapsed_s << " s\n";
   for (const auto& [topic, t] : stats.topics) {
     std::cerr << "  " << topic << " (" << t.type << "): received " << t.received << ", written "
-              << t.written << ", malformed " << t.malformed << ", sequence gaps " << t.gaps
-              << "\n";
+              << t.written << ", malformed " << t.malformed << ", dropped " << t.dropped
+              << ", lost " << t.lost << ", sequence gaps " << t.gaps << "\n";
     if (t.malformed > 0) {
       std::cerr << "    malformed payloads were rejected, not recorded (first: " << t.first_problem
                 << ")\n";
@@ -211,6 +236,10 @@ void run_record(const RecordArgs& a) {
   }
   if (stats.dropped_queue_full > 0) {
     std::cerr << "  dropped (writer could not keep up): " << stats.dropped_queue_full << "\n";
+  }
+  if (stats.lost > 0) {
+    std::cerr << "  lost (received, not in the file because writing failed): " << stats.lost
+              << "\n";
   }
   if (!stats.error.empty()) {
     throw Error(stats.error);
@@ -253,10 +282,18 @@ void run_replay(const ReplayArgs& a) {
   if (stats.write_failures > 0) {
     std::cerr << "  DDS refused " << stats.write_failures << " samples\n";
   }
-  if (!stats.complete) {
+  if (stats.malformed > 0) {
+    std::cerr << "  skipped " << stats.malformed << " malformed payload(s) (not published)\n";
+  }
+  if (stats.damaged()) {
+    std::cerr << "poise replay: the file is damaged ("
+              << stats.corrupt_in_file + stats.schedule.problems.size()
+              << " corrupt part(s) skipped, see above); the readable part was replayed\n";
+  } else if (!stats.complete) {
     std::cerr << "poise replay: the file was incomplete (see above); the recovered part was "
                  "replayed\n";
   }
+  refuse_damaged("replay", stats.damaged(), a.allow_damaged);
 }
 
 }  // namespace
@@ -315,6 +352,9 @@ void add_record_commands(CLI::App& app) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   replay_cmd->add_option("--profile", rep->profile, "DDS participant profile");
+  replay_cmd->add_flag("--allow-damaged", rep->allow_damaged,
+                       "exit 0 although the file is incomplete or has unreadable chunks (the "
+                       "readable part is replayed either way; exit code 3 otherwise)");
   add_domain_option(replay_cmd, &rep->domain);
   replay_cmd->callback([rep] { run_replay(*rep); });
 
@@ -333,6 +373,9 @@ void add_record_commands(CLI::App& app) {
                           "NAME[=CONFIG.yaml]: a filter to run (repeatable); see `poise bench "
                           "filters --help` for names");
   process_cmd->add_option("--imu-topic", proc->imu_topic, "IMU topic (default: host file / imu)");
+  process_cmd->add_flag("--allow-damaged", proc->allow_damaged,
+                        "exit 0 although the input is incomplete or has unreadable chunks (the "
+                        "readable part is processed either way; exit code 3 otherwise)");
   process_cmd->callback([proc] { run_process(*proc); });
 
   CLI::App* bench = subcommand_group(app, "bench", "Benchmarks (print figures)");

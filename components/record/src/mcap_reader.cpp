@@ -433,6 +433,7 @@ void McapReader::scan() {
                                    " corrupt bytes, resumed at the chunk at byte " +
                                    std::to_string(*next));
         crc_valid = false;
+        ++report_.corrupt;
         pos = *next;
         continue;
       }
@@ -471,6 +472,7 @@ void McapReader::scan() {
             records = chunk_records(body, body_len);
           } catch (const ReadError& e) {
             ++chunk_fail;
+            ++report_.corrupt;
             report_.problems.push_back("chunk " + at_byte(pos) + " (" +
                                        std::to_string(record.size()) + " bytes): " + e.what() +
                                        "; its messages are skipped");
@@ -498,6 +500,7 @@ void McapReader::scan() {
           Parser p(body, body_len, "Data End");
           const uint32_t stored = p.u32();
           if (stored != 0 && crc_valid && stored != data_crc) {
+            ++report_.corrupt;
             report_.problems.push_back("data section CRC mismatch (stored " +
                                        std::to_string(stored) + ", computed " +
                                        std::to_string(data_crc) + "): some bytes are corrupt");
@@ -513,6 +516,7 @@ void McapReader::scan() {
           break;  // indexes, attachments, metadata: not needed to read messages
       }
     } catch (const ReadError& e) {
+      ++report_.corrupt;
       report_.problems.push_back(std::string(opcode_name(op)) + " record " + at_byte(pos) +
                                  ": " + e.what() + "; skipped");
     }
@@ -580,6 +584,7 @@ bool MessageCursor::load_next_chunk() {
     }
     entries_.clear();
     next_entry_ = 0;
+    chunk_offset_ = c.offset;
     try {
       for_each_record(records_.data(), records_.size(), "chunk",
                       [&](uint8_t op, const uint8_t* body, size_t len, size_t offset) {
@@ -630,7 +635,16 @@ const MessageView* MessageCursor::next() {
   view_.publish_time_ns = get_u64(body + 14);
   view_.data = body + 22;
   view_.size = static_cast<size_t>(len - 22);
+  view_.index = ++delivered_;
+  view_.chunk_offset = chunk_offset_;
+  view_.record_offset = e.offset;
   return &view_;
+}
+
+std::string describe_position(const MessageView& m) {
+  return "message #" + std::to_string(m.index) + " (log time " + std::to_string(m.log_time_ns) +
+         " ns, chunk at byte " + std::to_string(m.chunk_offset) + ", record " +
+         std::to_string(m.record_offset) + " in it)";
 }
 
 }  // namespace poise::record

@@ -2,6 +2,7 @@
 
 #include "poise/core/attitude.h"
 #include "poise/dds/convert.h"
+#include "poise/ddstools/cdr.h"
 #include "poise/record/idl_schema.h"
 #include "poise/record/mcap.h"
 
@@ -11,6 +12,7 @@
 #include <fastdds/rtps/common/SerializedPayload.h>
 
 #include <cstring>
+#include <optional>
 
 namespace poise::record {
 
@@ -25,6 +27,7 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
   const McapReader reader = McapReader::open_file(options.input);
   stats.input_complete = reader.report().complete;
   stats.input_problems = reader.report().problems;
+  stats.corrupt_in_file = reader.report().corrupt;
 
   int64_t log_clock = 0;  // the writer's chunk clock: recording time, never the wall clock
   WriterOptions wopt;
@@ -91,17 +94,27 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
     if (m->channel->topic == options.imu_topic && m->schema != nullptr &&
         m->schema->name == "poise::msg::ImuSample") {
       ++stats.imu_samples;
-      in_payload.reserve(static_cast<uint32_t>(m->size));
-      std::memcpy(in_payload.data, m->data, m->size);
-      in_payload.length = static_cast<uint32_t>(m->size);
-      bool decoded = false;
-      try {
-        decoded = imu_type.deserialize(&in_payload, &imu_msg);
-      } catch (const std::exception&) {
-        decoded = false;
+      // The one payload check (bounds, encapsulation, strings, trailing bytes) before fastcdr.
+      std::optional<std::string> problem = ddstools::payload_problem(
+          ddstools::TypeTable::builtin(), m->schema->name, m->data, m->size);
+      if (!problem) {
+        in_payload.reserve(static_cast<uint32_t>(m->size));
+        std::memcpy(in_payload.data, m->data, m->size);
+        in_payload.length = static_cast<uint32_t>(m->size);
+        try {
+          if (!imu_type.deserialize(&in_payload, &imu_msg)) {
+            problem = "fastcdr could not deserialize it";
+          }
+        } catch (const std::exception& e) {
+          problem = std::string("fastcdr: ") + e.what();
+        }
       }
-      if (!decoded) {
+      if (problem) {
         ++stats.undecodable;
+        if (stats.undecodable_details.size() < kMaxDescribedSkips) {
+          stats.undecodable_details.push_back(describe_position(*m) + " on '" + m->channel->topic +
+                                              "', " + std::to_string(m->size) + " bytes: " + *problem);
+        }
         continue;
       }
       const ImuSample sample = dds::from_msg(imu_msg);
@@ -135,6 +148,7 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
       }
     }
   }
+  stats.damaged_chunks = cursor.problems().size();
   for (const std::string& p : cursor.problems()) {
     stats.input_problems.push_back(p);
   }

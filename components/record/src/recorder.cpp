@@ -181,6 +181,7 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
     last = std::max(last, seq);
     if (queue.size() >= opt.max_queue_messages) {
       ++stats.dropped_queue_full;
+      ++t.dropped;
       return;
     }
     queue.push_back(std::move(p));
@@ -286,6 +287,7 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
     } catch (const IoError& e) {
       throw WriteError(e.what());
     }
+    accounted = false;
     schema_ids.clear();
     stats.files.push_back(path);
     for (auto& s : subs) {
@@ -376,9 +378,36 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
                   static_cast<uint64_t>(std::max<int64_t>(0, p.publish_ns)), p.bytes.data(),
                   p.bytes.size());
     owner.written_.fetch_add(1);
+  }
+
+  // Adds what the current file holds (durable chunks, per channel) to the written counts; once
+  // per file, after it was closed or failed.
+  bool accounted = false;
+  void account_file() {
+    if (accounted || !writer) {
+      return;
+    }
+    accounted = true;
+    const auto& held = writer->channel_messages();
     std::lock_guard<std::mutex> lock(mutex);
-    ++stats.topics[s.topic].written;
-    ++stats.written;
+    for (const auto& sub : subs) {
+      const auto it = held.find(sub->channel);
+      const uint64_t n = it == held.end() ? 0 : it->second;
+      stats.topics[sub->topic].written += n;
+      stats.written += n;
+    }
+  }
+
+  // After the participant is gone: every valid sample received and not in the file is lost.
+  void account_lost() {
+    std::lock_guard<std::mutex> lock(mutex);
+    for (auto& [topic, t] : stats.topics) {
+      (void)topic;
+      const uint64_t kept = t.written + t.malformed + t.dropped;
+      t.lost = t.received > kept ? t.received - kept : 0;
+    }
+    const uint64_t kept = stats.written + stats.malformed + stats.dropped_queue_full;
+    stats.lost = stats.received > kept ? stats.received - kept : 0;
   }
 };
 
@@ -424,6 +453,7 @@ RecorderStats Recorder::run() {
           im.writer->stats().bytes + im.writer->stats().pending_messages * 64 >=
               options_.split_size_bytes) {
         im.writer->close();
+        im.account_file();
         ++im.file_index;
         im.open_file();
       }
@@ -480,9 +510,12 @@ RecorderStats Recorder::run() {
     drain();
     im.writer->close();
   } catch (const WriteError& e) {
+    std::lock_guard<std::mutex> lock(im.mutex);
     im.stats.error = e.what();
   }
+  im.account_file();  // the writer is closed, or failed with its durable chunks finalised
   im.destroy_participant();
+  im.account_lost();
   std::lock_guard<std::mutex> lock(im.mutex);
   im.stats.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return im.stats;

@@ -2,6 +2,7 @@
 
 #include "poise/dds/participant.h"
 #include "poise/dds/topics.h"
+#include "poise/ddstools/cdr.h"
 #include "poise/ddstools/raw_type.h"
 
 #include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
@@ -37,6 +38,7 @@ struct Output {
   fdds::DataWriter* writer = nullptr;
   std::unique_ptr<dds::detail::MatchCounter> matches;
   dds::RawSample sample;
+  std::string type_name;  // checked against the built-in IDL when it knows the type
 };
 
 }  // namespace
@@ -47,6 +49,7 @@ ReplayStats replay(const ReplayOptions& options) {
   ReplayStats stats;
   stats.complete = reader.report().complete;
   stats.file_problems = reader.report().problems;
+  stats.corrupt_in_file = reader.report().corrupt;
   if (!stats.complete) {
     log << "poise replay: " << options.input
         << " is incomplete; replaying what could be recovered (" << reader.report().messages
@@ -96,6 +99,7 @@ ReplayStats replay(const ReplayOptions& options) {
       qos.durability().kind = fdds::TRANSIENT_LOCAL_DURABILITY_QOS;
     }
     Output out;
+    out.type_name = type_name;
     out.matches = std::make_unique<dds::detail::MatchCounter>();
     out.writer = participant.publisher()->create_datawriter(
         topic, qos, out.matches.get(), fdds::StatusMask::publication_matched());
@@ -129,6 +133,15 @@ ReplayStats replay(const ReplayOptions& options) {
       return false;
     }
     Output& out = found->second;
+    const std::optional<std::string> problem = ddstools::payload_problem(
+        ddstools::TypeTable::builtin(), out.type_name, m.data, m.size);
+    if (problem) {
+      if (++stats.malformed <= kMaxDescribedSkips) {
+        log << "poise replay: skipped " << describe_position(m) << " on '" << m.channel->topic
+            << "', " << m.size << " bytes: " << *problem << "\n";
+      }
+      return false;
+    }
     out.sample.data.assign(m.data, m.data + m.size);
     if (!out.writer->write(&out.sample)) {
       ++stats.write_failures;

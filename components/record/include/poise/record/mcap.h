@@ -125,6 +125,10 @@ class McapWriter {
   void close();
 
   [[nodiscard]] const WriterStats& stats() const { return stats_; }
+  /// Messages per channel id in closed (durable) chunks: what the file holds.
+  [[nodiscard]] const std::map<uint16_t, uint64_t>& channel_messages() const {
+    return channel_counts_;
+  }
   [[nodiscard]] bool closed() const { return closed_; }
   [[nodiscard]] const std::string& sink_name() const { return sink_name_; }
 
@@ -177,6 +181,9 @@ struct FileReport {
   bool complete = false;   ///< valid footer + summary (with matching CRC); nothing recovered
   bool recovered = false;  ///< read by scanning: some part was truncated or corrupt
   std::vector<std::string> problems;  ///< human-readable, one per problem, with byte offsets
+  /// Corrupt chunks, byte ranges and records found by scanning (data lost inside the file). A
+  /// file merely cut short (killed writer) is incomplete but not corrupt.
+  uint64_t corrupt = 0;
   uint64_t file_size = 0;
   uint64_t messages = 0;
   uint64_t chunks = 0;
@@ -195,7 +202,16 @@ struct MessageView {
   uint64_t publish_time_ns = 0;
   const uint8_t* data = nullptr;
   size_t size = 0;
+  uint64_t index = 0;         ///< 1-based position in the cursor's iteration
+  uint64_t chunk_offset = 0;  ///< file offset of the Chunk (or loose Message) record holding it
+  uint64_t record_offset = 0; ///< offset of the Message record in the chunk's uncompressed records
 };
+
+/// "message #12 (log time 5000001000 ns, chunk at byte 4096, record 230 in it)": where a message
+/// is, for reports about it.
+std::string describe_position(const MessageView& m);
+/// Reports describe at most this many skipped messages one by one (the rest are counted).
+inline constexpr size_t kMaxDescribedSkips = 10;
 
 /// Selects messages: log time in [start_ns, end_ns] and topic in TOPICS (all when empty).
 struct ReadFilter {
@@ -237,6 +253,8 @@ class MessageCursor {
   };
   std::vector<Entry> entries_;
   size_t next_entry_ = 0;
+  uint64_t chunk_offset_ = 0;  // of the chunk whose records_ are loaded
+  uint64_t delivered_ = 0;
   MessageView view_;
   std::vector<std::string> problems_;
 };

@@ -38,11 +38,17 @@ struct ProcessOptions {
 struct ProcessStats {
   uint64_t input_messages = 0;
   uint64_t imu_samples = 0;
-  uint64_t undecodable = 0;  ///< IMU payloads that did not deserialize (rejected, counted)
+  uint64_t undecodable = 0;  ///< IMU payloads that are malformed (skipped, counted)
+  std::vector<std::string> undecodable_details;  ///< the first 10: position (index, offset) + why
+  uint64_t damaged_chunks = 0;  ///< chunks that could not be read while processing (skipped)
   std::map<std::string, uint64_t> estimates;  ///< per filter
   std::map<std::string, uint64_t> rejected;   ///< per filter: update() returned false
   bool input_complete = true;
   std::vector<std::string> input_problems;
+  uint64_t corrupt_in_file = 0;  ///< FileReport::corrupt of the input
+  /// Corrupt chunks or bytes: part of the input could not be read (a file merely cut short by a
+  /// killed recorder is incomplete, not damaged).
+  [[nodiscard]] bool input_damaged() const { return corrupt_in_file > 0 || damaged_chunks > 0; }
 };
 
 /// Throws ReadError (input) or WriteError (output).

@@ -41,7 +41,9 @@ struct RecorderOptions {
 struct TopicStats {
   std::string type;
   uint64_t received = 0;  ///< samples handed to the recorder by DDS
-  uint64_t written = 0;   ///< messages given to the MCAP writer
+  uint64_t written = 0;   ///< messages in the file(s): in complete, durable chunks
+  uint64_t lost = 0;      ///< valid samples received but not in the file (write error)
+  uint64_t dropped = 0;   ///< dropped because the write queue was full
   uint64_t gaps = 0;      ///< samples missing according to writer sequence numbers
   uint64_t malformed = 0;  ///< rejected: not a valid payload of `type` (never written)
   std::string first_problem;  ///< why the first malformed payload was rejected
@@ -50,7 +52,8 @@ struct TopicStats {
 struct RecorderStats {
   std::map<std::string, TopicStats> topics;
   uint64_t received = 0;
-  uint64_t written = 0;
+  uint64_t written = 0;  ///< in the file(s); received = written + malformed + dropped + lost
+  uint64_t lost = 0;     ///< never reached a durable chunk (write error: disk full, ...)
   uint64_t dropped_queue_full = 0;
   uint64_t sequence_gaps = 0;
   uint64_t malformed = 0;  ///< all topics (see TopicStats::malformed)
@@ -73,7 +76,7 @@ class Recorder {
   void request_stop() { stop_.store(true); }
   /// Number of topics subscribed so far (thread-safe).
   [[nodiscard]] int subscribed() const { return subscribed_.load(); }
-  /// Messages written so far (thread-safe).
+  /// Messages handed to the MCAP writer so far (progress; durable counts are in RecorderStats).
   [[nodiscard]] uint64_t written() const { return written_.load(); }
   /// Remote writers currently matched by the recorder's readers, all topics (thread-safe).
   [[nodiscard]] int matched_writers() const { return matched_.load(); }

@@ -23,8 +23,12 @@ struct ReplayOptions {
 struct ReplayStats {
   ScheduleStats schedule;
   uint64_t write_failures = 0;  ///< DDS refused the sample (e.g. larger than the type allows)
+  uint64_t malformed = 0;  ///< payloads not valid for their type: skipped (logged with position)
   std::vector<std::string> file_problems;  ///< what the reader recovered (empty if complete)
   bool complete = true;
+  uint64_t corrupt_in_file = 0;  ///< FileReport::corrupt
+  /// Corrupt chunks or bytes (in the file or met while replaying); a file cut short is not.
+  [[nodiscard]] bool damaged() const { return corrupt_in_file > 0 || !schedule.problems.empty(); }
 };
 
 /// Opens the file (ReadError if it is not MCAP), creates one writer per selected channel and
