@@ -49,8 +49,9 @@ std::vector<uint8_t> read_bytes(const std::string& path) {
   return std::vector<uint8_t>(std::istreambuf_iterator<char>(in), {});
 }
 
-/// A recording with kImu stationary IMU samples at 100 Hz, attitude messages, one garbage payload.
-void write_input(const std::string& path) {
+/// A recording with kImu stationary IMU samples at 100 Hz, attitude messages, one garbage payload
+/// at the end (and with `garbage_mid`, one more in the middle).
+void write_input(const std::string& path, bool garbage_mid = false) {
   int64_t clock = 0;
   WriterOptions opt;
   opt.clock = [&clock] { return clock; };
@@ -73,6 +74,10 @@ void write_input(const std::string& path) {
     const auto bytes = testing::serialize<msg::ImuSamplePubSubType>(m);
     w.write(imu, static_cast<uint32_t>(i), static_cast<uint64_t>(stamp + 1000),
             static_cast<uint64_t>(stamp), bytes.data(), bytes.size());
+    if (garbage_mid && i == kImu / 2) {
+      const uint8_t bad[8] = {0, 7, 0, 0, 1, 2, 3, 4};  // unknown encapsulation
+      w.write(imu, 8888, static_cast<uint64_t>(stamp + 1500), 0, bad, sizeof(bad));
+    }
     if (i % 10 == 0) {
       const auto e = testing::serialize<msg::AttitudeEstimatePubSubType>(
           testing::make_attitude(static_cast<uint32_t>(i), stamp));
@@ -284,7 +289,7 @@ TEST(Process, GivenACorruptChunkWhenProcessedThenTheRestIsProcessedAndTheDamageR
 TEST(Replay, GivenACorruptChunkAndAMalformedPayloadWhenReplayedThenEveryReadableValidMessageGoesOut) {
   const std::string dir = testing::cases_dir("replay-damaged");
   const std::string input = dir + "/input.mcap";
-  write_input(input);
+  write_input(input, true);
   const uint64_t lost = damage_chunk(input, 1);
   poise::testing::DomainLease lease;
   const std::vector<std::string> env = {"POISE_DDS_PROFILE=poise_loopback"};
@@ -293,16 +298,19 @@ TEST(Replay, GivenACorruptChunkAndAMalformedPayloadWhenReplayedThenEveryReadable
                                          std::to_string(lease.id())};
   const auto r = poise::testing::run(argv, 60s, env);
   EXPECT_EQ(r.exit_code, 3) << r.output;
-  const uint64_t readable = static_cast<uint64_t>(kImu + kImu / 10 + 1) - lost;
-  // Every readable message except the one malformed payload is published; none stops the replay.
-  EXPECT_NE(r.output.find("published " + std::to_string(readable - 1) + " messages"),
+  const uint64_t readable = static_cast<uint64_t>(kImu + kImu / 10 + 2) - lost;
+  // Every readable message except the two malformed payloads is published: the one in the middle
+  // does not stop the replay.
+  EXPECT_NE(r.output.find("published " + std::to_string(readable - 2) + " messages"),
             std::string::npos)
       << r.output;
   EXPECT_NE(r.output.find("poise replay: skipped message #" + std::to_string(readable) +
                           " (log time "),
             std::string::npos)
       << r.output;
-  EXPECT_NE(r.output.find("skipped 1 malformed payload(s)"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("on 'imu', 8 bytes: unsupported encapsulation 0x0007"), std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("skipped 2 malformed payload(s)"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("chunk CRC mismatch"), std::string::npos) << r.output;
   std::vector<std::string> allowed = argv;
   allowed.emplace_back("--allow-damaged");
