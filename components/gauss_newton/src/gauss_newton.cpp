@@ -18,16 +18,8 @@ GaussNewton::GaussNewton(const GaussNewtonParams& params) : p_(params) {
 }
 
 void GaussNewton::reset() {
-  result_ = GaussNewtonResult{};
-  initialized_ = false;
-  dip_sum_rad_ = 0.0;
-  dip_n_ = 0;
-  dip_rad_ = std::isfinite(p_.dip_deg) ? p_.dip_deg * kRadPerDeg : 0.0;
-  last_stamp_ns_ = -1;
-  anchor_ = StampAnchor{};
-  rejections_ = RejectCounters{};
-  accel_ = source_named("accel");
-  mag_ = source_named("mag");
+  s_ = GaussNewtonState{};
+  s_.dip_rad = std::isfinite(p_.dip_deg) ? p_.dip_deg * kRadPerDeg : 0.0;
 }
 
 GaussNewtonResult GaussNewton::solve(const Eigen::Vector3d& accel, const Eigen::Vector3d& mag,
@@ -70,33 +62,33 @@ GaussNewtonResult GaussNewton::solve(const Eigen::Vector3d& accel, const Eigen::
 }
 
 bool GaussNewton::update(const ImuSample& s) {
-  const SampleCheck c = check_imu_sample(s, last_stamp_ns_, p_.limits, rejections_);
-  if (anchor_.reanchor(c, s.stamp_ns, p_.limits.max_dt_s)) {
-    last_stamp_ns_ = s.stamp_ns;
+  const SampleCheck c = check_imu_sample(s, s_.last_stamp_ns, p_.limits, s_.rejections);
+  if (s_.anchor.reanchor(c, s.stamp_ns, p_.limits.max_dt_s)) {
+    s_.last_stamp_ns = s.stamp_ns;
   }
   if (!c.accept) {
-    accel_.mark_rejected(to_string(c.reject));
-    mag_.mark_rejected(to_string(c.reject));
+    s_.accel.mark_rejected(to_string(c.reject));
+    s_.mag.mark_rejected(to_string(c.reject));
     return false;
   }
   if (!c.mag_ok) {  // the solution needs both vectors
-    accel_.mark_rejected("no_mag");
+    s_.accel.mark_rejected("no_mag");
     if (s.has_mag) {
-      mag_.mark_rejected(to_string(c.mag_reject));
+      s_.mag.mark_rejected(to_string(c.mag_reject));
     } else {
-      mag_.mark_not_available("no_sample");
+      s_.mag.mark_not_available("no_sample");
     }
     return false;
   }
-  last_stamp_ns_ = s.stamp_ns;
-  if (!std::isfinite(p_.dip_deg) && dip_n_ < p_.startup_samples) {
+  s_.last_stamp_ns = s.stamp_ns;
+  if (!std::isfinite(p_.dip_deg) && s_.dip_n < p_.startup_samples) {
     // measured dip = angle(a, m) - 90 deg
-    dip_sum_rad_ += angle_between_vectors(s.accel_mps2, s.mag_ut) - 0.5 * kPi;
-    ++dip_n_;
-    dip_rad_ = dip_sum_rad_ / dip_n_;
+    s_.dip_sum_rad += angle_between_vectors(s.accel_mps2, s.mag_ut) - 0.5 * kPi;
+    ++s_.dip_n;
+    s_.dip_rad = s_.dip_sum_rad / s_.dip_n;
   }
-  Eigen::Quaterniond start = result_.q_world_body;
-  if (!initialized_) {
+  Eigen::Quaterniond start = s_.result.q_world_body;
+  if (!s_.initialized) {
     // Closed-form start (TRIAD): body axes of world up and horizontal north.
     Eigen::Matrix3d r_body_world;
     if (body_world_axes_from_up_forward(s.accel_mps2, s.mag_ut, r_body_world)) {
@@ -104,10 +96,10 @@ bool GaussNewton::update(const ImuSample& s) {
       start = quat_enu_nwu() * Eigen::Quaterniond(Eigen::Matrix3d(r_body_world.transpose()));
     }
   }
-  result_ = solve(s.accel_mps2, s.mag_ut, start, dip_rad_);
-  initialized_ = true;
-  accel_.mark_fused(s.stamp_ns);
-  mag_.mark_fused(s.stamp_ns);
+  s_.result = solve(s.accel_mps2, s.mag_ut, start, s_.dip_rad);
+  s_.initialized = true;
+  s_.accel.mark_fused(s.stamp_ns);
+  s_.mag.mark_fused(s.stamp_ns);
   return true;
 }
 

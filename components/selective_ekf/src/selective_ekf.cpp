@@ -101,7 +101,7 @@ void validate(const SelectiveEkfParams& p) {
        "init_sigma_* must be > 0");
 }
 
-SelectiveEkf::SelectiveEkf(const SelectiveEkfParams& params) : p_(params), gn_(params.gauss_newton) {
+SelectiveEkf::SelectiveEkf(const SelectiveEkfParams& params) : p_(params) {
   validate(p_);
   p_.q_body_camera.normalize();
   imu_delay_ns_ = seconds_to_ns(p_.imu_delay_s);

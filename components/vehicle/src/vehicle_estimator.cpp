@@ -124,46 +124,31 @@ VehicleEstimator::VehicleEstimator(const VehicleParams& params) : params_(params
 }
 
 void VehicleEstimator::reset() {
-  est_ = VehicleEstimate{};
-  rejects_ = VehicleRejects{};
-  have_stamp_ = false;
-  last_stamp_ns_ = 0;
-  last_speed_mps_ = 0.0;
-  ekf_init_ = false;
-  x_.setZero();
-  p_.setZero();
-  prev_ax_ = prev_ay_ = prev_r_ = 0.0;
-  static_mag_sum_.setZero();
-  static_ay_sum_ = 0.0;
-  static_count_ = 0;
-  yaw_rate_ = source_named("yaw_rate");
-  accel_ = source_named("accel");
-  mag_ = source_named("mag");
-  speed_ = source_named("speed");
+  s_ = VehicleEstimatorState{};
 }
 
 void VehicleEstimator::ekf_init(const Eigen::Vector3d& euler) {
-  x_ << euler(0), 0.0, euler(1), 0.0, euler(2);
-  p_.setZero();
-  p_.diagonal() << params_.initial_var_angle_rad2, params_.initial_var_rate_rad2ps2,
+  s_.x << euler(0), 0.0, euler(1), 0.0, euler(2);
+  s_.p.setZero();
+  s_.p.diagonal() << params_.initial_var_angle_rad2, params_.initial_var_rate_rad2ps2,
       params_.initial_var_angle_rad2, params_.initial_var_rate_rad2ps2, params_.initial_var_angle_rad2;
-  ekf_init_ = true;
+  s_.ekf_init = true;
 }
 
 void VehicleEstimator::ekf_predict(double a_x, double a_y, double r, double dt_s) {
   const VehicleModelParams& m = params_.model;
-  const double phi = x_(0);
-  const double theta = x_(2);
+  const double phi = s_.x(0);
+  const double theta = s_.x(2);
   const double sp = std::sin(phi);
   const double cp = std::cos(phi);
   const double st = std::sin(theta);
   const double ct = std::cos(theta);
   const double mh = m.m_s_kg * m.h_s_m;
   Vector5 f;  // (11)
-  f << x_(1) + cp * st * r,
-      (-m.k_x_nm_per_rad * phi - m.b_x_nms_per_rad * x_(1) + mh * a_y) / m.i_x_kgm2,
-      x_(3) - sp * r,
-      (-m.k_y_nm_per_rad * theta - m.b_y_nms_per_rad * x_(3) - mh * a_x) / m.i_y_kgm2,
+  f << s_.x(1) + cp * st * r,
+      (-m.k_x_nm_per_rad * phi - m.b_x_nms_per_rad * s_.x(1) + mh * a_y) / m.i_x_kgm2,
+      s_.x(3) - sp * r,
+      (-m.k_y_nm_per_rad * theta - m.b_y_nms_per_rad * s_.x(3) - mh * a_x) / m.i_y_kgm2,
       cp * ct * r;
   Matrix5 j = Matrix5::Zero();  // J_f_x
   j(0, 0) = -sp * st * r;
@@ -178,19 +163,19 @@ void VehicleEstimator::ekf_predict(double a_x, double a_y, double r, double dt_s
   j(4, 0) = -sp * ct * r;
   j(4, 2) = -cp * st * r;
   const Matrix5 fm = Matrix5::Identity() + j * dt_s;
-  x_ += f * dt_s;
-  x_(4) = wrap_angle(x_(4));
+  s_.x += f * dt_s;
+  s_.x(4) = wrap_angle(s_.x(4));
   Vector5 q;
   q << params_.q_roll_rad2_per_s, 0.0, params_.q_pitch_rad2_per_s, 0.0, params_.q_yaw_rad2_per_s;  // (13)
-  p_ = fm * p_ * fm.transpose();
-  p_.diagonal() += q * dt_s;
-  p_ = 0.5 * (p_ + p_.transpose());
+  s_.p = fm * s_.p * fm.transpose();
+  s_.p.diagonal() += q * dt_s;
+  s_.p = 0.5 * (s_.p + s_.p.transpose());
 }
 
 void VehicleEstimator::ekf_correct(const Eigen::Vector3d& mag_ut) {
-  const double phi = x_(0);
-  const double theta = x_(2);
-  const double psi = x_(4);
+  const double phi = s_.x(0);
+  const double theta = s_.x(2);
+  const double psi = s_.x(4);
   // R = Rx(phi)^T Ry(theta)^T Rz(psi)^T = Rx(-phi) Ry(-theta) Rz(-psi); d/da R(-a) = -[e x] R(-a).
   const Eigen::Matrix3d rx = Eigen::AngleAxisd(-phi, Eigen::Vector3d::UnitX()).toRotationMatrix();
   const Eigen::Matrix3d ry = Eigen::AngleAxisd(-theta, Eigen::Vector3d::UnitY()).toRotationMatrix();
@@ -204,22 +189,22 @@ void VehicleEstimator::ekf_correct(const Eigen::Vector3d& mag_ut) {
   hm.col(2) = rx * (-skew(Eigen::Vector3d::UnitY()) * v_y);
   hm.col(4) = rx * ry * (-skew(Eigen::Vector3d::UnitZ()) * v_z);
   const Eigen::Matrix3d rm = params_.r_mag_ut2.asDiagonal();  // (13)
-  const Eigen::Matrix3d s = hm * p_ * hm.transpose() + rm;
-  const Eigen::Matrix<double, 5, 3> k = p_ * hm.transpose() * s.inverse();
-  x_ += k * (mag_ut - pred);
-  x_(4) = wrap_angle(x_(4));
+  const Eigen::Matrix3d s = hm * s_.p * hm.transpose() + rm;
+  const Eigen::Matrix<double, 5, 3> k = s_.p * hm.transpose() * s.inverse();
+  s_.x += k * (mag_ut - pred);
+  s_.x(4) = wrap_angle(s_.x(4));
   const Matrix5 ikh = Matrix5::Identity() - k * hm;
-  p_ = ikh * p_ * ikh.transpose() + k * rm * k.transpose();  // Joseph form
-  p_ = 0.5 * (p_ + p_.transpose());
+  s_.p = ikh * s_.p * ikh.transpose() + k * rm * k.transpose();  // Joseph form
+  s_.p = 0.5 * (s_.p + s_.p.transpose());
 }
 
 void VehicleEstimator::set_output(const Eigen::Vector3d& euler, bool from_triad) {
-  est_.roll_rad = euler(0);
-  est_.pitch_rad = euler(1);
-  est_.yaw_rad = wrap_angle(euler(2));
-  est_.q_world_body = quat_from_euler_zyx(euler(0), euler(1), euler(2));
-  est_.from_triad = from_triad;
-  est_.valid = true;
+  s_.est.roll_rad = euler(0);
+  s_.est.pitch_rad = euler(1);
+  s_.est.yaw_rad = wrap_angle(euler(2));
+  s_.est.q_world_body = quat_from_euler_zyx(euler(0), euler(1), euler(2));
+  s_.est.from_triad = from_triad;
+  s_.est.valid = true;
 }
 
 VehicleSample vehicle_sample_from_imu(const ImuSample& imu, bool has_speed, double speed_mps) {
@@ -238,13 +223,13 @@ VehicleSample vehicle_sample_from_imu(const ImuSample& imu, bool has_speed, doub
 bool VehicleEstimator::update(const VehicleSample& s) {
   if (!std::isfinite(s.accel_lon_mps2) || !std::isfinite(s.accel_lat_mps2) ||
       !std::isfinite(s.yaw_rate_rps)) {
-    ++rejects_.non_finite_input;
+    ++s_.rejects.non_finite_input;
     reject_sample("non_finite_input");
     return false;
   }
   TimeStep step;
-  if (!advance_stamp(s.stamp_ns, have_stamp_, last_stamp_ns_, params_.max_dt_s, rejects_.non_monotonic_stamp,
-                     rejects_.dt_gap, step)) {
+  if (!advance_stamp(s.stamp_ns, s_.have_stamp, s_.last_stamp_ns, params_.max_dt_s, s_.rejects.non_monotonic_stamp,
+                     s_.rejects.dt_gap, step)) {
     reject_sample("non_monotonic_stamp");
     return false;
   }
@@ -252,54 +237,54 @@ bool VehicleEstimator::update(const VehicleSample& s) {
   const bool gap = step.kind == TimeStep::kGap;
 
   if (s.has_speed && std::isfinite(s.speed_mps) && s.speed_mps >= 0.0) {
-    last_speed_mps_ = s.speed_mps;
-    speed_.mark_fused(s.stamp_ns);
+    s_.last_speed_mps = s.speed_mps;
+    s_.speed.mark_fused(s.stamp_ns);
   } else {
-    ++rejects_.bad_speed;
+    ++s_.rejects.bad_speed;
     if (s.has_speed) {
-      speed_.mark_rejected("bad_speed");
+      s_.speed.mark_rejected("bad_speed");
     } else {
-      speed_.mark_not_available("no_sample");
+      s_.speed.mark_not_available("no_sample");
     }
   }
   bool mag_ok = s.has_mag && s.mag_ut.allFinite();
   if (!mag_ok) {
-    ++rejects_.missing_mag;
+    ++s_.rejects.missing_mag;
     if (s.has_mag) {
-      mag_.mark_rejected("non_finite_mag");
+      s_.mag.mark_rejected("non_finite_mag");
     } else {
-      mag_.mark_not_available("no_sample");
+      s_.mag.mark_not_available("no_sample");
     }
   } else {
     // The disturbance test as a gate: |B| - |H| against tolerance |H| (uT).
     const double h_ut = params_.mag_world_ut.norm();
     const double tol_ut = params_.mag_norm_tolerance * h_ut;
-    mag_.set_innovation(InnovationVector::Constant(1, s.mag_ut.norm() - h_ut),
+    s_.mag.set_innovation(InnovationVector::Constant(1, s.mag_ut.norm() - h_ut),
                         InnovationVector::Constant(1, tol_ut * tol_ut));
-    if (mag_.test_ratio > 1.0) {
-      ++rejects_.disturbed_mag;
+    if (s_.mag.test_ratio > 1.0) {
+      ++s_.rejects.disturbed_mag;
       mag_ok = false;
-      mag_.mark_rejected("disturbed_mag");
+      s_.mag.mark_rejected("disturbed_mag");
     }
   }
 
   const bool is_static = std::abs(s.yaw_rate_rps) < params_.static_yaw_rate_max_rps &&
-                         last_speed_mps_ < params_.static_speed_max_mps;
-  est_.is_static = is_static;
-  est_.stamp_ns = s.stamp_ns;
+                         s_.last_speed_mps < params_.static_speed_max_mps;
+  s_.est.is_static = is_static;
+  s_.est.stamp_ns = s.stamp_ns;
 
   Eigen::Vector3d mag_in = s.mag_ut;
   double ay_in = s.accel_lat_mps2;
   if (!is_static) {
-    static_count_ = 0;
-    static_mag_sum_.setZero();
-    static_ay_sum_ = 0.0;
+    s_.static_count = 0;
+    s_.static_mag_sum.setZero();
+    s_.static_ay_sum = 0.0;
   } else if (params_.static_average && mag_ok) {
-    static_mag_sum_ += s.mag_ut;
-    static_ay_sum_ += s.accel_lat_mps2;
-    ++static_count_;
-    mag_in = static_mag_sum_ / static_cast<double>(static_count_);
-    ay_in = static_ay_sum_ / static_cast<double>(static_count_);
+    s_.static_mag_sum += s.mag_ut;
+    s_.static_ay_sum += s.accel_lat_mps2;
+    ++s_.static_count;
+    mag_in = s_.static_mag_sum / static_cast<double>(s_.static_count);
+    ay_in = s_.static_ay_sum / static_cast<double>(s_.static_count);
   }
   Eigen::Vector3d triad_euler(0.0, 0.0, 0.0);
   bool triad_ok = false;
@@ -311,8 +296,8 @@ bool VehicleEstimator::update(const VehicleSample& s) {
     }
   }
 
-  const bool propagate = have_stamp_ && !gap && ekf_init_;
-  have_stamp_ = true;
+  const bool propagate = s_.have_stamp && !gap && s_.ekf_init;
+  s_.have_stamp = true;
   const VehicleMode mode = params_.mode;
   const bool use_triad = mode == VehicleMode::kTriad || (mode == VehicleMode::kSwitched && is_static);
   if (use_triad) {
@@ -321,14 +306,14 @@ bool VehicleEstimator::update(const VehicleSample& s) {
       ekf_init(triad_euler);  // the EKF restarts from the static solution
     }
     // else: no usable magnetometer; the last output is held (static: the vehicle does not turn).
-  } else if (ekf_init_) {
+  } else if (s_.ekf_init) {
     if (propagate) {
-      ekf_predict(prev_ax_, prev_ay_, prev_r_, dt_s);
+      ekf_predict(s_.prev_ax, s_.prev_ay, s_.prev_r, dt_s);
     }
     if (mag_ok) {
       ekf_correct(s.mag_ut);
     }
-    set_output(Eigen::Vector3d(x_(0), x_(2), x_(4)), false);
+    set_output(Eigen::Vector3d(s_.x(0), s_.x(2), s_.x(4)), false);
   } else if (triad_ok) {
     ekf_init(triad_euler);  // first fix: the EKF starts from TRIAD
     set_output(triad_euler, true);
@@ -336,34 +321,34 @@ bool VehicleEstimator::update(const VehicleSample& s) {
 
   // What the step used: TRIAD uses a_y and B; the EKF propagates with a_x, a_y, r and corrects
   // with B (after the first fix).
-  const bool ekf_ran = !use_triad && ekf_init_;
+  const bool ekf_ran = !use_triad && s_.ekf_init;
   if (ekf_ran && propagate) {
-    yaw_rate_.mark_fused(s.stamp_ns);
+    s_.yaw_rate.mark_fused(s.stamp_ns);
   } else {
-    yaw_rate_.mark_not_available(use_triad ? "static_triad" : "no_previous_sample");
+    s_.yaw_rate.mark_not_available(use_triad ? "static_triad" : "no_previous_sample");
   }
   const bool fixed = use_triad ? triad_ok : (ekf_ran || triad_ok);
   if (fixed) {
-    accel_.mark_fused(s.stamp_ns);
+    s_.accel.mark_fused(s.stamp_ns);
   } else {
-    accel_.mark_not_available("no_mag_fix");
+    s_.accel.mark_not_available("no_mag_fix");
   }
   if (mag_ok) {
     if (fixed) {
-      mag_.mark_fused(s.stamp_ns);
+      s_.mag.mark_fused(s.stamp_ns);
     } else {
-      mag_.mark_rejected("triad_degenerate");
+      s_.mag.mark_rejected("triad_degenerate");
     }
   }
 
-  prev_ax_ = s.accel_lon_mps2;
-  prev_ay_ = s.accel_lat_mps2;
-  prev_r_ = s.yaw_rate_rps;
+  s_.prev_ax = s.accel_lon_mps2;
+  s_.prev_ay = s.accel_lat_mps2;
+  s_.prev_r = s.yaw_rate_rps;
   return true;
 }
 
 void VehicleEstimator::reject_sample(const char* why) {
-  for (SourceReport* r : {&yaw_rate_, &accel_, &mag_, &speed_}) {
+  for (SourceReport* r : {&s_.yaw_rate, &s_.accel, &s_.mag, &s_.speed}) {
     r->mark_rejected(why);
   }
 }

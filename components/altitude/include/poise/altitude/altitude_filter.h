@@ -157,29 +157,62 @@ struct AltitudeRejects {
   }
 };
 
+/// Everything the altitude filter carries from one sample to the next besides its parameters:
+/// inspect it, save it, restore it into a filter with the same parameters (`set_state`).
+struct AltitudeFilterState {
+  TiltKf tilt;
+  AltitudeEstimate est;
+  AltitudeRejects rejects;
+  bool have_stamp = false;
+  int64_t last_stamp_ns = 0;
+  bool have_baro = false;
+  double last_baro_m = 0.0;
+  int64_t last_baro_stamp_ns = 0;
+  Eigen::Vector2d x{0.0, 0.0};  ///< [h; v], m and m/s
+  Eigen::Matrix2d p_kf = Eigen::Matrix2d::Zero();
+  double integral = 0.0;        ///< sum eps_i
+  // Quantities of sample k-1 used by (19)
+  Eigen::Vector3d prev_gyro{0.0, 0.0, 0.0};
+  double prev_a_z = 0.0;
+  double prev_y_b = 0.0;
+  bool prev_baro_ok = false;
+  double still_time_s = 0.0;    ///< how long every sample has been "still", s
+  // Per-source reports of the last sample.
+  SourceReport gyro = source_named("gyro");
+  SourceReport accel = source_named("accel");
+  SourceReport baro = source_named("baro");
+  SourceReport zupt = source_named("zupt");
+};
+
 class AltitudeFilter {
  public:
   /// Throws std::invalid_argument when params.validate() is not empty.
   explicit AltitudeFilter(const AltitudeParams& params = {});
 
+  /// Back to the state of a new filter (parameters kept).
   void reset();
+  /// The filter's whole state: two filters with the same parameters and state give the same
+  /// outputs for the same samples.
+  [[nodiscard]] const AltitudeFilterState& state() const { return s_; }
+  /// Restores a state taken from state() of a filter with the same parameters.
+  void set_state(const AltitudeFilterState& state) { s_ = state; }
   /// Processes one sample (IMU and, when has_pressure, the barometer). Returns false when the
   /// sample was rejected as a whole (see AltitudeRejects); a bad pressure alone returns true.
   bool update(const ImuSample& sample);
 
-  [[nodiscard]] const AltitudeEstimate& estimate() const { return est_; }
-  [[nodiscard]] const AltitudeRejects& rejects() const { return rejects_; }
+  [[nodiscard]] const AltitudeEstimate& estimate() const { return s_.est; }
+  [[nodiscard]] const AltitudeRejects& rejects() const { return s_.rejects; }
   [[nodiscard]] const AltitudeParams& params() const { return params_; }
-  [[nodiscard]] const TiltKf& tilt() const { return tilt_; }
+  [[nodiscard]] const TiltKf& tilt() const { return s_.tilt; }
   /// K_c in use: [height gain 1/s, velocity gain 1/s^2].
   [[nodiscard]] const Eigen::Vector2d& cf_gain() const { return k_c_; }
   /// Covariance of [h; v] (method 1 only; zero otherwise).
-  [[nodiscard]] const Eigen::Matrix2d& kf_covariance() const { return p_kf_; }
+  [[nodiscard]] const Eigen::Matrix2d& kf_covariance() const { return s_.p_kf; }
   /// Per source for the last sample, in this order: gyro (tilt propagation), accel (tilt
   /// correction and a_z), baro (innovation eps (15) = h_b - h, m, variance s_b^2 (+ P_hh for the
   /// two-step KF); rejected "bad_pressure"), zupt (fused when v was forced to 0; not available
   /// "moving" or "not_used_by_method").
-  [[nodiscard]] SourceReports sources() const { return {gyro_, accel_, baro_, zupt_}; }
+  [[nodiscard]] SourceReports sources() const { return {s_.gyro, s_.accel, s_.baro, s_.zupt}; }
 
  private:
   void step_cf(double dt_s);
@@ -189,31 +222,8 @@ class AltitudeFilter {
   [[nodiscard]] bool uses_integral() const;
 
   AltitudeParams params_;
-  TiltKf tilt_;
-  Eigen::Vector2d k_c_{0.0, 0.0};
-  AltitudeEstimate est_;
-  AltitudeRejects rejects_;
-
-  // State
-  bool have_stamp_ = false;
-  int64_t last_stamp_ns_ = 0;
-  bool have_baro_ = false;
-  double last_baro_m_ = 0.0;
-  int64_t last_baro_stamp_ns_ = 0;
-  Eigen::Vector2d x_{0.0, 0.0};          // [h; v]
-  Eigen::Matrix2d p_kf_ = Eigen::Matrix2d::Zero();
-  double integral_ = 0.0;                // sum eps_i
-  // Quantities of sample k-1 used by (19)
-  Eigen::Vector3d prev_gyro_{0.0, 0.0, 0.0};
-  double prev_a_z_ = 0.0;
-  double prev_y_b_ = 0.0;
-  bool prev_baro_ok_ = false;
-  double still_time_s_ = 0.0;            // how long every sample has been "still"
-  // Per-source reports of the last sample.
-  SourceReport gyro_ = source_named("gyro");
-  SourceReport accel_ = source_named("accel");
-  SourceReport baro_ = source_named("baro");
-  SourceReport zupt_ = source_named("zupt");
+  Eigen::Vector2d k_c_{0.0, 0.0};  ///< from the parameters
+  AltitudeFilterState s_;
   void reject_sample(const char* why);
   void report_sources(const ImuSample& s, bool propagated);
 };

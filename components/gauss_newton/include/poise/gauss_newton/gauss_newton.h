@@ -47,6 +47,21 @@ struct GaussNewtonResult {
   double residual = 0.0;    ///< |e| after the last iteration (unit-vector units)
 };
 
+/// Everything the Gauss-Newton filter carries from one sample to the next besides its
+/// parameters: inspect it, save it, restore it into a filter with the same parameters.
+struct GaussNewtonState {
+  GaussNewtonResult result;
+  bool initialized = false;
+  double dip_rad = 0.0;
+  double dip_sum_rad = 0.0;  ///< start-up dip learning: sum and count of measured dips
+  int dip_n = 0;
+  int64_t last_stamp_ns = -1;
+  StampAnchor anchor;  ///< time restarts after a stamp jump only when two samples agree
+  RejectCounters rejections;
+  SourceReport accel = source_named("accel");
+  SourceReport mag = source_named("mag");
+};
+
 class GaussNewton {
  public:
   explicit GaussNewton(const GaussNewtonParams& params = {});
@@ -58,26 +73,23 @@ class GaussNewton {
   /// Processes one sample (validated, rejected and counted when bad). Needs a magnetometer.
   bool update(const ImuSample& s);
 
-  [[nodiscard]] const GaussNewtonResult& result() const { return result_; }
-  [[nodiscard]] bool initialized() const { return initialized_; }
-  [[nodiscard]] double dip_rad() const { return dip_rad_; }
-  [[nodiscard]] const RejectCounters& rejections() const { return rejections_; }
+  [[nodiscard]] const GaussNewtonResult& result() const { return s_.result; }
+  [[nodiscard]] bool initialized() const { return s_.initialized; }
+  [[nodiscard]] double dip_rad() const { return s_.dip_rad; }
+  [[nodiscard]] const RejectCounters& rejections() const { return s_.rejections; }
   /// Per source (accel, mag) for the last sample: both fused together, or the sample's reason.
-  [[nodiscard]] SourceReports sources() const { return {accel_, mag_}; }
+  [[nodiscard]] SourceReports sources() const { return {s_.accel, s_.mag}; }
+  /// Back to the state of a new filter (parameters kept).
   void reset();
+  /// The filter's whole state: two filters with the same parameters and state give the same
+  /// outputs for the same samples.
+  [[nodiscard]] const GaussNewtonState& state() const { return s_; }
+  /// Restores a state taken from state() of a filter with the same parameters.
+  void set_state(const GaussNewtonState& state) { s_ = state; }
 
  private:
   GaussNewtonParams p_;
-  GaussNewtonResult result_;
-  bool initialized_ = false;
-  double dip_rad_ = 0.0;
-  double dip_sum_rad_ = 0.0;
-  int dip_n_ = 0;
-  int64_t last_stamp_ns_ = -1;
-  StampAnchor anchor_;  ///< time restarts after a stamp jump only when two samples agree
-  RejectCounters rejections_;
-  SourceReport accel_ = source_named("accel");
-  SourceReport mag_ = source_named("mag");
+  GaussNewtonState s_;
 };
 
 /// AttitudeFilter adapter.

@@ -321,7 +321,57 @@ struct SelectiveEkfState {
   int64_t last_aiding_ns = -1;           ///< last tilt/heading fusion (kSplit)
 };
 
-class SelectiveEkf {
+/// Everything the selective EKF carries from one sample to the next besides its parameters: the
+/// estimate (SelectiveEkfState), the Gauss-Newton source, the start-up reference, counters, the
+/// per-source reports, the output blend and the history of snapshots and vision for late
+/// measurements. Opaque (read it through the filter's accessors): take it with full_state(),
+/// restore it with set_full_state() into a filter with the same parameters.
+class SelectiveEkfFullState {
+  friend class SelectiveEkf;
+
+  struct ImuInput {
+    int64_t stamp_ns = 0;
+    Eigen::Vector3d gyro{0, 0, 0};
+    Eigen::Vector3d accel{0, 0, 0};
+    Eigen::Vector3d mag{0, 0, 0};
+    bool has_q_imu = false;
+    Eigen::Quaterniond q_imu = Eigen::Quaterniond::Identity();
+    bool has_mag = false;
+    double dt_s = 0.0;                  ///< sample interval (for spectral densities)
+    // derived by preprocess() from the state's SelectiveEkfPreState (re-derived in replays)
+    Eigen::Vector3d up_meas{0, 0, 1};   ///< kSplit: low-passed accelerometer direction (body)
+    double tilt_var_scale = 1.0;        ///< kSplit: external-acceleration inflation
+    bool rest = false;
+  };
+  struct HistoryEntry {
+    ImuInput input;
+    SelectiveEkfState post;  ///< state right after processing `input` (before same-stamp vision)
+  };
+
+  GaussNewton gn_;
+  SelectiveEkfState x_;
+  bool initialized_ = false;
+  bool out_ready_ = false;           ///< out_q_ holds a blended output
+  Eigen::Quaterniond out_q_ = Eigen::Quaterniond::Identity();
+  int64_t last_imu_stamp_ns_ = -1;   ///< stamp of the last accepted IMU sample (sensor clock)
+  StampAnchor anchor_;               ///< time restarts after a stamp jump only when two samples agree
+  RejectCounters rejections_;
+  std::array<SourceStatus, static_cast<size_t>(Source::kCount)> status_{};
+  MagStatus mag_;
+  VisionCounters vc_;
+  // start-up reference
+  double dip_sum_rad_ = 0.0;
+  double norm_sum_ut_ = 0.0;
+  int ref_n_ = 0;
+  double ref_angle_rad_ = 0.5 * kPi;
+  double ref_norm_ut_ = 0.0;
+  // history
+  std::deque<HistoryEntry> history_;
+  std::deque<VisionPose> vision_log_;    ///< applied or queued, sorted by capture stamp
+  int64_t newest_vision_capture_ns_ = -1;
+};
+
+class SelectiveEkf : private SelectiveEkfFullState {
  public:
   static constexpr int kN = 15;
   using Mat = Eigen::Matrix<double, kN, kN>;
@@ -361,28 +411,17 @@ class SelectiveEkf {
   [[nodiscard]] const GaussNewton& gauss_newton() const { return gn_; }
   /// Body-frame attitude standard deviations, deg.
   [[nodiscard]] Eigen::Vector3d attitude_sigma_deg() const;
+  /// Back to the state of a new filter (parameters kept).
   void reset();
+  /// The filter's whole state: two filters with the same parameters and the same full state give
+  /// the same outputs for the same samples (vision included).
+  [[nodiscard]] const SelectiveEkfFullState& full_state() const { return *this; }
+  /// Restores a state taken from full_state() of a filter with the same parameters.
+  void set_full_state(const SelectiveEkfFullState& state) {
+    static_cast<SelectiveEkfFullState&>(*this) = state;
+  }
 
  private:
-  struct ImuInput {
-    int64_t stamp_ns = 0;
-    Eigen::Vector3d gyro{0, 0, 0};
-    Eigen::Vector3d accel{0, 0, 0};
-    Eigen::Vector3d mag{0, 0, 0};
-    bool has_q_imu = false;
-    Eigen::Quaterniond q_imu = Eigen::Quaterniond::Identity();
-    bool has_mag = false;
-    double dt_s = 0.0;                  ///< sample interval (for spectral densities)
-    // derived by preprocess() from the state's SelectiveEkfPreState (re-derived in replays)
-    Eigen::Vector3d up_meas{0, 0, 1};   ///< kSplit: low-passed accelerometer direction (body)
-    double tilt_var_scale = 1.0;        ///< kSplit: external-acceleration inflation
-    bool rest = false;
-  };
-  struct HistoryEntry {
-    ImuInput input;
-    SelectiveEkfState post;  ///< state right after processing `input` (before same-stamp vision)
-  };
-
   void predict_to(int64_t stamp_ns);
   void process_imu(const ImuInput& in, bool first_pass);
   void process_vision(const VisionPose& v, bool first_pass);
@@ -406,28 +445,7 @@ class SelectiveEkf {
   void record(SourceStatus& st, Decision d, int64_t stamp_ns, bool first_pass) const;
 
   SelectiveEkfParams p_;
-  GaussNewton gn_;
-  SelectiveEkfState x_;
-  bool initialized_ = false;
-  bool out_ready_ = false;           ///< out_q_ holds a blended output
-  Eigen::Quaterniond out_q_ = Eigen::Quaterniond::Identity();
-  int64_t last_imu_stamp_ns_ = -1;   ///< stamp of the last accepted IMU sample (sensor clock)
-  StampAnchor anchor_;               ///< time restarts after a stamp jump only when two samples agree
   int64_t imu_delay_ns_ = 0;         ///< state time = IMU stamp - imu_delay_ns_
-  RejectCounters rejections_;
-  std::array<SourceStatus, static_cast<size_t>(Source::kCount)> status_{};
-  MagStatus mag_;
-  VisionCounters vc_;
-  // start-up reference
-  double dip_sum_rad_ = 0.0;
-  double norm_sum_ut_ = 0.0;
-  int ref_n_ = 0;
-  double ref_angle_rad_ = 0.5 * kPi;
-  double ref_norm_ut_ = 0.0;
-  // history
-  std::deque<HistoryEntry> history_;
-  std::deque<VisionPose> vision_log_;    ///< applied or queued, sorted by capture stamp
-  int64_t newest_vision_capture_ns_ = -1;
 };
 
 // ---- Reporting (selective_ekf_report.cpp): the core's outputs in the shapes every node maps 1:1.

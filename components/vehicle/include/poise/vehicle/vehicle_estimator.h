@@ -149,6 +149,32 @@ Eigen::Vector3d euler_from_body_world(const Eigen::Matrix3d& r_body_world);
 /// Matrix (1): R_body_world of roll, pitch, yaw.
 Eigen::Matrix3d body_world_from_euler(double roll_rad, double pitch_rad, double yaw_rad);
 
+/// Everything the vehicle estimator carries from one sample to the next besides its parameters:
+/// inspect it, save it, restore it into an estimator with the same parameters (`set_state`).
+struct VehicleEstimatorState {
+  VehicleEstimate est;
+  VehicleRejects rejects;
+  bool have_stamp = false;
+  int64_t last_stamp_ns = 0;
+  double last_speed_mps = 0.0;
+  bool ekf_init = false;
+  Eigen::Matrix<double, 5, 1> x = Eigen::Matrix<double, 5, 1>::Zero();  ///< [phi, phi_dot, theta, theta_dot, psi]
+  Eigen::Matrix<double, 5, 5> p = Eigen::Matrix<double, 5, 5>::Zero();  ///< its covariance
+  // Static averaging
+  Eigen::Vector3d static_mag_sum{0.0, 0.0, 0.0};
+  double static_ay_sum = 0.0;
+  uint64_t static_count = 0;
+  // Inputs of sample k-1 (the EKF propagates from k-1 to k with them).
+  double prev_ax = 0.0;
+  double prev_ay = 0.0;
+  double prev_r = 0.0;
+  // Per-source reports of the last sample.
+  SourceReport yaw_rate = source_named("yaw_rate");
+  SourceReport accel = source_named("accel");
+  SourceReport mag = source_named("mag");
+  SourceReport speed = source_named("speed");
+};
+
 class VehicleEstimator {
  public:
   using Vector5 = Eigen::Matrix<double, 5, 1>;
@@ -157,22 +183,28 @@ class VehicleEstimator {
   /// Throws std::invalid_argument when params.validate() is not empty.
   explicit VehicleEstimator(const VehicleParams& params = {});
 
+  /// Back to the state of a new estimator (parameters kept).
   void reset();
+  /// The estimator's whole state: two estimators with the same parameters and state give the
+  /// same outputs for the same samples.
+  [[nodiscard]] const VehicleEstimatorState& state() const { return s_; }
+  /// Restores a state taken from state() of an estimator with the same parameters.
+  void set_state(const VehicleEstimatorState& state) { s_ = state; }
   /// Returns false when the sample was rejected as a whole.
   bool update(const VehicleSample& sample);
 
-  [[nodiscard]] const VehicleEstimate& estimate() const { return est_; }
-  [[nodiscard]] const VehicleRejects& rejects() const { return rejects_; }
+  [[nodiscard]] const VehicleEstimate& estimate() const { return s_.est; }
+  [[nodiscard]] const VehicleRejects& rejects() const { return s_.rejects; }
   [[nodiscard]] const VehicleParams& params() const { return params_; }
   /// EKF state [phi, phi_dot, theta, theta_dot, psi] and covariance.
-  [[nodiscard]] const Vector5& ekf_state() const { return x_; }
-  [[nodiscard]] const Matrix5& ekf_covariance() const { return p_; }
-  [[nodiscard]] bool ekf_initialized() const { return ekf_init_; }
+  [[nodiscard]] const Vector5& ekf_state() const { return s_.x; }
+  [[nodiscard]] const Matrix5& ekf_covariance() const { return s_.p; }
+  [[nodiscard]] bool ekf_initialized() const { return s_.ekf_init; }
   /// Per source for the last sample, in this order: yaw_rate (the EKF's propagation input), accel
   /// (a_x, a_y: EKF input and TRIAD's virtual gravity), mag (innovation: |B| - |H|, uT, against
   /// the disturbance tolerance: test ratio > 1 = rejected "disturbed_mag"), speed (the switching
   /// input; rejected "bad_speed" when negative or NaN, the last valid speed is then kept).
-  [[nodiscard]] SourceReports sources() const { return {yaw_rate_, accel_, mag_, speed_}; }
+  [[nodiscard]] SourceReports sources() const { return {s_.yaw_rate, s_.accel, s_.mag, s_.speed}; }
 
  private:
   void ekf_init(const Eigen::Vector3d& euler);
@@ -182,27 +214,7 @@ class VehicleEstimator {
   void reject_sample(const char* why);
 
   VehicleParams params_;
-  VehicleEstimate est_;
-  VehicleRejects rejects_;
-  bool have_stamp_ = false;
-  int64_t last_stamp_ns_ = 0;
-  double last_speed_mps_ = 0.0;
-  bool ekf_init_ = false;
-  Vector5 x_ = Vector5::Zero();
-  Matrix5 p_ = Matrix5::Zero();
-  // Static averaging
-  Eigen::Vector3d static_mag_sum_{0.0, 0.0, 0.0};
-  double static_ay_sum_ = 0.0;
-  uint64_t static_count_ = 0;
-  // Inputs of sample k-1 (the EKF propagates from k-1 to k with them).
-  double prev_ax_ = 0.0;
-  double prev_ay_ = 0.0;
-  double prev_r_ = 0.0;
-  // Per-source reports of the last sample.
-  SourceReport yaw_rate_ = source_named("yaw_rate");
-  SourceReport accel_ = source_named("accel");
-  SourceReport mag_ = source_named("mag");
-  SourceReport speed_ = source_named("speed");
+  VehicleEstimatorState s_;
 };
 
 }  // namespace poise
