@@ -1,9 +1,12 @@
 // AltitudeFilter scenarios in simulated time: rest, constant climb, bad input, configuration.
 #include "poise/altitude/altitude_filter.h"
 
+#include "poise/testing/param_errors.h"
 #include "poise/testing/testing.h"
 
 #include <gtest/gtest.h>
+
+#include <limits>
 
 #include <cmath>
 #include <fstream>
@@ -221,7 +224,7 @@ TEST(AltitudeFilter, InvalidParamsThrow) {
   EXPECT_THROW(AltitudeFilter{p}, std::invalid_argument);
   p = AltitudeParams{};
   p.min_pressure_pa = 120000.0;
-  EXPECT_FALSE(p.validate().empty());
+  EXPECT_THROW(p.validate(), std::invalid_argument);
 }
 
 // Defaults in one place: the shipped file holds only what differs from AltitudeParams{} (nothing),
@@ -392,6 +395,17 @@ TEST(AltitudeFilter, GivenAStateTakenMidRunWhenRestoredIntoAnotherFilterThenBoth
   EXPECT_EQ(a.state().est.valid, fresh.state().est.valid);
   EXPECT_EQ(a.state().x, fresh.state().x);
   EXPECT_EQ(a.state().rejects.total(), 0u);
+}
+
+// One validation shape (ParamCheck): a bad value of a key is an error at construction that names
+// the key as in the YAML file and its range/unit, never a silent repair or a NaN later.
+TEST(AltitudeParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorNamesTheKey) {
+  testing::expect_bad_values_name_their_keys<AltitudeParams>("altitude", AltitudeParams{}, {
+    {"cf.sigma_baro_m", [](AltitudeParams& p) { p.sigma_baro_m = 0.0; }},
+    {"barometer.min_pressure_pa", [](AltitudeParams& p) { p.min_pressure_pa = 120000.0; }},
+    {"zupt.window_s", [](AltitudeParams& p) { p.zupt_window_s = std::nan(""); }},
+    {"tilt.c_a", [](AltitudeParams& p) { p.tilt.c_a = -0.1; }}
+  }, [](const AltitudeParams& p) { AltitudeFilter f(p); });
 }
 
 }  // namespace

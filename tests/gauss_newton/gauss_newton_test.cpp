@@ -3,7 +3,12 @@
 
 #include "poise/sim/sensor_simulator.h"
 
+#include "poise/testing/param_errors.h"
+#include "poise/testing/testing.h"
+
 #include <gtest/gtest.h>
+
+#include <limits>
 
 #include <random>
 
@@ -128,6 +133,17 @@ TEST(GaussNewton, GivenAStateTakenMidRunWhenRestoredIntoAnotherFilterThenBothGiv
   EXPECT_EQ(a.state().initialized, fresh.state().initialized);
   EXPECT_EQ(a.state().dip_n, 0);
   EXPECT_EQ(a.state().rejections.total(), 0u);
+}
+
+// One validation shape (ParamCheck): a bad value of a key is an error at construction that names
+// the key as in the YAML file and its range/unit, never a silent repair or a NaN later.
+TEST(GaussNewtonParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorNamesTheKey) {
+  testing::expect_bad_values_name_their_keys<GaussNewtonParams>("gauss_newton", GaussNewtonParams{}, {
+    {"max_iterations", [](GaussNewtonParams& p) { p.max_iterations = 0; }},
+    {"mag_weight", [](GaussNewtonParams& p) { p.mag_weight = -1.0; }},
+    {"dip_deg", [](GaussNewtonParams& p) { p.dip_deg = 91.0; }},
+    {"limits.max_gyro_rps", [](GaussNewtonParams& p) { p.limits.max_gyro_rps = std::numeric_limits<double>::infinity(); }}
+  }, [](const GaussNewtonParams& p) { GaussNewton f(p); });
 }
 
 }  // namespace

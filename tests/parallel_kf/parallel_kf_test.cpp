@@ -3,7 +3,12 @@
 
 #include "poise/sim/sensor_simulator.h"
 
+#include "poise/testing/param_errors.h"
+#include "poise/testing/testing.h"
+
 #include <gtest/gtest.h>
+
+#include <limits>
 
 #include <cstdint>
 #include <cstdio>
@@ -531,6 +536,19 @@ TEST(ParallelKf, GivenAGyroBiasAndNoRestWhenMovingThenTheBiasIsLearntFromTheCorr
   EXPECT_LT(on_run.max_tilt_err_deg, kTiltTolDeg);
   EXPECT_GT(off_run.bias_err_dps, 4.0 * kBiasTolDps);  // ~|(0.3, -0.2, 0.25)| = 0.46 deg/s
   EXPECT_LT(on_run.rms_total_err_deg, off_run.rms_total_err_deg);
+}
+
+// One validation shape (ParamCheck): a bad value of a key is an error at construction that names
+// the key as in the YAML file and its range/unit, never a silent repair or a NaN later.
+TEST(ParallelKfParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorNamesTheKey) {
+  testing::expect_bad_values_name_their_keys<ParallelKfParams>("parallel_kf", ParallelKfParams::defaults(), {
+    {"tilt.sigma_gyro_rps", [](ParallelKfParams& p) { p.tilt.sigma_gyro_rps = 0.0; }},
+    {"tilt.c_a", [](ParallelKfParams& p) { p.tilt.c_a = 1.0; }},
+    {"sigma_mag_ut", [](ParallelKfParams& p) { p.sigma_mag_ut = std::nan(""); }},
+    {"mag_norm_tol", [](ParallelKfParams& p) { p.mag_norm_tol = std::numeric_limits<double>::infinity(); }},
+    {"accel_lowpass_order", [](ParallelKfParams& p) { p.accel_lowpass_order = 3; }},
+    {"limits.max_dt_s", [](ParallelKfParams& p) { p.limits.max_dt_s = -1.0; }}
+  }, [](const ParallelKfParams& p) { ParallelKf f(p); });
 }
 
 }  // namespace

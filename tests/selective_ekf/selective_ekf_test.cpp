@@ -7,6 +7,7 @@
 #include "poise/eval/imu_delay.h"
 #include "poise/eval/filter_registry.h"
 #include "poise/eval/runner.h"
+#include "poise/testing/param_errors.h"
 #include "poise/testing/testing.h"
 
 #include "poise/sim/sensor_simulator.h"
@@ -695,6 +696,96 @@ TEST(SelectiveEkfCore, GivenHeadingOffWithoutVisionWhenSplitThenMagnetometerTrus
   EXPECT_LT(r.final_error_deg, 2.0);
 }
 
+bool same_or_both_nan(double x, double y) { return x == y || (std::isnan(x) && std::isnan(y)); }
+
+/// Every field of SelectiveEkfParams (Gauss-Newton and sample limits included), compared exactly.
+void expect_same_params(const SelectiveEkfParams& a, const SelectiveEkfParams& b) {
+  EXPECT_EQ(a.sigma_angular_accel, b.sigma_angular_accel);
+  EXPECT_EQ(a.sigma_linear_accel, b.sigma_linear_accel);
+  EXPECT_EQ(a.sigma_attitude_walk, b.sigma_attitude_walk);
+  EXPECT_EQ(a.sigma_bias_walk, b.sigma_bias_walk);
+  EXPECT_EQ(a.sigma_gyro_rps, b.sigma_gyro_rps);
+  EXPECT_EQ(a.imu_measurement, b.imu_measurement);
+  EXPECT_EQ(a.accel_lowpass_tau_s, b.accel_lowpass_tau_s);
+  EXPECT_EQ(a.sigma_tilt_rad_sqrt_s, b.sigma_tilt_rad_sqrt_s);
+  EXPECT_EQ(a.tilt_accel_ref_mps2, b.tilt_accel_ref_mps2);
+  EXPECT_EQ(a.gravity_mps2, b.gravity_mps2);
+  EXPECT_EQ(a.heading_dip_tolerance_deg, b.heading_dip_tolerance_deg);
+  EXPECT_EQ(a.heading_norm_tolerance, b.heading_norm_tolerance);
+  EXPECT_EQ(a.aiding_period_s, b.aiding_period_s);
+  EXPECT_EQ(a.sigma_heading_rad_sqrt_s, b.sigma_heading_rad_sqrt_s);
+  EXPECT_EQ(a.rest_detection, b.rest_detection);
+  EXPECT_EQ(a.rest_gyro_max_rps, b.rest_gyro_max_rps);
+  EXPECT_EQ(a.rest_accel_max_mps2, b.rest_accel_max_mps2);
+  EXPECT_EQ(a.rest_min_s, b.rest_min_s);
+  EXPECT_EQ(a.rest_filter_tau_s, b.rest_filter_tau_s);
+  EXPECT_EQ(a.sigma_rest_rate_rps, b.sigma_rest_rate_rps);
+  EXPECT_EQ(a.sigma_imu_quat_deg, b.sigma_imu_quat_deg);
+  EXPECT_EQ(a.sigma_vision_deg, b.sigma_vision_deg);
+  EXPECT_EQ(a.sigma_vision_m, b.sigma_vision_m);
+  EXPECT_EQ(a.gating_enabled, b.gating_enabled);
+  EXPECT_EQ(a.up_source, b.up_source);
+  EXPECT_TRUE(same_or_both_nan(a.dip_deg, b.dip_deg)) << a.dip_deg << " vs " << b.dip_deg;
+  EXPECT_EQ(a.startup_samples, b.startup_samples);
+  EXPECT_EQ(a.disturbance_angle_threshold_deg, b.disturbance_angle_threshold_deg);
+  EXPECT_EQ(a.mag_norm_test, b.mag_norm_test);
+  EXPECT_EQ(a.mag_norm_threshold, b.mag_norm_threshold);
+  EXPECT_EQ(a.quat_error_test, b.quat_error_test);
+  EXPECT_EQ(a.quat_error_threshold_deg, b.quat_error_threshold_deg);
+  EXPECT_EQ(a.action, b.action);
+  EXPECT_EQ(a.inflate_factor, b.inflate_factor);
+  EXPECT_EQ(a.untrusted_hold_s, b.untrusted_hold_s);
+  EXPECT_EQ(a.q_error_lockout_s, b.q_error_lockout_s);
+  EXPECT_EQ(a.vision_anchor_s, b.vision_anchor_s);
+  EXPECT_EQ(a.vision_gate_sigma, b.vision_gate_sigma);
+  EXPECT_EQ(a.vision_reset_after_rejections, b.vision_reset_after_rejections);
+  EXPECT_EQ(a.history_s, b.history_s);
+  EXPECT_EQ(a.vision_time_offset_s, b.vision_time_offset_s);
+  EXPECT_EQ(a.imu_delay_s, b.imu_delay_s);
+  EXPECT_EQ(a.output_max_correction_dps, b.output_max_correction_dps);
+  EXPECT_EQ(a.q_body_camera.coeffs(), b.q_body_camera.coeffs());
+  EXPECT_EQ(a.p_body_camera_m, b.p_body_camera_m);
+  EXPECT_EQ(a.init_sigma_attitude_deg, b.init_sigma_attitude_deg);
+  EXPECT_EQ(a.init_sigma_rate_rps, b.init_sigma_rate_rps);
+  EXPECT_EQ(a.init_sigma_bias_rps, b.init_sigma_bias_rps);
+  EXPECT_EQ(a.init_sigma_position_m, b.init_sigma_position_m);
+  EXPECT_EQ(a.init_sigma_velocity_mps, b.init_sigma_velocity_mps);
+  EXPECT_EQ(a.limits.min_accel_norm_mps2, b.limits.min_accel_norm_mps2);
+  EXPECT_EQ(a.limits.min_mag_norm_ut, b.limits.min_mag_norm_ut);
+  EXPECT_EQ(a.limits.max_dt_s, b.limits.max_dt_s);
+  EXPECT_EQ(a.limits.max_gyro_rps, b.limits.max_gyro_rps);
+  EXPECT_EQ(a.limits.max_accel_mps2, b.limits.max_accel_mps2);
+  EXPECT_EQ(a.limits.max_mag_ut, b.limits.max_mag_ut);
+  EXPECT_EQ(a.gauss_newton.max_iterations, b.gauss_newton.max_iterations);
+  EXPECT_EQ(a.gauss_newton.tolerance_rad, b.gauss_newton.tolerance_rad);
+  EXPECT_EQ(a.gauss_newton.mag_weight, b.gauss_newton.mag_weight);
+  EXPECT_EQ(a.gauss_newton.startup_samples, b.gauss_newton.startup_samples);
+  EXPECT_TRUE(same_or_both_nan(a.gauss_newton.dip_deg, b.gauss_newton.dip_deg));
+}
+
+// Defaults in one place: each shipped selective_ekf*.yaml holds only what differs from the C++
+// defaults, so loading it gives exactly SelectiveEkfParams{} with those keys, every field compared
+// (a rounded copy of a default, e.g. 0.0349066 for 2 deg/s, fails here).
+TEST(SelectiveEkfConfig, GivenEachShippedYamlWhenLoadedThenItIsTheDefaultsWithOnlyItsDifferences) {
+  const std::string dir = std::string(POISE_SOURCE_DIR) + "/config/filters/";
+  const SelectiveEkfParams defaults;
+  SelectiveEkfParams nogating;
+  nogating.gating_enabled = false;
+  const SelectiveEkfParams broad = broad_sensor_params();  // defaults + BROAD's IMU delay
+  SelectiveEkfParams broad_nogating = broad;
+  broad_nogating.gating_enabled = false;
+  const std::pair<const char*, const SelectiveEkfParams*> files[] = {
+      {"selective_ekf.yaml", &defaults},
+      {"selective_ekf_nogating.yaml", &nogating},
+      {"selective_ekf_broad.yaml", &broad},
+      {"selective_ekf_broad_nogating.yaml", &broad_nogating},
+  };
+  for (const auto& [file, expected] : files) {
+    SCOPED_TRACE(file);
+    expect_same_params(load_selective_ekf_params(dir + file), *expected);
+  }
+}
+
 TEST(SelectiveEkfConfig, GivenShippedYamlFilesWhenLoadedThenValidAndDistinct) {
   const std::string dir = std::string(POISE_SOURCE_DIR) + "/config/filters/";
   const SelectiveEkfParams on = load_selective_ekf_params(dir + "selective_ekf.yaml");
@@ -1052,6 +1143,24 @@ TEST(SelectiveEkfCore, GivenAFullStateTakenMidRunWhenRestoredIntoAnotherFilterTh
   EXPECT_EQ(a.initialized(), fresh.initialized());
   EXPECT_EQ(a.state().P, fresh.state().P);
   EXPECT_EQ(a.vision_counters().applied, 0u);
+}
+
+// One validation shape (ParamCheck): a bad value of a key is an error at construction that names
+// the key as in the YAML file and its range/unit, never a silent repair or a NaN later.
+TEST(SelectiveEkfParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorNamesTheKey) {
+  testing::expect_bad_values_name_their_keys<SelectiveEkfParams>("selective_ekf", SelectiveEkfParams{}, {
+    {"sigma_gyro_rps", [](SelectiveEkfParams& p) { p.sigma_gyro_rps = 0.0; }},
+    {"heading_dip_tolerance_deg", [](SelectiveEkfParams& p) { p.heading_dip_tolerance_deg = std::nan(""); }},
+    {"imu_delay_s", [](SelectiveEkfParams& p) { p.imu_delay_s = 0.1; }},
+    {"limits.max_dt_s", [](SelectiveEkfParams& p) { p.limits.max_dt_s = 0.0; }}
+  }, [](const SelectiveEkfParams& p) { SelectiveEkf f(p); });
+}
+
+TEST(SelectiveEkfParams, GivenABadGaussNewtonValueThenTheErrorNamesTheNestedKey) {
+  SelectiveEkfParams p;
+  p.gauss_newton.max_iterations = 0;
+  const std::string msg = testing::invalid_argument_message([&] { SelectiveEkf f(p); });
+  EXPECT_NE(msg.find("selective_ekf.gauss_newton parameter max_iterations must be"), std::string::npos) << msg;
 }
 
 }  // namespace

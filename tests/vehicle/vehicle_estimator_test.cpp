@@ -2,6 +2,7 @@
 #include "poise/vehicle/vehicle_estimator.h"
 
 #include "poise/core/attitude.h"
+#include "poise/testing/param_errors.h"
 #include "poise/testing/testing.h"
 
 #include <gtest/gtest.h>
@@ -376,6 +377,17 @@ TEST(VehicleEstimator, GivenAStateTakenMidRunWhenRestoredIntoAnotherEstimatorThe
   EXPECT_EQ(a.state().ekf_init, fresh.state().ekf_init);
   EXPECT_EQ(a.state().p, fresh.state().p);
   EXPECT_EQ(a.state().rejects.total(), 0u);
+}
+
+// One validation shape (ParamCheck): a bad value of a key is an error at construction that names
+// the key as in the YAML file and its range/unit, never a silent repair or a NaN later.
+TEST(VehicleParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorNamesTheKey) {
+  testing::expect_bad_values_name_their_keys<VehicleParams>("vehicle", VehicleParams{}, {
+    {"model.m_s_kg", [](VehicleParams& p) { p.model.m_s_kg = 0.0; }},
+    {"mag_world_ut", [](VehicleParams& p) { p.mag_world_ut = Eigen::Vector3d(0.0, 0.0, -40.0); }},
+    {"ekf.r_mag_ut2", [](VehicleParams& p) { p.r_mag_ut2.y() = 0.0; }},
+    {"mag_norm_tolerance", [](VehicleParams& p) { p.mag_norm_tolerance = 1.0; }}
+  }, [](const VehicleParams& p) { VehicleEstimator f(p); });
 }
 
 }  // namespace

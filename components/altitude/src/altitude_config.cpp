@@ -2,6 +2,7 @@
 // defaults apply); unknown keys and bad values are startup errors naming the file and the key.
 #include "poise/altitude/altitude_filter.h"
 
+#include "poise/core/params_check.h"
 #include "poise/core/yaml_params.h"
 
 #include <yaml-cpp/yaml.h>
@@ -62,10 +63,7 @@ AltitudeParams load_altitude_params(const std::string& path) {
   tilt.finish();
   r.finish();
 
-  const std::string problems = p.validate();
-  if (!problems.empty()) {
-    throw std::runtime_error(path + ": " + problems);
-  }
+  validate_loaded(p, path);
   return p;
 }
 

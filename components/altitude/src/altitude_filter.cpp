@@ -1,9 +1,9 @@
 #include "poise/altitude/altitude_filter.h"
 
+#include "poise/core/params_check.h"
 #include "poise/core/sample_check.h"
 
 #include <cmath>
-#include <sstream>
 #include <stdexcept>
 
 namespace poise {
@@ -66,50 +66,30 @@ bool parse_cf_gains(const std::string& name, CfGains& out) {
   return false;
 }
 
-std::string AltitudeParams::validate() const {
-  std::ostringstream err;
-  const auto positive = [&err](double v, const char* name) {
-    if (!std::isfinite(v) || v <= 0.0) {
-      err << name << " must be > 0 (got " << v << "); ";
-    }
-  };
-  const auto non_negative = [&err](double v, const char* name) {
-    if (!std::isfinite(v) || v < 0.0) {
-      err << name << " must be >= 0 (got " << v << "); ";
-    }
-  };
-  positive(gravity_mps2, "gravity_mps2");
-  positive(reference_pressure_pa, "barometer.reference_pressure_pa");
-  positive(min_pressure_pa, "barometer.min_pressure_pa");
-  positive(max_pressure_pa, "barometer.max_pressure_pa");
-  if (min_pressure_pa >= max_pressure_pa) {
-    err << "barometer.min_pressure_pa must be below barometer.max_pressure_pa; ";
-  }
-  non_negative(max_baro_age_s, "barometer.max_baro_age_s");
-  positive(sigma_acc_mps2, "cf.sigma_acc_mps2");
-  positive(sigma_baro_m, "cf.sigma_baro_m");
-  non_negative(k_i, "cf.k_i");
-  positive(zupt_gyro_max_rps, "zupt.gyro_max_rps");
-  positive(zupt_accel_dev_max_mps2, "zupt.accel_dev_max_mps2");
-  non_negative(zupt_window_s, "zupt.window_s");
-  positive(max_dt_s, "max_dt_s");
-  positive(tilt.sigma_gyro_rps, "tilt.sigma_gyro_rps");
-  positive(tilt.sigma_accel_mps2, "tilt.sigma_accel_mps2");
-  if (!(tilt.c_a >= 0.0 && tilt.c_a < 1.0)) {
-    err << "tilt.c_a must be in [0, 1) (got " << tilt.c_a << "); ";
-  }
-  std::string s = err.str();
-  if (!s.empty()) {
-    s.resize(s.size() - 2);
-  }
-  return s;
+void AltitudeParams::validate() const {
+  const ParamCheck check("altitude");
+  check.positive(gravity_mps2, "gravity_mps2", "m/s^2");
+  check.positive(reference_pressure_pa, "barometer.reference_pressure_pa", "Pa");
+  check.positive(min_pressure_pa, "barometer.min_pressure_pa", "Pa");
+  check.positive(max_pressure_pa, "barometer.max_pressure_pa", "Pa");
+  check.require(min_pressure_pa < max_pressure_pa, "barometer.min_pressure_pa", "below barometer.max_pressure_pa (Pa)");
+  check.non_negative(max_baro_age_s, "barometer.max_baro_age_s", "s");
+  check.positive(sigma_acc_mps2, "cf.sigma_acc_mps2", "m/s^2");
+  check.positive(sigma_baro_m, "cf.sigma_baro_m", "m");
+  check.non_negative(k_i, "cf.k_i", "1/s^3 when time-scaled");
+  check.positive(zupt_gyro_max_rps, "zupt.gyro_max_rps", "rad/s");
+  check.positive(zupt_accel_dev_max_mps2, "zupt.accel_dev_max_mps2", "m/s^2");
+  check.non_negative(zupt_window_s, "zupt.window_s", "s");
+  check.positive(max_dt_s, "max_dt_s", "s");
+  check.positive(tilt.sigma_gyro_rps, "tilt.sigma_gyro_rps", "rad/s");
+  check.positive(tilt.sigma_accel_mps2, "tilt.sigma_accel_mps2", "m/s^2");
+  check.require(tilt.c_a >= 0.0 && tilt.c_a < 1.0, "tilt.c_a", "in [0, 1)");
+  check.non_negative(tilt.c_a_rate_hz, "tilt.c_a_rate_hz", "Hz");
+  check.non_negative(tilt.sigma_gyro_extra_rps, "tilt.sigma_gyro_extra_rps", "rad/s");
 }
 
 AltitudeFilter::AltitudeFilter(const AltitudeParams& params) : params_(params) {
-  const std::string problems = params_.validate();
-  if (!problems.empty()) {
-    throw std::invalid_argument("altitude filter parameters: " + problems);
-  }
+  params_.validate();
   params_.tilt.gravity_mps2 = params_.gravity_mps2;
   s_.tilt = TiltKf(params_.tilt);
   const double r = params_.sigma_acc_mps2 / params_.sigma_baro_m;  // (14)

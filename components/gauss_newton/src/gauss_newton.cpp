@@ -1,19 +1,26 @@
 #include "poise/gauss_newton/gauss_newton.h"
 #include "poise/core/yaml_params.h"
 
+#include "poise/core/params_check.h"
+
 #include <yaml-cpp/yaml.h>
 
 #include <stdexcept>
 
 namespace poise {
 
+void GaussNewtonParams::validate(const char* filter) const {
+  const ParamCheck check(filter);
+  check.require(max_iterations >= 1 && max_iterations <= 100, "max_iterations", "in [1, 100] (per sample)");
+  check.non_negative(tolerance_rad, "tolerance_rad", "rad");
+  check.positive(mag_weight, "mag_weight", "relative to the accelerometer rows");
+  check.require(std::isnan(dip_deg) || std::abs(dip_deg) <= 90.0, "dip_deg", "in [-90, 90] (deg) or null");
+  check.require(startup_samples >= 1, "startup_samples", ">= 1 (samples)");
+  poise::validate(limits, check);
+}
+
 GaussNewton::GaussNewton(const GaussNewtonParams& params) : p_(params) {
-  if (p_.max_iterations < 1 || !(p_.tolerance_rad >= 0.0) || !(p_.mag_weight > 0.0) ||
-      p_.startup_samples < 1) {
-    throw std::invalid_argument(
-        "GaussNewtonParams: need max_iterations >= 1, tolerance_rad >= 0, mag_weight > 0, "
-        "startup_samples >= 1");
-  }
+  p_.validate();
   reset();
 }
 
@@ -136,14 +143,10 @@ GaussNewtonParams load_gauss_newton_params(const std::string& path) {
                                "startup_samples)");
     }
   }
-  if (p.max_iterations < 1 || p.max_iterations > 100) {
-    throw std::runtime_error(path + ": max_iterations must be in [1, 100]");
-  }
-  if (!(p.mag_weight > 0.0)) {
-    throw std::runtime_error(path + ": mag_weight must be > 0");
-  }
-  if (std::isfinite(p.dip_deg) && std::abs(p.dip_deg) > 90.0) {
-    throw std::runtime_error(path + ": dip_deg must be in [-90, 90]");
+  try {
+    p.validate();
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": " + e.what());
   }
   return p;
 }

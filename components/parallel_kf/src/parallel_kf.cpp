@@ -1,5 +1,7 @@
 #include "poise/parallel_kf/parallel_kf.h"
 
+#include "poise/core/params_check.h"
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -47,49 +49,46 @@ ParallelKfParams ParallelKfParams::named(const std::string& name) {
 }
 
 void ParallelKfParams::validate() const {
-  auto need = [](bool ok, const char* what) {
-    if (!ok) {
-      throw std::invalid_argument(std::string("parallel_kf parameter out of range: ") + what);
-    }
-  };
-  need(tilt.sigma_gyro_rps > 0.0, "tilt.sigma_gyro_rps must be > 0 (rad/s)");
-  need(tilt.sigma_accel_mps2 > 0.0, "tilt.sigma_accel_mps2 must be > 0 (m/s^2)");
-  need(tilt.c_a >= 0.0 && tilt.c_a < 1.0, "tilt.c_a must be in [0, 1)");
-  need(tilt.c_a_rate_hz >= 0.0, "tilt.c_a_rate_hz must be >= 0 (Hz)");
-  need(tilt.gravity_mps2 > 5.0 && tilt.gravity_mps2 < 15.0, "tilt.gravity_mps2 must be in (5, 15)");
-  need(tilt.sigma_gyro_extra_rps >= 0.0, "tilt.sigma_gyro_extra_rps must be >= 0");
-  need(sigma_gyro_heading_rps >= 0.0, "sigma_gyro_heading_rps must be >= 0 (0 = tilt value)");
-  need(sigma_mag_ut > 0.0, "sigma_mag_ut must be > 0 (uT)");
-  need(c_d >= 0.0 && c_d < 1.0, "c_d must be in [0, 1)");
-  need(c_d_rate_hz >= 0.0, "c_d_rate_hz must be >= 0 (Hz)");
-  need(sigma_gyro_extra_heading_rps >= 0.0, "sigma_gyro_extra_heading_rps must be >= 0");
-  need(std::isnan(field_magnitude_ut) || field_magnitude_ut > 0.0, "field_magnitude_ut must be > 0 or null");
-  need(std::isnan(dip_deg) || std::abs(dip_deg) < 90.0, "dip_deg must be in (-90, 90) or null");
-  need(startup_s > 0.0, "startup_s must be > 0 (s)");
-  need(rest_gyro_max_rps > 0.0 && rest_accel_max_mps2 > 0.0, "rest thresholds must be > 0");
-  need(rest_min_s >= 0.0 && rest_filter_tau_s > 0.0, "rest times must be > 0");
-  need(bias_sigma_init_rps > 0.0 && bias_sigma_rest_rps > 0.0 && bias_drift_rps > 0.0 &&
-           bias_forgetting_time_s > 0.0,
-       "bias_sigma_init_rps, bias_sigma_rest_rps, bias_drift_rps and bias_forgetting_time_s must be > 0");
-  need(motion_bias_sigma_rps >= 0.0 && std::isfinite(motion_bias_sigma_rps),
-       "motion_bias_sigma_rps must be finite and >= 0 (rad/s, 0 = off)");
-  need(motion_bias_clip_rps > 0.0, "motion_bias_clip_rps must be > 0 (rad/s)");
-  need(motion_gyro_scale_error >= 0.0 && motion_gyro_scale_error < 1.0, "motion_gyro_scale_error must be in [0, 1)");
-  need(max_bias_rps > 0.0, "max_bias_rps must be > 0");
-  need(mag_norm_tol > 0.0 && mag_dip_tol_deg > 0.0, "mag gating tolerances must be > 0");
-  need(mag_reference_tau_s >= 0.0 && std::isfinite(mag_reference_tau_s),
-       "mag_reference_tau_s must be finite and >= 0 (s, 0 = fixed reference)");
-  need(mag_max_reject_s >= 0.0, "mag_max_reject_s must be >= 0 (s, 0 = never)");
-  need(mag_reacquire_s >= 0.0 && mag_reacquire_tol > 0.0, "mag_reacquire_s >= 0, mag_reacquire_tol > 0");
-  need(gyro_current_weight >= 0.0 && gyro_current_weight <= 1.0, "gyro_current_weight must be in [0, 1]");
-  need(accel_lowpass_tau_s >= 0.0, "accel_lowpass_tau_s must be >= 0 (s, 0 = off)");
-  need(accel_lowpass_order == 1 || accel_lowpass_order == 2, "accel_lowpass_order must be 1 or 2");
-  need(!share_tilt_correction || (tilt.renormalize && tilt.exact_rotation),
-       "share_tilt_correction needs tilt.renormalize and tilt.exact_rotation (unit directions)");
-  need(limits.max_dt_s > 0.0, "limits.max_dt_s must be > 0 (s)");
-  need(limits.max_gyro_rps > 0.0 && std::isfinite(limits.max_gyro_rps) && limits.max_accel_mps2 > 0.0 &&
-           std::isfinite(limits.max_accel_mps2) && limits.max_mag_ut > 0.0 && std::isfinite(limits.max_mag_ut),
-       "limits.max_gyro_rps, max_accel_mps2 and max_mag_ut must be finite and > 0");
+  const ParamCheck check("parallel_kf");
+  check.positive(tilt.sigma_gyro_rps, "tilt.sigma_gyro_rps", "rad/s");
+  check.positive(tilt.sigma_accel_mps2, "tilt.sigma_accel_mps2", "m/s^2");
+  check.require(tilt.c_a >= 0.0 && tilt.c_a < 1.0, "tilt.c_a", "in [0, 1)");
+  check.non_negative(tilt.c_a_rate_hz, "tilt.c_a_rate_hz", "Hz");
+  check.require(tilt.gravity_mps2 > 5.0 && tilt.gravity_mps2 < 15.0, "tilt.gravity_mps2", "in (5, 15) (m/s^2)");
+  check.non_negative(tilt.sigma_gyro_extra_rps, "tilt.sigma_gyro_extra_rps", "rad/s");
+  check.non_negative(sigma_gyro_heading_rps, "sigma_gyro_heading_rps", "rad/s, 0 = tilt value");
+  check.positive(sigma_mag_ut, "sigma_mag_ut", "uT");
+  check.require(c_d >= 0.0 && c_d < 1.0, "c_d", "in [0, 1)");
+  check.non_negative(c_d_rate_hz, "c_d_rate_hz", "Hz");
+  check.non_negative(sigma_gyro_extra_heading_rps, "sigma_gyro_extra_heading_rps", "rad/s");
+  check.require(std::isnan(field_magnitude_ut) || (std::isfinite(field_magnitude_ut) && field_magnitude_ut > 0.0),
+                "field_magnitude_ut", "> 0 (uT) or null");
+  check.require(std::isnan(dip_deg) || std::abs(dip_deg) < 90.0, "dip_deg", "in (-90, 90) (deg) or null");
+  check.positive(startup_s, "startup_s", "s");
+  check.positive(rest_gyro_max_rps, "rest_gyro_max_rps", "rad/s");
+  check.positive(rest_accel_max_mps2, "rest_accel_max_mps2", "m/s^2");
+  check.non_negative(rest_min_s, "rest_min_s", "s");
+  check.positive(rest_filter_tau_s, "rest_filter_tau_s", "s");
+  check.positive(bias_sigma_init_rps, "bias_sigma_init_rps", "rad/s");
+  check.positive(bias_sigma_rest_rps, "bias_sigma_rest_rps", "rad/s");
+  check.positive(bias_drift_rps, "bias_drift_rps", "rad/s");
+  check.positive(bias_forgetting_time_s, "bias_forgetting_time_s", "s");
+  check.non_negative(motion_bias_sigma_rps, "motion_bias_sigma_rps", "rad/s, 0 = off");
+  check.positive(motion_bias_clip_rps, "motion_bias_clip_rps", "rad/s");
+  check.require(motion_gyro_scale_error >= 0.0 && motion_gyro_scale_error < 1.0, "motion_gyro_scale_error", "in [0, 1)");
+  check.positive(max_bias_rps, "max_bias_rps", "rad/s");
+  check.positive(mag_norm_tol, "mag_norm_tol", "relative");
+  check.positive(mag_dip_tol_deg, "mag_dip_tol_deg", "deg");
+  check.non_negative(mag_reference_tau_s, "mag_reference_tau_s", "s, 0 = fixed reference");
+  check.non_negative(mag_max_reject_s, "mag_max_reject_s", "s, 0 = never");
+  check.non_negative(mag_reacquire_s, "mag_reacquire_s", "s, 0 = never");
+  check.positive(mag_reacquire_tol, "mag_reacquire_tol", "relative");
+  check.require(gyro_current_weight >= 0.0 && gyro_current_weight <= 1.0, "gyro_current_weight", "in [0, 1]");
+  check.non_negative(accel_lowpass_tau_s, "accel_lowpass_tau_s", "s, 0 = off");
+  check.require(accel_lowpass_order == 1 || accel_lowpass_order == 2, "accel_lowpass_order", "1 or 2");
+  check.require(!share_tilt_correction || (tilt.renormalize && tilt.exact_rotation), "share_tilt_correction",
+                "false unless tilt.renormalize and tilt.exact_rotation are true (unit directions)");
+  poise::validate(limits, check);
 }
 
 ParallelKf::ParallelKf(const ParallelKfParams& params) : p_(params) {

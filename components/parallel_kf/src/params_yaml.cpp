@@ -3,6 +3,8 @@
 #include "poise/parallel_kf/parallel_kf.h"
 #include "poise/core/yaml_params.h"
 
+#include "poise/core/params_check.h"
+
 #include <yaml-cpp/yaml.h>
 
 #include <functional>
@@ -153,11 +155,7 @@ ParallelKfParams load_parallel_kf_params(const std::string& path, const Parallel
     }
   }
   apply(p, root, "", path);
-  try {
-    p.validate();
-  } catch (const std::exception& e) {
-    throw std::runtime_error(path + ": " + e.what());
-  }
+  validate_loaded(p, path);
   return p;
 }
 

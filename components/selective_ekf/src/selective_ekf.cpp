@@ -1,5 +1,7 @@
 #include "poise/selective_ekf/selective_ekf.h"
 
+#include "poise/core/params_check.h"
+
 #include <algorithm>
 #include <stdexcept>
 
@@ -52,53 +54,53 @@ const char* to_string(Decision d) {
 }
 
 void validate(const SelectiveEkfParams& p) {
-  auto need = [](bool ok, const char* what) {
-    if (!ok) {
-      throw std::invalid_argument(std::string("SelectiveEkfParams: ") + what);
-    }
-  };
-  need(p.sigma_angular_accel > 0.0, "sigma_angular_accel must be > 0");
-  need(p.sigma_linear_accel > 0.0, "sigma_linear_accel must be > 0");
-  need(p.sigma_attitude_walk >= 0.0, "sigma_attitude_walk must be >= 0");
-  need(p.sigma_gyro_rps > 0.0, "sigma_gyro_rps must be > 0");
-  need(p.sigma_bias_walk >= 0.0, "sigma_bias_walk must be >= 0");
-  need(p.accel_lowpass_tau_s >= 0.0, "accel_lowpass_tau_s must be >= 0 (s, 0 = raw accelerometer)");
-  need(p.sigma_tilt_rad_sqrt_s > 0.0, "sigma_tilt_rad_sqrt_s must be > 0");
-  need(p.tilt_accel_ref_mps2 >= 0.0, "tilt_accel_ref_mps2 must be >= 0 (0 = off)");
-  need(p.gravity_mps2 > 5.0 && p.gravity_mps2 < 15.0, "gravity_mps2 must be in (5, 15)");
-  need(p.output_max_correction_dps >= 0.0, "output_max_correction_dps must be >= 0 (0 = off)");
-  need(p.aiding_period_s >= 0.0 && p.aiding_period_s <= 1.0, "aiding_period_s must be in [0, 1] s");
-  need(p.sigma_heading_rad_sqrt_s > 0.0, "sigma_heading_rad_sqrt_s must be > 0");
-  need(p.rest_gyro_max_rps > 0.0 && p.rest_accel_max_mps2 > 0.0, "rest thresholds must be > 0");
-  need(p.rest_min_s >= 0.0 && p.rest_filter_tau_s > 0.0, "rest_min_s >= 0, rest_filter_tau_s > 0");
-  need(p.sigma_rest_rate_rps > 0.0, "sigma_rest_rate_rps must be > 0");
-  need(p.init_sigma_bias_rps > 0.0, "init_sigma_bias_rps must be > 0");
-  need(p.sigma_imu_quat_deg > 0.0, "sigma_imu_quat_deg must be > 0");
-  need(p.sigma_vision_deg > 0.0, "sigma_vision_deg must be > 0");
-  need(p.sigma_vision_m > 0.0, "sigma_vision_m must be > 0");
-  need(!std::isfinite(p.dip_deg) || std::abs(p.dip_deg) <= 90.0, "dip_deg must be in [-90, 90]");
-  need(std::isnan(p.dip_deg) || std::isfinite(p.dip_deg), "dip_deg must be finite or NaN");
-  need(p.startup_samples >= 1, "startup_samples must be >= 1");
-  need(p.disturbance_angle_threshold_deg > 0.0, "disturbance_angle_threshold_deg must be > 0");
-  need(p.mag_norm_threshold > 0.0, "mag_norm_threshold must be > 0");
-  need(p.heading_dip_tolerance_deg > 0.0, "heading_dip_tolerance_deg must be > 0");
-  need(p.heading_norm_tolerance >= 0.0, "heading_norm_tolerance must be >= 0 (0 = off)");
-  need(p.quat_error_threshold_deg > 0.0 && p.quat_error_threshold_deg <= 180.0,
-       "quat_error_threshold_deg must be in (0, 180]");
-  need(p.inflate_factor >= 1.0, "inflate_factor must be >= 1");
-  need(p.untrusted_hold_s >= 0.0, "untrusted_hold_s must be >= 0");
-  need(p.q_error_lockout_s > 0.0, "q_error_lockout_s must be > 0");
-  need(p.vision_anchor_s > 0.0, "vision_anchor_s must be > 0");
-  need(p.vision_gate_sigma > 0.0, "vision_gate_sigma must be > 0");
-  need(p.vision_reset_after_rejections >= 1, "vision_reset_after_rejections must be >= 1");
-  need(p.history_s > 0.0 && p.history_s <= 5.0, "history_s must be in (0, 5]");
-  need(std::abs(p.vision_time_offset_s) <= 0.2, "vision_time_offset_s must be in [-0.2, 0.2]");
-  need(p.imu_delay_s >= 0.0 && p.imu_delay_s <= 0.05, "imu_delay_s must be in [0, 0.05]");
-  need(finite_quat(p.q_body_camera), "q_body_camera must be a finite unit quaternion");
-  need(p.p_body_camera_m.allFinite(), "p_body_camera_m must be finite");
-  need(p.init_sigma_attitude_deg > 0.0 && p.init_sigma_rate_rps > 0.0 &&
-           p.init_sigma_position_m > 0.0 && p.init_sigma_velocity_mps > 0.0,
-       "init_sigma_* must be > 0");
+  const ParamCheck check("selective_ekf");
+  check.positive(p.sigma_angular_accel, "sigma_angular_accel", "rad/s^2/sqrt(Hz)");
+  check.positive(p.sigma_linear_accel, "sigma_linear_accel", "m/s^2/sqrt(Hz)");
+  check.non_negative(p.sigma_attitude_walk, "sigma_attitude_walk", "rad/sqrt(s)");
+  check.positive(p.sigma_gyro_rps, "sigma_gyro_rps", "rad/s");
+  check.non_negative(p.sigma_bias_walk, "sigma_bias_walk", "rad/s/sqrt(s)");
+  check.non_negative(p.accel_lowpass_tau_s, "accel_lowpass_tau_s", "s, 0 = raw accelerometer");
+  check.positive(p.sigma_tilt_rad_sqrt_s, "sigma_tilt_rad_sqrt_s", "rad sqrt(s)");
+  check.non_negative(p.tilt_accel_ref_mps2, "tilt_accel_ref_mps2", "m/s^2, 0 = off");
+  check.require(p.gravity_mps2 > 5.0 && p.gravity_mps2 < 15.0, "gravity_mps2", "in (5, 15) (m/s^2)");
+  check.non_negative(p.output_max_correction_dps, "output_max_correction_dps", "deg/s, 0 = off");
+  check.require(p.aiding_period_s >= 0.0 && p.aiding_period_s <= 1.0, "aiding_period_s", "in [0, 1] (s)");
+  check.positive(p.sigma_heading_rad_sqrt_s, "sigma_heading_rad_sqrt_s", "rad sqrt(s)");
+  check.positive(p.rest_gyro_max_rps, "rest_gyro_max_rps", "rad/s");
+  check.positive(p.rest_accel_max_mps2, "rest_accel_max_mps2", "m/s^2");
+  check.non_negative(p.rest_min_s, "rest_min_s", "s");
+  check.positive(p.rest_filter_tau_s, "rest_filter_tau_s", "s");
+  check.positive(p.sigma_rest_rate_rps, "sigma_rest_rate_rps", "rad/s");
+  check.positive(p.init_sigma_bias_rps, "init_sigma_bias_rps", "rad/s");
+  check.positive(p.sigma_imu_quat_deg, "sigma_imu_quat_deg", "deg");
+  check.positive(p.sigma_vision_deg, "sigma_vision_deg", "deg");
+  check.positive(p.sigma_vision_m, "sigma_vision_m", "m");
+  check.require(std::isnan(p.dip_deg) || std::abs(p.dip_deg) <= 90.0, "dip_deg", "in [-90, 90] (deg) or null");
+  check.require(p.startup_samples >= 1, "startup_samples", ">= 1 (samples)");
+  check.positive(p.disturbance_angle_threshold_deg, "disturbance_angle_threshold_deg", "deg");
+  check.positive(p.mag_norm_threshold, "mag_norm_threshold", "relative");
+  check.positive(p.heading_dip_tolerance_deg, "heading_dip_tolerance_deg", "deg");
+  check.non_negative(p.heading_norm_tolerance, "heading_norm_tolerance", "relative, 0 = off");
+  check.require(p.quat_error_threshold_deg > 0.0 && p.quat_error_threshold_deg <= 180.0,
+                "quat_error_threshold_deg", "in (0, 180] (deg)");
+  check.require(std::isfinite(p.inflate_factor) && p.inflate_factor >= 1.0, "inflate_factor", "finite and >= 1");
+  check.non_negative(p.untrusted_hold_s, "untrusted_hold_s", "s");
+  check.positive(p.q_error_lockout_s, "q_error_lockout_s", "s");
+  check.positive(p.vision_anchor_s, "vision_anchor_s", "s");
+  check.positive(p.vision_gate_sigma, "vision_gate_sigma", "standard deviations");
+  check.require(p.vision_reset_after_rejections >= 1, "vision_reset_after_rejections", ">= 1 (samples)");
+  check.require(p.history_s > 0.0 && p.history_s <= 5.0, "history_s", "in (0, 5] (s)");
+  check.require(std::abs(p.vision_time_offset_s) <= 0.2, "vision_time_offset_s", "in [-0.2, 0.2] (s)");
+  check.require(p.imu_delay_s >= 0.0 && p.imu_delay_s <= 0.05, "imu_delay_s", "in [0, 0.05] (s)");
+  check.require(finite_quat(p.q_body_camera), "q_body_camera", "a finite unit quaternion [w, x, y, z]");
+  check.require(p.p_body_camera_m.allFinite(), "p_body_camera_m", "finite (m)");
+  check.positive(p.init_sigma_attitude_deg, "init_sigma_attitude_deg", "deg");
+  check.positive(p.init_sigma_rate_rps, "init_sigma_rate_rps", "rad/s");
+  check.positive(p.init_sigma_position_m, "init_sigma_position_m", "m");
+  check.positive(p.init_sigma_velocity_mps, "init_sigma_velocity_mps", "m/s");
+  validate(p.limits, check);
+  p.gauss_newton.validate("selective_ekf.gauss_newton");
 }
 
 SelectiveEkf::SelectiveEkf(const SelectiveEkfParams& params) : p_(params) {

@@ -2,6 +2,7 @@
 // defaults apply); unknown keys and bad values are startup errors naming the file and the key.
 #include "poise/vehicle/vehicle_estimator.h"
 
+#include "poise/core/params_check.h"
 #include "poise/core/yaml_params.h"
 
 #include <yaml-cpp/yaml.h>
@@ -64,10 +65,7 @@ VehicleParams load_vehicle_params(const std::string& path) {
   ekf.finish();
   r.finish();
 
-  const std::string problems = p.validate();
-  if (!problems.empty()) {
-    throw std::runtime_error(path + ": " + problems);
-  }
+  validate_loaded(p, path);
   return p;
 }
 

@@ -1,5 +1,6 @@
 #include "poise/vehicle/vehicle_estimator.h"
 
+#include "poise/core/params_check.h"
 #include "poise/core/attitude.h"
 #include "poise/core/sample_check.h"
 
@@ -31,51 +32,32 @@ bool parse_vehicle_mode(const std::string& name, VehicleMode& out) {
   return false;
 }
 
-std::string VehicleParams::validate() const {
-  std::ostringstream err;
-  const auto positive = [&err](double v, const char* name) {
-    if (!std::isfinite(v) || v <= 0.0) {
-      err << name << " must be > 0 (got " << v << "); ";
-    }
-  };
-  const auto non_negative = [&err](double v, const char* name) {
-    if (!std::isfinite(v) || v < 0.0) {
-      err << name << " must be >= 0 (got " << v << "); ";
-    }
-  };
-  positive(model.i_x_kgm2, "model.i_x_kgm2");
-  positive(model.i_y_kgm2, "model.i_y_kgm2");
-  non_negative(model.k_x_nm_per_rad, "model.k_x_nm_per_rad");
-  non_negative(model.k_y_nm_per_rad, "model.k_y_nm_per_rad");
-  non_negative(model.b_x_nms_per_rad, "model.b_x_nms_per_rad");
-  non_negative(model.b_y_nms_per_rad, "model.b_y_nms_per_rad");
-  positive(model.m_s_kg, "model.m_s_kg");
-  non_negative(model.h_s_m, "model.h_s_m");
-  positive(gravity_mps2, "gravity_mps2");
-  if (!mag_world_ut.allFinite() || mag_world_ut.norm() < 1.0) {
-    err << "mag_world_ut must be a finite field of at least 1 uT; ";
-  } else if (mag_world_ut.head<2>().norm() < 1e-3 * mag_world_ut.norm()) {
-    err << "mag_world_ut must not be vertical (no heading reference); ";
-  }
-  positive(static_yaw_rate_max_rps, "switching.static_yaw_rate_max_rps");
-  positive(static_speed_max_mps, "switching.static_speed_max_mps");
-  non_negative(q_roll_rad2_per_s, "ekf.q_roll_rad2_per_s");
-  non_negative(q_pitch_rad2_per_s, "ekf.q_pitch_rad2_per_s");
-  non_negative(q_yaw_rad2_per_s, "ekf.q_yaw_rad2_per_s");
-  if (!r_mag_ut2.allFinite() || (r_mag_ut2.array() <= 0.0).any()) {
-    err << "ekf.r_mag_ut2 must be three values > 0; ";
-  }
-  positive(initial_var_angle_rad2, "ekf.initial_var_angle_rad2");
-  positive(initial_var_rate_rad2ps2, "ekf.initial_var_rate_rad2ps2");
-  positive(max_dt_s, "max_dt_s");
-  if (!(mag_norm_tolerance > 0.0 && mag_norm_tolerance < 1.0)) {
-    err << "mag_norm_tolerance must be in (0, 1) (got " << mag_norm_tolerance << "); ";
-  }
-  std::string s = err.str();
-  if (!s.empty()) {
-    s.resize(s.size() - 2);
-  }
-  return s;
+void VehicleParams::validate() const {
+  const ParamCheck check("vehicle");
+  check.positive(model.i_x_kgm2, "model.i_x_kgm2", "kg m^2");
+  check.positive(model.i_y_kgm2, "model.i_y_kgm2", "kg m^2");
+  check.non_negative(model.k_x_nm_per_rad, "model.k_x_nm_per_rad", "N m/rad");
+  check.non_negative(model.k_y_nm_per_rad, "model.k_y_nm_per_rad", "N m/rad");
+  check.non_negative(model.b_x_nms_per_rad, "model.b_x_nms_per_rad", "N m s/rad");
+  check.non_negative(model.b_y_nms_per_rad, "model.b_y_nms_per_rad", "N m s/rad");
+  check.positive(model.m_s_kg, "model.m_s_kg", "kg");
+  check.non_negative(model.h_s_m, "model.h_s_m", "m");
+  check.positive(gravity_mps2, "gravity_mps2", "m/s^2");
+  check.require(mag_world_ut.allFinite() && mag_world_ut.norm() >= 1.0, "mag_world_ut",
+                "a finite field of at least 1 uT [east, north, up]");
+  check.require(mag_world_ut.head<2>().norm() >= 1e-3 * mag_world_ut.norm(), "mag_world_ut",
+                "not vertical (no heading reference)");
+  check.positive(static_yaw_rate_max_rps, "switching.static_yaw_rate_max_rps", "rad/s");
+  check.positive(static_speed_max_mps, "switching.static_speed_max_mps", "m/s");
+  check.non_negative(q_roll_rad2_per_s, "ekf.q_roll_rad2_per_s", "rad^2/s");
+  check.non_negative(q_pitch_rad2_per_s, "ekf.q_pitch_rad2_per_s", "rad^2/s");
+  check.non_negative(q_yaw_rad2_per_s, "ekf.q_yaw_rad2_per_s", "rad^2/s");
+  check.require(r_mag_ut2.allFinite() && (r_mag_ut2.array() > 0.0).all(), "ekf.r_mag_ut2",
+                "three finite values > 0 (uT^2)");
+  check.positive(initial_var_angle_rad2, "ekf.initial_var_angle_rad2", "rad^2");
+  check.positive(initial_var_rate_rad2ps2, "ekf.initial_var_rate_rad2ps2", "rad^2/s^2");
+  check.positive(max_dt_s, "max_dt_s", "s");
+  check.require(mag_norm_tolerance > 0.0 && mag_norm_tolerance < 1.0, "mag_norm_tolerance", "in (0, 1) (relative)");
 }
 
 Eigen::Matrix3d body_world_from_euler(double roll_rad, double pitch_rad, double yaw_rad) {
@@ -116,10 +98,7 @@ bool triad_body_world(const Eigen::Vector3d& mag_body_ut, double accel_lat_g,
 }
 
 VehicleEstimator::VehicleEstimator(const VehicleParams& params) : params_(params) {
-  const std::string problems = params_.validate();
-  if (!problems.empty()) {
-    throw std::invalid_argument("vehicle estimator parameters: " + problems);
-  }
+  params_.validate();
   reset();
 }
 

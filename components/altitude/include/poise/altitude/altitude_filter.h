@@ -124,8 +124,8 @@ struct AltitudeParams {
   // Time
   double max_dt_s = 0.2;                  ///< a larger stamp gap re-anchors time (counted, no propagation)
 
-  /// Empty when valid, else what is wrong (one message per problem, "; " separated).
-  [[nodiscard]] std::string validate() const;
+  /// Throws std::invalid_argument naming the first key out of range, its range and unit (ParamCheck).
+  void validate() const;
 };
 
 /// Loads AltitudeParams from a YAML file (keys as in config/filters/altitude.yaml); unknown keys
@@ -186,7 +186,7 @@ struct AltitudeFilterState {
 
 class AltitudeFilter {
  public:
-  /// Throws std::invalid_argument when params.validate() is not empty.
+  /// Throws std::invalid_argument when params.validate() does.
   explicit AltitudeFilter(const AltitudeParams& params = {});
 
   /// Back to the state of a new filter (parameters kept).

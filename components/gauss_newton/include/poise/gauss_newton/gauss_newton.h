@@ -35,6 +35,9 @@ struct GaussNewtonParams {
   double dip_deg = std::nan("");   ///< NaN: learn at start-up; else the configured dip, deg
   int startup_samples = 50;        ///< samples averaged to learn the dip
   SampleLimits limits;             ///< input validation
+  /// Throws std::invalid_argument naming the key and its range (ParamCheck); `filter` names the
+  /// section in messages.
+  void validate(const char* filter = "gauss_newton") const;
 };
 
 /// Loads GaussNewtonParams from a YAML file (keys as the fields; unknown keys are an error).

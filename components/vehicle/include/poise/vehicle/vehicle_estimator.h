@@ -93,8 +93,8 @@ struct VehicleParams {
   double max_dt_s = 0.2;                       ///< a larger stamp gap re-anchors time (counted)
   double mag_norm_tolerance = 0.5;             ///< |B| outside (1 +- this) |H| is rejected as disturbed
 
-  /// Empty when valid, else what is wrong ("; " separated).
-  [[nodiscard]] std::string validate() const;
+  /// Throws std::invalid_argument naming the first key out of range, its range and unit (ParamCheck).
+  void validate() const;
 };
 
 /// Loads VehicleParams from YAML (config/filters/vehicle.yaml); unknown keys and bad values throw
@@ -180,7 +180,7 @@ class VehicleEstimator {
   using Vector5 = Eigen::Matrix<double, 5, 1>;
   using Matrix5 = Eigen::Matrix<double, 5, 5>;
 
-  /// Throws std::invalid_argument when params.validate() is not empty.
+  /// Throws std::invalid_argument when params.validate() does.
   explicit VehicleEstimator(const VehicleParams& params = {});
 
   /// Back to the state of a new estimator (parameters kept).
