@@ -58,7 +58,7 @@ TEST(Echo, GivenABestEffortImuPublisherWhenEchoedAsJsonThenCountDecodedSamplesAr
   const std::regex shape(
       R"re(^\{"topic":"imu","type":"poise::msg::ImuSample","size":\d+,"source_timestamp_ns":\d+,)re"
       R"re("data":\{"header":\{"stamp_ns":(\d+),"seq":(\d+),"frame_id":"body"\},"sensor_id":"imu0",)re"
-      R"re("accel_mps2":\{"x":0,"y":0,"z":9\.81\},.*"valid":\{"accel":true,"gyro":true,"mag":false,)re"
+      R"re("accel_mps2":\{"x":0\.0,"y":0\.0,"z":9\.81\},.*"valid":\{"accel":true,"gyro":true,"mag":false,)re"
       R"re("pressure":false,"temperature":false\}\}\}$)re");
   long last_seq = -1;
   for (const auto& s : samples) {

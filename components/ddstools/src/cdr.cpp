@@ -1,6 +1,7 @@
 #include "poise/ddstools/cdr.h"
 
-#include <charconv>
+#include <nlohmann/json.hpp>
+
 #include <cmath>
 #include <cstring>
 #include <sstream>
@@ -255,103 +256,43 @@ class Reader {
 // ---------------------------------------------------------------------------------------------
 // Output
 
-void append_double(std::string& out, double d) {
-  if (std::isnan(d)) {
-    out += "\"NaN\"";
-    return;
-  }
-  if (std::isinf(d)) {
-    out += d > 0 ? "\"Infinity\"" : "\"-Infinity\"";
-    return;
-  }
-  char buf[64];
-  const auto result = std::to_chars(buf, buf + sizeof buf, d);
-  out.append(buf, result.ptr);
-}
-
-// JSON string with escapes; invalid UTF-8 bytes become U+FFFD so the output stays valid JSON.
-void append_string(std::string& out, const std::string& s) {
-  out += '"';
-  const std::size_t n = s.size();
-  for (std::size_t i = 0; i < n;) {
-    const auto c = static_cast<unsigned char>(s[i]);
-    if (c < 0x80) {
-      switch (c) {
-        case '"': out += "\\\""; break;
-        case '\\': out += "\\\\"; break;
-        case '\n': out += "\\n"; break;
-        case '\r': out += "\\r"; break;
-        case '\t': out += "\\t"; break;
-        default:
-          if (c < 0x20) {
-            char buf[8];
-            std::snprintf(buf, sizeof buf, "\\u%04x", c);
-            out += buf;
-          } else {
-            out += static_cast<char>(c);
-          }
+// The one JSON writer is nlohmann-json. NaN and infinities (not representable in JSON) become the
+// strings "NaN", "Infinity", "-Infinity"; invalid UTF-8 bytes in strings become U+FFFD.
+nlohmann::ordered_json json_of(const Value& v) {
+  switch (v.kind) {
+    case Value::Kind::kBool: return v.b;
+    case Value::Kind::kInt: return v.i;
+    case Value::Kind::kUInt: return v.u;
+    case Value::Kind::kFloat:
+      if (std::isnan(v.d)) {
+        return "NaN";
       }
-      ++i;
-      continue;
+      if (std::isinf(v.d)) {
+        return v.d > 0 ? "Infinity" : "-Infinity";
+      }
+      return v.d;
+    case Value::Kind::kString:
+    case Value::Kind::kEnum: return v.s;
+    case Value::Kind::kStruct: {
+      nlohmann::ordered_json o = nlohmann::ordered_json::object();
+      for (const auto& [name, field] : v.fields) {
+        o[name] = json_of(field);
+      }
+      return o;
     }
-    std::size_t len = 0;
-    if ((c & 0xE0) == 0xC0 && c >= 0xC2) {
-      len = 2;
-    } else if ((c & 0xF0) == 0xE0) {
-      len = 3;
-    } else if ((c & 0xF8) == 0xF0 && c <= 0xF4) {
-      len = 4;
-    }
-    bool valid = len != 0 && i + len <= n;
-    for (std::size_t k = 1; valid && k < len; ++k) {
-      valid = (static_cast<unsigned char>(s[i + k]) & 0xC0) == 0x80;
-    }
-    if (valid) {
-      out.append(s, i, len);
-      i += len;
-    } else {
-      out += "\\ufffd";
-      ++i;
+    case Value::Kind::kList: {
+      nlohmann::ordered_json a = nlohmann::ordered_json::array();
+      for (const auto& item : v.items) {
+        a.push_back(json_of(item));
+      }
+      return a;
     }
   }
-  out += '"';
+  return nullptr;
 }
 
 void append_json(std::string& out, const Value& v) {
-  switch (v.kind) {
-    case Value::Kind::kBool: out += v.b ? "true" : "false"; break;
-    case Value::Kind::kInt: out += std::to_string(v.i); break;
-    case Value::Kind::kUInt: out += std::to_string(v.u); break;
-    case Value::Kind::kFloat: append_double(out, v.d); break;
-    case Value::Kind::kString:
-    case Value::Kind::kEnum: append_string(out, v.s); break;
-    case Value::Kind::kStruct: {
-      out += '{';
-      bool first = true;
-      for (const auto& [name, field] : v.fields) {
-        if (!first) {
-          out += ',';
-        }
-        first = false;
-        append_string(out, name);
-        out += ':';
-        append_json(out, field);
-      }
-      out += '}';
-      break;
-    }
-    case Value::Kind::kList: {
-      out += '[';
-      for (std::size_t k = 0; k < v.items.size(); ++k) {
-        if (k != 0) {
-          out += ',';
-        }
-        append_json(out, v.items[k]);
-      }
-      out += ']';
-      break;
-    }
-  }
+  out += json_of(v).dump(-1, ' ', false, nlohmann::ordered_json::error_handler_t::replace);
 }
 
 bool is_scalar(const Value& v) { return v.kind != Value::Kind::kStruct && v.kind != Value::Kind::kList; }

@@ -58,10 +58,11 @@ inline Value decode(const TypeTable& table, const std::string& type_name,
 std::optional<std::string> payload_problem(const TypeTable& table, const std::string& type_name,
                                            const std::uint8_t* data, std::size_t size);
 
-/// Compact single-line JSON. Structs are objects (members in declaration order), arrays and
+/// Compact single-line JSON (written by nlohmann-json, the project's one JSON writer). Structs are
+/// objects (members in declaration order), arrays and
 /// sequences are arrays, enums are their enumerator name as a string, booleans true/false, 64-bit
 /// integers exact, doubles with round-trip precision; NaN and infinities (not representable in
-/// JSON) are the strings "NaN", "Infinity", "-Infinity".
+/// JSON) are the strings "NaN", "Infinity", "-Infinity"; invalid UTF-8 becomes U+FFFD.
 std::string to_json(const Value& value);
 
 /// Readable multi-line text (YAML-like): `name: value` per line, nested structs indented two
