@@ -31,6 +31,7 @@ struct PipelineMonitor::Impl {
   std::map<std::string, FilterStats> stats;
   std::map<std::string, std::vector<AttitudePoint>> series;
   std::map<std::string, std::vector<std::pair<double, double>>> errors;
+  std::map<std::string, std::map<uint32_t, double>> errors_by_seq;
   std::map<uint32_t, Eigen::Quaterniond> truth_by_seq;  // recent truth, for matching
   std::map<std::string, std::map<uint32_t, Eigen::Quaterniond>> pending;  // estimates before truth
   std::map<std::string, std::vector<AltitudePoint>> altitude;
@@ -57,6 +58,7 @@ struct PipelineMonitor::Impl {
     s.sum_sq_error += e * e;
     ++s.compared;
     errors[filter].emplace_back(t_s, e);
+    errors_by_seq[filter][seq] = e;
   }
 
   void on_attitude(const std::string& filter, const msg::AttitudeEstimate& m) {
@@ -119,6 +121,7 @@ PipelineMonitor::PipelineMonitor(dds::Participant& participant, const dds::Topic
     return [impl, key](const msg::AltitudeEstimate& m, const auto&) {
       AltitudePoint p;
       p.t_s = impl->now_s();
+      p.seq = m.header().seq();
       p.height_m = m.height_m();
       p.vertical_velocity_mps = m.vertical_velocity_mps();
       p.baro_height_m = m.baro_valid() ? m.baro_height_m() : std::numeric_limits<double>::quiet_NaN();
@@ -182,6 +185,11 @@ std::map<std::string, std::vector<AltitudePoint>> PipelineMonitor::altitude_seri
 std::map<std::string, std::vector<std::pair<double, double>>> PipelineMonitor::error_series() const {
   std::lock_guard<std::mutex> lock(impl_->mutex);
   return impl_->errors;
+}
+
+std::map<std::string, std::map<uint32_t, double>> PipelineMonitor::errors_by_seq() const {
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  return impl_->errors_by_seq;
 }
 
 PipelineMonitor::CameraStats PipelineMonitor::camera_stats() const {

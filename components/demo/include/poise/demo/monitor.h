@@ -31,6 +31,7 @@ struct AttitudePoint {
 
 struct AltitudePoint {
   double t_s = 0.0;
+  uint32_t seq = 0;             ///< IMU seq of the sample (header.seq): matches the truth's
   double height_m = 0.0;
   double vertical_velocity_mps = 0.0;
   double baro_height_m = 0.0;
@@ -61,6 +62,8 @@ class PipelineMonitor {
   [[nodiscard]] std::map<std::string, std::vector<AltitudePoint>> altitude_series() const;
   /// Error of each filter vs truth over time: filter -> (t_s, error deg).
   [[nodiscard]] std::map<std::string, std::vector<std::pair<double, double>>> error_series() const;
+  /// The same errors by IMU seq: filter -> seq -> error deg (for comparisons sample by sample).
+  [[nodiscard]] std::map<std::string, std::map<uint32_t, double>> errors_by_seq() const;
   /// Camera: frames with a pose, tags in the last frame, last pose time.
   struct CameraStats {
     uint64_t frames = 0;
