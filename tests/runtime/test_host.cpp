@@ -21,6 +21,27 @@ std::string error_of(const std::string& yaml) {
   return "";
 }
 
+std::string realtime_error(const std::string& map) {
+  return error_of("realtime: " + map + "\ncomponents: [{type: parallel_kf}]\n");
+}
+
+TEST(HostFile, GivenARealtimeSectionWhenParsedThenEachKeyIsReadAndBadValuesNameTheKey) {
+  const HostSpec spec = parse("realtime: {priority: 80, cpus: [2, 3], lock_memory: true}\n"
+                              "components: [{type: parallel_kf}]\n");
+  EXPECT_EQ(spec.realtime.priority, 80);
+  EXPECT_EQ(spec.realtime.cpus, (std::vector<int>{2, 3}));
+  EXPECT_TRUE(spec.realtime.lock_memory);
+  EXPECT_FALSE(parse("components: [{type: parallel_kf}]\n").realtime.any());
+  EXPECT_NE(realtime_error("{priority: 100}").find("test.yaml: realtime.priority must be 1-99"), std::string::npos);
+  EXPECT_NE(realtime_error("{priority: -1}").find("realtime.priority"), std::string::npos);
+  EXPECT_NE(realtime_error("{cpus: []}").find("realtime.cpus"), std::string::npos);
+  EXPECT_NE(realtime_error("{cpus: [-1]}").find("cpu -1 is out of range"), std::string::npos);
+  EXPECT_NE(realtime_error("{cpus: [1, 1]}").find("twice"), std::string::npos);
+  EXPECT_NE(realtime_error("{prio: 5}").find("unknown key 'prio'"), std::string::npos);
+  EXPECT_NE(realtime_error("[1]").find("must be a map"), std::string::npos);
+  EXPECT_NE(realtime_error("{priority: high}").find("test.yaml: realtime"), std::string::npos);
+}
+
 TEST(HostFile, ParsesComponentsTopicsAndDomain) {
   const HostSpec spec = parse(R"(
 domain: 12

@@ -127,7 +127,7 @@ HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std
   if (!root || !root.IsMap()) {
     throw ConfigError(origin + ": a host file is a YAML map with a 'components' list");
   }
-  check_keys(root, {"domain", "participant_profile", "qos_file", "topics", "components"}, origin);
+  check_keys(root, {"domain", "participant_profile", "qos_file", "topics", "realtime", "components"}, origin);
   HostSpec spec;
   spec.path = origin;
   try {
@@ -148,6 +148,7 @@ HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std
     throw ConfigError(origin + ": " + e.what());
   }
   apply_topic_overrides(root["topics"], origin, spec.topics);
+  spec.realtime = parse_realtime(root["realtime"], origin);
 
   const YAML::Node list = root["components"];
   if (!list || !list.IsSequence() || list.size() == 0) {

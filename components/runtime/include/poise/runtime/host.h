@@ -5,6 +5,7 @@
 //   participant_profile: poise_default   # optional (poise_default | poise_udp | poise_loopback)
 //   qos_file: ../qos/poise_profiles.xml  # optional; relative paths are relative to this file
 //   topics: {imu: imu, attitude_prefix: attitude/}   # optional overrides of the default names
+//   realtime: {priority: 80, cpus: [2, 3], lock_memory: true}   # optional (realtime.h)
 //   components:
 //     - type: parallel_kf          # a registered component type (`poise run --list`)
 //       name: pkf                  # optional instance name (default: type)
@@ -14,6 +15,7 @@
 #pragma once
 
 #include "poise/runtime/component.h"
+#include "poise/runtime/realtime.h"
 
 #include <atomic>
 #include <optional>
@@ -27,6 +29,7 @@ struct HostSpec {
   std::string participant_profile;
   std::string qos_file;
   dds::TopicNames topics;
+  RealtimeSettings realtime;
   std::vector<ComponentSpec> components;
   std::string path;  ///< the host file
 };
