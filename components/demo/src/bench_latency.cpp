@@ -15,6 +15,7 @@
 #include "poise/imu/pty_link.h"
 #include "poise/nodes/imu_node.h"
 #include "poise/nodes/reports.h"
+#include "poise/runtime/realtime.h"
 
 #include <poise/msg/estimatesPubSubTypes.h>
 
@@ -149,6 +150,9 @@ struct BenchOptions {
   double window_s = 1.0;
   int diagnostics_every = 1;
   std::vector<double> rates{200.0, 1000.0};
+  int load_threads = 0;   ///< competing busy threads for the whole run (normal priority, any core)
+  bool realtime = false;  ///< each rate measured twice: the pipeline at normal and at real-time settings
+  int rt_priority = 80;
   // hidden: the bare-hop publisher role
   bool hop_publisher = false;
   double hop_rate = 0.0;
@@ -243,7 +247,7 @@ class PtyEcho {
 /// the `poise run` child (imu_driver + parallel_kf) and times write -> attitude/parallel_kf
 /// received. Hop: the `--hop-publisher` child publishes stamped AttitudeEstimates while resumed
 /// (SIGUSR1 toggles it) and this process times stamp -> received.
-RateResult measure_rate(const BenchOptions& o, double rate) {
+RateResult measure_rate(const BenchOptions& o, double rate, bool pipeline_realtime) {
   const std::string link = "/tmp/poise-bench-imu-" + std::to_string(::getpid());
   imu::PtyLink pty(link);
   const std::string host = "/tmp/poise-bench-" + std::to_string(::getpid()) + ".yaml";
@@ -277,7 +281,11 @@ RateResult measure_rate(const BenchOptions& o, double rate) {
       participant, "bench/hop", dds::QosKind::kEstimate, [&](const msg::AttitudeEstimate& m, const auto&) {
         hop.add(static_cast<double>(nodes::monotonic_ns() - m.header().stamp_ns()) * 1e-6);
       });
-  Process child({"run", host, "--domain", std::to_string(o.domain), "--quiet"});
+  std::vector<std::string> run_args{"run", host, "--domain", std::to_string(o.domain), "--quiet"};
+  if (pipeline_realtime) {  // the host's real-time settings, as `poise run` applies them
+    run_args.insert(run_args.end(), {"--rt-priority", std::to_string(o.rt_priority), "--lock-memory"});
+  }
+  Process child(run_args);
   Process hop_child({"bench", "latency", "--hop-publisher", "--domain", std::to_string(o.domain), "--hop-rate",
                      std::to_string(rate)});
   if (!reader.wait_for_writers(1, std::chrono::seconds(20))) {
@@ -428,14 +436,57 @@ void run_bench(const BenchOptions& o) {
     return;
   }
   install_stop_handlers();
+  // Competing load: busy threads at normal priority on every core for the whole run.
+  std::atomic<bool> load_stop{false};
+  std::vector<std::thread> load;
+  for (int i = 0; i < o.load_threads; ++i) {
+    load.emplace_back([&load_stop] {
+      volatile uint64_t spin = 0;
+      while (!load_stop.load(std::memory_order_relaxed)) {
+        spin = spin + 1;
+      }
+    });
+  }
+  struct StopLoad {
+    std::atomic<bool>& stop;
+    std::vector<std::thread>& threads;
+    ~StopLoad() {
+      stop = true;
+      for (auto& t : threads) {
+        t.join();
+      }
+    }
+  } stop_load{load_stop, load};
+  if (o.realtime) {
+    // the measuring side (this process's DDS threads, created after this) at real-time priority in
+    // both rows, so that only the pipeline's settings differ between them
+    runtime::RealtimeSettings rt;
+    rt.priority = o.rt_priority;
+    for (const auto& w : runtime::apply_realtime(rt)) {
+      std::printf("warning: %s\n", w.c_str());
+    }
+  }
+  std::printf("load: %d busy thread(s) at normal priority%s\n", o.load_threads,
+              o.realtime ? "; each rate measured with the pipeline at normal scheduling and at SCHED_FIFO "
+                           "(`poise run --rt-priority P --lock-memory`)" : "");
   std::printf("poise bench latency: line written on the pty -> attitude estimate received in another "
               "process (imu_driver + parallel_kf in one `poise run` process), next to a bare Fast DDS hop "
               "of the same payload (AttitudeEstimate), measured in alternating %.1f s windows for %.0f s "
               "each. Times in ms.\n\n", o.window_s, o.seconds);
   std::printf("%8s | %28s | %28s | %9s | %17s | %8s\n", "rate Hz", "pipeline p50 / p99 / max",
               "bare hop p50 / p99 / max", "p99 ratio", "rounds min/median", "host CPU");
+  std::vector<std::pair<double, bool>> runs;
   for (double rate : o.rates) {
-    const RateResult r = measure_rate(o, rate);
+    runs.emplace_back(rate, false);
+    if (o.realtime) {
+      runs.emplace_back(rate, true);
+    }
+  }
+  for (const auto& [rate, rt] : runs) {
+    if (o.realtime) {
+      std::printf("%s\n", rt ? "pipeline: SCHED_FIFO, memory locked" : "pipeline: normal scheduling");
+    }
+    const RateResult r = measure_rate(o, rate, rt);
     std::vector<double> ratios = r.round_ratios;
     std::sort(ratios.begin(), ratios.end());
     const double rmin = ratios.empty() ? 0.0 : ratios.front();
@@ -473,6 +524,14 @@ void register_bench_latency(CLI::App& app) {
       ->check(CLI::Range(0.2, 60.0))
       ->capture_default_str();
   cmd->add_option("--rates", o->rates, "IMU rates, Hz")->check(CLI::Range(1.0, 5000.0));
+  cmd->add_option("--load", o->load_threads, "Competing busy threads (normal priority, any core) for the whole run")
+      ->check(CLI::Range(0, 256))
+      ->capture_default_str();
+  cmd->add_flag("--realtime", o->realtime,
+                "Measure each rate twice: the pipeline at normal scheduling and at SCHED_FIFO with memory locked");
+  cmd->add_option("--rt-priority", o->rt_priority, "SCHED_FIFO priority for --realtime")
+      ->check(CLI::Range(1, 99))
+      ->capture_default_str();
   cmd->add_flag("--hop-publisher", o->hop_publisher)->group("");  // internal: the bare-hop peer
   cmd->add_option("--hop-rate", o->hop_rate)->group("");
   cmd->add_option("--hop-seconds", o->hop_seconds)->group("");
