@@ -705,8 +705,10 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
     history_.push_back({in, x_});
     return true;
   }
-  // Queued (future-stamped) vision strictly before this sample goes first, in stamp order.
-  auto it = std::upper_bound(vision_log_.begin(), vision_log_.end(), history_.back().input.stamp_ns,
+  // Queued (future-stamped) vision strictly before this sample goes first, in stamp order. After a
+  // re-anchored time jump the history is empty: the state's own time is the previous sample's.
+  const int64_t previous_ns = history_.empty() ? x_.stamp_ns : history_.back().input.stamp_ns;
+  auto it = std::upper_bound(vision_log_.begin(), vision_log_.end(), previous_ns,
                              [](int64_t t, const VisionPose& v) { return t < v.capture_stamp_ns; });
   for (; it != vision_log_.end() && it->capture_stamp_ns < in.stamp_ns; ++it) {
     predict_to(it->capture_stamp_ns);
