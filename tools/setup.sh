@@ -2,7 +2,9 @@
 # Installs what poise needs on Debian 12 (only what is missing), then configures and builds it in
 # Release. Idempotent and fast when everything is already there.
 #
-#   tools/setup.sh [--build-dir DIR] [--no-build] [--sanitize] [--jobs N]
+#   tools/setup.sh [--build-dir DIR] [--no-build] [--no-tests | --cores-only] [--sanitize] [--jobs N]
+#   --no-tests    no test-only packages (GoogleTest, Cyclone DDS, clang, Node.js, ...), no tests built
+#   --cores-only  only the estimator cores (Eigen + yaml-cpp; -DPOISE_CORES_ONLY=ON; README "Installing")
 #
 # Needs root (or sudo) only when packages are missing.
 set -euo pipefail
@@ -11,6 +13,8 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 root="$(cd "$here/.." && pwd)"
 build_dir="$root/build"
 do_build=1
+tests=ON
+cores_only=OFF
 sanitize=OFF
 jobs="$(nproc 2>/dev/null || echo 2)"
 
@@ -18,9 +22,11 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --build-dir) build_dir="$2"; shift 2 ;;
     --no-build) do_build=0; shift ;;
+    --no-tests) tests=OFF; shift ;;
+    --cores-only) cores_only=ON; tests=OFF; shift ;;
     --sanitize) sanitize=ON; shift ;;
     --jobs) jobs="$2"; shift 2 ;;
-    -h|--help) sed -n '2,9p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,11p' "$0"; exit 0 ;;
     *) echo "setup.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -28,14 +34,14 @@ done
 # Debian 12 packages. Build: compiler, CMake, Ninja, Fast DDS + generator, Eigen, OpenCV,
 # AprilTag, yaml-cpp, CLI11, HDF5, zstd, nlohmann-json (the one JSON writer). Tests: GoogleTest, Cyclone DDS (interop), iproute2
 # (network namespaces), openssl (DDS Security), clang (fuzzing), Node.js + npm (MCAP validators).
-packages=(
-  build-essential cmake ninja-build pkg-config
-  libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools
-  libeigen3-dev libopencv-dev libapriltag-dev libyaml-cpp-dev libcli11-dev libhdf5-dev libzstd-dev
-  nlohmann-json3-dev
-  libgtest-dev libgmock-dev cyclonedds-dev cyclonedds-tools
-  iproute2 iputils-ping openssl clang
-)
+packages=(build-essential cmake ninja-build pkg-config libeigen3-dev libyaml-cpp-dev)
+if [ "$cores_only" = OFF ]; then
+  packages+=(libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools libopencv-dev libapriltag-dev
+             libcli11-dev libhdf5-dev libzstd-dev nlohmann-json3-dev)
+fi
+if [ "$tests" = ON ]; then
+  packages+=(libgtest-dev libgmock-dev cyclonedds-dev cyclonedds-tools iproute2 iputils-ping openssl clang)
+fi
 
 missing=()
 for p in "${packages[@]}"; do
@@ -44,8 +50,10 @@ for p in "${packages[@]}"; do
   fi
 done
 # Node.js/npm may come from Debian or be preinstalled elsewhere: check the commands.
-if ! command -v node >/dev/null 2>&1; then missing+=(nodejs); fi
-if ! command -v npm >/dev/null 2>&1; then missing+=(npm); fi
+if [ "$tests" = ON ]; then
+  if ! command -v node >/dev/null 2>&1; then missing+=(nodejs); fi
+  if ! command -v npm >/dev/null 2>&1; then missing+=(npm); fi
+fi
 
 if [ ${#missing[@]} -gt 0 ]; then
   echo "setup: installing ${#missing[@]} missing package(s): ${missing[*]}" >&2
@@ -69,7 +77,11 @@ if [ ! -f "$build_dir/CMakeCache.txt" ]; then
   generator=(-G Ninja)
 fi
 cmake -S "$root" -B "$build_dir" "${generator[@]}" -DCMAKE_BUILD_TYPE=Release \
-  -DPOISE_SANITIZE="$sanitize" >/dev/null
+  -DPOISE_SANITIZE="$sanitize" -DPOISE_BUILD_TESTS="$tests" -DPOISE_CORES_ONLY="$cores_only" >/dev/null
 echo "setup: building in $build_dir ($jobs jobs)" >&2
 cmake --build "$build_dir" -j "$jobs"
-echo "setup: done; the poise binary is $build_dir/bin/poise" >&2
+if [ "$cores_only" = ON ]; then
+  echo "setup: done; the cores are built in $build_dir (cmake --install $build_dir --prefix PREFIX)" >&2
+else
+  echo "setup: done; the poise binary is $build_dir/bin/poise" >&2
+fi
