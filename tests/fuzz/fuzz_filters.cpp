@@ -4,10 +4,9 @@
 // KF's covariances are finite; a sample the filter cannot use is rejected, never integrated.
 //
 // Input: records of 1 flag byte, a stamp and 9 values (gyro, accel, mag):
-//   flag & 1: stamp = 8 raw bytes masked to [0, 2^62) ns (any wild stamp a clock could give:
-//             146 years), else stamp += 2 bytes x 10 us (kept in the same range);
-// Known and not yet fixed: stamps near the int64 limits (e.g. -2^63) overflow stamp differences
-// inside the selective EKF (UBSan: signed overflow in process_imu); hence the mask.
+//   flag & 1: stamp = 8 raw bytes (any int64: negative, -2^63, INT64_MAX; the shared sample
+//             check refuses stamps outside [0, 2^62] ns), else stamp += 2 bytes x 10 us
+//             (wrapping as unsigned);
 //   flag & 2: values = 8 raw bytes each (any double, NaN and inf included), else 2 bytes each,
 //             scaled to plausible ranges (gyro 1e-3 rad/s, accel 1e-3 m/s^2, mag 1e-2 uT);
 //   flag & 4: no magnetometer; flag & 8: no gyro; flag & 16: no accelerometer.
@@ -59,15 +58,14 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   for (int records = 0; records < 4096; ++records) {
     uint8_t flag = 0;
     if (!r.take(&flag, 1)) break;
-    constexpr uint64_t kStampMask = (uint64_t{1} << 62) - 1;
     if (flag & 1) {
       uint64_t raw = 0;
       if (!r.take(&raw, 8)) break;
-      stamp = static_cast<int64_t>(raw & kStampMask);
+      stamp = static_cast<int64_t>(raw);
     } else {
       uint16_t d = 0;
       if (!r.take(&d, 2)) break;
-      stamp = static_cast<int64_t>((static_cast<uint64_t>(stamp) + d * 10000ULL) & kStampMask);
+      stamp = static_cast<int64_t>(static_cast<uint64_t>(stamp) + d * 10000ULL);
     }
     double v[9];
     bool complete = true;

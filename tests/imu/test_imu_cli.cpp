@@ -99,8 +99,9 @@ TEST(ImuCli, SimImuThroughImuToASubscriberWithFaultsAndADisconnect) {
   });
   Child driver({poise_bin(), "imu", "--port", link, "--domain", d, "--status-period", "1"});
   ASSERT_TRUE(imu.wait_for_writers(1, 20s)) << driver.output();
-  Child sim({poise_bin(), "sim-imu", "--link", link, "--rate", "200", "--duration", "4",
-             "--faults", "flip=0.03,garbage=0.03,disconnect=2:0.3,seed=4"});
+  // one disconnect at 3 s, then 2.6 s of data: a loaded machine may take a while to reopen the device
+  Child sim({poise_bin(), "sim-imu", "--link", link, "--rate", "200", "--duration", "5.9",
+             "--faults", "flip=0.03,garbage=0.03,disconnect=3:0.3,seed=4"});
   // WHEN the simulated device finishes
   const auto sim_exit = sim.wait_for(30s);
   ASSERT_TRUE(sim_exit.has_value()) << sim.output();

@@ -420,7 +420,9 @@ TEST(ParallelKf, GivenOneImpossibleSampleWhenFilteredThenItIsRejectedCountedAndT
       {"gyro 1e308", RejectReason::kGyroOutOfRange, [](ImuSample& s) { s.gyro_rps.x() = 1e308; }},
       {"accel 1e20", RejectReason::kAccelOutOfRange, [](ImuSample& s) { s.accel_mps2.x() = 1e20; }},
       {"stamp +1e15 ns", RejectReason::kTimeGap, [](ImuSample& s) { s.stamp_ns += 1'000'000'000'000'000; }},
-      {"stamp INT64_MAX", RejectReason::kTimeGap, [](ImuSample& s) { s.stamp_ns = INT64_MAX; }},
+      {"stamp INT64_MAX", RejectReason::kStampOutOfRange, [](ImuSample& s) { s.stamp_ns = INT64_MAX; }},
+      {"stamp INT64_MIN", RejectReason::kStampOutOfRange, [](ImuSample& s) { s.stamp_ns = INT64_MIN; }},
+      {"stamp -1 ns", RejectReason::kStampOutOfRange, [](ImuSample& s) { s.stamp_ns = -1; }},
   };
   for (const Case& c : cases) {
     sim::SensorSimulator sim_a(sim::make_scenario("fast_motion", 100.0, 4));

@@ -25,6 +25,7 @@ enum class RejectReason : uint8_t {
   kGyroOutOfRange,   ///< |gyro| above the sensor's full scale (finite but impossible, e.g. 1e308)
   kAccelOutOfRange,  ///< |accel| above the sensor's full scale
   kMagOutOfRange,    ///< |mag| above the sensor's full scale
+  kStampOutOfRange,  ///< stamp < 0 or beyond kMaxStampNs (no sensor clock reads that)
   kCount
 };
 
@@ -36,6 +37,7 @@ inline const char* to_string(RejectReason r) {
     case RejectReason::kZeroAccel: return "zero_accel";
     case RejectReason::kZeroMag: return "zero_mag";
     case RejectReason::kNonMonotonicStamp: return "non_monotonic_stamp";
+    case RejectReason::kStampOutOfRange: return "stamp_out_of_range";
     case RejectReason::kTimeGap: return "time_gap";
     case RejectReason::kMissingGyro: return "missing_gyro";
     case RejectReason::kMissingAccel: return "missing_accel";
@@ -133,12 +135,21 @@ inline bool advance_stamp(int64_t stamp_ns, bool have_stamp, int64_t& last_stamp
   return true;
 }
 
+/// The largest stamp a sensor clock can plausibly give: 2^62 ns, 146 years after its zero. Stamps
+/// are ns of the sensor's clock (>= 0); beyond this, differences of two stamps could overflow.
+constexpr int64_t kMaxStampNs = int64_t{1} << 62;
+
 /// Validates `s`; counts every problem found in `counters`. `last_stamp_ns` < 0 means "no
 /// previous sample". Non-monotonic stamps are rejected; a gap above max_dt_s is rejected
 /// (counted) with reanchor = true. When to restart time after either: StampAnchor.
 inline SampleCheck check_imu_sample(const ImuSample& s, int64_t last_stamp_ns,
                                     const SampleLimits& lim, RejectCounters& counters) {
   SampleCheck out;
+  if (s.stamp_ns < 0 || s.stamp_ns > kMaxStampNs) {  // keeps every stamp difference in int64
+    out.reject = RejectReason::kStampOutOfRange;
+    counters.add(out.reject);
+    return out;
+  }
   if (!s.has_gyro) {
     out.reject = RejectReason::kMissingGyro;
     counters.add(out.reject);
