@@ -599,7 +599,7 @@ DriftRun run_field_drift(const ParallelKfParams& p) {
 }
 
 TEST(ParallelKf, GivenAFieldThatDriftsSlowlyWhenTheReferenceFollowsThenItStaysAcceptedWhileASuddenChangeIsGated) {
-  constexpr double kAcceptedStepFraction = 0.3;  // the 1 s ramp's first 0.25 s are inside the 5 % gate
+  constexpr double kAcceptedStepFraction = 0.3;  // at most the 1 s ramp's first 0.25 s (+5 %) pass the gate
   // GIVEN the default filter (the reference follows the accepted field, 100 s) and one whose
   // reference stays what it learnt at start-up
   ParallelKfParams fixed = ParallelKfParams::defaults();

@@ -20,6 +20,7 @@ TEST(Realtime, GivenACpuListWhenParsedThenRangesExpandAndBadTextIsRefused) {
   EXPECT_EQ(parse_cpu_list("2", "--cpus"), (std::vector<int>{2}));
   EXPECT_THROW(parse_cpu_list("a", "--cpus"), ConfigError);
   EXPECT_THROW(parse_cpu_list("3-1", "--cpus"), ConfigError);
+  EXPECT_THROW(parse_cpu_list("0-2,1", "--cpus"), ConfigError);  // as the host file: twice is an error
   EXPECT_THROW(parse_cpu_list("", "--cpus"), ConfigError);
   EXPECT_THROW(parse_cpu_list("99999999", "--cpus"), ConfigError);
 }

@@ -23,6 +23,7 @@
 #include <poll.h>
 #include <termios.h>
 #include <signal.h>
+#include <sched.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -58,11 +59,20 @@ class Process {
     posix_spawn_file_actions_t actions;
     posix_spawn_file_actions_init(&actions);
     posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, "/dev/null", O_WRONLY, 0);
-    if (posix_spawn(&pid_, c[0], &actions, nullptr, c.data(), environ) != 0) {
-      posix_spawn_file_actions_destroy(&actions);
+    // Children start at normal scheduling even when this process runs at SCHED_FIFO (--realtime):
+    // a child is real-time only when its own options say so.
+    posix_spawnattr_t attr;
+    posix_spawnattr_init(&attr);
+    sched_param normal{};
+    posix_spawnattr_setschedpolicy(&attr, SCHED_OTHER);
+    posix_spawnattr_setschedparam(&attr, &normal);
+    posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSCHEDULER);
+    const int rc = posix_spawn(&pid_, c[0], &actions, &attr, c.data(), environ);
+    posix_spawnattr_destroy(&attr);
+    posix_spawn_file_actions_destroy(&actions);
+    if (rc != 0) {
       throw Error("cannot start " + argv[0]);
     }
-    posix_spawn_file_actions_destroy(&actions);
   }
   ~Process() {
     ::kill(pid_, SIGINT);

@@ -99,9 +99,10 @@ std::vector<int> parse_cpu_list(const std::string& text, const std::string& orig
     }
     for (int c = lo; c <= hi; ++c) {
       check_cpu(c, origin);
-      if (seen.insert(c).second) {
-        cpus.push_back(c);
+      if (!seen.insert(c).second) {
+        throw ConfigError(origin + ": '" + text + "' lists cpu " + std::to_string(c) + " twice");
       }
+      cpus.push_back(c);
     }
   }
   if (cpus.empty()) {

@@ -159,7 +159,7 @@ struct ParallelKfParams {
   double mag_dip_tol_deg = 10.0;    ///< |dip - alpha| above which s_M is rejected, deg
   /// The reference norm and dip follow the accepted field with this time constant (s, over
   /// accepted time; 0 = fixed after start-up): a slow change of the field is adopted, a fast one
-  /// is gated. 100 s chosen in every fold of leave-one-trial-out on BROAD (docs/ESTIMATORS.md).
+  /// is gated. 100 s chosen in 18 of 19 folds of leave-one-trial-out on BROAD (docs/ESTIMATORS.md).
   double mag_reference_tau_s = 100.0;
   double mag_reacquire_s = 20.0;    ///< adopt a stable new field after this long rejected, s (0 = never)
   double mag_reacquire_tol = 0.05;  ///< relative stability of the candidate field for adoption
