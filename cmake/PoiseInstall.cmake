@@ -18,24 +18,29 @@ function(poise_install_cores)
     add_library(poise::${export_name} ALIAS ${t})
   endforeach()
   install(TARGETS ${POISE_CORE_TARGETS} EXPORT poiseTargets
-          ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
+          ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR} COMPONENT dev
           INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
   foreach(d IN LISTS POISE_CORE_DIRS)
-    install(DIRECTORY ${PROJECT_SOURCE_DIR}/components/${d}/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+    install(DIRECTORY ${PROJECT_SOURCE_DIR}/components/${d}/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}
+            COMPONENT dev)
   endforeach()
   set(cmake_dir ${CMAKE_INSTALL_LIBDIR}/cmake/poise)
-  install(EXPORT poiseTargets NAMESPACE poise:: DESTINATION ${cmake_dir})
+  install(EXPORT poiseTargets NAMESPACE poise:: DESTINATION ${cmake_dir} COMPONENT dev)
   configure_package_config_file(${PROJECT_SOURCE_DIR}/cmake/poiseConfig.cmake.in
                                 ${PROJECT_BINARY_DIR}/poiseConfig.cmake INSTALL_DESTINATION ${cmake_dir})
   write_basic_package_version_file(${PROJECT_BINARY_DIR}/poiseConfigVersion.cmake
                                    VERSION ${PROJECT_VERSION} COMPATIBILITY SameMinorVersion)
   install(FILES ${PROJECT_BINARY_DIR}/poiseConfig.cmake ${PROJECT_BINARY_DIR}/poiseConfigVersion.cmake
-          DESTINATION ${cmake_dir})
+          DESTINATION ${cmake_dir} COMPONENT dev)
   set(libs "")
   foreach(t IN LISTS POISE_CORE_TARGETS)
     string(APPEND libs " -l${t}")
   endforeach()
   set(POISE_PC_LIBS "${libs}")
+  # The prefix relative to the .pc file, so the same file serves any install prefix (cmake
+  # --install --prefix P, the /usr of the Debian package).
+  file(RELATIVE_PATH POISE_PC_PREFIX /p/${CMAKE_INSTALL_LIBDIR}/pkgconfig /p)
+  string(REGEX REPLACE "/$" "" POISE_PC_PREFIX "${POISE_PC_PREFIX}")
   configure_file(${PROJECT_SOURCE_DIR}/cmake/poise-cores.pc.in ${PROJECT_BINARY_DIR}/poise-cores.pc @ONLY)
-  install(FILES ${PROJECT_BINARY_DIR}/poise-cores.pc DESTINATION ${CMAKE_INSTALL_LIBDIR}/pkgconfig)
+  install(FILES ${PROJECT_BINARY_DIR}/poise-cores.pc DESTINATION ${CMAKE_INSTALL_LIBDIR}/pkgconfig COMPONENT dev)
 endfunction()

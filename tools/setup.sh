@@ -32,15 +32,18 @@ while [ $# -gt 0 ]; do
 done
 
 # Debian 12 packages. Build: compiler, CMake, Ninja, Fast DDS + generator, Eigen, OpenCV,
-# AprilTag, yaml-cpp, CLI11, HDF5, zstd, nlohmann-json (the one JSON writer). Tests: GoogleTest, Cyclone DDS (interop), iproute2
-# (network namespaces), openssl (DDS Security), clang (fuzzing), Node.js + npm (MCAP validators).
+# AprilTag, yaml-cpp, CLI11, HDF5, zstd, nlohmann-json (the one JSON writer), libsystemd (sd_notify
+# for the poise@.service unit). Tests: GoogleTest, Cyclone DDS (interop), iproute2
+# (network namespaces), openssl (DDS Security), clang (fuzzing), Node.js + npm (MCAP validators),
+# dpkg-dev (dpkg-shlibdeps for the Debian packages) and systemd (systemd-analyze verify).
 packages=(build-essential cmake ninja-build pkg-config libeigen3-dev libyaml-cpp-dev)
 if [ "$cores_only" = OFF ]; then
   packages+=(libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools libopencv-dev libapriltag-dev
-             libcli11-dev libhdf5-dev libzstd-dev nlohmann-json3-dev)
+             libcli11-dev libhdf5-dev libzstd-dev nlohmann-json3-dev libsystemd-dev)
 fi
 if [ "$tests" = ON ]; then
-  packages+=(libgtest-dev libgmock-dev cyclonedds-dev cyclonedds-tools iproute2 iputils-ping openssl clang)
+  packages+=(libgtest-dev libgmock-dev cyclonedds-dev cyclonedds-tools iproute2 iputils-ping openssl clang
+             dpkg-dev systemd)
 fi
 
 missing=()

@@ -3,6 +3,7 @@
 #include "poise/runtime/host.h"
 #include "poise/core/yaml_params.h"
 #include "poise/runtime/realtime.h"
+#include "poise/runtime/service.h"
 
 #include <chrono>
 #include <cstdio>
@@ -48,7 +49,7 @@ void run_host(const runtime::HostSpec& spec, const RunOptions& options) {
     }
   }
   runtime::Host host(spec, domain);
-  host.start();
+  runtime::start_and_notify(host);  // READY=1 to systemd only once every component has started
   if (!options.quiet) {
     std::fprintf(stderr, "poise: %zu component(s) running on domain %d (Ctrl-C stops)\n",
                  spec.components.size(), domain);
@@ -69,7 +70,7 @@ void run_host(const runtime::HostSpec& spec, const RunOptions& options) {
       next_status += std::chrono::duration<double>(options.status_period_s);
     }
   }
-  host.stop();
+  runtime::stop_and_notify(host);
   if (!options.quiet) {
     std::fprintf(stderr, "poise: stopped cleanly\n");
   }

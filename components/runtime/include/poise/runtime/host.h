@@ -57,6 +57,8 @@ class Host {
   void stop();
   /// One status line per component.
   [[nodiscard]] std::vector<std::string> status() const;
+  /// Number of components.
+  [[nodiscard]] std::size_t size() const { return components_.size(); }
   [[nodiscard]] dds::Participant& participant() { return *participant_; }
 
  private:
