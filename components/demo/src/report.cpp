@@ -65,6 +65,14 @@ std::string fmt(double v, int decimals = 2) {
   return buf;
 }
 
+/// The charts are left out when poise was built without OpenCV (POISE_WITH_CAMERA=OFF); the page
+/// says so.
+void write_chart(const report::Figure& figure, const std::string& path) {
+  if (report::png_supported()) {
+    report::write_png(figure, path);
+  }
+}
+
 }  // namespace
 
 std::string write_report(const std::string& dir, const ReportInput& input, const PipelineMonitor& monitor) {
@@ -102,7 +110,7 @@ std::string write_report(const std::string& dir, const ReportInput& input, const
       }
       f.panels.push_back(p);
     }
-    report::write_png(f, dir + "/attitude.png");
+    write_chart(f, dir + "/attitude.png");
   }
   // 2. Total attitude error per filter, with the episodes.
   {
@@ -132,7 +140,7 @@ std::string write_report(const std::string& dir, const ReportInput& input, const
     p.y_min = 0.0;
     p.y_max = std::min(std::max(worst * 1.05, 1.0), 45.0);
     f.panels.push_back(p);
-    report::write_png(f, dir + "/error.png");
+    write_chart(f, dir + "/error.png");
   }
   // 3. Magnetic disturbance and magnetometer trust.
   {
@@ -176,7 +184,7 @@ std::string write_report(const std::string& dir, const ReportInput& input, const
       ++colour;
     }
     f.panels = {norm, trust};
-    report::write_png(f, dir + "/disturbance.png");
+    write_chart(f, dir + "/disturbance.png");
   }
   // 4. Altitude and vertical velocity.
   if (!alt.empty()) {
@@ -215,7 +223,7 @@ std::string write_report(const std::string& dir, const ReportInput& input, const
       v.series.push_back(sv);
     }
     f.panels = {h, v};
-    report::write_png(f, dir + "/altitude.png");
+    write_chart(f, dir + "/altitude.png");
   }
 
   // index.html
@@ -248,6 +256,9 @@ std::string write_report(const std::string& dir, const ReportInput& input, const
   }
   html << "</table>\n<p>Camera: " << camera.frames << " frames, " << camera.poses
        << " vision poses.</p>\n";
+  if (!report::png_supported()) {
+    html << "<p>No charts: this poise was built without OpenCV (-DPOISE_WITH_CAMERA=OFF).</p>\n";
+  }
   for (const char* png : {"error.png", "attitude.png", "disturbance.png", "altitude.png"}) {
     if (std::filesystem::exists(dir + "/" + png)) {
       html << "<img src=\"" << png << "\" alt=\"" << png << "\">\n";

@@ -1,7 +1,9 @@
 #include "poise/report/plot.h"
 
+#if POISE_WITH_OPENCV
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
+#endif
 
 #include <algorithm>
 #include <cmath>
@@ -10,6 +12,7 @@
 #include <stdexcept>
 
 namespace poise::report {
+#if POISE_WITH_OPENCV
 namespace {
 
 constexpr int kMarginLeft = 90;
@@ -166,6 +169,7 @@ void draw_panel(cv::Mat& img, const Panel& panel, const cv::Rect& area, double x
 }
 
 }  // namespace
+#endif
 
 std::vector<double> nice_ticks(double lo, double hi, int target) {
   std::vector<double> ticks;
@@ -199,6 +203,9 @@ std::array<int, 3> palette(int index) {
   return colours[static_cast<std::size_t>(index) % colours.size()];
 }
 
+#if POISE_WITH_OPENCV
+bool png_supported() { return true; }
+
 void write_png(const Figure& figure, const std::string& path) {
   const int height = kFigureTitleHeight + figure.panel_height_px * static_cast<int>(figure.panels.size());
   cv::Mat img(std::max(height, kFigureTitleHeight + 10), figure.width_px, CV_8UC3,
@@ -229,5 +236,14 @@ void write_png(const Figure& figure, const std::string& path) {
     throw std::runtime_error("cannot write the chart '" + path + "'");
   }
 }
+
+#else
+bool png_supported() { return false; }
+
+void write_png(const Figure& /*figure*/, const std::string& path) {
+  throw std::runtime_error("cannot write the chart '" + path +
+                           "': poise was built without OpenCV (-DPOISE_WITH_CAMERA=OFF)");
+}
+#endif
 
 }  // namespace poise::report

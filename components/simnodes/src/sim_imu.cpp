@@ -206,6 +206,8 @@ void register_sim_imu(runtime::ComponentRegistry& registry) {
 namespace poise::runtime {
 void register_sim_nodes(ComponentRegistry& registry) {
   simnodes::register_sim_imu(registry);
+#if POISE_WITH_CAMERA
   simnodes::register_sim_camera(registry);
+#endif
 }
 }  // namespace poise::runtime

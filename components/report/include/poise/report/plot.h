@@ -46,7 +46,11 @@ struct Figure {
   int panel_height_px = 320;
 };
 
-/// Writes `figure` to `path` (PNG). Throws std::runtime_error if the file cannot be written.
+/// True when PNG charts can be written (poise built with OpenCV, i.e. POISE_WITH_CAMERA=ON).
+bool png_supported();
+
+/// Writes `figure` to `path` (PNG). Throws std::runtime_error if the file cannot be written, or
+/// when !png_supported().
 void write_png(const Figure& figure, const std::string& path);
 
 /// A palette of distinguishable colours (index wraps).

@@ -1,0 +1,44 @@
+#!/usr/bin/env bash
+# Builds poise with -DPOISE_WITH_CAMERA=OFF where OpenCV and AprilTag cannot be found
+# (CMAKE_DISABLE_FIND_PACKAGE_*) and checks the result:
+#   - `poise` links no OpenCV or AprilTag library (ldd), and the number of shared libraries it
+#     loads is printed beside that of the full build (when BUILD_DIR/bin/poise exists);
+#   - the camera commands are gone (`poise camera`, `poise tags`), the estimators are there, and the
+#     selective EKF still takes vision poses over DDS (`poise run --list`: selective_ekf, no
+#     camera/sim_camera component).
+# Tests are not built in that configuration (they need the camera).
+#   tools/check_no_camera.sh [OUT_DIR [FULL_BUILD_DIR]]   (default build-nocamera/ and build/)
+# CMAKE_CXX_COMPILER_LAUNCHER (e.g. ccache) is honoured.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+out="${1:-$root/build-nocamera}"
+full="${2:-$root/build}"
+fail() { echo "check_no_camera: $*" >&2; exit 1; }
+launcher=()
+if [[ -n "${CMAKE_CXX_COMPILER_LAUNCHER:-}" ]]; then
+  launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER="$CMAKE_CXX_COMPILER_LAUNCHER")
+fi
+start=$SECONDS
+cmake -S "$root" -B "$out" -G Ninja -DCMAKE_BUILD_TYPE=Release -DPOISE_WITH_CAMERA=OFF -DPOISE_BUILD_TESTS=OFF \
+  -DCMAKE_DISABLE_FIND_PACKAGE_OpenCV=ON -DCMAKE_DISABLE_FIND_PACKAGE_apriltag=ON --no-warn-unused-cli \
+  "${launcher[@]}" >"$out.configure.log" 2>&1 \
+  || { tail -30 "$out.configure.log" >&2; fail "poise does not configure with POISE_WITH_CAMERA=OFF and no OpenCV/AprilTag"; }
+cmake --build "$out" -j "$(nproc 2>/dev/null || echo 2)" >"$out.build.log" 2>&1 \
+  || { tail -40 "$out.build.log" >&2; fail "poise does not build with POISE_WITH_CAMERA=OFF (see $out.build.log)"; }
+poise="$out/bin/poise"
+if hits=$(ldd "$poise" | grep -E 'libopencv|libapriltag'); then
+  fail "poise built with POISE_WITH_CAMERA=OFF still links:"$'\n'"$hits"
+fi
+list="$("$poise" run --list)" || fail "poise run --list failed"
+grep -q '^selective_ekf ' <<<"$list" || fail "the selective EKF component is missing"
+grep -q '^sim_imu ' <<<"$list" || fail "the simulated IMU component is missing"
+if grep -qE '^(camera|sim_camera) ' <<<"$list"; then fail "a camera component is still registered"; fi
+for cmd in camera tags; do
+  "$poise" "$cmd" 2>&1 | grep -q "unknown subcommand '$cmd'" || fail "poise $cmd still exists"
+done
+n_off=$(ldd "$poise" | wc -l)
+msg="check_no_camera: POISE_WITH_CAMERA=OFF builds in $((SECONDS - start)) s; poise loads $n_off shared libraries (ldd), no OpenCV/AprilTag"
+if [[ -x "$full/bin/poise" ]]; then
+  msg+="; the full build's poise: $(ldd "$full/bin/poise" | wc -l)"
+fi
+echo "$msg"
