@@ -410,3 +410,50 @@ TEST(AltitudeParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorNamesTh
 
 }  // namespace
 }  // namespace poise
+
+namespace poise {
+namespace {
+
+// State health (issue 19): a non-finite state or a covariance with a negative variance (through
+// set_state(): no sample that passes the input checks gets there) resets the filter on the next
+// update, counted, nothing non-finite comes out, and it re-converges. Oracle: the true height.
+TEST(AltitudeFilter, GivenAnUnhealthyStateWhenUpdatedThenTheFilterResetsCountsItAndReconverges) {
+  constexpr double kHeightTolM = 1e-3;  // noiseless rest, 5 s after the reset
+  constexpr double kHeightM = 42.0;
+  struct Case {
+    const char* name;
+    AltitudeMethod method;
+    void (*spoil)(AltitudeFilterState&);
+  };
+  const Case cases[] = {
+      {"NaN height", AltitudeMethod::kPiCfZupt, [](AltitudeFilterState& st) { st.x(0) = std::nan(""); }},
+      {"NaN tilt", AltitudeMethod::kPiCfZupt,
+       [](AltitudeFilterState& st) { st.tilt.core().set_u(Eigen::Vector3d::Constant(std::nan(""))); }},
+      {"negative height variance", AltitudeMethod::kTwoStepKf, [](AltitudeFilterState& st) { st.p_kf(0, 0) = -1.0; }},
+  };
+  for (const Case& c : cases) {
+    AltitudeParams p;
+    p.method = c.method;
+    AltitudeFilter f(p);
+    for (int k = 0; k < 1000; ++k) {
+      if (k == 500) {
+        AltitudeFilterState st = f.state();
+        c.spoil(st);
+        f.set_state(st);
+        EXPECT_FALSE(f.update(level_sample(k * kStepNs, kHeightM))) << c.name;  // the resetting update
+        EXPECT_FALSE(f.estimate().valid) << c.name;
+        EXPECT_STREQ(f.sources()[0].reason, kStateResetReason) << c.name;
+        continue;
+      }
+      f.update(level_sample(k * kStepNs, kHeightM));
+      ASSERT_TRUE(std::isfinite(f.estimate().height_m) || !f.estimate().valid) << c.name << " at " << k;
+    }
+    EXPECT_EQ(f.state_resets(), 1u) << c.name;
+    EXPECT_EQ(f.rejects().total(), 0u) << c.name;
+    EXPECT_TRUE(f.estimate().valid) << c.name;
+    EXPECT_NEAR(f.estimate().height_m, kHeightM, kHeightTolM) << c.name;
+  }
+}
+
+}  // namespace
+}  // namespace poise

@@ -148,3 +148,56 @@ TEST(GaussNewtonParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorName
 
 }  // namespace
 }  // namespace poise
+
+namespace poise {
+namespace {
+
+// State health (issue 19): a non-finite dip (through set_state(): no sample that passes the input
+// checks gets there) resets the filter on the next update, counted, nothing non-finite comes out,
+// and it re-converges. (A non-finite previous solution needs no reset: solve() starts from the
+// identity then.) Oracle: a filter that was never spoilt.
+TEST(GaussNewton, GivenAnUnhealthyStateWhenUpdatedThenTheFilterResetsCountsItAndReconverges) {
+  constexpr double kSameAsCleanDeg = 0.5;  // dip learnt from other samples after the reset, deg
+  struct Case {
+    const char* name;
+    void (*spoil)(GaussNewtonState&);
+  };
+  const Case cases[] = {
+      {"NaN dip", [](GaussNewtonState& st) { st.dip_rad = std::nan(""); }},
+      {"NaN dip being learnt", [](GaussNewtonState& st) {
+         st.dip_sum_rad = std::nan("");
+         st.dip_n = 10;  // still learning: the next sample averages the NaN in
+       }},
+  };
+  for (const Case& c : cases) {
+    sim::SimConfig cfg = sim::make_scenario("static_magnet", 100.0, 5);
+    cfg.magnets.clear();
+    cfg.duration_s = 5.0;
+    sim::SensorSimulator sim(cfg);
+    GaussNewton hit;
+    GaussNewton clean;
+    for (int k = 0; !sim.done(); ++k) {
+      const ImuSample s = sim.next().imu;
+      if (k == 200) {
+        GaussNewtonState st = hit.state();
+        c.spoil(st);
+        hit.set_state(st);
+        EXPECT_FALSE(hit.update(s)) << c.name;  // the resetting update
+        EXPECT_FALSE(hit.initialized()) << c.name;
+        EXPECT_STREQ(hit.sources()[0].reason, kStateResetReason) << c.name;
+      } else {
+        hit.update(s);
+      }
+      clean.update(s);
+      ASSERT_TRUE(hit.result().q_world_body.coeffs().allFinite() || !hit.initialized()) << c.name << " at " << k;
+    }
+    EXPECT_EQ(hit.state_resets(), 1u) << c.name;
+    EXPECT_EQ(hit.rejections().total(), 0u) << c.name;
+    EXPECT_LT(quat_angle_between(hit.result().q_world_body, clean.result().q_world_body) * kDegPerRad,
+              kSameAsCleanDeg)
+        << c.name;
+  }
+}
+
+}  // namespace
+}  // namespace poise

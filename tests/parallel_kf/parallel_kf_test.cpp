@@ -621,3 +621,66 @@ TEST(ParallelKf, GivenAFieldThatDriftsSlowlyWhenTheReferenceFollowsThenItStaysAc
 
 }  // namespace
 }  // namespace poise
+
+namespace poise {
+namespace {
+
+// State health (issue 19): a state made non-finite or a covariance made negative or indefinite
+// (through set_state(): no sample that passes the input checks gets there) resets the filter on
+// the next update, which is counted, publishes nothing non-finite, and re-converges from the next
+// samples. Oracle: the simulator's truth.
+TEST(ParallelKf, GivenAnUnhealthyStateWhenUpdatedThenTheFilterResetsCountsItAndReconverges) {
+  constexpr double kReconvergedDeg = 1.0;  // total attitude error 20 s after the reset, deg
+  constexpr int kSpoilAt = 1000;           // 10 s at 100 Hz
+  struct Case {
+    const char* name;
+    void (*spoil)(ParallelKfState&);
+  };
+  const Case cases[] = {
+      {"NaN field direction", [](ParallelKfState& st) { st.kf2.set_u(Eigen::Vector3d::Constant(std::nan(""))); }},
+      {"negative bias variance", [](ParallelKfState& st) { st.bias_cov(0, 0) = -1e-6; }},
+      {"indefinite bias covariance",  // positive diagonal: found by the periodic LDLT check
+       [](ParallelKfState& st) {
+         st.bias_cov << 1e-6, 2e-6, 0.0, 2e-6, 1e-6, 0.0, 0.0, 0.0, 1e-6;
+       }},
+  };
+  for (const Case& c : cases) {
+    sim::SimConfig cfg = sim::make_scenario("static_magnet", 100.0, 31);
+    cfg.magnets.clear();
+    cfg.duration_s = 30.0;
+    sim::SensorSimulator sim(cfg);
+    ParallelKf kf;
+    int k = 0;
+    sim::SimSample s;
+    while (!sim.done()) {
+      s = sim.next();
+      if (k++ == kSpoilAt) {
+        ParallelKfState st = kf.state();
+        c.spoil(st);
+        kf.set_state(st);
+      }
+      const uint64_t resets_before = kf.state_resets();
+      const bool used = kf.update(s.imu);
+      ASSERT_TRUE(kf.q_world_body().coeffs().allFinite()) << c.name << " at " << k;
+      ASSERT_TRUE(kf.output().gyro_bias_rps.allFinite()) << c.name << " at " << k;
+      if (kf.state_resets() != resets_before) {  // the resetting update: refused, not initialised
+        EXPECT_FALSE(used) << c.name;
+        EXPECT_FALSE(kf.initialized()) << c.name;
+        EXPECT_STREQ(kf.sources()[0].reason, kStateResetReason) << c.name;
+      }
+      if (k == kSpoilAt + 1 + static_cast<int>(StateHealth::kFullCheckEvery)) {
+        EXPECT_EQ(kf.state_resets(), 1u) << c.name;  // within one full-check period
+      }
+    }
+    EXPECT_EQ(kf.state_resets(), 1u) << c.name;
+    EXPECT_EQ(kf.rejections().total(), 0u) << c.name;  // no sample was bad
+    const double err_deg = quat_angle_between(kf.q_world_body(), s.truth.q_world_body) * kDegPerRad;
+    std::printf("%s: error %.3f deg 20 s after the reset\n", c.name, err_deg);
+    EXPECT_LT(err_deg, kReconvergedDeg) << c.name;
+    const SourceReports src = kf.sources();
+    EXPECT_EQ(src[0].rejected_count, 1u) << c.name;  // the resetting sample, counted once
+  }
+}
+
+}  // namespace
+}  // namespace poise

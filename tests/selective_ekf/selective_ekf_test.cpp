@@ -1165,3 +1165,72 @@ TEST(SelectiveEkfParams, GivenABadGaussNewtonValueThenTheErrorNamesTheNestedKey)
 
 }  // namespace
 }  // namespace poise
+
+namespace poise {
+
+// The test accessor SelectiveEkfFullState befriends: spoils the state of a copy (the only way
+// there: no input that passes the checks gets the filter into it).
+struct SelectiveEkfTestAccess {
+  static SelectiveEkfState& state(SelectiveEkfFullState& f) { return f.x_; }
+};
+
+namespace {
+
+// State health (issue 19): a non-finite state or a covariance with a NaN, a negative variance or
+// that is not positive semi-definite resets the filter on the next update, counted, nothing
+// non-finite comes out, and it re-converges. Oracle: the simulator's truth.
+TEST(SelectiveEkfCore, GivenAnUnhealthyStateWhenUpdatedThenTheFilterResetsCountsItAndReconverges) {
+  constexpr double kReconvergedDeg = 1.0;  // total attitude error 20 s after the reset, deg
+  constexpr int kSpoilAt = 1000;           // 10 s at 100 Hz
+  using K = SelectiveEkf;
+  struct Case {
+    const char* name;
+    void (*spoil)(SelectiveEkfState&);
+  };
+  const Case cases[] = {
+      {"NaN attitude", [](SelectiveEkfState& x) { x.q_world_body.coeffs().setConstant(std::nan("")); }},
+      {"NaN covariance entry", [](SelectiveEkfState& x) { x.P(K::kB, K::kTh) = std::nan(""); }},
+      {"negative variance", [](SelectiveEkfState& x) { x.P(K::kTh, K::kTh) = -1e-4; }},
+      {"indefinite covariance",  // positive diagonal: found by the periodic LDLT check
+       [](SelectiveEkfState& x) {
+         const double v = x.P(K::kTh, K::kTh);
+         x.P(K::kTh, K::kTh + 1) = x.P(K::kTh + 1, K::kTh) = 10.0 * std::max(v, 1e-6);
+       }},
+  };
+  for (const Case& c : cases) {
+    sim::SimConfig cfg = sim::make_scenario("static_magnet", kRateHz, kSeed);
+    cfg.magnets.clear();
+    cfg.duration_s = 30.0;
+    sim::SensorSimulator sim(cfg);
+    SelectiveEkf ekf;
+    sim::SimSample s;
+    for (int k = 0; !sim.done(); ++k) {
+      s = sim.next();
+      if (k == kSpoilAt) {
+        SelectiveEkfFullState full = ekf.full_state();
+        c.spoil(SelectiveEkfTestAccess::state(full));
+        ekf.set_full_state(full);
+      }
+      const uint64_t resets_before = ekf.state_resets();
+      const bool used = ekf.update_imu(s.imu);
+      ASSERT_TRUE(ekf.q_world_body().coeffs().allFinite()) << c.name << " at " << k;
+      ASSERT_TRUE(ekf.state().P.allFinite()) << c.name << " at " << k;
+      if (ekf.state_resets() != resets_before) {  // the resetting update: refused, not initialised
+        EXPECT_FALSE(used) << c.name;
+        EXPECT_FALSE(ekf.initialized()) << c.name;
+        EXPECT_STREQ(selective_ekf_sources(ekf)[0].reason, kStateResetReason) << c.name;
+      }
+      if (k == kSpoilAt + static_cast<int>(StateHealth::kFullCheckEvery)) {
+        EXPECT_EQ(ekf.state_resets(), 1u) << c.name;  // within one full-check period
+      }
+    }
+    EXPECT_EQ(ekf.state_resets(), 1u) << c.name;
+    EXPECT_EQ(ekf.imu_rejections().total(), 0u) << c.name;
+    const double err_deg = quat_angle_between(ekf.q_world_body(), s.truth.q_world_body) * kDegPerRad;
+    std::printf("%s: error %.3f deg 20 s after the reset\n", c.name, err_deg);
+    EXPECT_LT(err_deg, kReconvergedDeg) << c.name;
+  }
+}
+
+}  // namespace
+}  // namespace poise

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <limits>
 #include <stdexcept>
@@ -388,6 +389,63 @@ TEST(VehicleParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorNamesThe
     {"ekf.r_mag_ut2", [](VehicleParams& p) { p.r_mag_ut2.y() = 0.0; }},
     {"mag_norm_tolerance", [](VehicleParams& p) { p.mag_norm_tolerance = 1.0; }}
   }, [](const VehicleParams& p) { VehicleEstimator f(p); });
+}
+
+}  // namespace
+}  // namespace poise
+
+namespace poise {
+namespace {
+
+// State health (issue 19): a non-finite EKF state or a covariance with a NaN or that is not
+// positive semi-definite (through set_state(): no sample that passes the input checks gets there)
+// resets the estimator on the next update, counted, nothing non-finite comes out, and it
+// re-converges. EKF mode (the switched mode re-initialises from TRIAD at every static sample).
+// Oracle: an estimator that was never spoilt, on the same samples.
+TEST(VehicleEstimator, GivenAnUnhealthyStateWhenUpdatedThenTheEstimatorResetsCountsItAndReconverges) {
+  constexpr double kSameAsCleanRad = 1e-4;  // 7 s after the reset (noiseless static samples)
+  constexpr double kRoll = 0.1;
+  constexpr double kYaw = 0.5;
+  struct Case {
+    const char* name;
+    void (*spoil)(VehicleEstimatorState&);
+  };
+  const Case cases[] = {
+      {"NaN yaw", [](VehicleEstimatorState& st) { st.x(4) = std::nan(""); }},
+      {"NaN covariance entry", [](VehicleEstimatorState& st) { st.p(2, 2) = std::nan(""); }},
+      {"indefinite covariance",  // positive diagonal: found by the periodic LDLT check
+       [](VehicleEstimatorState& st) { st.p(0, 4) = st.p(4, 0) = 10.0 * std::max(st.p(0, 0), 1e-6); }},
+  };
+  for (const Case& c : cases) {
+    VehicleParams p;
+    p.mode = VehicleMode::kEkf;
+    VehicleEstimator e(p);
+    VehicleEstimator clean(p);
+    for (int k = 0; k < 1500; ++k) {
+      clean.update(static_sample(k * kStepNs, kRoll, 0.0, kYaw));
+      if (k == 300) {
+        VehicleEstimatorState st = e.state();
+        c.spoil(st);
+        e.set_state(st);
+      }
+      const uint64_t resets_before = e.state_resets();
+      const bool used = e.update(static_sample(k * kStepNs, kRoll, 0.0, kYaw));
+      if (e.state_resets() != resets_before) {  // the resetting update: refused, not initialised
+        EXPECT_FALSE(used) << c.name;
+        EXPECT_FALSE(e.estimate().valid) << c.name;
+        EXPECT_STREQ(e.sources()[0].reason, kStateResetReason) << c.name;
+      }
+      ASSERT_TRUE(e.estimate().q_world_body.coeffs().allFinite()) << c.name << " at " << k;
+    }
+    EXPECT_EQ(e.state_resets(), 1u) << c.name;
+    EXPECT_EQ(e.rejects().non_finite_input, 0u) << c.name;
+    EXPECT_TRUE(e.estimate().valid) << c.name;
+    std::printf("%s: roll %.6f (clean %.6f), yaw %.6f (clean %.6f) rad\n", c.name, e.estimate().roll_rad,
+                clean.estimate().roll_rad, e.estimate().yaw_rad, clean.estimate().yaw_rad);
+    EXPECT_NEAR(e.estimate().roll_rad, clean.estimate().roll_rad, kSameAsCleanRad) << c.name;
+    EXPECT_NEAR(e.estimate().pitch_rad, clean.estimate().pitch_rad, kSameAsCleanRad) << c.name;
+    EXPECT_NEAR(e.estimate().yaw_rad, clean.estimate().yaw_rad, kSameAsCleanRad) << c.name;
+  }
 }
 
 }  // namespace

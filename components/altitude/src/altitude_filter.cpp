@@ -255,8 +255,24 @@ bool AltitudeFilter::update(const ImuSample& s) {
   s_.est.vertical_velocity_mps = s_.x(1);
   s_.est.vertical_accel_mps2 = a_z;
   s_.est.integral_sum_m = s_.integral;
+  if (!healthy()) {
+    reset_unhealthy();
+    return false;
+  }
   report_sources(s, propagated);
   return true;
+}
+
+bool AltitudeFilter::healthy() {
+  const bool full = s_.health.full_due();
+  return all_finite(s_.x, s_.integral, s_.prev_a_z, s_.last_baro_m, s_.tilt.up_body(), s_.tilt.ext_accel_body()) &&
+         covariance_ok(s_.tilt.covariance(), full) && covariance_ok(s_.p_kf, full);
+}
+
+void AltitudeFilter::reset_unhealthy() {
+  using S = AltitudeFilterState;
+  reset_keeping(s_, [this] { reset(); }, &S::rejects, &S::gyro, &S::accel, &S::baro, &S::zupt);
+  reject_sample(kStateResetReason);
 }
 
 void AltitudeFilter::reject_sample(const char* why) {

@@ -105,9 +105,26 @@ bool GaussNewton::update(const ImuSample& s) {
   }
   s_.result = solve(s.accel_mps2, s.mag_ut, start, s_.dip_rad);
   s_.initialized = true;
+  if (!healthy()) {
+    reset_unhealthy();
+    return false;
+  }
   s_.accel.mark_fused(s.stamp_ns);
   s_.mag.mark_fused(s.stamp_ns);
   return true;
+}
+
+bool GaussNewton::healthy() const {
+  // no covariance: the state is the solution and the learnt dip
+  const Eigen::Quaterniond& q = s_.result.q_world_body;
+  return all_finite(q.coeffs(), s_.dip_rad, s_.dip_sum_rad) && std::abs(q.norm() - 1.0) < 1e-6;
+}
+
+void GaussNewton::reset_unhealthy() {
+  using S = GaussNewtonState;
+  reset_keeping(s_, [this] { reset(); }, &S::rejections, &S::accel, &S::mag);
+  s_.accel.mark_rejected(kStateResetReason);
+  s_.mag.mark_rejected(kStateResetReason);
 }
 
 GaussNewtonParams load_gauss_newton_params(const std::string& path) {

@@ -84,7 +84,8 @@ class AltitudeNode : public ImuEstimatorNode {
     diag.counters = {{"rejected_non_finite_imu", r.non_finite_imu},
                      {"rejected_non_monotonic_stamp", r.non_monotonic_stamp},
                      {"time_gap", r.dt_gap},
-                     {"rejected_bad_pressure", r.bad_pressure}};
+                     {"rejected_bad_pressure", r.bad_pressure},
+                     {"state_resets", filter_.state_resets()}};
   }
 
  private:

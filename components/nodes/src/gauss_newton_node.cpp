@@ -41,6 +41,7 @@ class GaussNewtonNode : public ImuAttitudeNode {
   void diagnostics(DiagnosticsReport& diag) const override {
     diag.sources = gn_.sources();
     diag.counters = gn_.rejections().to_map();
+    diag.counters["state_resets"] = gn_.state_resets();
     diag.metrics = {{"iterations", static_cast<double>(gn_.result().iterations), ""},
                     {"residual", gn_.result().residual, ""}};
   }

@@ -116,6 +116,7 @@ class SelectiveEkfNode : public ImuAttitudeNode {
     diag.counters["rejected_vision_too_old"] = vc.too_old;
     diag.counters["rejected_vision_bad_input"] = vc.bad_input;
     diag.counters["mag_untrusted_samples"] = mag.untrusted_samples;
+    diag.counters["state_resets"] = ekf_.state_resets();
     diag.metrics = {{"disturbance_angle", mag.disturbance_angle_deg * kRadPerDeg, "rad"},
                     {"reference_angle", mag.reference_angle_deg * kRadPerDeg, "rad"},
                     {"quat_error", mag.quat_error_deg * kRadPerDeg, "rad"}};

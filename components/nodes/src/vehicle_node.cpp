@@ -73,7 +73,8 @@ class VehicleNode : public ImuAttitudeNode {
                      {"missing_mag", r.missing_mag},
                      {"rejected_disturbed_mag", r.disturbed_mag},
                      {"rejected_non_monotonic_stamp", r.non_monotonic_stamp},
-                     {"time_gap", r.dt_gap}};
+                     {"time_gap", r.dt_gap},
+                     {"state_resets", estimator_.state_resets()}};
     diag.metrics = {{"static", e.is_static ? 1.0 : 0.0, ""}, {"from_triad", e.from_triad ? 1.0 : 0.0, ""}};
   }
 

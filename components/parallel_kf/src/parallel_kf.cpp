@@ -148,6 +148,7 @@ void ParallelKf::reset() {
   s_.ref_sin_dip_sum = 0.0;
   s_.rest_det = RestDetector{};
   s_.anchor = StampAnchor{};
+  s_.health = StateHealth{};
   reset_report();
 }
 

@@ -14,8 +14,34 @@ bool ParallelKf::update(const ImuSample& s) {
   gate_norm_ut_ = std::nan("");
   SampleCheck c;
   const bool accepted = step(s, c);
+  if (accepted && !healthy()) {
+    reset_unhealthy();
+    return false;
+  }
   report(s, c, accepted, was_initialized);
   return accepted;
+}
+
+bool ParallelKf::healthy() {
+  const bool full = s_.health.full_due();
+  return all_finite(s_.kf1.up_body(), s_.kf1.ext_accel_body(), s_.kf2.u(), s_.kf2.e(), s_.bias, s_.lp_accel_i,
+                    s_.field_m, s_.field_dip) &&
+         covariance_ok(s_.kf1.covariance(), full) && covariance_ok(s_.kf2.covariance(), full) &&
+         covariance_ok(s_.bias_cov, full);
+}
+
+void ParallelKf::reset_unhealthy() {
+  const SourceReport gyro = gyro_src_;  // reports are the filter's, not its state's
+  const SourceReport accel = accel_src_;
+  const SourceReport mag = mag_src_;
+  using S = ParallelKfState;
+  reset_keeping(s_, [this] { reset(); }, &S::rejections, &S::mag_gated, &S::mag_forced, &S::reacquired);
+  gyro_src_ = gyro;
+  accel_src_ = accel;
+  mag_src_ = mag;
+  for (SourceReport* r : {&gyro_src_, &accel_src_, &mag_src_}) {
+    r->mark_rejected(kStateResetReason);
+  }
 }
 
 void ParallelKf::reset_report() {

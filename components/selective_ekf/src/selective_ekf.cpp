@@ -48,6 +48,7 @@ const char* to_string(Decision d) {
     case Decision::kRejectedBadInput: return "rejected_bad_input";
     case Decision::kRejectedTooOld: return "rejected_too_old";
     case Decision::kReset: return "reset";
+    case Decision::kRejectedStateReset: return "rejected_state_reset";
     case Decision::kCount: break;
   }
   return "unknown";
@@ -146,6 +147,7 @@ void SelectiveEkf::reset() {
   history_.clear();
   vision_log_.clear();
   newest_vision_capture_ns_ = -1;
+  health_ = StateHealth{};
 }
 
 Eigen::Quaterniond SelectiveEkf::q_world_body() const {
@@ -730,6 +732,10 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
          vision_log_.front().capture_stamp_ns < history_.front().input.stamp_ns) {
     vision_log_.pop_front();
   }
+  if (!healthy()) {
+    reset_unhealthy(s.stamp_ns);
+    return false;
+  }
   return true;
 }
 
@@ -832,7 +838,37 @@ bool SelectiveEkf::update_vision(const VisionPose& v_in) {
     predict_to(vision_log_[vi].capture_stamp_ns);
     process_vision(vision_log_[vi], vi == fresh);
   }
+  if (!healthy()) {
+    reset_unhealthy(v.capture_stamp_ns);
+    return false;
+  }
   return true;
+}
+
+bool SelectiveEkf::healthy() {
+  const bool full = health_.full_due();
+  return all_finite(x_.w_rps, x_.q_world_body.coeffs(), x_.b_rps, x_.t_m, x_.v_mps, out_q_.coeffs()) &&
+         covariance_ok(x_.P, full);
+}
+
+void SelectiveEkf::reset_unhealthy(int64_t stamp_ns) {
+  const RejectCounters rejections = rejections_;
+  const auto status = status_;
+  const VisionCounters vc = vc_;
+  const uint64_t untrusted = mag_.untrusted_samples;
+  StateHealth health = health_;
+  reset();
+  rejections_ = rejections;
+  status_ = status;
+  vc_ = vc;
+  mag_.untrusted_samples = untrusted;
+  ++health.resets;
+  health_ = health;
+  for (SourceStatus& st : status_) {
+    if (st.last != Decision::kNone) {
+      record(st, Decision::kRejectedStateReset, stamp_ns, true);
+    }
+  }
 }
 
 std::map<std::string, uint64_t> SelectiveEkfFilter::rejections() const {
@@ -846,6 +882,7 @@ std::map<std::string, uint64_t> SelectiveEkfFilter::rejections() const {
   put("vision_too_old", vc.too_old);
   put("vision_bad_input", vc.bad_input);
   put("vision_before_init", vc.before_init);
+  put("state_reset", ekf_.state_resets());
   for (size_t s = 0; s < static_cast<size_t>(Source::kCount); ++s) {
     const SourceStatus& st = ekf_.status(static_cast<Source>(s));
     for (size_t d = 0; d < st.by_decision.size(); ++d) {

@@ -28,6 +28,7 @@ SourceReport from_status(const char* name, const SourceStatus& st) {
     case Decision::kRejectedGate: r.decision = SourceDecision::kRejected; r.reason = "gate"; break;
     case Decision::kRejectedBadInput: r.decision = SourceDecision::kRejected; r.reason = "bad_input"; break;
     case Decision::kRejectedTooOld: r.decision = SourceDecision::kRejected; r.reason = "too_old"; break;
+    case Decision::kRejectedStateReset: r.decision = SourceDecision::kRejected; r.reason = kStateResetReason; break;
     case Decision::kCount: break;
   }
   if (r.decision == SourceDecision::kNotAvailable) {

@@ -323,7 +323,23 @@ bool VehicleEstimator::update(const VehicleSample& s) {
   s_.prev_ax = s.accel_lon_mps2;
   s_.prev_ay = s.accel_lat_mps2;
   s_.prev_r = s.yaw_rate_rps;
+  if (!healthy()) {
+    reset_unhealthy();
+    return false;
+  }
   return true;
+}
+
+bool VehicleEstimator::healthy() {
+  const bool full = s_.health.full_due();
+  return all_finite(s_.x, s_.est.q_world_body.coeffs(), s_.static_mag_sum, s_.static_ay_sum) &&
+         covariance_ok(s_.p, full);
+}
+
+void VehicleEstimator::reset_unhealthy() {
+  using S = VehicleEstimatorState;
+  reset_keeping(s_, [this] { reset(); }, &S::rejects, &S::yaw_rate, &S::accel, &S::mag, &S::speed);
+  reject_sample(kStateResetReason);
 }
 
 void VehicleEstimator::reject_sample(const char* why) {

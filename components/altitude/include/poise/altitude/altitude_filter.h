@@ -33,6 +33,7 @@
 #pragma once
 
 #include "poise/core/source_report.h"
+#include "poise/core/state_health.h"
 #include "poise/core/types.h"
 #include "poise/parallel_kf/tilt_kf.h"
 
@@ -182,6 +183,7 @@ struct AltitudeFilterState {
   SourceReport accel = source_named("accel");
   SourceReport baro = source_named("baro");
   SourceReport zupt = source_named("zupt");
+  StateHealth health;  ///< resets after an unhealthy update (poise/core/state_health.h)
 };
 
 class AltitudeFilter {
@@ -198,7 +200,11 @@ class AltitudeFilter {
   void set_state(const AltitudeFilterState& state) { s_ = state; }
   /// Processes one sample (IMU and, when has_pressure, the barometer). Returns false when the
   /// sample was rejected as a whole (see AltitudeRejects); a bad pressure alone returns true.
+  /// False too when the update left the state non-finite or a covariance not one: the filter is
+  /// then reset (counters kept), counted in state_resets() and starts again from the next sample.
   bool update(const ImuSample& sample);
+  /// Resets after an unhealthy state (poise/core/state_health.h).
+  [[nodiscard]] uint64_t state_resets() const { return s_.health.resets; }
 
   [[nodiscard]] const AltitudeEstimate& estimate() const { return s_.est; }
   [[nodiscard]] const AltitudeRejects& rejects() const { return s_.rejects; }
@@ -226,6 +232,8 @@ class AltitudeFilter {
   AltitudeFilterState s_;
   void reject_sample(const char* why);
   void report_sources(const ImuSample& s, bool propagated);
+  [[nodiscard]] bool healthy();
+  void reset_unhealthy();  ///< reset() keeping the counters, one reset counted
 };
 
 /// Heights relative to the start: the zero is the mean barometric height of the valid estimates

@@ -19,6 +19,7 @@
 #include "poise/core/attitude_filter.h"
 #include "poise/core/sample_check.h"
 #include "poise/core/source_report.h"
+#include "poise/core/state_health.h"
 #include "poise/core/types.h"
 
 #include <Eigen/Core>
@@ -63,6 +64,7 @@ struct GaussNewtonState {
   RejectCounters rejections;
   SourceReport accel = source_named("accel");
   SourceReport mag = source_named("mag");
+  StateHealth health;  ///< resets after a non-finite or non-unit solution (state_health.h)
 };
 
 class GaussNewton {
@@ -74,7 +76,11 @@ class GaussNewton {
                                         const Eigen::Quaterniond& q_start, double dip_rad) const;
 
   /// Processes one sample (validated, rejected and counted when bad). Needs a magnetometer.
+  /// False too when the solution is not a finite unit quaternion: the filter is then reset
+  /// (counters kept) and counted in state_resets().
   bool update(const ImuSample& s);
+  /// Resets after an unhealthy state (poise/core/state_health.h).
+  [[nodiscard]] uint64_t state_resets() const { return s_.health.resets; }
 
   [[nodiscard]] const GaussNewtonResult& result() const { return s_.result; }
   [[nodiscard]] bool initialized() const { return s_.initialized; }
@@ -91,6 +97,9 @@ class GaussNewton {
   void set_state(const GaussNewtonState& state) { s_ = state; }
 
  private:
+  [[nodiscard]] bool healthy() const;
+  void reset_unhealthy();  ///< reset() keeping the counters, one reset counted
+
   GaussNewtonParams p_;
   GaussNewtonState s_;
 };
@@ -104,7 +113,11 @@ class GaussNewtonFilter : public AttitudeFilter {
   [[nodiscard]] bool initialized() const override { return gn_.initialized(); }
   void reset() override { gn_.reset(); }
   [[nodiscard]] std::map<std::string, uint64_t> rejections() const override {
-    return gn_.rejections().to_map();
+    auto m = gn_.rejections().to_map();
+    if (gn_.state_resets() != 0) {
+      m["state_reset"] = gn_.state_resets();
+    }
+    return m;
   }
   [[nodiscard]] const GaussNewton& core() const { return gn_; }
 

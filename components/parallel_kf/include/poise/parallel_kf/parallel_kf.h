@@ -51,6 +51,7 @@
 #include "poise/core/rest_detector.h"
 #include "poise/core/sample_check.h"
 #include "poise/core/source_report.h"
+#include "poise/core/state_health.h"
 #include "poise/core/types.h"
 #include "poise/parallel_kf/direction_kf.h"
 #include "poise/parallel_kf/tilt_kf.h"
@@ -267,6 +268,7 @@ struct ParallelKfState {
   double ref_sin_dip_sum = 0.0;  ///< integral of sin(dip) dt over accepted samples, s
   RestDetector rest_det;
   StampAnchor anchor;  ///< time restarts after a stamp jump only when two samples agree
+  StateHealth health;  ///< resets after an unhealthy update (poise/core/state_health.h)
 };
 
 class ParallelKf {
@@ -274,7 +276,9 @@ class ParallelKf {
   explicit ParallelKf(const ParallelKfParams& params = {});
 
   /// One sample. Returns false when the sample was rejected (counted in rejections()); a sample
-  /// with a bad magnetometer but good gyro/accelerometer is used without its magnetometer.
+  /// with a bad magnetometer but good gyro/accelerometer is used without its magnetometer. Also
+  /// false when the update left the state non-finite or a covariance not one: the filter is then
+  /// reset (counters kept), counted in state_resets() and starts again from the next sample.
   bool update(const ImuSample& s);
   /// Back to the state of a new filter (parameters kept).
   void reset();
@@ -306,6 +310,8 @@ class ParallelKf {
   [[nodiscard]] uint64_t field_reacquired_count() const { return s_.reacquired; }
   /// Magnetometer samples used although gated, because rejection lasted mag_max_reject_s.
   [[nodiscard]] uint64_t mag_forced_count() const { return s_.mag_forced; }
+  /// Resets after an unhealthy state (poise/core/state_health.h).
+  [[nodiscard]] uint64_t state_resets() const { return s_.health.resets; }
   [[nodiscard]] const ParallelKfParams& params() const { return p_; }
   /// Per source for the last sample (parallel_kf_report.cpp), in this order:
   ///   gyro   fused when it propagated both KFs (not available on the first sample / after a gap);
@@ -347,6 +353,8 @@ class ParallelKf {
   }
   void report(const ImuSample& s, const SampleCheck& c, bool accepted, bool was_initialized);
   void reset_report();
+  [[nodiscard]] bool healthy();  ///< the state health check (state_health.h)
+  void reset_unhealthy();        ///< reset() keeping the counters, one reset counted
   MagUse mag_use_ = MagUse::kNone;
   double gate_norm_ut_ = std::nan("");  ///< |s_M| at the gate (NaN: not gated this sample)
   double gate_sin_dip_ = 0.0;           ///< sin(dip) at the gate
@@ -367,6 +375,9 @@ class ParallelKfFilter : public AttitudeFilter {
     auto m = kf_.rejections().to_map();
     if (kf_.mag_gated_count() != 0) {
       m["mag_gated_disturbed"] = kf_.mag_gated_count();
+    }
+    if (kf_.state_resets() != 0) {
+      m["state_reset"] = kf_.state_resets();
     }
     return m;
   }

@@ -63,6 +63,7 @@
 #include "poise/core/attitude_filter.h"
 #include "poise/core/sample_check.h"
 #include "poise/core/source_report.h"
+#include "poise/core/state_health.h"
 #include "poise/core/types.h"
 #include "poise/gauss_newton/gauss_newton.h"
 
@@ -246,6 +247,7 @@ enum class Decision : uint8_t {
   kRejectedBadInput,    ///< NaN / non-unit quaternion / bad stamp
   kRejectedTooOld,      ///< capture older than the history
   kReset,               ///< state reset to this measurement (after repeated gate rejections)
+  kRejectedStateReset,  ///< the update left the state unhealthy: filter reset (state_health.h)
   kCount
 };
 const char* to_string(Decision d);
@@ -328,6 +330,7 @@ struct SelectiveEkfState {
 /// restore it with set_full_state() into a filter with the same parameters.
 class SelectiveEkfFullState {
   friend class SelectiveEkf;
+  friend struct SelectiveEkfTestAccess;  ///< defined by tests only (e.g. to spoil the state)
 
   struct ImuInput {
     int64_t stamp_ns = 0;
@@ -369,6 +372,7 @@ class SelectiveEkfFullState {
   std::deque<HistoryEntry> history_;
   std::deque<VisionPose> vision_log_;    ///< applied or queued, sorted by capture stamp
   int64_t newest_vision_capture_ns_ = -1;
+  StateHealth health_;  ///< resets after an unhealthy update (poise/core/state_health.h)
 };
 
 class SelectiveEkf : private SelectiveEkfFullState {
@@ -386,7 +390,10 @@ class SelectiveEkf : private SelectiveEkfFullState {
 
   explicit SelectiveEkf(const SelectiveEkfParams& params = {});
 
-  /// One IMU sample (validated; rejected and counted when bad). Returns false when rejected.
+  /// One IMU sample (validated; rejected and counted when bad). Returns false when rejected, and
+  /// when the update left the state non-finite or P not a covariance: the filter is then reset
+  /// (counters kept), counted in state_resets() and starts again from the next sample (the
+  /// same after update_vision()).
   bool update_imu(const ImuSample& s);
   /// One vision pose (capture-stamped, may arrive late or out of order). Returns false when it
   /// was rejected (bad input, too old, before the first IMU sample); the reason is counted.
@@ -407,6 +414,8 @@ class SelectiveEkf : private SelectiveEkfFullState {
   [[nodiscard]] const MagStatus& mag_status() const { return mag_; }
   [[nodiscard]] const VisionCounters& vision_counters() const { return vc_; }
   [[nodiscard]] const RejectCounters& imu_rejections() const { return rejections_; }
+  /// Resets after an unhealthy state (poise/core/state_health.h).
+  [[nodiscard]] uint64_t state_resets() const { return health_.resets; }
   [[nodiscard]] const SelectiveEkfParams& params() const { return p_; }
   [[nodiscard]] const GaussNewton& gauss_newton() const { return gn_; }
   /// Body-frame attitude standard deviations, deg.
@@ -443,6 +452,8 @@ class SelectiveEkf : private SelectiveEkfFullState {
                    bool first_pass);
   void inject(const Vec& dx);
   void record(SourceStatus& st, Decision d, int64_t stamp_ns, bool first_pass) const;
+  [[nodiscard]] bool healthy();
+  void reset_unhealthy(int64_t stamp_ns);  ///< reset() keeping the counters, one reset counted
 
   SelectiveEkfParams p_;
   int64_t imu_delay_ns_ = 0;         ///< state time = IMU stamp - imu_delay_ns_

@@ -37,6 +37,7 @@
 #pragma once
 
 #include "poise/core/source_report.h"
+#include "poise/core/state_health.h"
 #include "poise/core/types.h"
 
 #include <Eigen/Core>
@@ -173,6 +174,7 @@ struct VehicleEstimatorState {
   SourceReport accel = source_named("accel");
   SourceReport mag = source_named("mag");
   SourceReport speed = source_named("speed");
+  StateHealth health;  ///< resets after an unhealthy update (poise/core/state_health.h)
 };
 
 class VehicleEstimator {
@@ -190,8 +192,12 @@ class VehicleEstimator {
   [[nodiscard]] const VehicleEstimatorState& state() const { return s_; }
   /// Restores a state taken from state() of an estimator with the same parameters.
   void set_state(const VehicleEstimatorState& state) { s_ = state; }
-  /// Returns false when the sample was rejected as a whole.
+  /// Returns false when the sample was rejected as a whole, and when the update left the state
+  /// non-finite or P not a covariance: the estimator is then reset (counters kept), counted in
+  /// state_resets() and starts again from the next sample.
   bool update(const VehicleSample& sample);
+  /// Resets after an unhealthy state (poise/core/state_health.h).
+  [[nodiscard]] uint64_t state_resets() const { return s_.health.resets; }
 
   [[nodiscard]] const VehicleEstimate& estimate() const { return s_.est; }
   [[nodiscard]] const VehicleRejects& rejects() const { return s_.rejects; }
@@ -212,6 +218,8 @@ class VehicleEstimator {
   void ekf_correct(const Eigen::Vector3d& mag_ut);
   void set_output(const Eigen::Vector3d& euler, bool from_triad);
   void reject_sample(const char* why);
+  [[nodiscard]] bool healthy();
+  void reset_unhealthy();  ///< reset() keeping the counters, one reset counted
 
   VehicleParams params_;
   VehicleEstimatorState s_;
