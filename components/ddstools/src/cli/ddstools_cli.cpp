@@ -454,8 +454,13 @@ void run_malformed_pub(const TestPubOptions& o) {
     m.header().frame_id("body");
     m.sensor_id(o.sensor_id);
     m.accel_mps2().z(9.81);
+    m.mag_ut().y(30.0);  // level, facing magnetic north: every estimator node can use it
+    m.mag_ut().z(-40.0);
+    m.pressure_pa(101325.0);
     m.valid().accel(true);
     m.valid().gyro(true);
+    m.valid().mag(true);
+    m.valid().pressure(true);
     poise::dds::RawSample good{serialized<poise::msg::ImuSamplePubSubType>(m)};
     const auto variants = ddstools::malformed_variants(good.data);
     poise::dds::RawSample bad{variants[static_cast<std::size_t>(i) % variants.size()].bytes};
