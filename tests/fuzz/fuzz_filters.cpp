@@ -1,7 +1,10 @@
 // Fuzz target for the IMU filters' update (issue 19): arbitrary doubles, stamps and flags go to
-// the parallel KF, Gauss-Newton and the selective EKF. Invariant (abort on violation): after
-// every update each initialised filter's q_world_body is finite and unit-norm and the parallel
-// KF's covariances are finite; a sample the filter cannot use is rejected, never integrated.
+// the parallel KF, Gauss-Newton, the selective EKF, the altitude filter and the vehicle
+// estimator. Invariant (abort on violation): after every update each initialised filter's
+// q_world_body is finite and unit-norm, the altitude filter's height and velocity are finite, and
+// every covariance passes the per-sample state-health check (finite, no negative variance:
+// poise/core/state_health.h; a filter that fails it resets itself); a sample the filter cannot
+// use is rejected, never integrated.
 //
 // Input: records of 1 flag byte, a stamp and 9 values (gyro, accel, mag):
 //   flag & 1: stamp = 8 raw bytes (any int64: negative, -2^63, INT64_MAX; the shared sample
@@ -9,10 +12,15 @@
 //             (wrapping as unsigned);
 //   flag & 2: values = 8 raw bytes each (any double, NaN and inf included), else 2 bytes each,
 //             scaled to plausible ranges (gyro 1e-3 rad/s, accel 1e-3 m/s^2, mag 1e-2 uT);
-//   flag & 4: no magnetometer; flag & 8: no gyro; flag & 16: no accelerometer.
+//   flag & 4: no magnetometer; flag & 8: no gyro; flag & 16: no accelerometer;
+//   flag & 32: a pressure (mag.x: raw, else 101325 Pa + 100 x mag.x); the vehicle estimator gets
+//             the IMU's x/y specific force, z rate and magnetometer with speed |mag.y|.
+#include "poise/altitude/altitude_filter.h"
+#include "poise/core/state_health.h"
 #include "poise/gauss_newton/gauss_newton.h"
 #include "poise/parallel_kf/parallel_kf.h"
 #include "poise/selective_ekf/selective_ekf.h"
+#include "poise/vehicle/vehicle_estimator.h"
 
 #include <cmath>
 #include <cstddef>
@@ -52,6 +60,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   poise::GaussNewtonFilter gn;
   poise::SelectiveEkfFilter ekf;
   poise::AttitudeFilter* filters[] = {&pkf, &gn, &ekf};
+  poise::AltitudeFilter alt;
+  poise::VehicleEstimator veh;
   Reader r{data, size};
   int64_t stamp = 0;
   uint32_t seq = 0;
@@ -88,13 +98,30 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     s.has_mag = (flag & 4) == 0;
     s.has_gyro = (flag & 8) == 0;
     s.has_accel = (flag & 16) == 0;
+    s.has_pressure = (flag & 32) != 0;
+    s.pressure_pa = (flag & 2) ? v[6] : 101325.0 + 100.0 * v[6];
     for (poise::AttitudeFilter* f : filters) {
       (void)f->update(s);
       check_q(*f);
     }
     if (pkf.initialized()) {
-      check(pkf.core().tilt_covariance().allFinite());
-      check(pkf.core().heading_covariance().allFinite());
+      check(poise::covariance_ok(pkf.core().tilt_covariance(), false));
+      check(poise::covariance_ok(pkf.core().heading_covariance(), false));
+    }
+    if (ekf.initialized()) {
+      check(poise::covariance_ok(ekf.core().state().P, false));
+    }
+    (void)alt.update(s);
+    if (alt.estimate().valid) {
+      check(std::isfinite(alt.estimate().height_m) && std::isfinite(alt.estimate().vertical_velocity_mps));
+      check(poise::covariance_ok(alt.kf_covariance(), false));
+      check(poise::covariance_ok(alt.tilt().covariance(), false));
+    }
+    (void)veh.update(poise::vehicle_sample_from_imu(s, true, std::abs(v[7])));
+    if (veh.estimate().valid) {
+      const Eigen::Quaterniond q = veh.estimate().q_world_body;
+      check(q.coeffs().allFinite() && std::abs(q.norm() - 1.0) < 1e-6);
+      check(poise::covariance_ok(veh.ekf_covariance(), false));
     }
   }
   return 0;
