@@ -19,12 +19,13 @@ if [[ -n "${CMAKE_CXX_COMPILER_LAUNCHER:-}" ]]; then
   launcher=(-DCMAKE_CXX_COMPILER_LAUNCHER="$CMAKE_CXX_COMPILER_LAUNCHER")
 fi
 start=$SECONDS
+mkdir -p "$out"
 cmake -S "$root" -B "$out" -G Ninja -DCMAKE_BUILD_TYPE=Release -DPOISE_WITH_CAMERA=OFF -DPOISE_BUILD_TESTS=OFF \
   -DCMAKE_DISABLE_FIND_PACKAGE_OpenCV=ON -DCMAKE_DISABLE_FIND_PACKAGE_apriltag=ON --no-warn-unused-cli \
-  "${launcher[@]}" >"$out.configure.log" 2>&1 \
-  || { tail -30 "$out.configure.log" >&2; fail "poise does not configure with POISE_WITH_CAMERA=OFF and no OpenCV/AprilTag"; }
-cmake --build "$out" -j "$(nproc 2>/dev/null || echo 2)" >"$out.build.log" 2>&1 \
-  || { tail -40 "$out.build.log" >&2; fail "poise does not build with POISE_WITH_CAMERA=OFF (see $out.build.log)"; }
+  "${launcher[@]}" >"$out/check_no_camera.configure.log" 2>&1 \
+  || { tail -30 "$out/check_no_camera.configure.log" >&2; fail "poise does not configure with POISE_WITH_CAMERA=OFF and no OpenCV/AprilTag"; }
+cmake --build "$out" -j "$(nproc 2>/dev/null || echo 2)" >"$out/check_no_camera.build.log" 2>&1 \
+  || { tail -40 "$out/check_no_camera.build.log" >&2; fail "poise does not build with POISE_WITH_CAMERA=OFF (see $out/check_no_camera.build.log)"; }
 poise="$out/bin/poise"
 if hits=$(ldd "$poise" | grep -E 'libopencv|libapriltag'); then
   fail "poise built with POISE_WITH_CAMERA=OFF still links:"$'\n'"$hits"
