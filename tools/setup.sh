@@ -2,9 +2,10 @@
 # Installs what poise needs on Debian 12 (only what is missing), then configures and builds it in
 # Release. Idempotent and fast when everything is already there.
 #
-#   tools/setup.sh [--build-dir DIR] [--no-build] [--no-tests | --cores-only] [--sanitize] [--jobs N]
+#   tools/setup.sh [--build-dir DIR] [--no-build] [--no-tests | --cores-only] [--no-camera] [--sanitize] [--jobs N]
 #   --no-tests    no test-only packages (GoogleTest, Cyclone DDS, clang, Node.js, ...), no tests built
 #   --cores-only  only the estimator cores (Eigen + yaml-cpp; -DPOISE_CORES_ONLY=ON; README "Installing")
+#   --no-camera   no OpenCV/AprilTag (-DPOISE_WITH_CAMERA=OFF, implies --no-tests; docs/DEPLOY.md)
 #
 # Needs root (or sudo) only when packages are missing.
 set -euo pipefail
@@ -15,6 +16,7 @@ build_dir="$root/build"
 do_build=1
 tests=ON
 cores_only=OFF
+camera=ON
 sanitize=OFF
 jobs="$(nproc 2>/dev/null || echo 2)"
 
@@ -24,9 +26,10 @@ while [ $# -gt 0 ]; do
     --no-build) do_build=0; shift ;;
     --no-tests) tests=OFF; shift ;;
     --cores-only) cores_only=ON; tests=OFF; shift ;;
+    --no-camera) camera=OFF; tests=OFF; shift ;;
     --sanitize) sanitize=ON; shift ;;
     --jobs) jobs="$2"; shift 2 ;;
-    -h|--help) sed -n '2,11p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,12p' "$0"; exit 0 ;;
     *) echo "setup.sh: unknown option '$1' (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -38,8 +41,11 @@ done
 # dpkg-dev (dpkg-shlibdeps for the Debian packages) and systemd (systemd-analyze verify).
 packages=(build-essential cmake ninja-build pkg-config libeigen3-dev libyaml-cpp-dev)
 if [ "$cores_only" = OFF ]; then
-  packages+=(libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools libopencv-dev libapriltag-dev
+  packages+=(libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools
              libcli11-dev libhdf5-dev libzstd-dev nlohmann-json3-dev libsystemd-dev)
+  if [ "$camera" = ON ]; then
+    packages+=(libopencv-dev libapriltag-dev)
+  fi
 fi
 if [ "$tests" = ON ]; then
   packages+=(libgtest-dev libgmock-dev cyclonedds-dev cyclonedds-tools iproute2 iputils-ping openssl clang
@@ -80,7 +86,8 @@ if [ ! -f "$build_dir/CMakeCache.txt" ]; then
   generator=(-G Ninja)
 fi
 cmake -S "$root" -B "$build_dir" "${generator[@]}" -DCMAKE_BUILD_TYPE=Release \
-  -DPOISE_SANITIZE="$sanitize" -DPOISE_BUILD_TESTS="$tests" -DPOISE_CORES_ONLY="$cores_only" >/dev/null
+  -DPOISE_SANITIZE="$sanitize" -DPOISE_BUILD_TESTS="$tests" -DPOISE_CORES_ONLY="$cores_only" \
+  -DPOISE_WITH_CAMERA="$camera" >/dev/null
 echo "setup: building in $build_dir ($jobs jobs)" >&2
 cmake --build "$build_dir" -j "$jobs"
 if [ "$cores_only" = ON ]; then
