@@ -10,8 +10,9 @@ namespace poise::imu {
 namespace {
 const std::set<std::string> kDriverSections{"serial", "protocol", "limits", "raw", "clock",
                                             "calibration"};
-const std::set<std::string> kNodeKeys{"port", "baud", "config_file", "diagnostics_period_s",
-                                      "reliable"};
+const std::set<std::string> kNodeKeys{"port",     "baud",          "config_file",
+                                      "diagnostics_period_s", "reliable", "publish_queue",
+                                      "max_age_s"};
 }  // namespace
 
 ImuNodeOptions imu_node_options(const runtime::ComponentSpec& spec) {
@@ -27,8 +28,8 @@ ImuNodeOptions imu_node_options(const runtime::ComponentSpec& spec) {
       } else if (kNodeKeys.count(key) == 0) {
         throw runtime::ConfigError(spec.origin + ": unknown parameter '" + key +
                                    "' of imu_driver (known: port, baud, config_file, "
-                                   "diagnostics_period_s, reliable, serial, protocol, limits, raw, "
-                                   "clock, calibration)");
+                                   "diagnostics_period_s, reliable, publish_queue, max_age_s, "
+                                   "serial, protocol, limits, raw, clock, calibration)");
       }
     }
   }
@@ -63,6 +64,15 @@ ImuNodeOptions imu_node_options(const runtime::ComponentSpec& spec) {
     throw runtime::ConfigError(spec.origin + ": diagnostics_period_s must be in (0, 3600]");
   }
   o.reliable = runtime::param<bool>(spec, "reliable", false);
+  const int queue = runtime::param<int>(spec, "publish_queue", static_cast<int>(o.publish_queue));
+  if (queue < 1 || queue > 100000) {
+    throw runtime::ConfigError(spec.origin + ": publish_queue must be in [1, 100000] samples");
+  }
+  o.publish_queue = static_cast<std::size_t>(queue);
+  o.max_age_s = runtime::param<double>(spec, "max_age_s", o.max_age_s);
+  if (!(o.max_age_s >= 0.0 && o.max_age_s <= 3600.0)) {
+    throw runtime::ConfigError(spec.origin + ": max_age_s must be in [0, 3600] s (0: no limit)");
+  }
   return o;
 }
 
@@ -116,7 +126,12 @@ ImuDriverNode::ImuDriverNode(const ImuNodeOptions& options, const std::string& s
                 if (options_.log_to_stderr) {
                   std::fprintf(stderr, "imu_driver %s: %s\n", sensor_id_.c_str(), m.c_str());
                 }
-              }) {}
+              }),
+      imu_queue_({options.publish_queue, static_cast<int64_t>(options.max_age_s * 1e9)},
+                 [this](const msg::ImuSample& m) { return imu_writer_.write(m); },
+                 monotonic_now_ns),
+      diag_queue_({4, 0}, [this](const msg::FilterDiagnostics& m) { return diag_writer_.write(m); },
+                  monotonic_now_ns) {}
 
 ImuDriverNode::~ImuDriverNode() { stop(); }
 
@@ -131,12 +146,14 @@ void ImuDriverNode::start() {
 void ImuDriverNode::stop() {
   stop_.store(true);
   if (thread_.joinable()) thread_.join();
+  imu_queue_.stop();
+  diag_queue_.stop();
 }
 
 void ImuDriverNode::on_sample(const ImuSample& sample, const SampleInfo& info) {
   meter_.add(sample.stamp_ns, info.arrival_ns);
   last_stamp_ns_ = sample.stamp_ns;
-  if (!imu_writer_.write(dds::to_msg(sample, sensor_id_))) ++write_failures_;
+  imu_queue_.push(dds::to_msg(sample, sensor_id_), sample.stamp_ns);  // never blocks
 }
 
 void ImuDriverNode::on_tick(int64_t now_ns) {
@@ -147,16 +164,29 @@ void ImuDriverNode::on_tick(int64_t now_ns) {
   nodes::DiagnosticsReport report = driver_diagnostics(
       st, summary, reader_.connected(), reader_.connects(), last_stamp_ns_ != 0 ? last_stamp_ns_ : now_ns,
       diag_seq_++);
-  report.counters["dds_write_failures"] = write_failures_;
-  diag_writer_.write(nodes::to_diagnostics_msg(report, sensor_id_));
-  char line[512];
+  const auto q = imu_queue_.stats();
+  report.counters["published"] = q.written;
+  report.counters["dds_write_failures"] = q.write_failed;
+  report.counters["dropped_queue_full"] = q.dropped_full;
+  report.counters["dropped_stale"] = q.dropped_stale;
+  report.counters["dropped_at_stop"] = q.dropped_at_stop;
+  report.counters["publish_queue_pending"] = q.pending;
+  report.counters["publish_queue_high_water"] = q.high_water;
+  report.counters["slow_writes"] = q.slow_writes;
+  report.metrics.push_back({"longest_write", static_cast<double>(q.longest_write_ns) * 1e-6, "ms"});
+  diag_queue_.push(nodes::to_diagnostics_msg(report, sensor_id_), now_ns);
+  char line[640];
   std::snprintf(line, sizeof line,
-                "%s, %.1f Hz, %" PRIu64 " samples, %" PRIu64 " rejected, %" PRIu64
-                " lost (seq gaps), latency p50 %.2f ms p99 %.2f ms, clock offset %.6f s drift %.0f ppm",
+                "%s, %.1f Hz, %" PRIu64 " lines, %" PRIu64 " samples, %" PRIu64 " rejected, %" PRIu64
+                " lost (seq gaps), %" PRIu64 " published, dropped %" PRIu64 " stale %" PRIu64
+                " queue full, longest write %.1f ms, latency p50 %.2f ms p99 %.2f ms, clock offset "
+                "%.6f s drift %.0f ppm",
                 reader_.connected() ? "connected" : "waiting for port",
-                summary.rate_hz, st.samples, st.rejected_total(), st.seq_gap_drops,
-                summary.latency_p50_ms, summary.latency_p99_ms,
-                static_cast<double>(st.clock_offset_ns) * 1e-9, st.clock_drift_ppm);
+                summary.rate_hz, st.lines, st.samples, st.rejected_total(), st.seq_gap_drops,
+                q.written, q.dropped_stale, q.dropped_full,
+                static_cast<double>(q.longest_write_ns) * 1e-6, summary.latency_p50_ms,
+                summary.latency_p99_ms, static_cast<double>(st.clock_offset_ns) * 1e-9,
+                st.clock_drift_ppm);
   {
     std::lock_guard<std::mutex> lock(status_mutex_);
     status_ = line;

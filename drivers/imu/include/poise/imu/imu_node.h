@@ -1,6 +1,8 @@
 // The serial IMU driver as a DDS component: port -> ImuDriver -> `imu` topic (ImuSample) and
 // `diagnostics` (FilterDiagnostics, component_name "imu_driver", once per diagnostics period).
-// Runs its own reader thread; survives unplug/replug (PortReader).
+// Runs its own reader thread; survives unplug/replug (PortReader). The reading thread never
+// writes to DDS: samples and diagnostics go through PublishQueues whose writer threads may block
+// (a link cut) without stopping the serial port from being read (docs/NETWORK.md).
 //
 // Component parameters (host file or `poise imu` options):
 //   port: /dev/ttyACM0        (required)
@@ -8,6 +10,10 @@
 //   config_file: imu.yaml     (driver YAML, config/drivers/imu.yaml format) -- or the same
 //                             sections inline: serial, protocol, limits, raw, clock, calibration
 //   diagnostics_period_s: 1.0
+//   publish_queue: 400        (samples between the reading thread and the DDS writer thread; when
+//                             full the oldest is dropped and counted: dropped_queue_full)
+//   max_age_s: 0.5            (a sample older than this when its turn to be written comes is
+//                             dropped and counted, dropped_stale, never delivered late; 0 = off)
 //   reliable: false           (true: publish `imu` with the reliable "estimate" QoS instead of the
 //                             best-effort "sensor" one, e.g. for recording or exact-count tests)
 #pragma once
@@ -22,6 +28,7 @@
 #include <poise/msg/diagnosticsPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
 
+#include "poise/dds/publish_queue.h"
 #include "poise/imu/config.h"
 #include "poise/imu/driver.h"
 #include "poise/imu/serial_port.h"
@@ -35,6 +42,8 @@ struct ImuNodeOptions {
   DriverConfig config;
   double diagnostics_period_s = 1.0;
   bool reliable = false;
+  std::size_t publish_queue = 400;
+  double max_age_s = 0.5;
   bool log_to_stderr = true;
 };
 
@@ -69,9 +78,11 @@ class ImuDriverNode : public runtime::Component {
   RateLatencyMeter meter_;
   std::atomic<bool> stop_{false};
   std::thread thread_;
+  // Declared after the writers they write to (destroyed first, which stops their threads).
+  dds::PublishQueue<msg::ImuSample> imu_queue_;
+  dds::PublishQueue<msg::FilterDiagnostics> diag_queue_;
   int64_t next_diag_ns_ = 0;
   uint32_t diag_seq_ = 0;
-  uint64_t write_failures_ = 0;
   int64_t last_stamp_ns_ = 0;
   mutable std::mutex status_mutex_;
   std::string status_;
