@@ -142,9 +142,9 @@ TEST(Topics, GivenTwoPublishersWhenListedThenEachTopicHasItsTypeWriterAndRate) {
                      kCommandTimeout, kEnv);
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const std::regex imu_row(
-      R"re(\{"topic":"imu","type":"poise::msg::ImuSample","writers":1,"samples":(\d+),"rate_hz":([0-9.]+),"bytes_per_s":([0-9.]+),"malformed":0\})re");
+      R"re(\{"topic":"imu","type":"poise::msg::ImuSample","writers":1,"samples":(\d+),"rate_hz":([0-9.]+),"bytes_per_s":([0-9.]+),"malformed":0,"lost":(\d+)\})re");
   const std::regex diag_row(
-      R"re(\{"topic":"diagnostics","type":"poise::msg::FilterDiagnostics","writers":1,"samples":(\d+),"rate_hz":([0-9.]+),"bytes_per_s":([0-9.]+),"malformed":0\})re");
+      R"re(\{"topic":"diagnostics","type":"poise::msg::FilterDiagnostics","writers":1,"samples":(\d+),"rate_hz":([0-9.]+),"bytes_per_s":([0-9.]+),"malformed":0,"lost":(\d+)\})re");
   std::smatch m;
   ASSERT_TRUE(std::regex_search(r.output, m, imu_row)) << r.output << imu->output();
   // The publisher paces itself at 100 Hz; the band only guards against gross miscounting (e.g.
@@ -167,8 +167,33 @@ TEST(Topics, GivenTwoPublishersWhenListedThenEachTopicHasItsTypeWriterAndRate) {
   ASSERT_EQ(table.exit_code, 0) << table.output;
   EXPECT_NE(table.output.find("TOPIC"), std::string::npos) << table.output;
   EXPECT_TRUE(std::regex_search(table.output,
-                                std::regex(R"(\nimu +poise::msg::ImuSample +1 +[0-9.]+ +[0-9]+ +0\n)")))
+                                std::regex(R"(\nimu +poise::msg::ImuSample +1 +[0-9.]+ +[0-9]+ +0 +[0-9]+\n)")))
       << table.output;
+}
+
+// GIVEN a publisher whose header.seq advances by 4 per sample (3 missing each time, as if lost)
+// WHEN listed THEN LOST counts them: 3 per interval between received samples, plus 4 for every
+// sample the best-effort reader really missed -- so lost - 3 (samples - 1) is a multiple of 4.
+TEST(Topics, GivenSequenceGapsWhenListedThenLostCountsTheMissingSamples) {
+  DomainLease lease;
+  auto pub = std::make_unique<Child>(
+      std::vector<std::string>{poise::testing::bin("poise"), "dds-test-pub", "--type", "imu",
+                               "--domain", std::to_string(lease.id()), "--count", "100000",
+                               "--rate", "100", "--seq-step", "4"},
+      kEnv);
+  const auto r = run({poise::testing::bin("poise"), "topics", "--json", "--duration", "3",
+                      "--domain", std::to_string(lease.id())},
+                     kCommandTimeout, kEnv);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(
+      r.output, m, std::regex(R"re("topic":"imu",.*"samples":(\d+),.*"lost":(\d+)\})re")))
+      << r.output << pub->output();
+  const long samples = std::stol(m[1]);
+  const long lost = std::stol(m[2]);
+  ASSERT_GE(samples, 2) << r.output;
+  EXPECT_GE(lost, 3 * (samples - 1));
+  EXPECT_EQ((lost - 3 * (samples - 1)) % 4, 0) << r.output;
 }
 
 TEST(Topics, GivenAnEmptyDomainWhenListedThenItSaysSoAndSucceeds) {

@@ -5,7 +5,8 @@
 //   fusion   subscribes `imu` (+ `vision_pose`) and publishes msg::AttitudeEstimate on
 //            `attitude/<filter-id>` for every IMU sample (fusion host; an accelerometer-tilt relay
 //            standing in for `poise parallel-kf` until that node exists)
-//   watch    subscribes a topic and reports arrivals, sequence gaps and restarts (recorder host)
+//   watch    subscribes a topic and reports arrivals, sequence gaps and restarts (recorder host);
+//            --type diagnostics prints every FilterDiagnostics as "@diag source=... counter=N ..."
 //   capture  counts UDP/RTPS packets on an interface and those containing a byte marker (root)
 //   pose     publishes msg::PoseEstimate on `pose/<filter-id>` (fields from net_samples.h)
 //   ros2-mirror  republishes `imu` / `pose/<filter-id>` as ROS 2 sensor_msgs/Imu and
@@ -20,6 +21,7 @@
 #include "poise/dds/participant.h"
 #include "poise/dds/sequence_gaps.h"
 
+#include <poise/msg/diagnosticsPubSubTypes.h>
 #include <poise/msg/estimatesPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
 #include <poise/msg/visionPubSubTypes.h>
@@ -416,6 +418,27 @@ int run_watch(const Common& c, const std::string& type) {
                           m.header().stamp_ns());
         });
     watch(reader);
+  } else if (type == "diagnostics") {
+    // Every diagnostics message as one line: @diag source component t_ns + counters + metrics.
+    dds::Reader<msg::FilterDiagnosticsPubSubType> reader(
+        participant, c.topic.empty() ? "diagnostics" : c.topic,
+        [&](const msg::FilterDiagnostics& m, const auto& /*info*/) {
+          std::string line = "@diag source=" + m.sensor_id().to_string() +
+                             " component=" + m.component_name().to_string() +
+                             " seq=" + std::to_string(m.header().seq()) +
+                             " t_ns=" + std::to_string(now_ns());
+          for (const auto& k : m.counters()) {
+            line += " " + k.name().to_string() + "=" + std::to_string(k.value());
+          }
+          char value[64];
+          for (const auto& k : m.metrics()) {
+            std::snprintf(value, sizeof value, "=%.6g", k.value());
+            line += " " + k.name().to_string() + value;
+          }
+          event("%s\n", line.c_str());
+        });
+    watch(reader);
+    return 0;
   } else if (type == "vision_pose") {
     dds::Reader<msg::VisionPosePubSubType> reader(
         participant, topic, [&](const msg::VisionPose& m, const auto& info) {
@@ -536,7 +559,7 @@ int main(int argc, char** argv) {
   auto* watch = app.add_subcommand("watch", "report arrivals and sequence gaps on a topic");
   add_common(watch);
   watch->add_option("--type", type, "message type")
-      ->check(CLI::IsMember({"imu", "attitude", "vision_pose"}));
+      ->check(CLI::IsMember({"imu", "attitude", "vision_pose", "diagnostics"}));
   auto* capture = app.add_subcommand("capture", "count packets carrying a marker (root)");
   capture->add_option("--iface", iface, "interface");
   capture->add_option("--duration-s", c.duration_s, "capture time")->required();

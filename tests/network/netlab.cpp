@@ -7,6 +7,7 @@
 
 #include <cerrno>
 #include <ctime>
+#include <fstream>
 #include <sstream>
 #include <stdexcept>
 
@@ -200,6 +201,37 @@ void NetLab::set_link(const std::string& host, bool up) const {
     }
   }
   throw std::invalid_argument("NetLab: no host " + host);
+}
+
+RemoveOnExit::~RemoveOnExit() {
+  if (!path.empty()) {
+    ::unlink(path.c_str());
+  }
+}
+
+std::string write_discovery_client_xml(const std::string& server_ip) {
+  std::ifstream in(testing::source_path("config/qos/discovery_server_client.xml"));
+  std::stringstream ss;
+  ss << in.rdbuf();
+  std::string xml = ss.str();
+  const std::string placeholder = "192.168.1.10";
+  for (size_t at = xml.find(placeholder); at != std::string::npos; at = xml.find(placeholder)) {
+    xml.replace(at, placeholder.size(), server_ip);
+  }
+  static int count = 0;
+  const std::string path = "/tmp/poise-ds-client-" + std::to_string(::getpid()) + "-" +
+                           std::to_string(count++) + ".xml";
+  std::ofstream(path) << xml;
+  return path;
+}
+
+std::string discovery_server_binary() {
+  for (const char* c : {"/usr/bin/fast-discovery-server", "/usr/local/bin/fast-discovery-server"}) {
+    if (::access(c, X_OK) == 0) {
+      return c;
+    }
+  }
+  return {};
 }
 
 std::string Event::str(const std::string& key) const {

@@ -85,6 +85,20 @@ std::optional<Event> wait_event(const testing::Child& child, const std::string& 
                                 const std::map<std::string, std::string>& match,
                                 std::chrono::milliseconds timeout, int64_t after_ns = 0);
 
+/// Removes a path (e.g. the pty symlink of a `poise sim-imu` board that was killed) when it goes
+/// out of scope.
+struct RemoveOnExit {
+  std::string path;
+  ~RemoveOnExit();
+};
+
+/// A copy of config/qos/discovery_server_client.xml pointing at `server_ip` (port 11811), in /tmp;
+/// returns its path (remove it with RemoveOnExit).
+std::string write_discovery_client_xml(const std::string& server_ip);
+
+/// The `fast-discovery-server` executable (Debian fastdds-tools), or empty when not installed.
+std::string discovery_server_binary();
+
 /// Sends SIGINT and waits (bounded) for the exit so the @summary lines are printed.
 void stop(testing::Child& child);
 

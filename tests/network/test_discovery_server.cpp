@@ -29,14 +29,7 @@ std::string read_file(const std::string& path) {
   return ss.str();
 }
 
-std::string server_binary() {
-  for (const char* c : {"/usr/bin/fast-discovery-server", "/usr/local/bin/fast-discovery-server"}) {
-    if (::access(c, X_OK) == 0) {
-      return c;
-    }
-  }
-  return {};
-}
+std::string server_binary() { return discovery_server_binary(); }
 
 /// The source's time from "both processes started" to "the reader matched": discovery time.
 double discovery_ms(const testing::Child& publisher, const testing::Child& reader,
@@ -104,16 +97,9 @@ TEST_P(DiscoveryServerTest, ClientsDiscoverThroughTheServerWithMulticastBlocked)
       lab.in_host("server", {server_bin, "-i", "0", "-l", server_ip, "-p", kServerPort}));
 
   std::vector<std::string> env;
-  std::string xml_copy;
+  RemoveOnExit xml_copy{GetParam() == "xml" ? write_discovery_client_xml(server_ip) : ""};
   if (GetParam() == "xml") {
-    std::string xml = read_file(testing::source_path("config/qos/discovery_server_client.xml"));
-    for (size_t at = xml.find("192.168.1.10"); at != std::string::npos;
-         at = xml.find("192.168.1.10")) {
-      xml.replace(at, std::string("192.168.1.10").size(), server_ip);
-    }
-    xml_copy = "/tmp/poise-ds-client-" + std::to_string(::getpid()) + ".xml";
-    std::ofstream(xml_copy) << xml;
-    env = {"POISE_QOS_FILE=" + xml_copy, "POISE_DDS_PROFILE=poise_ds_client"};
+    env = {"POISE_QOS_FILE=" + xml_copy.path, "POISE_DDS_PROFILE=poise_ds_client"};
   } else {
     env = {"ROS_DISCOVERY_SERVER=" + server_ip + ":" + kServerPort};
   }
@@ -126,9 +112,6 @@ TEST_P(DiscoveryServerTest, ClientsDiscoverThroughTheServerWithMulticastBlocked)
   const auto at_fusion = wait_event(*fusion, "first", {{"topic", "imu"}}, kDiscoveryBound);
   const auto at_recorder = wait_event(*recorder, "first", {{"topic", "attitude/tilt"}},
                                       kDiscoveryBound);
-  if (!xml_copy.empty()) {
-    ::unlink(xml_copy.c_str());
-  }
   ASSERT_TRUE(matched && at_fusion) << "fusion:\n" << fusion->output() << "imu:\n"
                                     << imu->output() << "server:\n" << server.output();
   ASSERT_TRUE(at_recorder) << recorder->output();

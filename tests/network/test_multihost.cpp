@@ -94,10 +94,7 @@ TEST(MultiHost, RealImuDriverAndParallelKfAcrossHosts) {
   const std::string domain = std::to_string(lease.id());
   NetLab lab({"imu", "fusion", "recorder"});
   const std::string link = "/tmp/poise-net-imu-" + std::to_string(::getpid());
-  struct Unlink {  // the board is killed, not stopped: remove its pty symlink ourselves
-    std::string path;
-    ~Unlink() { ::unlink(path.c_str()); }
-  } unlink_link{link};
+  const RemoveOnExit remove_link{link};  // the board may be killed before it removes it
   const std::string tools = testing::bin("poise_imu_dev");
   auto board = lab.process("imu", {tools, "sim-imu", "--link", link, "--rate", "100", "--quiet"});
   ASSERT_TRUE(testing::wait_until([&] { return ::access(link.c_str(), F_OK) == 0; }, 10s))

@@ -2,6 +2,7 @@
 
 #include "poise/dds/convert.h"
 
+#include <chrono>
 #include <ctime>
 #include <sstream>
 
@@ -14,7 +15,8 @@ int64_t monotonic_ns() {
 }
 
 const std::vector<std::string>& NodeParams::keys() {
-  static const std::vector<std::string> k{"diagnostics_every"};
+  static const std::vector<std::string> k{"diagnostics_every", "diagnostics_period_s",
+                                          "input_deadline_s"};
   return k;
 }
 
@@ -24,12 +26,24 @@ NodeParams node_params(const runtime::ComponentSpec& spec) {
   if (p.diagnostics_every < 1) {
     throw runtime::ConfigError(spec.origin + ": diagnostics_every must be >= 1");
   }
+  p.diagnostics_period_s = runtime::param<double>(spec, "diagnostics_period_s", p.diagnostics_period_s);
+  if (!(p.diagnostics_period_s >= 0.01 && p.diagnostics_period_s <= 3600.0)) {
+    throw runtime::ConfigError(spec.origin + ": diagnostics_period_s must be in [0.01, 3600] s");
+  }
+  p.input_deadline_s = runtime::param<double>(spec, "input_deadline_s", p.input_deadline_s);
+  if (!(p.input_deadline_s > 0.0 && p.input_deadline_s <= 3600.0)) {
+    throw runtime::ConfigError(spec.origin + ": input_deadline_s must be in (0, 3600] s");
+  }
   return p;
 }
 
 ImuEstimatorNode::ImuEstimatorNode(const runtime::ComponentSpec& spec, runtime::HostContext& host,
                                    std::string component)
-    : host_(host), sensor_id_(spec.name), component_(std::move(component)), params_(node_params(spec)) {
+    : host_(host),
+      sensor_id_(spec.name),
+      component_(std::move(component)),
+      params_(node_params(spec)),
+      inputs_(static_cast<int64_t>(params_.input_deadline_s * 1e9), monotonic_ns()) {
   diagnostics_writer_ = std::make_unique<dds::Writer<msg::FilterDiagnosticsPubSubType>>(
       host.participant, host.topics.diagnostics, dds::QosKind::kEstimate);
 }
@@ -38,25 +52,61 @@ ImuEstimatorNode::~ImuEstimatorNode() { ImuEstimatorNode::stop(); }
 
 void ImuEstimatorNode::start() {
   running_.store(true);
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    inputs_.expect(host_.topics.imu);
+  }
   if (!imu_reader_) {
     imu_reader_ = std::make_unique<dds::Reader<msg::ImuSamplePubSubType>>(
         host_.participant, host_.topics.imu, dds::QosKind::kSensor,
-        [this](const msg::ImuSample& m, const auto& /*info*/) { on_imu(m); }, &malformed_);
+        [this](const msg::ImuSample& m, const auto& info) { on_imu(m, info); }, &malformed_);
+  }
+  if (!timer_.joinable()) {
+    {
+      std::lock_guard<std::mutex> lock(timer_mutex_);
+      timer_stop_ = false;
+    }
+    timer_ = std::thread([this] { run_timer(); });
   }
 }
 
 void ImuEstimatorNode::stop() {
   running_.store(false);
   imu_reader_.reset();  // no callback runs after this returns
+  {
+    std::lock_guard<std::mutex> lock(timer_mutex_);
+    timer_stop_ = true;
+  }
+  timer_cv_.notify_all();
+  if (timer_.joinable()) {
+    timer_.join();
+  }
 }
 
-void ImuEstimatorNode::on_imu(const msg::ImuSample& m) {
+void ImuEstimatorNode::run_timer() {
+  const auto period = std::chrono::duration<double>(params_.diagnostics_period_s);
+  std::unique_lock<std::mutex> timer_lock(timer_mutex_);
+  while (!timer_cv_.wait_for(timer_lock, period, [this] { return timer_stop_; })) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const int64_t now = monotonic_ns();
+    publish_diagnostics(now, last_seq_, now);
+  }
+}
+
+void ImuEstimatorNode::track_input(const std::string& topic, const std::string& source, uint32_t seq,
+                                   const eprosima::fastdds::dds::SampleInfo& info) {
+  inputs_.on_sample(topic, source, seq, dds::writer_key(info), monotonic_ns());
+}
+
+void ImuEstimatorNode::on_imu(const msg::ImuSample& m, const eprosima::fastdds::dds::SampleInfo& info) {
   if (!running_.load()) {
     return;
   }
   received_.fetch_add(1);
   const ImuSample sample = dds::from_msg(m);
   std::lock_guard<std::mutex> lock(mutex_);
+  track_input(host_.topics.imu, m.sensor_id().to_string(), m.header().seq(), info);
+  last_seq_ = sample.seq;
   if (!step(sample)) {
     rejected_.fetch_add(1);
   } else if (publish_estimate(sample)) {
@@ -67,11 +117,17 @@ void ImuEstimatorNode::on_imu(const msg::ImuSample& m) {
     return;
   }
   since_diagnostics_ = 0;
-  DiagnosticsReport diag;
-  diagnostics(diag);
-  diag.stamp_ns = sample.stamp_ns;
-  diag.seq = sample.seq;
+  core_report_ = DiagnosticsReport{};
+  diagnostics(core_report_);
+  publish_diagnostics(sample.stamp_ns, sample.seq, monotonic_ns());
+}
+
+void ImuEstimatorNode::publish_diagnostics(int64_t stamp_ns, uint32_t seq, int64_t now_ns) {
+  DiagnosticsReport diag = core_report_;
+  diag.stamp_ns = stamp_ns;
+  diag.seq = seq;
   diag.component = component_;
+  inputs_.report(now_ns, diag);
   diag.metrics.push_back({"latency", static_cast<double>(last_latency_ns_.load()) * 1e-6, "ms"});
   diag.counters["samples_received"] = received_.load();
   diag.counters["samples_rejected"] = rejected_.load();
@@ -82,6 +138,14 @@ void ImuEstimatorNode::on_imu(const msg::ImuSample& m) {
 
 std::string ImuEstimatorNode::status() const {
   std::ostringstream os;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const std::string silence = describe_silence(inputs_.silent(monotonic_ns()));
+    if (!silence.empty()) {
+      os << silence << "; ";
+    }
+    os << "imu lost " << inputs_.totals(host_.topics.imu).lost << ", ";
+  }
   os << "imu in " << received_.load() << ", estimates out " << published_.load() << ", rejected "
      << rejected_.load() << ", malformed " << malformed_.load()
      << ", last latency " << static_cast<double>(last_latency_ns_.load()) * 1e-3

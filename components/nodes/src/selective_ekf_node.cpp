@@ -63,8 +63,9 @@ class SelectiveEkfNode : public ImuAttitudeNode {
     if (!vision_reader_) {
       vision_reader_ = std::make_unique<dds::Reader<msg::VisionPosePubSubType>>(
           host().participant, host().topics.vision_pose, dds::QosKind::kEstimate,
-          [this](const msg::VisionPose& m, const auto&) {
+          [this](const msg::VisionPose& m, const auto& info) {
             std::lock_guard<std::mutex> lock(mutex());
+            track_input(host().topics.vision_pose, m.sensor_id().to_string(), m.header().seq(), info);
             ekf_.update_vision(to_vision_pose(dds::camera_pose_from_msg(m)));
           });
     }

@@ -37,8 +37,9 @@ class VehicleNode : public ImuAttitudeNode {
     if (!speed_reader_) {
       speed_reader_ = std::make_unique<dds::Reader<msg::VehicleInputPubSubType>>(
           host().participant, host().topics.vehicle_input, dds::QosKind::kSensor,
-          [this](const msg::VehicleInput& m, const auto&) {
+          [this](const msg::VehicleInput& m, const auto& info) {
             std::lock_guard<std::mutex> lock(mutex());
+            track_input(host().topics.vehicle_input, m.sensor_id().to_string(), m.header().seq(), info);
             has_speed_ = m.speed_valid();
             speed_mps_ = m.speed_mps();
           });

@@ -1,6 +1,7 @@
 // `poise topics`, `poise echo` and the hidden test publisher `poise dds-test-pub`.
 #include "poise/cli/common.h"
 #include "poise/dds/participant.h"
+#include "poise/dds/sequence_gaps.h"
 #include "poise/dds/topics.h"
 #include "poise/ddstools/cdr.h"
 #include "poise/ddstools/malformed.h"
@@ -22,6 +23,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <thread>
 
@@ -199,6 +201,9 @@ struct TopicsOptions {
 
 struct TopicStats {
   std::mutex mutex;
+  /// Sequence gaps of poise types (header.seq), per instance (sensor_id) and writer.
+  bool poise_type = false;
+  poise::dds::SequenceGaps gaps;
   std::uint64_t samples = 0;
   std::uint64_t malformed = 0;  // rejected: not a valid payload of the topic's type
   std::uint64_t bytes = 0;
@@ -227,13 +232,21 @@ void run_topics(const TopicsOptions& o) {
         continue;
       }
       auto s = std::make_shared<TopicStats>();
+      s->poise_type = w.type.rfind("poise::msg::", 0) == 0;
       stats[w.topic] = s;
       try {
         observer.subscribe(w, &table,
                            [s](const poise::dds::RawSample& sample,
-                               const eprosima::fastdds::dds::SampleInfo& /*info*/) {
+                               const eprosima::fastdds::dds::SampleInfo& info) {
                              const auto now = Clock::now();
                              std::lock_guard<std::mutex> lock(s->mutex);
+                             const auto seq = s->poise_type
+                                                  ? poise::dds::header_seq_from_payload(sample.data)
+                                                  : std::nullopt;
+                             if (seq) {
+                               s->gaps.on_sample(poise::dds::handle_key(info.instance_handle), *seq,
+                                                 poise::dds::writer_key(info));
+                             }
                              if (s->samples == 0) {
                                s->first = now;
                              }
@@ -261,6 +274,7 @@ void run_topics(const TopicsOptions& o) {
     int writers = 0;
     std::uint64_t samples = 0;
     std::uint64_t malformed = 0;
+    std::optional<std::uint64_t> lost;  // sequence gaps (poise types only)
     double rate_hz = 0.0;
     double bytes_per_s = 0.0;
   };
@@ -280,6 +294,9 @@ void run_topics(const TopicsOptions& o) {
     const TopicStats& s = *it->second;
     r.samples = s.samples;
     r.malformed = s.malformed;
+    if (s.poise_type) {
+      r.lost = s.gaps.totals().lost;
+    }
     const double span_s = std::chrono::duration<double>(s.last - s.first).count();
     if (s.samples >= 2 && span_s > 0.0) {
       // Rate over the sampled span: (n - 1) intervals; bytes/s from the mean sample size.
@@ -306,7 +323,8 @@ void run_topics(const TopicsOptions& o) {
              ",\"writers\":" + std::to_string(r.writers) +
              ",\"samples\":" + std::to_string(r.samples) + ",\"rate_hz\":" + fixed(r.rate_hz, 3) +
              ",\"bytes_per_s\":" + fixed(r.bytes_per_s, 1) +
-             ",\"malformed\":" + std::to_string(r.malformed) + "}";
+             ",\"malformed\":" + std::to_string(r.malformed) +
+             ",\"lost\":" + (r.lost ? std::to_string(*r.lost) : std::string("null")) + "}";
     }
     out += "]}\n";
     std::fputs(out.c_str(), stdout);
@@ -317,13 +335,15 @@ void run_topics(const TopicsOptions& o) {
       topic_w = std::max(topic_w, topic.size());
       type_w = std::max(type_w, join(r.types).size());
     }
-    std::printf("%-*s  %-*s  %7s  %9s  %11s  %9s\n", static_cast<int>(topic_w), "TOPIC",
-                static_cast<int>(type_w), "TYPE", "WRITERS", "RATE_HZ", "BYTES_PER_S", "MALFORMED");
+    std::printf("%-*s  %-*s  %7s  %9s  %11s  %9s  %6s\n", static_cast<int>(topic_w), "TOPIC",
+                static_cast<int>(type_w), "TYPE", "WRITERS", "RATE_HZ", "BYTES_PER_S", "MALFORMED",
+                "LOST");
     for (const auto& [topic, r] : rows) {
-      std::printf("%-*s  %-*s  %7d  %9s  %11s  %9llu\n", static_cast<int>(topic_w), topic.c_str(),
+      std::printf("%-*s  %-*s  %7d  %9s  %11s  %9llu  %6s\n", static_cast<int>(topic_w), topic.c_str(),
                   static_cast<int>(type_w), join(r.types).c_str(), r.writers,
                   fixed(r.rate_hz, 1).c_str(), fixed(r.bytes_per_s, 0).c_str(),
-                  static_cast<unsigned long long>(r.malformed));
+                  static_cast<unsigned long long>(r.malformed),
+                  r.lost ? std::to_string(*r.lost).c_str() : "-");
     }
     if (rows.empty()) {
       std::printf("(no writers discovered on domain %d)\n", o.domain);
@@ -343,6 +363,7 @@ struct TestPubOptions {
   int count = 100;
   double rate_hz = 50.0;
   double wait_readers_s = 0.0;
+  int seq_step = 1;  // header.seq advances by this per sample (> 1: gaps, as if samples were lost)
 };
 
 template <class PubSubType, class Fill>
@@ -365,7 +386,7 @@ void publish(const TestPubOptions& o, const std::string& default_topic, Fill fil
   for (int i = 0; i < o.count && !stop_requested(); ++i) {
     typename PubSubType::type msg;
     msg.header().stamp_ns(1000000000LL + 1000000LL * i);
-    msg.header().seq(static_cast<std::uint32_t>(i));
+    msg.header().seq(static_cast<std::uint32_t>(i) * static_cast<std::uint32_t>(o.seq_step));
     msg.sensor_id(o.sensor_id);
     fill(msg, i);
     writer.write(msg);
@@ -609,6 +630,8 @@ void register_ddstools_commands(CLI::App& app) {
   p->add_option("--wait-readers", pub->wait_readers_s,
                 "Wait up to this many seconds for a reader before publishing (0: do not wait)")
       ->check(CLI::NonNegativeNumber);
+  p->add_option("--seq-step", pub->seq_step, "header.seq advances by this per sample (gaps)")
+      ->check(CLI::Range(1, 1000));
   p->callback([pub] { run_test_pub(*pub); });
 }
 

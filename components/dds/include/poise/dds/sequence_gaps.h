@@ -10,7 +10,9 @@
 #include <cstdint>
 #include <cstdio>
 #include <map>
+#include <optional>
 #include <string>
+#include <vector>
 
 namespace poise::dds {
 
@@ -97,15 +99,36 @@ class SequenceGaps {
   std::map<std::string, State> sources_;
 };
 
-/// The publishing DataWriter's GUID (SampleInfo::publication_handle) as 32 hex digits.
-inline std::string writer_key(const eprosima::fastdds::dds::SampleInfo& info) {
+/// header.seq of a serialized poise message (every poise topic type starts with Header{int64
+/// stamp_ns; uint32 seq; ...}): `payload` is the full serialized payload, 4-byte encapsulation
+/// first (CDR big or little endian). nullopt when it is too short or not plain CDR.
+inline std::optional<uint32_t> header_seq_from_payload(const std::vector<uint8_t>& payload) {
+  if (payload.size() < 16 || payload[0] != 0 || payload[1] > 1) {
+    return std::nullopt;
+  }
+  const bool little = payload[1] == 1;
+  uint32_t seq = 0;
+  for (int k = 0; k < 4; ++k) {
+    const uint32_t byte = payload[static_cast<size_t>(12 + (little ? 3 - k : k))];
+    seq = (seq << 8) | byte;
+  }
+  return seq;
+}
+
+/// An instance or writer handle as 32 hex digits.
+inline std::string handle_key(const eprosima::fastrtps::rtps::InstanceHandle_t& handle) {
   std::string out;
   char byte[3];
   for (size_t i = 0; i < 16; ++i) {
-    std::snprintf(byte, sizeof(byte), "%02x", static_cast<unsigned>(info.publication_handle.value[i]));
+    std::snprintf(byte, sizeof(byte), "%02x", static_cast<unsigned>(handle.value[i]));
     out += byte;
   }
   return out;
+}
+
+/// The publishing DataWriter's GUID (SampleInfo::publication_handle) as 32 hex digits.
+inline std::string writer_key(const eprosima::fastdds::dds::SampleInfo& info) {
+  return handle_key(info.publication_handle);
 }
 
 }  // namespace poise::dds

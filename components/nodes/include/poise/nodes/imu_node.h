@@ -5,6 +5,7 @@
 #pragma once
 
 #include "poise/core/types.h"
+#include "poise/nodes/input_health.h"
 #include "poise/nodes/reports.h"
 #include "poise/runtime/component.h"
 
@@ -13,15 +14,21 @@
 #include <poise/msg/imuPubSubTypes.h>
 
 #include <atomic>
+#include <condition_variable>
 #include <memory>
 #include <mutex>
 #include <string>
+#include <thread>
 
 namespace poise::nodes {
 
 /// Node-level parameters common to every estimator node (host-file `params`).
 struct NodeParams {
   int diagnostics_every = 1;  ///< publish diagnostics every N input samples (1 = input rate)
+  /// ... and on a timer with this period, input or not (a dead input shows as silence)
+  double diagnostics_period_s = 1.0;
+  /// an input silent for longer is reported silent (`<topic>_silent`, status "no input on ...")
+  double input_deadline_s = 0.5;
   static const std::vector<std::string>& keys();
 };
 NodeParams node_params(const runtime::ComponentSpec& spec);
@@ -29,7 +36,10 @@ NodeParams node_params(const runtime::ComponentSpec& spec);
 /// The one node shape of every IMU-driven estimator: on each `imu` sample convert -> step the
 /// core -> publish the estimate (when the core has one) -> publish diagnostics every
 /// `diagnostics_every` input samples, rejected samples included (a core that rejects everything
-/// is reported, never silent). Subclasses only call their core and convert its outputs.
+/// is reported, never silent) -- and on a timer every `diagnostics_period_s`, so a dead input
+/// shows as "no input for N s". Every input's sequence gaps (samples lost on the way) and silence
+/// against `input_deadline_s` are counted (InputHealth). Subclasses only call their core and
+/// convert its outputs; secondary inputs call track_input() from their callbacks.
 class ImuEstimatorNode : public runtime::Component {
  public:
   ImuEstimatorNode(const runtime::ComponentSpec& spec, runtime::HostContext& host, std::string component);
@@ -51,15 +61,22 @@ class ImuEstimatorNode : public runtime::Component {
   [[nodiscard]] const std::string& sensor_id() const { return sensor_id_; }
   [[nodiscard]] const std::string& component() const { return component_; }
   runtime::HostContext& host() { return host_; }
+  /// Accounts one sample of a secondary input `topic` (loss, silence). Call with mutex() held.
+  void track_input(const std::string& topic, const std::string& source, uint32_t seq,
+                   const eprosima::fastdds::dds::SampleInfo& info);
 
  private:
-  void on_imu(const msg::ImuSample& m);
+  void on_imu(const msg::ImuSample& m, const eprosima::fastdds::dds::SampleInfo& info);
+  /// Publishes diagnostics: the core's part from the last diagnostics() call, plus the node's
+  /// counters and input health at `now_ns`. Called with mutex_ held.
+  void publish_diagnostics(int64_t stamp_ns, uint32_t seq, int64_t now_ns);
+  void run_timer();
 
   runtime::HostContext& host_;
   std::string sensor_id_;
   std::string component_;
   NodeParams params_;
-  std::mutex mutex_;
+  mutable std::mutex mutex_;
   std::atomic<bool> running_{false};
   std::atomic<uint64_t> received_{0};
   std::atomic<uint64_t> published_{0};
@@ -67,6 +84,13 @@ class ImuEstimatorNode : public runtime::Component {
   std::atomic<uint64_t> malformed_{0};  // IMU payloads that did not deserialize (dropped)
   std::atomic<int64_t> last_latency_ns_{0};
   uint64_t since_diagnostics_ = 0;
+  InputHealth inputs_;              // guarded by mutex_
+  DiagnosticsReport core_report_;   // the core's last diagnostics(), guarded by mutex_
+  uint32_t last_seq_ = 0;           // guarded by mutex_
+  std::mutex timer_mutex_;
+  std::condition_variable timer_cv_;
+  bool timer_stop_ = false;
+  std::thread timer_;
   std::unique_ptr<dds::Writer<msg::FilterDiagnosticsPubSubType>> diagnostics_writer_;
   std::unique_ptr<dds::Reader<msg::ImuSamplePubSubType>> imu_reader_;
 };
