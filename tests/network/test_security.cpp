@@ -158,6 +158,9 @@ TEST_F(SecurityTest, SecureParticipantFromEnvironmentAndTamperedPermissionsRejec
   fs::remove_all(tampered);
   EXPECT_NE(error.find("DDS Security"), std::string::npos)
       << "a participant with tampered permissions must not be created: " << error;
+  EXPECT_NE(error.find("the signature of " + tampered + "/fusion/permissions.p7s is invalid"),
+            std::string::npos)
+      << "the error names the file whose signature failed: " << error;
 }
 
 // A host name without topic rules (here "monitor") may join the domain but not use any topic.
@@ -166,9 +169,16 @@ TEST_F(SecurityTest, IdentityWithoutTopicGrantsJoinsButCannotReadImu) {
   ScopedEnv d("POISE_SECURITY_DIR", dir("good"));
   ScopedEnv i("POISE_SECURITY_IDENTITY", "monitor");
   dds::Participant participant({lease.id(), "poise_loopback", "", "secure_monitor"});
-  EXPECT_THROW(dds::Reader<msg::ImuSamplePubSubType>(participant, "imu",
-                                                      [](const auto&, const auto&) {}),
-               dds::DdsError);
+  std::string error;
+  try {
+    dds::Reader<msg::ImuSamplePubSubType> reader(participant, "imu", [](const auto&, const auto&) {});
+  } catch (const dds::DdsError& e) {
+    error = e.what();
+  }
+  EXPECT_NE(error.find("identity 'monitor'"), std::string::npos) << error;
+  EXPECT_NE(error.find("no grant to subscribe 'imu' on domain " + std::to_string(lease.id())),
+            std::string::npos)
+      << "the error says that the permissions do not grant the topic: " << error;
 }
 
 // Control for the capture below: without security the marker travels in clear.

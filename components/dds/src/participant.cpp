@@ -1,6 +1,7 @@
 #include "poise/dds/participant.h"
 
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
+#include <fastdds/rtps/attributes/ServerAttributes.h>
 
 #include <cstdlib>
 #include <cstring>
@@ -98,14 +99,26 @@ std::string resolve_participant_profile(const ParticipantOptions& options) {
   return options.profile.empty() ? env_or("POISE_DDS_PROFILE", "poise_default") : options.profile;
 }
 
-Participant::Participant(const ParticipantOptions& options) : domain_(options.domain) {
+namespace {
+/// Why Fast DDS (which logs little) refused a secure participant, as far as can be told here.
+std::string diagnose_security(const SecurityConfig& security, int domain) {
+  const std::string problem = check_security_files(security, domain);
+  return problem.empty() ? "its files verify here (certificate from the CA, key, signatures, "
+                           "subject, domain): check that governance and permissions come from "
+                           "the same CA as the other hosts"
+                         : problem;
+}
+}  // namespace
+
+fdds::DomainParticipantQos participant_qos(const ParticipantOptions& options) {
   load_profiles(options.qos_file);
   auto* factory = fdds::DomainParticipantFactory::get_instance();
   const std::string profile = resolve_participant_profile(options);
   fdds::DomainParticipantQos qos;
   if (factory->get_participant_qos_from_profile(profile, qos) != ReturnCode_t::RETCODE_OK) {
     throw DdsError("no participant profile '" + profile +
-                   "' in the QoS profiles (known: poise_default, poise_udp, poise_loopback)");
+                   "' in the QoS profiles (known: poise_default, poise_udp, poise_loopback, and "
+                   "those of config/qos/discovery_server_client.xml)");
   }
   qos.name(options.name);
   const std::optional<SecurityConfig> security = security_from_env();
@@ -114,21 +127,73 @@ Participant::Participant(const ParticipantOptions& options) : domain_(options.do
       qos.properties().properties().emplace_back(name, value);
     }
   }
-  participant_ = factory->create_participant(static_cast<fdds::DomainId_t>(options.domain), qos);
-  if (participant_ == nullptr) {
+  using eprosima::fastrtps::rtps::DiscoveryProtocol_t;
+  auto& discovery = qos.wire_protocol().builtin.discovery_config;
+  const std::string servers = env_or("ROS_DISCOVERY_SERVER", "");
+  if (discovery.discoveryProtocol == DiscoveryProtocol_t::SIMPLE && !servers.empty()) {
+    // What Fast DDS would do with the variable, done here so that the role decides the kind.
+    eprosima::fastdds::rtps::RemoteServerList_t list;
+    if (!eprosima::fastdds::rtps::load_environment_server_info(servers, list) || list.empty()) {
+      throw DdsError("ROS_DISCOVERY_SERVER='" + servers + "' is not a list of discovery servers "
+                     "(IP:PORT, several separated by ';', position = server id)");
+    }
+    discovery.discoveryProtocol = DiscoveryProtocol_t::CLIENT;
+    discovery.m_DiscoveryServers = list;
+  }
+  if (options.role == ParticipantRole::kObserver &&
+      discovery.discoveryProtocol == DiscoveryProtocol_t::CLIENT) {
+    // A plain client only learns about endpoints it matches: a tool that must see every topic
+    // (before it has a reader for any) receives all discovery data as a super client.
+    discovery.discoveryProtocol = DiscoveryProtocol_t::SUPER_CLIENT;
+  }
+  return qos;
+}
+
+std::string describe_discovery(const fdds::DomainParticipantQos& qos) {
+  using eprosima::fastrtps::rtps::DiscoveryProtocol_t;
+  const auto& discovery = qos.wire_protocol().builtin.discovery_config;
+  const std::string n = std::to_string(discovery.m_DiscoveryServers.size());
+  switch (discovery.discoveryProtocol) {
+    case DiscoveryProtocol_t::SIMPLE: return "simple discovery (multicast)";
+    case DiscoveryProtocol_t::CLIENT: return "client of " + n + " discovery server(s)";
+    case DiscoveryProtocol_t::SUPER_CLIENT: return "super client of " + n + " discovery server(s)";
+    case DiscoveryProtocol_t::SERVER: return "discovery server";
+    case DiscoveryProtocol_t::BACKUP: return "discovery server (backup)";
+    default: return "static or no discovery";
+  }
+}
+
+fdds::DomainParticipant* create_participant(const ParticipantOptions& options,
+                                            fdds::DomainParticipantListener* listener,
+                                            const fdds::StatusMask& mask) {
+  if (options.domain < 0 || options.domain > 232) {
+    throw DdsError("domain " + std::to_string(options.domain) +
+                   " is impossible: DDS over UDP uses ports 7400 + 250 * domain + offsets, which "
+                   "leave the 16-bit port range above domain 232 (use 0..232)");
+  }
+  const fdds::DomainParticipantQos qos = participant_qos(options);
+  fdds::DomainParticipant* participant = fdds::DomainParticipantFactory::get_instance()->create_participant(
+      static_cast<fdds::DomainId_t>(options.domain), qos, listener, mask);
+  if (participant == nullptr) {
+    const std::optional<SecurityConfig> security = security_from_env();
     throw DdsError("cannot create a DDS participant on domain " + std::to_string(options.domain) +
-                   " with profile '" + profile + "'" +
-                   (security ? " and DDS Security identity '" + security->identity + "' of " +
-                                   security->dir + " (check the certificates, the signed "
-                                   "governance/permissions and that the permissions grant this "
-                                   "domain)"
+                   " with profile '" + resolve_participant_profile(options) + "' (" +
+                   describe_discovery(qos) + ")" +
+                   (security ? "; DDS Security identity '" + security->identity + "' of " +
+                                   security->dir + ": " + diagnose_security(*security, options.domain)
                              : std::string()));
   }
+  return participant;
+}
+
+Participant::Participant(const ParticipantOptions& options)
+    : domain_(options.domain), security_(security_from_env()) {
+  participant_ = create_participant(options);
   publisher_ = participant_->create_publisher(fdds::PUBLISHER_QOS_DEFAULT);
   subscriber_ = participant_->create_subscriber(fdds::SUBSCRIBER_QOS_DEFAULT);
   if (publisher_ == nullptr || subscriber_ == nullptr) {
     participant_->delete_contained_entities();
-    factory->delete_participant(participant_);
+    fdds::DomainParticipantFactory::get_instance()->delete_participant(participant_);
     throw DdsError("cannot create the DDS publisher/subscriber");
   }
 }
@@ -174,14 +239,36 @@ fdds::Topic* Participant::topic(const std::string& name, const fdds::TypeSupport
 }
 
 namespace detail {
+namespace {
+/// Why an endpoint was refused: the profile is missing, or (security on, profile fine) access
+/// control: Fast DDS refuses the endpoint when the permissions do not grant the topic.
+std::string refusal(const Participant& participant, bool profile_ok, const char* action,
+                    const std::string& topic) {
+  if (!profile_ok) {
+    return ": no such endpoint profile in the QoS profiles";
+  }
+  const auto& security = participant.security();
+  if (!security) {
+    return {};
+  }
+  return ": refused by DDS Security access control: the permissions of identity '" +
+         security->identity + "' (" + security->dir + "/" + security->identity +
+         "/permissions.xml) have no grant to " + action + " '" + topic + "' on domain " +
+         std::to_string(participant.domain()) +
+         " (add the topic to its rules in tools/security/make_security.sh and sign again)";
+}
+}  // namespace
 
 fdds::DataWriter* create_writer(Participant& participant, fdds::Topic* topic, QosKind kind,
                                 fdds::DataWriterListener* listener) {
   fdds::DataWriter* writer = participant.publisher()->create_datawriter_with_profile(
       topic, profile_name(kind), listener, fdds::StatusMask::publication_matched());
   if (writer == nullptr) {
+    fdds::DataWriterQos qos;
+    const bool profile_ok = participant.publisher()->get_datawriter_qos_from_profile(
+                                profile_name(kind), qos) == ReturnCode_t::RETCODE_OK;
     throw DdsError("cannot create a DDS writer on '" + topic->get_name() + "' with profile '" +
-                   profile_name(kind) + "'");
+                   profile_name(kind) + "'" + refusal(participant, profile_ok, "publish", topic->get_name()));
   }
   return writer;
 }
@@ -192,8 +279,11 @@ fdds::DataReader* create_reader(Participant& participant, fdds::Topic* topic, Qo
       topic, profile_name(kind), listener,
       fdds::StatusMask::data_available() << fdds::StatusMask::subscription_matched());
   if (reader == nullptr) {
+    fdds::DataReaderQos qos;
+    const bool profile_ok = participant.subscriber()->get_datareader_qos_from_profile(
+                                profile_name(kind), qos) == ReturnCode_t::RETCODE_OK;
     throw DdsError("cannot create a DDS reader on '" + topic->get_name() + "' with profile '" +
-                   profile_name(kind) + "'");
+                   profile_name(kind) + "'" + refusal(participant, profile_ok, "subscribe", topic->get_name()));
   }
   return reader;
 }

@@ -129,23 +129,10 @@ TopicObserver::TopicObserver(const ObserverOptions& options) : impl_(std::make_u
   popts.domain = options.domain;
   popts.profile = options.profile;
   popts.qos_file = options.qos_file;
-  poise::dds::load_profiles(options.qos_file);
-  const std::string profile = poise::dds::resolve_participant_profile(popts);
-  auto* factory = fdds::DomainParticipantFactory::get_instance();
-  fdds::DomainParticipantQos qos;
-  if (factory->get_participant_qos_from_profile(profile, qos) != ReturnCode_t::RETCODE_OK) {
-    throw poise::dds::DdsError("no participant profile '" + profile +
-                               "' in the QoS profiles (known: poise_default, poise_udp, "
-                               "poise_loopback)");
-  }
-  qos.name(options.name);
+  popts.name = options.name;
+  popts.role = poise::dds::ParticipantRole::kObserver;  // sees every topic, also via a server
   // The listener is installed at creation so that no discovery event is missed.
-  impl_->participant = factory->create_participant(static_cast<fdds::DomainId_t>(options.domain),
-                                                   qos, impl_.get(), fdds::StatusMask::none());
-  if (impl_->participant == nullptr) {
-    throw poise::dds::DdsError("cannot create a DDS participant on domain " +
-                               std::to_string(options.domain) + " with profile '" + profile + "'");
-  }
+  impl_->participant = poise::dds::create_participant(popts, impl_.get(), fdds::StatusMask::none());
 }
 
 TopicObserver::~TopicObserver() {

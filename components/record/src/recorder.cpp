@@ -236,20 +236,8 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
     popt.domain = opt.domain;
     popt.profile = opt.participant_profile;
     popt.name = "poise record";
-    dds::load_profiles(popt.qos_file);
-    auto* factory = fdds::DomainParticipantFactory::get_instance();
-    const std::string profile = dds::resolve_participant_profile(popt);
-    fdds::DomainParticipantQos qos;
-    if (factory->get_participant_qos_from_profile(profile, qos) != ReturnCode_t::RETCODE_OK) {
-      throw dds::DdsError("no participant profile '" + profile + "' in the QoS profiles");
-    }
-    qos.name(popt.name);
-    participant = factory->create_participant(static_cast<fdds::DomainId_t>(opt.domain), qos,
-                                              this, fdds::StatusMask::none());
-    if (participant == nullptr) {
-      throw dds::DdsError("cannot create a DDS participant on domain " +
-                          std::to_string(opt.domain) + " with profile '" + profile + "'");
-    }
+    popt.role = dds::ParticipantRole::kObserver;  // records every topic, also via a server
+    participant = dds::create_participant(popt, this, fdds::StatusMask::none());
     subscriber = participant->create_subscriber(fdds::SUBSCRIBER_QOS_DEFAULT);
     if (subscriber == nullptr) {
       throw dds::DdsError("cannot create a DDS subscriber");

@@ -6,6 +6,8 @@
 
 #include <fastdds/dds/core/status/StatusMask.hpp>
 #include <fastdds/dds/domain/DomainParticipant.hpp>
+#include <fastdds/dds/domain/DomainParticipantListener.hpp>
+#include <fastdds/dds/domain/qos/DomainParticipantQos.hpp>
 #include <fastdds/dds/publisher/DataWriter.hpp>
 #include <fastdds/dds/publisher/DataWriterListener.hpp>
 #include <fastdds/dds/publisher/Publisher.hpp>
@@ -36,6 +38,11 @@ class DdsError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+/// What a participant is for. Nodes create their own endpoints; observers (poise echo, topics,
+/// record) must learn every topic, so under a Discovery Server they become a SUPER_CLIENT by
+/// themselves (with either configuration method: ROS_DISCOVERY_SERVER or a CLIENT XML profile).
+enum class ParticipantRole { kNode, kObserver };
+
 struct ParticipantOptions {
   int domain = 0;
   /// Participant profile; empty: $POISE_DDS_PROFILE, else "poise_default".
@@ -43,8 +50,9 @@ struct ParticipantOptions {
   /// Profiles XML file; empty: $POISE_QOS_FILE, else the copy of config/qos/poise_profiles.xml
   /// built into the binary.
   std::string qos_file;
-  /// Participant name shown to discovery tools.
+  /// Participant name shown to discovery tools (it travels in clear, security or not).
   std::string name = "poise";
+  ParticipantRole role = ParticipantRole::kNode;
 };
 
 /// DDS Security (authentication PKI-DH, access control Access-Permissions, crypto AES-GCM-GMAC) for
@@ -64,6 +72,12 @@ std::optional<SecurityConfig> security_from_env();
 /// DdsError naming the first file that is missing or unreadable.
 std::vector<std::pair<std::string, std::string>> security_properties(const SecurityConfig& config);
 
+/// The first problem found in `config`'s files for `domain`, checked as Fast DDS's builtin
+/// plugins check them (certificate issued by DIR/ca.pem and not expired, key matching it, S/MIME
+/// signatures of governance.p7s and permissions.p7s by the CA, permissions subject = certificate
+/// subject in RFC 2253 form, domain granted); empty when none is found.
+std::string check_security_files(const SecurityConfig& config, int domain);
+
 /// The instance of every keyed sample whose key cannot be computed from its bytes (16 bytes 0xFF).
 /// Keyed type supports that read untrusted payloads give it instead of failing getKey().
 eprosima::fastrtps::rtps::InstanceHandle_t undecodable_instance();
@@ -74,6 +88,25 @@ void load_profiles(const std::string& qos_file = {});
 
 /// The participant profile that `options` resolve to.
 std::string resolve_participant_profile(const ParticipantOptions& options);
+
+/// The one participant factory of every poise process, tools included: the QoS of `options`'
+/// participant profile (QoS file loaded first), its name, DDS Security from the environment
+/// (security_from_env()) and the discovery setup (a Discovery Server client from
+/// ROS_DISCOVERY_SERVER or the profile; SUPER_CLIENT for ParticipantRole::kObserver).
+/// Throws DdsError with what to fix (unknown profile, bad ROS_DISCOVERY_SERVER, missing files).
+eprosima::fastdds::dds::DomainParticipantQos participant_qos(const ParticipantOptions& options);
+
+/// The discovery setup participant_qos() chose, for messages: "simple (multicast)",
+/// "client of 1 discovery server(s)", "super client of 2 discovery server(s)", ...
+std::string describe_discovery(const eprosima::fastdds::dds::DomainParticipantQos& qos);
+
+/// Creates a participant with participant_qos(options) (the listener, if any, is installed at
+/// creation so no discovery event is missed). Throws DdsError naming the domain, profile,
+/// discovery setup and, with security on, the identity and which of its files failed to verify.
+eprosima::fastdds::dds::DomainParticipant* create_participant(
+    const ParticipantOptions& options,
+    eprosima::fastdds::dds::DomainParticipantListener* listener = nullptr,
+    const eprosima::fastdds::dds::StatusMask& mask = eprosima::fastdds::dds::StatusMask::none());
 
 /// One DomainParticipant with one Publisher and one Subscriber, and the topics created on it.
 class Participant {
@@ -87,6 +120,8 @@ class Participant {
   [[nodiscard]] eprosima::fastdds::dds::Publisher* publisher() const { return publisher_; }
   [[nodiscard]] eprosima::fastdds::dds::Subscriber* subscriber() const { return subscriber_; }
   [[nodiscard]] int domain() const { return domain_; }
+  /// The DDS Security identity in use (nullopt: security off).
+  [[nodiscard]] const std::optional<SecurityConfig>& security() const { return security_; }
 
   /// The topic `name` of type `type`, registering the type and creating the topic on first use.
   /// Throws DdsError if the name is already used with another type.
@@ -95,6 +130,7 @@ class Participant {
 
  private:
   int domain_;
+  std::optional<SecurityConfig> security_;
   eprosima::fastdds::dds::DomainParticipant* participant_ = nullptr;
   eprosima::fastdds::dds::Publisher* publisher_ = nullptr;
   eprosima::fastdds::dds::Subscriber* subscriber_ = nullptr;
