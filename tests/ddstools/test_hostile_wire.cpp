@@ -146,7 +146,7 @@ TEST(HostileWire, GivenMalformedImuSamplesWhenTopicsSamplesThemThenTheyAreCounte
   std::smatch m;
   ASSERT_TRUE(std::regex_search(
       r.output, m,
-      std::regex(R"re(\{"topic":"imu","type":"poise::msg::ImuSample","writers":1,"samples":(\d+),.*"malformed":(\d+)\})re")))
+      std::regex(R"re(\{"topic":"imu","type":"poise::msg::ImuSample","writers":1,"samples":(\d+),.*"malformed":(\d+),"lost":(\d+|null)\})re")))
       << r.output << "\npublisher:\n" << pub.output();
   EXPECT_GE(std::stoi(m[1]), 1) << r.output;
   EXPECT_GE(std::stoi(m[2]), 1) << r.output;
