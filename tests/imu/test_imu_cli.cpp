@@ -129,7 +129,7 @@ TEST(ImuCli, SimImuThroughImuToASubscriberWithFaultsAndADisconnect) {
     std::lock_guard<std::mutex> lock(mu);
     EXPECT_GT(received, 300u);
     EXPECT_TRUE(resumed_after_restart) << "no sample after the reconnect; max seq before "
-                                       << max_seq_before_restart;
+                                       << max_seq_before_restart << "\n" << driver.output();
   }
   // AND the driver stops cleanly on SIGINT
   driver.signal(SIGINT);

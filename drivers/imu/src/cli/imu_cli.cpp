@@ -42,9 +42,17 @@ struct ImuOptions {
   double duration_s = 0;
   double status_period_s = 2.0;
   bool quiet = false;
+  int rt_priority = 0;  // SCHED_FIFO for every thread (the serial reader included); 0 = normal
+  bool lock_memory = false;
 };
 
 void run_imu(const ImuOptions& o) {
+  runtime::RealtimeSettings rt;
+  rt.priority = o.rt_priority;
+  rt.lock_memory = o.lock_memory;
+  if (rt.any()) {  // before the participant and the reader thread exist: they inherit it
+    for (const auto& w : runtime::apply_realtime(rt)) std::fprintf(stderr, "poise imu: warning: %s\n", w.c_str());
+  }
   runtime::HostSpec spec;
   spec.participant_profile = o.profile;
   runtime::ComponentSpec c;
@@ -375,6 +383,10 @@ void register_imu_cli(CLI::App& app) {
   imu_cmd->add_option("--status-period", io->status_period_s, "Seconds between status lines")
       ->check(CLI::PositiveNumber);
   imu_cmd->add_flag("--quiet", io->quiet, "No status output");
+  imu_cmd->add_option("--rt-priority", io->rt_priority,
+                      "SCHED_FIFO priority 1-99 for every thread, the serial reader included (0: normal)")
+      ->check(CLI::Range(0, 99));
+  imu_cmd->add_flag("--lock-memory", io->lock_memory, "mlockall: no page faults on the sensor path");
   imu_cmd->callback([io] { run_imu(*io); });
 
   auto so = std::make_shared<SimImuOptions>();
