@@ -2,7 +2,7 @@
 // the parallel KF, Gauss-Newton, the selective EKF, the altitude filter and the vehicle
 // estimator. Invariant (abort on violation): after every update each initialised filter's
 // q_world_body is finite and unit-norm, the altitude filter's height and velocity are finite, and
-// every covariance passes the per-sample state-health check (finite, no negative variance:
+// every covariance passes the per-sample state-health check (finite variances, none negative:
 // poise/core/state_health.h; a filter that fails it resets itself); a sample the filter cannot
 // use is rejected, never integrated.
 //

@@ -1,12 +1,12 @@
 // State-health check shared by the estimator cores (issue 19): after every update a filter checks
-// that its state is finite and that each covariance is one (finite, no negative variance, and on
-// every kFullCheckEvery-th sample symmetric within a relative tolerance and positive
-// semi-definite by an LDLT factorisation). An unhealthy filter resets itself to its initial state
+// that its state is finite and that each covariance is one (finite variances, none negative, and
+// on every kFullCheckEvery-th sample every entry finite, symmetric within a relative tolerance
+// and positive semi-definite by an LDLT factorisation). An unhealthy filter resets itself to its initial state
 // (it re-initialises from the next good samples), counts the reset (`state_resets` in the
 // diagnostics), reports the sample's sources rejected with reason kStateResetReason, and returns
 // false from update(): a NaN is never published.
 //
-// Cost: the per-sample part is allFinite() and a diagonal sign test (a few ns for a 6x6); the
+// Cost: the per-sample part is one sum over the state and the diagonals and a sign test; the
 // LDLT of a 15x15 runs once per kFullCheckEvery samples (256: 2.56 s at 100 Hz until a covariance
 // that is indefinite with a non-negative diagonal is found).
 #pragma once
@@ -41,14 +41,19 @@ template <typename... Terms>
   return std::isfinite((0.0 + ... + total(terms)));
 }
 
-/// Every entry finite and no negative variance; with `full` also symmetric and PSD (LDLT).
+/// Per sample: the variances (diagonal) finite and none negative (a NaN or inf off the diagonal
+/// reaches the diagonal at the next prediction, F P F^T); with `full` also every entry finite,
+/// symmetric and PSD (LDLT).
 template <typename Derived>
 [[nodiscard]] bool covariance_ok(const Eigen::MatrixBase<Derived>& p, bool full) {
-  if (!std::isfinite(p.sum()) || !(p.diagonal().minCoeff() >= 0.0)) {
+  if (!std::isfinite(p.diagonal().sum()) || !(p.diagonal().minCoeff() >= 0.0)) {
     return false;
   }
   if (!full) {
     return true;
+  }
+  if (!std::isfinite(p.sum())) {
+    return false;
   }
   using Matrix = Eigen::Matrix<double, Derived::RowsAtCompileTime, Derived::ColsAtCompileTime>;
   const Matrix m = p;
