@@ -2,7 +2,8 @@
 # The whole test suite: installs what is missing, builds (Release), checks that the estimator
 # cores build alone (tools/check_cores.sh), installs them and builds examples/embed against the
 # installed prefix (tools/test_install.sh), builds, installs, checks and purges the Debian packages
-# (tools/test_deb.sh; needs root), cross-builds the cores and their tests for arm64 and runs them
+# (tools/test_deb.sh; needs root), builds poise without OpenCV/AprilTag (tools/check_no_camera.sh),
+# cross-builds the cores and their tests for arm64 and runs them
 # under qemu (tools/cross_arm64.sh), runs ctest.
 #   tools/test.sh [extra ctest arguments, e.g. -R Parallel]
 set -euo pipefail
@@ -12,5 +13,6 @@ cd "$root"
 "$root/tools/check_cores.sh" "$root/build-cores"  # the cores build without Fast DDS / OpenCV / clocks
 "$root/tools/test_install.sh" "$root/build-install" "$root/build-cores"  # install + find_package(poise)
 "$root/tools/test_deb.sh" "$root/build"  # cpack .debs, dpkg -i, /usr/bin/poise, systemd-analyze verify
+"$root/tools/check_no_camera.sh" "$root/build-nocamera" "$root/build"  # -DPOISE_WITH_CAMERA=OFF (~5 min uncached)
 "$root/tools/cross_arm64.sh" "$root/build-arm64"  # arm64 cores + unit tests under qemu-user (~3 min)
 exec ctest --test-dir build --output-on-failure --no-tests=error -j "$(nproc 2>/dev/null || echo 2)" "$@"
