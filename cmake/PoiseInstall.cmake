@@ -44,3 +44,23 @@ function(poise_install_cores)
   configure_file(${PROJECT_SOURCE_DIR}/cmake/poise-cores.pc.in ${PROJECT_BINARY_DIR}/poise-cores.pc @ONLY)
   install(FILES ${PROJECT_BINARY_DIR}/poise-cores.pc DESTINATION ${CMAKE_INSTALL_LIBDIR}/pkgconfig COMPONENT dev)
 endfunction()
+
+# The DDS side of a full build, exported beside the cores (package poise-dds-dev): poise::idl
+# (the fastddsgen type support of idl/*.idl; headers in include/poise/msg) and poise::dds
+# (participants from the XML profiles, writers/readers, conversions; include/poise/dds). The
+# config file loads them when present (poiseDdsTargets.cmake) after finding Fast DDS and Fast CDR.
+function(poise_install_dds)
+  set_target_properties(poise_idl PROPERTIES EXPORT_NAME idl)
+  set_target_properties(poise_dds PROPERTIES EXPORT_NAME dds)
+  add_library(poise::idl ALIAS poise_idl)
+  add_library(poise::dds ALIAS poise_dds)
+  install(TARGETS poise_idl poise_dds EXPORT poiseDdsTargets
+          ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR} COMPONENT dds
+          INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
+  install(DIRECTORY ${PROJECT_BINARY_DIR}/gen/poise/msg/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/poise/msg
+          COMPONENT dds FILES_MATCHING PATTERN "*.h")
+  install(DIRECTORY ${PROJECT_SOURCE_DIR}/components/dds/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}
+          COMPONENT dds)
+  install(EXPORT poiseDdsTargets NAMESPACE poise:: DESTINATION ${CMAKE_INSTALL_LIBDIR}/cmake/poise
+          COMPONENT dds)
+endfunction()

@@ -49,7 +49,7 @@ function(poise_package)
   set(CPACK_PACKAGE_DESCRIPTION_SUMMARY "real-time attitude and pose estimation over DDS")
   set(CPACK_PACKAGING_INSTALL_PREFIX /usr)
   set(CPACK_DEB_COMPONENT_INSTALL ON)
-  set(CPACK_COMPONENTS_ALL runtime dev)
+  set(CPACK_COMPONENTS_ALL runtime dev dds)
   set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)
   set(CPACK_STRIP_FILES ON)
   set(CPACK_DEBIAN_PACKAGE_SECTION science)
@@ -72,5 +72,13 @@ function(poise_package)
   # poise-dev needs are the development packages its CMake package looks for
   # (find_dependency(Eigen3), find_dependency(yaml-cpp) in cmake/poiseConfig.cmake.in).
   set(CPACK_DEBIAN_DEV_PACKAGE_DEPENDS "libeigen3-dev (>= 3.3), libyaml-cpp-dev")
+  set(CPACK_DEBIAN_DDS_PACKAGE_NAME poise-dds-dev)
+  set(CPACK_DEBIAN_DDS_PACKAGE_SECTION libdevel)
+  set(CPACK_DEBIAN_DDS_DESCRIPTION
+      "poise DDS layer: type support and participant helpers\n find_package(poise) then gives poise::idl (the topic types) and poise::dds\n (participants from poise's QoS profiles, writers/readers, conversions).")
+  # As for poise-dev: what the CMake package's find_dependency looks for (Fast DDS, Fast CDR), and
+  # the cores poise::dds links.
+  set(CPACK_DEBIAN_DDS_PACKAGE_DEPENDS
+      "poise-dev (= ${PROJECT_VERSION}), libfastrtps-dev (>= 2.9), libfastcdr-dev")
   include(CPack)
 endfunction()

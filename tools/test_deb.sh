@@ -1,13 +1,14 @@
 #!/usr/bin/env bash
-# Builds the Debian packages of a configured and built full build (cpack -G DEB: poise and
-# poise-dev), installs them on this machine with dpkg -i, and checks them from the installed
+# Builds the Debian packages of a configured and built full build (cpack -G DEB: poise, poise-dev
+# and poise-dds-dev), installs them on this machine with dpkg -i, and checks them from the installed
 # places only:
 #   - /usr/bin/poise --version and /usr/bin/poise run --list run;
 #   - the shipped host/filter/QoS files are under /usr/share/poise;
 #   - poise@.service verifies with systemd-analyze verify (no warning at all) and is Type=notify
 #     when poise was built with libsystemd; the system user poise exists;
 #   - the Depends fields were computed (dpkg-shlibdeps: libfastrtps, libyaml-cpp, ...);
-#   - examples/embed configures, builds and runs against /usr (poise-dev) alone.
+#   - examples/embed configures, builds and runs against /usr alone: the cores (poise-dev) and
+#     poise::dds (poise-dds-dev: a participant on loopback, an IMU sample round trip).
 # Then purges both packages (and checks the user and files are gone), leaving the machine as it was.
 # Needs root, cpack, dpkg-shlibdeps (dpkg-dev) and systemd-analyze (systemd); without them it
 # skips, or fails under CI=true / POISE_REQUIRE_ALL=1.
@@ -26,7 +27,7 @@ work="$(cd "$work" && pwd)"
 installed=0
 cleanup() {  # leaves the machine as it was: the packages purged, a temporary work dir removed
   if [[ $installed -eq 1 ]]; then
-    dpkg --purge poise-dev poise >"$work/purge.log" 2>&1 || cat "$work/purge.log" >&2
+    dpkg --purge poise-dds-dev poise-dev poise >"$work/purge.log" 2>&1 || cat "$work/purge.log" >&2
   fi
   if [[ $temporary -eq 1 ]]; then rm -rf "$work"; fi
 }
@@ -45,7 +46,7 @@ for tool in cpack dpkg-deb dpkg-shlibdeps systemd-analyze; do
 done
 [[ -f "$build/CPackConfig.cmake" && -x "$build/bin/poise" ]] \
   || fail "$build is not a built full build (tools/setup.sh)"
-for p in poise poise-dev; do
+for p in poise poise-dev poise-dds-dev; do
   if dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q installed; then
     fail "package $p is already installed; remove it first (dpkg --purge $p): this test installs its own"
   fi
@@ -58,9 +59,11 @@ cpack --config "$build/CPackConfig.cmake" -B "$work/pkg" >"$work/cpack.log" 2>&1
 shopt -s nullglob
 runtime_deb=("$work"/pkg/poise_*.deb)
 dev_deb=("$work"/pkg/poise-dev_*.deb)
-[[ ${#runtime_deb[@]} -eq 1 && ${#dev_deb[@]} -eq 1 ]] || { ls "$work/pkg" >&2; fail "expected poise_*.deb and poise-dev_*.deb"; }
+dds_deb=("$work"/pkg/poise-dds-dev_*.deb)
+[[ ${#runtime_deb[@]} -eq 1 && ${#dev_deb[@]} -eq 1 && ${#dds_deb[@]} -eq 1 ]] \
+  || { ls "$work/pkg" >&2; fail "expected poise_*.deb, poise-dev_*.deb and poise-dds-dev_*.deb"; }
 echo "test_deb: cpack took $((SECONDS - start)) s"
-for deb in "${runtime_deb[0]}" "${dev_deb[0]}"; do
+for deb in "${runtime_deb[0]}" "${dev_deb[0]}" "${dds_deb[0]}"; do
   echo "test_deb: $(basename "$deb"): $(du -k "$deb" | cut -f1) KiB, installed $(dpkg-deb -f "$deb" Installed-Size) KiB"
 done
 depends="$(dpkg-deb -f "${runtime_deb[0]}" Depends)"
@@ -75,7 +78,7 @@ if [[ $with_systemd -eq 0 && ( "${CI:-}" == true || "${POISE_REQUIRE_ALL:-}" == 
 fi
 
 installed=1
-dpkg -i "${runtime_deb[0]}" "${dev_deb[0]}" >"$work/install.log" 2>&1 \
+dpkg -i "${runtime_deb[0]}" "${dev_deb[0]}" "${dds_deb[0]}" >"$work/install.log" 2>&1 \
   || { cat "$work/install.log" >&2; fail "dpkg -i failed"; }
 
 version="$(/usr/bin/poise --version)" || fail "/usr/bin/poise --version failed"
@@ -101,10 +104,14 @@ cmake -S "$root/examples/embed" -B "$work/embed" -G Ninja -DCMAKE_FIND_USE_PACKA
 grep -q '^poise_DIR:PATH=/usr/lib/' "$work/embed/CMakeCache.txt" || fail "examples/embed found poise outside /usr/lib"
 cmake --build "$work/embed" >>"$work/embed.log" 2>&1 || { tail -40 "$work/embed.log" >&2; fail "examples/embed does not build against /usr"; }
 "$work/embed/poise_embed" | grep -q '^ok ' || fail "examples/embed against /usr did not print ok"
+[[ -x "$work/embed/poise_embed_dds" ]] || fail "examples/embed did not find poise::dds in /usr (poise-dds-dev)"
+POISE_DDS_PROFILE=poise_loopback "$work/embed/poise_embed_dds" | grep -q '^ok dds' \
+  || fail "examples/embed's DDS program against /usr did not print ok dds"
 pkg-config --cflags --libs poise-cores | grep -q -- '-lpoise_core' || fail "pkg-config poise-cores does not work from /usr"
 
 installed=0
-dpkg --purge poise-dev poise >"$work/purge.log" 2>&1 || { cat "$work/purge.log" >&2; fail "dpkg --purge failed"; }
-[[ ! -e /usr/bin/poise && ! -e "$unit" && ! -e /usr/share/poise ]] || fail "files remain after dpkg --purge"
+dpkg --purge poise-dds-dev poise-dev poise >"$work/purge.log" 2>&1 || { cat "$work/purge.log" >&2; fail "dpkg --purge failed"; }
+[[ ! -e /usr/bin/poise && ! -e "$unit" && ! -e /usr/share/poise && ! -e /usr/include/poise && ! -e /usr/lib/cmake/poise ]] \
+  || fail "files remain after dpkg --purge"
 ! getent passwd poise >/dev/null || fail "the system user poise remains after dpkg --purge"
 echo "test_deb: poise and poise-dev built, installed, checked from /usr and purged in $((SECONDS - start)) s"
