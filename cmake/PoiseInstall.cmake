@@ -48,7 +48,9 @@ endfunction()
 # The DDS side of a full build, exported beside the cores (package poise-dds-dev): poise::idl
 # (the fastddsgen type support of idl/*.idl; headers in include/poise/msg) and poise::dds
 # (participants from the XML profiles, writers/readers, conversions; include/poise/dds). The
-# config file loads them when present (poiseDdsTargets.cmake) after finding Fast DDS and Fast CDR.
+# config file loads them when present (poiseDdsTargets.cmake) after finding Fast DDS and Fast CDR
+# (and OpenSSL). A target poise_dds or poise_idl links publicly must be exported too (or be an
+# imported target that cmake/poiseConfig.cmake.in finds), else configuring fails at install(EXPORT).
 function(poise_install_dds)
   set_target_properties(poise_idl PROPERTIES EXPORT_NAME idl)
   set_target_properties(poise_dds PROPERTIES EXPORT_NAME dds)

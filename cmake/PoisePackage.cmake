@@ -79,6 +79,6 @@ function(poise_package)
   # As for poise-dev: what the CMake package's find_dependency looks for (Fast DDS, Fast CDR), and
   # the cores poise::dds links.
   set(CPACK_DEBIAN_DDS_PACKAGE_DEPENDS
-      "poise-dev (= ${PROJECT_VERSION}), libfastrtps-dev (>= 2.9), libfastcdr-dev")
+      "poise-dev (= ${PROJECT_VERSION}), libfastrtps-dev (>= 2.9), libfastcdr-dev, libssl-dev")
   include(CPack)
 endfunction()

@@ -114,4 +114,4 @@ dpkg --purge poise-dds-dev poise-dev poise >"$work/purge.log" 2>&1 || { cat "$wo
 [[ ! -e /usr/bin/poise && ! -e "$unit" && ! -e /usr/share/poise && ! -e /usr/include/poise && ! -e /usr/lib/cmake/poise ]] \
   || fail "files remain after dpkg --purge"
 ! getent passwd poise >/dev/null || fail "the system user poise remains after dpkg --purge"
-echo "test_deb: poise and poise-dev built, installed, checked from /usr and purged in $((SECONDS - start)) s"
+echo "test_deb: poise, poise-dev and poise-dds-dev built, installed, checked from /usr and purged in $((SECONDS - start)) s"
