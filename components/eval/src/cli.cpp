@@ -114,7 +114,7 @@ struct GridOptions {
 /// and returns the cross-validation (with the candidates) for `poise tune`.
 std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
     const std::string& filter_name, const std::string& config, const std::string& out_dir,
-    const std::vector<std::string>& files, const GridOptions& g) {
+    const std::vector<std::string>& files, const GridOptions& g, bool broad) {
   make_dir(out_dir);
   std::vector<eval::GridAxis> axes;
   try {
@@ -123,14 +123,14 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
     throw Error(e.what());
   }
   const std::vector<eval::Overrides> candidates = eval::grid_points(axes);
-  if (config.empty()) {
+  if (config.empty() && broad) {
     // Candidates are written on top of the base file; without one they would be the built-in
     // defaults plus the grid keys, which is not what a filter with its own BROAD default runs.
     for (const auto& entry : eval::registered_filters()) {
       if (entry.name == filter_name && entry.broad_default) {
         throw Error("--grid with filter '" + filter_name +
                     "' needs --config BASE.yaml (its figures on BROAD use a configuration other than the "
-                    "built-in defaults; e.g. config/filters/selective_ekf_broad.yaml)");
+                    "built-in defaults; e.g. config/filters/" + filter_name + "_broad.yaml)");
       }
     }
   }
@@ -392,7 +392,7 @@ void register_eval_cli(CLI::App& app) {
       run_eval(*filter, *config, *out, *files);
       return;
     }
-    run_grid(*filter, *config, *out, *files, *grid);
+    run_grid(*filter, *config, *out, *files, *grid, true);
   });
 
   CLI::App* tune = app.add_subcommand(
@@ -424,7 +424,7 @@ void register_eval_cli(CLI::App& app) {
       ->check(CLI::ExistingFile);
   tune->callback([=]() {
     install_stop_handlers();
-    const auto [cv, candidates] = run_grid(*t_filter, *t_config, *t_out, *t_files, *t_grid);
+    const auto [cv, candidates] = run_grid(*t_filter, *t_config, *t_out, *t_files, *t_grid, false);
     const eval::GroupMeans in_means = eval::group_means(cv.in_sample);
     const eval::GroupMeans cv_means = eval::group_means(cv.cross_validated);
     std::ostringstream header;

@@ -61,10 +61,6 @@ void ParallelKfParams::validate() const {
   check.require(c_d >= 0.0 && c_d < 1.0, "c_d", "in [0, 1)");
   check.non_negative(c_d_rate_hz, "c_d_rate_hz", "Hz");
   check.non_negative(sigma_gyro_extra_heading_rps, "sigma_gyro_extra_heading_rps", "rad/s");
-  check.require(std::isnan(field_magnitude_ut) || (std::isfinite(field_magnitude_ut) && field_magnitude_ut > 0.0),
-                "field_magnitude_ut", "> 0 (uT) or null");
-  check.require(std::isnan(dip_deg) || std::abs(dip_deg) < 90.0, "dip_deg", "in (-90, 90) (deg) or null");
-  check.positive(startup_s, "startup_s", "s");
   check.positive(rest_gyro_max_rps, "rest_gyro_max_rps", "rad/s");
   check.positive(rest_accel_max_mps2, "rest_accel_max_mps2", "m/s^2");
   check.non_negative(rest_min_s, "rest_min_s", "s");
@@ -77,23 +73,21 @@ void ParallelKfParams::validate() const {
   check.positive(motion_bias_clip_rps, "motion_bias_clip_rps", "rad/s");
   check.require(motion_gyro_scale_error >= 0.0 && motion_gyro_scale_error < 1.0, "motion_gyro_scale_error", "in [0, 1)");
   check.positive(max_bias_rps, "max_bias_rps", "rad/s");
-  check.positive(mag_norm_tol, "mag_norm_tol", "relative");
-  check.positive(mag_dip_tol_deg, "mag_dip_tol_deg", "deg");
-  check.non_negative(mag_reference_tau_s, "mag_reference_tau_s", "s, 0 = fixed reference");
-  check.non_negative(mag_max_reject_s, "mag_max_reject_s", "s, 0 = never");
-  check.non_negative(mag_reacquire_s, "mag_reacquire_s", "s, 0 = never");
-  check.positive(mag_reacquire_tol, "mag_reacquire_tol", "relative");
   check.require(gyro_current_weight >= 0.0 && gyro_current_weight <= 1.0, "gyro_current_weight", "in [0, 1]");
+  check.require(imu_delay_s >= 0.0 && imu_delay_s <= 0.05, "imu_delay_s", "in [0, 0.05] (s)");
   check.non_negative(accel_lowpass_tau_s, "accel_lowpass_tau_s", "s, 0 = off");
   check.require(accel_lowpass_order == 1 || accel_lowpass_order == 2, "accel_lowpass_order", "1 or 2");
   check.require(!share_tilt_correction || (tilt.renormalize && tilt.exact_rotation), "share_tilt_correction",
                 "false unless tilt.renormalize and tilt.exact_rotation are true (unit directions)");
+  field_gate().validate(check, {"field_magnitude_ut", "dip_deg", "startup_s", "mag_norm_tol", "mag_dip_tol_deg",
+                                "mag_reference_tau_s", "mag_reacquire_s", "mag_reacquire_tol", "mag_max_reject_s"});
   poise::validate(limits, check);
 }
 
 ParallelKf::ParallelKf(const ParallelKfParams& params) : p_(params) {
   s_.kf1 = TiltKf(params.tilt);
   p_.validate();
+  gp_ = p_.field_gate();
   DirectionKfParams d;
   d.sigma_gyro_rps = p_.sigma_gyro_heading_rps > 0.0 ? p_.sigma_gyro_heading_rps : p_.tilt.sigma_gyro_rps;
   d.sigma_meas = p_.sigma_mag_ut;
@@ -114,23 +108,10 @@ void ParallelKf::reset() {
   s_.last_stamp_ns = -1;
   s_.prev_gyro.setZero();
   s_.rejections = RejectCounters{};
-  s_.mag_gated = 0;
-  s_.mag_forced = 0;
-  s_.reacquired = 0;
   s_.out = ParallelKfOutput{};
   last_q_ = Eigen::Quaterniond::Identity();
-  s_.field_m = std::isfinite(p_.field_magnitude_ut) ? p_.field_magnitude_ut : 0.0;
-  s_.field_dip = std::isfinite(p_.dip_deg) ? p_.dip_deg * kRadPerDeg : 0.0;
-  s_.field_learnt = std::isfinite(p_.field_magnitude_ut) && std::isfinite(p_.dip_deg);
-  s_.learn_time_s = 0.0;
-  s_.learn_norm_sum = 0.0;
-  s_.learn_dip_sum = 0.0;
-  s_.learn_n = 0;
-  s_.cand_norm = 0.0;
-  s_.cand_dip = 0.0;
-  s_.cand_stable_s = 0.0;
-  s_.rejected_s = 0.0;
-  s_.gate_dip = std::nan("");
+  s_.gate.reset(gp_);
+  s_.mag_extra_var = 0.0;
   s_.bias.setZero();
   s_.bias_cov = Eigen::Matrix3d::Identity() * (p_.bias_sigma_init_rps * p_.bias_sigma_init_rps);
   s_.bias_lp_i.setZero();
@@ -142,10 +123,6 @@ void ParallelKf::reset() {
   s_.mb_head_used = false;
   s_.mb_head_trusted = true;
   s_.c2_dip_for = std::nan("");
-  s_.ref_window_s = 0.0;
-  s_.ref_accepted_s = 0.0;
-  s_.ref_norm_sum = 0.0;
-  s_.ref_sin_dip_sum = 0.0;
   s_.rest_det = RestDetector{};
   s_.anchor = StampAnchor{};
   s_.health = StateHealth{};
@@ -215,13 +192,8 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   }
 
   // KF2: heading + magnetic disturbance (8)-(11)
-  heading_step(a, s.accel_mps2, s.mag_ut, c.mag_ok, dt);
-  if (p_.mag_reference_tau_s > 0.0) {
-    s_.ref_window_s += dt;
-    if (s_.ref_window_s >= kBiasPeriodS) {
-      follow_field_reference();
-    }
-  }
+  heading_step(a, s.mag_ut, c.mag_ok, dt);
+  s_.gate.tick(gp_, dt);
   if (p_.bias_estimation) {
     s_.mb_time += dt;
     if (s_.mb_time >= kBiasPeriodS) {
@@ -241,7 +213,9 @@ void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
   if (mag_ok) {
     s_.kf2.reset(s.mag_ut.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
     s_.heading_initialized = true;
-    learn_field(s.accel_mps2, s.mag_ut, 0.0);
+    if (!s_.gate.learnt) {
+      s_.gate.step(gp_, s.mag_ut, s_.kf1.up_body(), 0.0);  // learning
+    }
   }
   s_.prev_gyro = s.gyro_rps;
   s_.r_ib.setIdentity();
@@ -250,23 +224,6 @@ void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
   s_.accel_bw = Butterworth2<3>(p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : 1.0);
   s_.accel_bw.reset(s.accel_mps2);
   s_.initialized = true;
-}
-
-void ParallelKf::learn_field(const Eigen::Vector3d& /*accel*/, const Eigen::Vector3d& mag, double dt) {
-  // Mean |s_M| and mean dip against the filtered up sZ over the start-up window.
-  s_.learn_norm_sum += mag.norm();
-  s_.learn_dip_sum += angle_between_vectors(s_.kf1.up_body(), mag) - 0.5 * kPi;
-  ++s_.learn_n;
-  s_.learn_time_s += dt;
-  if (!std::isfinite(p_.field_magnitude_ut)) {
-    s_.field_m = s_.learn_norm_sum / s_.learn_n;
-  }
-  if (!std::isfinite(p_.dip_deg)) {
-    s_.field_dip = s_.learn_dip_sum / s_.learn_n;
-  }
-  if (s_.learn_time_s >= p_.startup_s) {
-    s_.field_learnt = true;
-  }
 }
 
 double ParallelKf::motion_bias_noise(double dt) const {
@@ -366,24 +323,22 @@ void ParallelKf::bias_update() {
   s_.mb_head_trusted = true;
 }
 
-void ParallelKf::follow_field_reference() {
-  // The reference norm and dip follow the field the gate accepted (never the rejected samples),
-  // with time constant mag_reference_tau_s over accepted time: slow changes (the sensor's
-  // temperature, another part of a building) stop looking like disturbances. Once per window.
-  if (s_.ref_accepted_s > 0.0) {
-    const double k = s_.ref_accepted_s / (p_.mag_reference_tau_s + s_.ref_accepted_s);
-    const double norm = s_.ref_norm_sum / s_.ref_accepted_s;
-    const double sin_dip = std::max(-1.0, std::min(1.0, s_.ref_sin_dip_sum / s_.ref_accepted_s));
-    s_.field_m += k * (norm - s_.field_m);
-    s_.field_dip += k * (std::asin(sin_dip) - s_.field_dip);
-  }
-  s_.ref_window_s = 0.0;
-  s_.ref_accepted_s = 0.0;
-  s_.ref_norm_sum = 0.0;
-  s_.ref_sin_dip_sum = 0.0;
+FieldGateParams ParallelKfParams::field_gate() const {
+  FieldGateParams g;
+  g.enabled = mag_gating;
+  g.field_magnitude_ut = field_magnitude_ut;
+  g.dip_deg = dip_deg;
+  g.startup_s = startup_s;
+  g.norm_tol = mag_norm_tol;
+  g.dip_tol_deg = mag_dip_tol_deg;
+  g.reference_tau_s = mag_reference_tau_s;
+  g.reacquire_s = mag_reacquire_s;
+  g.reacquire_tol = mag_reacquire_tol;
+  g.max_reject_s = mag_max_reject_s;
+  return g;
 }
 
-void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& accel,
+void ParallelKf::heading_step(const Eigen::Matrix3d& a,
                               const Eigen::Vector3d& mag, bool mag_ok, double dt) {
   s_.out.mag_used = false;
   if (s_.heading_initialized) {
@@ -396,91 +351,41 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& a
     s_.kf2.reset(mag.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
     s_.heading_initialized = true;
   }
-  if (!s_.field_learnt) {
-    mag_use_ = MagUse::kLearning;
-    learn_field(accel, mag, dt);
-  } else if (p_.mag_gating) {
-    const double norm = mag.norm();
-    // sin(dip) = -sZ . s_M / |s_M| (sZ unit); |dip - alpha| <= tol  <=>  sin(dip) within
-    // [sin(alpha - tol), sin(alpha + tol)] (sin is monotonic on [-90, 90] deg): no atan2 per sample.
-    const Eigen::Vector3d& up = s_.kf1.up_body();
-    const double sin_dip = -up.dot(mag) / (norm * up.norm());
-    record_mag_gate(norm, sin_dip);
-    if (s_.field_dip != s_.gate_dip) {  // bounds recomputed only when the reference changes
-      const double tol = p_.mag_dip_tol_deg * kRadPerDeg;
-      s_.gate_sin_lo = std::sin(std::max(s_.field_dip - tol, -0.5 * kPi));
-      s_.gate_sin_hi = std::sin(std::min(s_.field_dip + tol, 0.5 * kPi));
-      s_.gate_dip = s_.field_dip;
-    }
-    const bool disturbed = std::abs(norm - s_.field_m) > p_.mag_norm_tol * s_.field_m ||
-                           sin_dip < s_.gate_sin_lo || sin_dip > s_.gate_sin_hi;
-    if (p_.mag_soft_weight > 0.0) {
-      // inflate M2 smoothly with the gate ratios (1 at the gate)
-      const double rn = (norm - s_.field_m) / (p_.mag_norm_tol * s_.field_m);
-      const double rd = (sin_dip - std::sin(s_.field_dip)) / (0.5 * (s_.gate_sin_hi - s_.gate_sin_lo));
-      s_.mag_extra_var = p_.mag_soft_weight * p_.sigma_mag_ut * p_.sigma_mag_ut * (rn * rn + rd * rd);
-    }
-    const bool forced = disturbed && p_.mag_max_reject_s > 0.0 && s_.rejected_s >= p_.mag_max_reject_s;
-    if (forced) {
-      mag_use_ = MagUse::kForced;
-      ++s_.mag_forced;
-    }
-    if (disturbed && !forced) {
+  const FieldVerdict verdict = s_.gate.step(gp_, mag, s_.kf1.up_body(), dt);
+  if (std::isfinite(s_.gate.last_norm_ut)) {
+    record_mag_gate(s_.gate.last_norm_ut, s_.gate.last_sin_dip);
+  }
+  switch (verdict) {
+    case FieldVerdict::kLearning: mag_use_ = MagUse::kLearning; break;
+    case FieldVerdict::kForced: mag_use_ = MagUse::kForced; break;
+    case FieldVerdict::kGated:
       mag_use_ = MagUse::kGated;
-      ++s_.mag_gated;
       s_.mb_head_trusted = false;
-      s_.rejected_s += dt;
       // the disturbance seen through the propagated heading: sd = s_M - m sX'
-      s_.kf2.set_e(mag - s_.field_m * s_.kf2.u());
-      // candidate for a new reference: low-passed norm/dip and how long they stayed stable
-      if (p_.mag_reacquire_s > 0.0) {
-        if (s_.cand_norm <= 0.0) {
-          s_.cand_norm = norm;
-          s_.cand_dip = std::asin(std::max(-1.0, std::min(1.0, sin_dip)));
-        }
-        const double dip = std::asin(std::max(-1.0, std::min(1.0, sin_dip)));
-        const double k = dt / (1.0 + dt);
-        s_.cand_norm += k * (norm - s_.cand_norm);
-        s_.cand_dip += k * (dip - s_.cand_dip);
-        const bool stable = std::abs(norm - s_.cand_norm) < p_.mag_reacquire_tol * s_.cand_norm &&
-                            std::abs(dip - s_.cand_dip) < 0.5 * p_.mag_dip_tol_deg * kRadPerDeg;
-        s_.cand_stable_s = stable ? s_.cand_stable_s + dt : 0.0;
-        if (s_.rejected_s >= p_.mag_reacquire_s && s_.cand_stable_s >= p_.mag_reacquire_s) {
-          s_.field_m = s_.cand_norm;
-          s_.field_dip = s_.cand_dip;
-          ++s_.reacquired;
-          s_.rejected_s = 0.0;
-          s_.cand_stable_s = 0.0;
-          s_.cand_norm = 0.0;
-        }
-      }
+      s_.kf2.set_e(mag - s_.gate.m_ut * s_.kf2.u());
       return;
-    }
-    if (!disturbed) {
-      s_.rejected_s = 0.0;
-      s_.cand_stable_s = 0.0;
-      s_.cand_norm = 0.0;
-      if (p_.mag_reference_tau_s > 0.0) {  // accepted: what the reference follows (field_step)
-        s_.ref_norm_sum += norm * dt;
-        s_.ref_sin_dip_sum += sin_dip * dt;
-        s_.ref_accepted_s += dt;
-      }
-    }
+    case FieldVerdict::kAccepted: break;
+  }
+  if (p_.mag_soft_weight > 0.0 && std::isfinite(s_.gate.last_norm_ut)) {
+    // inflate M2 smoothly with the gate ratios (1 at the gate)
+    const double rn = s_.gate.norm_ratio(gp_);
+    const double rd = s_.gate.dip_ratio();
+    s_.mag_extra_var = p_.mag_soft_weight * p_.sigma_mag_ut * p_.sigma_mag_ut * (rn * rn + rd * rd);
   }
   const Eigen::Vector3d x_prior = s_.kf2.u();
-  s_.kf2.correct(mag, s_.field_m, s_.mag_extra_var);  // (10b), (11f)-(11h)
+  s_.kf2.correct(mag, s_.gate.m_ut, s_.mag_extra_var);  // (10b), (11f)-(11h)
   s_.mag_extra_var = 0.0;
   s_.out.mag_used = true;
-  if (p_.bias_estimation && p_.motion_bias_sigma_rps > 0.0 && p_.motion_bias_heading && s_.field_learnt) {
+  if (p_.bias_estimation && p_.motion_bias_sigma_rps > 0.0 && p_.motion_bias_heading && s_.gate.learnt) {
     if (mag_use_ == MagUse::kForced) {
       s_.mb_head_trusted = false;  // used although gated: not a measurement of the bias
       return;
     }
     // heading part (about sZ) of the correction rotation, sX'+ x sX'- = dtheta_perp(sX'); only
     // cos(dip) of a heading rotation shows in sX'
-    if (s_.field_dip != s_.c2_dip_for) {
-      s_.c2_dip = std::max(std::cos(s_.field_dip) * std::cos(s_.field_dip), kMinCos2Dip);
-      s_.c2_dip_for = s_.field_dip;
+    if (s_.gate.dip_rad != s_.c2_dip_for) {
+      s_.c2_dip = std::max(std::cos(s_.gate.dip_rad) * std::cos(s_.gate.dip_rad), kMinCos2Dip);
+      s_.c2_dip_for = s_.gate.dip_rad;
     }
     const bool unit = p_.tilt.renormalize && p_.tilt.exact_rotation;  // both directions are unit
     const Eigen::Vector3d corr =
@@ -502,6 +407,12 @@ Eigen::Quaterniond ParallelKf::q_world_body() const {
   r_enu_body.row(1) = r_body_world.col(0).transpose();
   r_enu_body.row(2) = r_body_world.col(2).transpose();
   Eigen::Quaterniond q(r_enu_body);
+  if (p_.imu_delay_s > 0.0) {
+    // predicted over the sensor's group delay (state untouched): q (x) exp(w d), to first order
+    // [1, w d / 2] normalised (angle error (|w| d)^3 / 12: 1e-5 deg at 10 rad/s and 5 ms)
+    const Eigen::Vector3d half = 0.5 * p_.imu_delay_s * s_.prev_gyro;
+    q = (q * Eigen::Quaterniond(1.0, half.x(), half.y(), half.z())).normalized();
+  }
   if (q.w() < 0.0) {
     q.coeffs() = -q.coeffs();
   }
@@ -526,9 +437,9 @@ ParallelKfOutput ParallelKf::output() const {
   o.gyro_bias_sigma_rps = std::sqrt(s_.bias_cov.diagonal().maxCoeff());
   o.rest = s_.rest_det.rest;
   o.mag_used = s_.out.mag_used;
-  o.field_learnt = s_.field_learnt;
-  o.field_magnitude_ut = s_.field_m;
-  o.dip_rad = s_.field_dip;
+  o.field_learnt = s_.gate.learnt;
+  o.field_magnitude_ut = s_.gate.m_ut;
+  o.dip_rad = s_.gate.dip_rad;
   return o;
 }
 

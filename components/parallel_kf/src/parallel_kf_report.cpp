@@ -25,7 +25,7 @@ bool ParallelKf::update(const ImuSample& s) {
 bool ParallelKf::healthy() {
   const bool full = s_.health.full_due();
   return all_finite(s_.kf1.up_body(), s_.kf1.ext_accel_body(), s_.kf2.u(), s_.kf2.e(), s_.bias, s_.lp_accel_i,
-                    s_.field_m, s_.field_dip) &&
+                    s_.gate.m_ut, s_.gate.dip_rad) &&
          covariance_ok(s_.kf1.covariance(), full) && covariance_ok(s_.kf2.covariance(), full) &&
          covariance_ok(s_.bias_cov, full);
 }
@@ -35,7 +35,11 @@ void ParallelKf::reset_unhealthy() {
   const SourceReport accel = accel_src_;
   const SourceReport mag = mag_src_;
   using S = ParallelKfState;
-  reset_keeping(s_, [this] { reset(); }, &S::rejections, &S::mag_gated, &S::mag_forced, &S::reacquired);
+  const FieldGate gate = s_.gate;  // its counters are kept, its reference is learnt again
+  reset_keeping(s_, [this] { reset(); }, &S::rejections);
+  s_.gate.gated = gate.gated;
+  s_.gate.forced = gate.forced;
+  s_.gate.reacquired = gate.reacquired;
   gyro_src_ = gyro;
   accel_src_ = accel;
   mag_src_ = mag;
@@ -108,10 +112,10 @@ SourceReports ParallelKf::sources() const {
   if (mag.decision != SourceDecision::kNotAvailable && std::isfinite(gate_norm_ut_)) {
     // The gate as a measurement: [|s_M| - m, dip - alpha] against the tolerances.
     const double dip = std::asin(std::clamp(gate_sin_dip_, -1.0, 1.0));
-    const double tol_norm_ut = p_.mag_norm_tol * s_.field_m;
+    const double tol_norm_ut = p_.mag_norm_tol * s_.gate.m_ut;
     const double tol_dip_rad = p_.mag_dip_tol_deg * kRadPerDeg;
     InnovationVector innov(2);
-    innov << gate_norm_ut_ - s_.field_m, dip - s_.field_dip;
+    innov << gate_norm_ut_ - s_.gate.m_ut, dip - s_.gate.dip_rad;
     InnovationVector var(2);
     var << tol_norm_ut * tol_norm_ut, tol_dip_rad * tol_dip_rad;
     mag.set_innovation(innov, var);

@@ -62,6 +62,7 @@ const std::vector<Field>& fields() {
       {"dip_deg", [](ParallelKfParams& p, const YAML::Node& n) { p.dip_deg = as_double_or_nan(n); }},
       make("startup_s", &ParallelKfParams::startup_s),
       make("gyro_current_weight", &ParallelKfParams::gyro_current_weight),
+      make("imu_delay_s", &ParallelKfParams::imu_delay_s),
       make("accel_lowpass_tau_s", &ParallelKfParams::accel_lowpass_tau_s),
       make("bias_estimation", &ParallelKfParams::bias_estimation),
       make("rest_gyro_max_rps", &ParallelKfParams::rest_gyro_max_rps),

@@ -77,12 +77,12 @@ void validate(const SelectiveEkfParams& p) {
   check.positive(p.sigma_imu_quat_deg, "sigma_imu_quat_deg", "deg");
   check.positive(p.sigma_vision_deg, "sigma_vision_deg", "deg");
   check.positive(p.sigma_vision_m, "sigma_vision_m", "m");
-  check.require(std::isnan(p.dip_deg) || std::abs(p.dip_deg) <= 90.0, "dip_deg", "in [-90, 90] (deg) or null");
   check.require(p.startup_samples >= 1, "startup_samples", ">= 1 (samples)");
   check.positive(p.disturbance_angle_threshold_deg, "disturbance_angle_threshold_deg", "deg");
   check.positive(p.mag_norm_threshold, "mag_norm_threshold", "relative");
-  check.positive(p.heading_dip_tolerance_deg, "heading_dip_tolerance_deg", "deg");
-  check.non_negative(p.heading_norm_tolerance, "heading_norm_tolerance", "relative, 0 = off");
+  heading_field_gate(p).validate(check, {"field_magnitude_ut", "dip_deg", "field_startup_s", "heading_norm_tolerance",
+                                          "heading_dip_tolerance_deg", "field_reference_tau_s", "field_reacquire_s",
+                                          "field_reacquire_tol", "field_max_reject_s"});
   check.require(p.quat_error_threshold_deg > 0.0 && p.quat_error_threshold_deg <= 180.0,
                 "quat_error_threshold_deg", "in (0, 180] (deg)");
   check.require(std::isfinite(p.inflate_factor) && p.inflate_factor >= 1.0, "inflate_factor", "finite and >= 1");
@@ -104,8 +104,24 @@ void validate(const SelectiveEkfParams& p) {
   p.gauss_newton.validate("selective_ekf.gauss_newton");
 }
 
+FieldGateParams heading_field_gate(const SelectiveEkfParams& p) {
+  FieldGateParams g;
+  g.enabled = p.gating_enabled;
+  g.field_magnitude_ut = p.field_magnitude_ut;
+  g.dip_deg = p.dip_deg;
+  g.startup_s = p.field_startup_s;
+  g.norm_tol = p.heading_norm_tolerance;
+  g.dip_tol_deg = p.heading_dip_tolerance_deg;
+  g.reference_tau_s = p.field_reference_tau_s;
+  g.reacquire_s = p.field_reacquire_s;
+  g.reacquire_tol = p.field_reacquire_tol;
+  g.max_reject_s = p.field_max_reject_s;
+  return g;
+}
+
 SelectiveEkf::SelectiveEkf(const SelectiveEkfParams& params) : p_(params) {
   validate(p_);
+  gp_ = heading_field_gate(p_);
   p_.q_body_camera.normalize();
   imu_delay_ns_ = seconds_to_ns(p_.imu_delay_s);
   // The dip reference and input limits are shared with the Gauss-Newton source.
@@ -120,6 +136,7 @@ SelectiveEkf::SelectiveEkf(const SelectiveEkfParams& params) : p_(params) {
 void SelectiveEkf::reset() {
   gn_.reset();
   x_ = SelectiveEkfState{};
+  x_.field_gate.reset(gp_);
   x_.P.setZero();
   const double sa = p_.init_sigma_attitude_deg * kRadPerDeg;
   x_.P.diagonal().segment<3>(kW).setConstant(p_.init_sigma_rate_rps * p_.init_sigma_rate_rps);
@@ -405,17 +422,31 @@ bool SelectiveEkf::mag_trusted(const ImuInput& in, const Eigen::Vector3d& up, do
   const double theta_m = angle_between_vectors(in.mag, up);  // (8)
   mag_.disturbance_angle_deg = theta_m * kDegPerRad;
   mag_.quat_error_deg = theta_q * kDegPerRad;
-  // kSplit measures the dip against the filtered tilt (accurate without vision) and |m|; its
-  // quaternion-error test compares with a heading that only vision anchors (see the notation).
+  // kSplit measures the dip against the filtered tilt (accurate without vision) and |m| with the
+  // parallel KF's field gate (learnt, following, re-acquired reference); its quaternion-error test
+  // compares with a heading that only vision anchors (see the notation).
   const bool split = p_.imu_measurement == ImuMeasurement::kSplit;
-  const double angle_tol_deg = split ? p_.heading_dip_tolerance_deg : p_.disturbance_angle_threshold_deg;
-  mag_.angle_test_failed =
-      mag_.reference_ready && std::abs(theta_m - ref_angle_rad_) > angle_tol_deg * kRadPerDeg;
-  mag_.norm_test_failed = false;
-  const double norm_tol = split ? p_.heading_norm_tolerance : (p_.mag_norm_test ? p_.mag_norm_threshold : 0.0);
-  if (norm_tol > 0.0 && ref_norm_ut_ > 0.0) {
-    mag_.norm_ratio = in.mag.norm() / ref_norm_ut_;
-    mag_.norm_test_failed = std::abs(mag_.norm_ratio - 1.0) > norm_tol;
+  bool field_disturbed = false;
+  if (split) {
+    FieldGate& g = x_.field_gate;
+    const FieldVerdict v = g.step(gp_, in.mag, up, in.dt_s);
+    g.tick(gp_, in.dt_s);
+    field_disturbed = v == FieldVerdict::kGated;
+    mag_.reference_ready = g.learnt;
+    mag_.dip_deg = g.dip_rad * kDegPerRad;
+    mag_.reference_angle_deg = 90.0 + mag_.dip_deg;
+    mag_.norm_ratio = g.m_ut > 0.0 ? in.mag.norm() / g.m_ut : 1.0;
+    mag_.norm_test_failed = field_disturbed && std::abs(g.norm_ratio(gp_)) > 1.0;
+    mag_.angle_test_failed = field_disturbed && (g.last_sin_dip < g.sin_lo || g.last_sin_dip > g.sin_hi);
+  } else {
+    mag_.angle_test_failed = mag_.reference_ready &&
+                             std::abs(theta_m - ref_angle_rad_) > p_.disturbance_angle_threshold_deg * kRadPerDeg;
+    mag_.norm_test_failed = false;
+    if (p_.mag_norm_test && ref_norm_ut_ > 0.0) {
+      mag_.norm_ratio = in.mag.norm() / ref_norm_ut_;
+      mag_.norm_test_failed = std::abs(mag_.norm_ratio - 1.0) > p_.mag_norm_threshold;
+    }
+    field_disturbed = mag_.angle_test_failed || mag_.norm_test_failed;
   }
   bool q_fail = p_.quat_error_test && (!split || anchored) &&
                 theta_q > p_.quat_error_threshold_deg * kRadPerDeg;
@@ -430,11 +461,13 @@ bool SelectiveEkf::mag_trusted(const ImuInput& in, const Eigen::Vector3d& up, do
     x_.q_error_fail_since_ns = -1;
   }
   mag_.quat_error_test_failed = q_fail;
-  const bool disturbed = mag_.angle_test_failed || mag_.norm_test_failed || q_fail;
+  const bool disturbed = field_disturbed || q_fail;
   if (p_.gating_enabled && disturbed) {
     x_.untrusted_until_ns = now + seconds_to_ns(p_.untrusted_hold_s);
   }
-  const bool trusted = !p_.gating_enabled || x_.untrusted_until_ns < 0 || now >= x_.untrusted_until_ns;
+  // untrusted while a test fails, and for untrusted_hold_s after the last failure
+  const bool trusted = !p_.gating_enabled ||
+                       (!disturbed && (x_.untrusted_until_ns < 0 || now >= x_.untrusted_until_ns));
   mag_.trusted = trusted;
   if (!trusted && first_pass) {
     ++mag_.untrusted_samples;

@@ -23,6 +23,12 @@ constexpr double kBroadMaxRateHz = 1e6;
 /// references are stored unit-norm to float precision); other finite rows (e.g. all zeros) are
 /// not a rotation: load_broad() marks them lost (NaN) and counts them.
 constexpr double kReferenceNormTol = 1e-3;
+/// BROAD's IMU lags its optical reference by this much (its internal filter): the median of
+/// `poise calibrate imu-delay` over the undisturbed trials 01-18 (4.06-4.45 ms). A property of the
+/// dataset's sensor, like a calibration file: `poise eval broad` gives it to the filters that take
+/// an imu_delay_s (parallel_kf, selective) unless a --config is given;
+/// config/filters/{parallel_kf,selective_ekf}_broad.yaml hold the same value (tests keep them equal).
+inline constexpr double kBroadImuDelayS = 0.00418;
 
 /// One BROAD trial in memory. Sample k is at t = k / rate_hz.
 struct BroadTrial {

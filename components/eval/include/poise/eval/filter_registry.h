@@ -5,6 +5,7 @@
 #pragma once
 
 #include "poise/core/attitude_filter.h"
+#include "poise/parallel_kf/parallel_kf.h"
 
 #include <functional>
 #include <memory>
@@ -34,5 +35,9 @@ std::vector<FilterEntry> registered_filters();
 std::unique_ptr<AttitudeFilter> make_filter(const std::string& name, const std::string& config_path = "");
 /// As make_filter, but for BROAD data: without a config, the entry's broad_default when it has one.
 std::unique_ptr<AttitudeFilter> make_filter_for_broad(const std::string& name, const std::string& config_path = "");
+
+/// The parallel KF's defaults with BROAD's IMU delay: what `poise eval broad` runs without --config
+/// (config/filters/parallel_kf_broad.yaml holds the same).
+ParallelKfParams broad_parallel_kf_params();
 
 }  // namespace poise::eval

@@ -34,7 +34,8 @@
 //     does not move (accel_lowpass_tau_s); KF1 then follows the low-passed vector closely;
 //   - KF1's tilt correction applied to KF2's field direction as well (share_tilt_correction):
 //     one attitude error moves both world directions seen in the body;
-//   - propagation with the current gyro sample (gyro_current_weight; the paper uses k-1);
+//   - trapezoidal propagation (gyro_current_weight; the paper uses k-1) and the output predicted
+//     over the IMU's group delay (imu_delay_s, a calibrated property of the sensor);
 //   - soft inflation of M2 as the field approaches the gate (mag_soft_weight, off: no gain);
 //   - exact rotation propagation, renormalisation, c_a/c_d defined at a reference rate.
 // Measured on the 19 BROAD trials in ../shared/broad (mean total RMSE, undisturbed / disturbed):
@@ -47,6 +48,7 @@
 
 #include "poise/core/attitude.h"
 #include "poise/core/attitude_filter.h"
+#include "poise/core/field_gate.h"
 #include "poise/core/lowpass.h"
 #include "poise/core/rest_detector.h"
 #include "poise/core/sample_check.h"
@@ -100,8 +102,15 @@ struct ParallelKfParams {
 
   // --- propagation
   /// Propagation rate w = (1 - x) s_G,k-1 + x s_G,k: 0 = the paper's s_G at k-1 (7a), 0.5 =
-  /// trapezoid, 1 = the current sample (right when the IMU reports the mean rate over (k-1, k]).
-  double gyro_current_weight = 1.0;
+  /// trapezoid (the rate over (k-1, k] as the mean of its two end samples: no lead or lag of its
+  /// own, so the whole state describes the sensor's time; the sensor's group delay is then
+  /// compensated by imu_delay_s alone), 1 = the current sample (leads by half a sample).
+  double gyro_current_weight = 0.5;
+  /// IMU group delay, s: the sensor's samples describe the motion this long before their stamp
+  /// (its internal low-pass; MPU6050 DLPF_CFG 3: about 4.8 ms). The output is predicted over it
+  /// with the bias-corrected gyro, q_world_body = q (x) exp(w delay); the filter state is not
+  /// touched. Calibrated per sensor (`poise calibrate imu-delay` against a reference). 0 = none.
+  double imu_delay_s = 0.0;
 
   // --- accelerometer low-pass in an almost inertial frame (extension)
   /// > 0: KF1 is corrected with the accelerometer low-passed with this time constant (s) in a
@@ -181,6 +190,9 @@ struct ParallelKfParams {
   static ParallelKfParams named(const std::string& name);
   /// Throws std::invalid_argument naming the first out-of-range field.
   void validate() const;
+  /// The magnetic field gate's parameters (mag_gating, field_magnitude_ut, dip_deg, startup_s,
+  /// mag_*), as the shared gate takes them (poise/core/field_gate.h).
+  [[nodiscard]] FieldGateParams field_gate() const;
 };
 
 /// Loads parameters from YAML: optional `preset: paper|default` (base; without it `base`), then
@@ -217,28 +229,10 @@ struct ParallelKfState {
   int64_t last_stamp_ns = -1;
   Eigen::Vector3d prev_gyro{0, 0, 0};  ///< bias-corrected s_G at k-1
   RejectCounters rejections;
-  uint64_t mag_gated = 0;
-  uint64_t mag_forced = 0;
-  uint64_t reacquired = 0;
   ParallelKfOutput out;  ///< only mag_used is kept here (the rest is derived in output())
 
-  // field learning
-  double field_m = 0.0;
-  double field_dip = 0.0;
-  bool field_learnt = false;
-  double learn_time_s = 0.0;
-  double learn_norm_sum = 0.0;
-  double learn_dip_sum = 0.0;
-  int learn_n = 0;
-  // reacquisition candidate
-  double cand_norm = 0.0;
-  double cand_dip = 0.0;
-  double cand_stable_s = 0.0;
-  double rejected_s = 0.0;
+  FieldGate gate;  ///< magnetic field reference, gate, re-acquisition (poise/core/field_gate.h)
   double mag_extra_var = 0.0;  ///< soft-gating inflation of M2 for the current sample, uT^2
-  double gate_dip = 0.0;      ///< dip the gate bounds were computed for
-  double gate_sin_lo = 0.0;   ///< sin(alpha - tol)
-  double gate_sin_hi = 0.0;   ///< sin(alpha + tol)
 
   // inertial low-pass of the accelerometer
   Eigen::Matrix3d r_ib = Eigen::Matrix3d::Identity();  ///< body -> almost inertial frame
@@ -261,11 +255,6 @@ struct ParallelKfState {
   bool mb_head_trusted = true;       ///< no gated or forced magnetometer sample in the window
   double c2_dip = 1.0;               ///< max(cos^2(alpha), guard), for alpha = c2_dip_for
   double c2_dip_for = 0.0;
-  // field reference following (summed over a window of accepted samples)
-  double ref_window_s = 0.0;
-  double ref_accepted_s = 0.0;
-  double ref_norm_sum = 0.0;     ///< integral of |s_M| dt over accepted samples, uT s
-  double ref_sin_dip_sum = 0.0;  ///< integral of sin(dip) dt over accepted samples, s
   RestDetector rest_det;
   StampAnchor anchor;  ///< time restarts after a stamp jump only when two samples agree
   StateHealth health;  ///< resets after an unhealthy update (poise/core/state_health.h)
@@ -306,10 +295,10 @@ class ParallelKf {
   [[nodiscard]] const TiltKf& tilt_kf() const { return s_.kf1; }
   [[nodiscard]] const RejectCounters& rejections() const { return s_.rejections; }
   /// Magnetometer samples not used for the heading: gated as disturbed.
-  [[nodiscard]] uint64_t mag_gated_count() const { return s_.mag_gated; }
-  [[nodiscard]] uint64_t field_reacquired_count() const { return s_.reacquired; }
+  [[nodiscard]] uint64_t mag_gated_count() const { return s_.gate.gated; }
+  [[nodiscard]] uint64_t field_reacquired_count() const { return s_.gate.reacquired; }
   /// Magnetometer samples used although gated, because rejection lasted mag_max_reject_s.
-  [[nodiscard]] uint64_t mag_forced_count() const { return s_.mag_forced; }
+  [[nodiscard]] uint64_t mag_forced_count() const { return s_.gate.forced; }
   /// Resets after an unhealthy state (poise/core/state_health.h).
   [[nodiscard]] uint64_t state_resets() const { return s_.health.resets; }
   [[nodiscard]] const ParallelKfParams& params() const { return p_; }
@@ -329,18 +318,17 @@ class ParallelKf {
  private:
   bool step(const ImuSample& s, SampleCheck& c);  ///< update() without the reporting
   void initialize(const ImuSample& s, bool mag_ok);
-  void learn_field(const Eigen::Vector3d& accel, const Eigen::Vector3d& mag, double dt);
   void bias_update();  ///< the bias filter over the window s_.mb_time (predict, rest or motion)
   /// One scalar bias measurement along unit h (body): value z (rad/s), noise variance w; the
   /// component along unit *keep (if given) is left as it is.
   void bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep);
   void motion_bias_measure();
-  void follow_field_reference();
   [[nodiscard]] double motion_bias_noise(double dt) const;
-  void heading_step(const Eigen::Matrix3d& a, const Eigen::Vector3d& accel,
+  void heading_step(const Eigen::Matrix3d& a,
                     const Eigen::Vector3d& mag, bool mag_ok, double dt);
 
   ParallelKfParams p_;
+  FieldGateParams gp_;  ///< p_.field_gate(), built once
   ParallelKfState s_;
   /// the last valid q_world_body (returned while sZ and sX' are parallel); a cache, not state
   mutable Eigen::Quaterniond last_q_ = Eigen::Quaterniond::Identity();

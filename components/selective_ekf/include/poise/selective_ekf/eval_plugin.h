@@ -4,6 +4,7 @@
 // "selective_vision30" (the hybrid benchmark's vision, for `poise bench filters`).
 #pragma once
 
+#include "poise/eval/broad.h"
 #include "poise/eval/runner.h"
 #include "poise/selective_ekf/selective_ekf.h"
 #include "poise/selective_ekf/vision_synth.h"
@@ -58,11 +59,7 @@ class SelectiveEvalFilter : public SelectiveEkfFilter, public eval::TrialInputs 
 /// 30 Hz, 50 ms, 1 deg, 1 cm, 30 % dropout, seed 1.
 VisionSynthParams hybrid_benchmark_vision();
 
-/// BROAD's IMU lags its optical reference by this much (its internal filter): the median of
-/// `poise calibrate imu-delay` over the undisturbed trials 01-18 (4.06-4.45 ms). The evaluation
-/// filters use it unless a --config is given; config/filters/selective_ekf_broad.yaml holds the
-/// same value (a test keeps the two equal).
-inline constexpr double kBroadImuDelayS = 0.00418;
+using eval::kBroadImuDelayS;  // poise/eval/broad.h
 
 /// The selective EKF's defaults with BROAD's IMU delay: what `poise eval broad --filter selective`
 /// runs without --config.

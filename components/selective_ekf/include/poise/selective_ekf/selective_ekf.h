@@ -61,6 +61,7 @@
 #include "poise/core/attitude.h"
 #include "poise/core/rest_detector.h"
 #include "poise/core/attitude_filter.h"
+#include "poise/core/field_gate.h"
 #include "poise/core/sample_check.h"
 #include "poise/core/source_report.h"
 #include "poise/core/state_health.h"
@@ -134,7 +135,19 @@ struct SelectiveEkfParams {
   /// (disturbance_angle_threshold_deg, 3 deg, is the paper's value for kQuaternion).
   double heading_dip_tolerance_deg = 10.0;
   /// kSplit: | |m| / m_ref - 1 | above this: disturbed (0 = off). kQuaternion uses mag_norm_test.
-  double heading_norm_tolerance = 0.1;
+  double heading_norm_tolerance = 0.05;
+  /// kSplit: the magnetometer trust is the parallel KF's field gate (poise/core/field_gate.h): the
+  /// reference |m| and dip are learnt over field_startup_s (|m| configured by field_magnitude_ut,
+  /// the dip by dip_deg), then follow the accepted field with field_reference_tau_s; a field gated
+  /// for field_reacquire_s that stayed stable (field_reacquire_tol) becomes the new reference;
+  /// after field_max_reject_s of continuous rejection the magnetometer is used again. The same
+  /// values as the parallel KF's mag_* keys.
+  double field_magnitude_ut = std::nan("");  ///< uT; NaN = learnt
+  double field_startup_s = 1.0;              ///< s
+  double field_reference_tau_s = 100.0;      ///< s, 0 = fixed reference
+  double field_reacquire_s = 20.0;           ///< s, 0 = never
+  double field_reacquire_tol = 0.05;         ///< relative
+  double field_max_reject_s = 60.0;          ///< s, 0 = never
   /// kSplit: tilt and heading are fused every aiding_period_s (variance of the elapsed interval),
   /// not every sample: their information is in a seconds-long low-pass. 0 = every sample.
   double aiding_period_s = 0.02;
@@ -163,7 +176,10 @@ struct SelectiveEkfParams {
   double quat_error_threshold_deg = 10.0;  ///< theta_q above: disturbed
   ImuQuatAction action = ImuQuatAction::kInflate;
   double inflate_factor = 1.0e4;       ///< variance multiplier when inflating
-  double untrusted_hold_s = 0.5;       ///< stay untrusted this long after the last failed test, s
+  /// stay untrusted this long after the last failed test, s (0: only while a test fails, as the
+  /// parallel KF's gate; kSplit with the field gate: a hold only delays trusting a field the gate
+  /// already accepts, and cost 5 deg of heading on BROAD trial 01)
+  double untrusted_hold_s = 0.0;
   double q_error_lockout_s = 3.0;      ///< see notation block, s
   double vision_anchor_s = 1.0;        ///< vision fused this recently anchors the prediction, s
 
@@ -212,6 +228,8 @@ struct SelectiveEkfParams {
 SelectiveEkfParams load_selective_ekf_params(const std::string& path);
 /// Validates ranges; throws std::invalid_argument with a message naming the field.
 void validate(const SelectiveEkfParams& p);
+/// The kSplit heading's field gate parameters (heading_*_tolerance, field_*, dip_deg).
+FieldGateParams heading_field_gate(const SelectiveEkfParams& p);
 
 /// A camera pose from the tag map, stamped at capture (not arrival).
 struct VisionPose {
@@ -321,6 +339,7 @@ struct SelectiveEkfState {
   int vision_pos_consecutive_rejects = 0;
   SelectiveEkfPreState pre;
   int64_t last_aiding_ns = -1;           ///< last tilt/heading fusion (kSplit)
+  FieldGate field_gate;                  ///< kSplit: magnetometer reference and gate
 };
 
 /// Everything the selective EKF carries from one sample to the next besides its parameters: the
@@ -456,6 +475,7 @@ class SelectiveEkf : private SelectiveEkfFullState {
   void reset_unhealthy(int64_t stamp_ns);  ///< reset() keeping the counters, one reset counted
 
   SelectiveEkfParams p_;
+  FieldGateParams gp_;  ///< heading_field_gate(p_)
   int64_t imu_delay_ns_ = 0;         ///< state time = IMU stamp - imu_delay_ns_
 };
 

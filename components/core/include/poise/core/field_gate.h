@@ -1,0 +1,122 @@
+// Magnetic field gate shared by the attitude filters that use a magnetometer for heading (the
+// parallel KF's KF2 and the selective EKF's heading row): decides, per magnetometer sample, whether
+// the field is the undisturbed Earth field the heading can trust.
+//
+// Reference: the field magnitude m (uT) and dip alpha (rad, the angle of the field below the
+// horizontal; sin(alpha) = -up . m / |m|) are learnt over the first startup_s seconds of
+// magnetometer samples (or configured). A sample is disturbed when | |s_M| - m | > norm_tol * m or
+// |dip(s_M, up) - alpha| > dip_tol (up = the filter's own up axis in the body frame, not the raw
+// accelerometer, so an external acceleration does not trip the dip test).
+//   - The reference follows the accepted field with time constant reference_tau_s (over accepted
+//     time, updated once per kFieldGateWindowS): a slow change (temperature, another part of a
+//     building) is adopted, a fast one is gated.
+//   - After reacquire_s of continuous rejection with a field that stayed stable (norm within
+//     reacquire_tol, dip within dip_tol / 2 of its own 1 s low-pass) for reacquire_s, that field
+//     becomes the reference (the sensor was moved into another field for good).
+//   - After max_reject_s of continuous rejection the sample is used anyway ("forced"): the gyro-only
+//     heading drift stays bounded in a field that changed for good but never looked stable.
+// Times in seconds of sample time (the dt given to step), never per sample. A value type: its
+// state is copied with the filter's state (VQF-style getState/setState, replays).
+#pragma once
+
+#include <Eigen/Core>
+
+#include <cmath>
+#include <cstdint>
+
+namespace poise {
+
+class ParamCheck;
+
+/// Length of the window over which accepted samples are summed before the reference follows, s.
+inline constexpr double kFieldGateWindowS = 0.04;
+
+struct FieldGateParams {
+  bool enabled = true;                  ///< false: every sample accepted (learning still runs)
+  double field_magnitude_ut = std::nan("");  ///< m, uT; NaN = learn at start-up
+  double dip_deg = std::nan("");             ///< alpha, deg; NaN = learn at start-up
+  double startup_s = 1.0;               ///< start-up window for learning m and alpha, s
+  double norm_tol = 0.05;               ///< relative | |s_M| - m | / m above which s_M is gated (0 = no norm test)
+  double dip_tol_deg = 10.0;            ///< |dip - alpha| above which s_M is gated, deg
+  double reference_tau_s = 100.0;       ///< the reference follows the accepted field, s (0 = fixed)
+  double reacquire_s = 20.0;            ///< adopt a stable new field after this long gated, s (0 = never)
+  double reacquire_tol = 0.05;          ///< relative stability of the candidate field for adoption
+  double max_reject_s = 60.0;           ///< use the field anyway after this long gated, s (0 = never)
+
+  /// Throws std::invalid_argument naming the key `<prefix><name>` (as spelled in the YAML file of
+  /// the filter that embeds the gate; `names` maps each field to its key).
+  struct Keys {
+    const char* field_magnitude_ut;
+    const char* dip_deg;
+    const char* startup_s;
+    const char* norm_tol;
+    const char* dip_tol_deg;
+    const char* reference_tau_s;
+    const char* reacquire_s;
+    const char* reacquire_tol;
+    const char* max_reject_s;
+  };
+  void validate(const ParamCheck& check, const Keys& keys) const;
+};
+
+/// What the gate decided for one magnetometer sample.
+enum class FieldVerdict : uint8_t {
+  kLearning,  ///< the reference is being learnt: use the sample (heading from the raw field)
+  kAccepted,  ///< within the gate (or the gate is off)
+  kGated,     ///< disturbed: do not use it for heading
+  kForced,    ///< disturbed, but gated for max_reject_s already: use it anyway
+};
+
+struct FieldGate {
+  // reference
+  double m_ut = 0.0;        ///< reference magnitude, uT
+  double dip_rad = 0.0;     ///< reference dip, rad
+  bool learnt = false;      ///< m and alpha known (configured or learnt)
+  // learning
+  double learn_time_s = 0.0;
+  double learn_norm_sum = 0.0;
+  double learn_dip_sum = 0.0;
+  int learn_n = 0;
+  // re-acquisition candidate
+  double cand_norm = 0.0;
+  double cand_dip = 0.0;
+  double cand_stable_s = 0.0;
+  double rejected_s = 0.0;  ///< continuous time gated, s
+  // gate bounds on sin(dip), recomputed only when the reference dip changes
+  double bounds_dip = std::nan("");
+  double sin_lo = 0.0;
+  double sin_hi = 0.0;
+  // reference following window (sums over accepted samples)
+  double window_s = 0.0;
+  double accepted_s = 0.0;
+  double norm_sum = 0.0;     ///< integral of |s_M| dt over accepted samples, uT s
+  double sin_dip_sum = 0.0;  ///< integral of sin(dip) dt over accepted samples, s
+  // counters
+  uint64_t gated = 0;
+  uint64_t forced = 0;
+  uint64_t reacquired = 0;
+  // the last sample tested (reporting): |s_M| (NaN when not tested) and sin(dip)
+  double last_norm_ut = std::nan("");
+  double last_sin_dip = 0.0;
+
+  /// Back to a new gate (the configured reference, if any).
+  void reset(const FieldGateParams& p);
+  /// One magnetometer sample `mag` (uT, body) with the filter's up axis `up` (body, any length > 0),
+  /// dt_s after the previous sample (0 for the first). Learns, tests, follows the reference and
+  /// re-acquires; returns what to do with the sample.
+  FieldVerdict step(const FieldGateParams& p, const Eigen::Vector3d& mag, const Eigen::Vector3d& up,
+                    double dt_s);
+  /// Advances the reference-following window by dt_s (call once per filter sample, magnetometer
+  /// or not); the reference moves once per kFieldGateWindowS.
+  void tick(const FieldGateParams& p, double dt_s);
+  /// Gate ratios of the last tested sample: norm deviation / (norm_tol m) and dip deviation (in
+  /// sin) / half the gate's width; |r| > 1 <=> outside. Zero when not tested.
+  [[nodiscard]] double norm_ratio(const FieldGateParams& p) const;
+  [[nodiscard]] double dip_ratio() const;
+
+ private:
+  void learn(const FieldGateParams& p, double norm, double dip, double dt_s);
+  void follow(const FieldGateParams& p);
+};
+
+}  // namespace poise

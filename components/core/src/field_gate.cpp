@@ -1,0 +1,154 @@
+#include "poise/core/field_gate.h"
+
+#include "poise/core/attitude.h"
+#include "poise/core/params_check.h"
+
+#include <algorithm>
+
+namespace poise {
+
+void FieldGateParams::validate(const ParamCheck& check, const Keys& keys) const {
+  check.require(std::isnan(field_magnitude_ut) || (std::isfinite(field_magnitude_ut) && field_magnitude_ut > 0.0),
+                keys.field_magnitude_ut, "> 0 (uT) or null");
+  check.require(std::isnan(dip_deg) || std::abs(dip_deg) < 90.0, keys.dip_deg, "in (-90, 90) (deg) or null");
+  check.positive(startup_s, keys.startup_s, "s");
+  check.non_negative(norm_tol, keys.norm_tol, "relative, 0 = no norm test");
+  check.positive(dip_tol_deg, keys.dip_tol_deg, "deg");
+  check.non_negative(reference_tau_s, keys.reference_tau_s, "s, 0 = fixed reference");
+  check.non_negative(reacquire_s, keys.reacquire_s, "s, 0 = never");
+  check.positive(reacquire_tol, keys.reacquire_tol, "relative");
+  check.non_negative(max_reject_s, keys.max_reject_s, "s, 0 = never");
+}
+
+void FieldGate::reset(const FieldGateParams& p) {
+  *this = FieldGate{};
+  m_ut = std::isfinite(p.field_magnitude_ut) ? p.field_magnitude_ut : 0.0;
+  dip_rad = std::isfinite(p.dip_deg) ? p.dip_deg * kRadPerDeg : 0.0;
+  learnt = std::isfinite(p.field_magnitude_ut) && std::isfinite(p.dip_deg);
+}
+
+void FieldGate::learn(const FieldGateParams& p, double norm, double dip, double dt_s) {
+  // Mean |s_M| and mean dip over the start-up window.
+  learn_norm_sum += norm;
+  learn_dip_sum += dip;
+  ++learn_n;
+  learn_time_s += dt_s;
+  if (!std::isfinite(p.field_magnitude_ut)) {
+    m_ut = learn_norm_sum / learn_n;
+  }
+  if (!std::isfinite(p.dip_deg)) {
+    dip_rad = learn_dip_sum / learn_n;
+  }
+  if (learn_time_s >= p.startup_s) {
+    learnt = true;
+  }
+}
+
+FieldVerdict FieldGate::step(const FieldGateParams& p, const Eigen::Vector3d& mag, const Eigen::Vector3d& up,
+                             double dt_s) {
+  last_norm_ut = std::nan("");
+  if (!learnt) {
+    learn(p, mag.norm(), angle_between_vectors(up, mag) - 0.5 * kPi, dt_s);
+    return FieldVerdict::kLearning;
+  }
+  if (!p.enabled) {
+    return FieldVerdict::kAccepted;
+  }
+  const double norm = mag.norm();
+  // sin(dip) = -up . s_M / (|up| |s_M|); |dip - alpha| <= tol  <=>  sin(dip) within
+  // [sin(alpha - tol), sin(alpha + tol)] (sin is monotonic on [-90, 90] deg): no asin per sample.
+  const double sin_dip = -up.dot(mag) / (norm * up.norm());
+  last_norm_ut = norm;
+  last_sin_dip = sin_dip;
+  if (dip_rad != bounds_dip) {
+    const double tol = p.dip_tol_deg * kRadPerDeg;
+    sin_lo = std::sin(std::max(dip_rad - tol, -0.5 * kPi));
+    sin_hi = std::sin(std::min(dip_rad + tol, 0.5 * kPi));
+    bounds_dip = dip_rad;
+  }
+  const bool disturbed =
+      (p.norm_tol > 0.0 && std::abs(norm - m_ut) > p.norm_tol * m_ut) || sin_dip < sin_lo || sin_dip > sin_hi;
+  if (!disturbed) {
+    rejected_s = 0.0;
+    cand_stable_s = 0.0;
+    cand_norm = 0.0;
+    if (p.reference_tau_s > 0.0) {  // what the reference follows (tick)
+      norm_sum += norm * dt_s;
+      sin_dip_sum += sin_dip * dt_s;
+      accepted_s += dt_s;
+    }
+    return FieldVerdict::kAccepted;
+  }
+  if (p.max_reject_s > 0.0 && rejected_s >= p.max_reject_s) {
+    ++forced;
+    return FieldVerdict::kForced;
+  }
+  ++gated;
+  rejected_s += dt_s;
+  if (p.reacquire_s > 0.0) {
+    // candidate for a new reference: norm and dip low-passed over 1 s, and how long they stayed
+    // stable around that low-pass
+    const double dip = std::asin(std::clamp(sin_dip, -1.0, 1.0));
+    if (cand_norm <= 0.0) {
+      cand_norm = norm;
+      cand_dip = dip;
+    }
+    const double k = dt_s / (1.0 + dt_s);
+    cand_norm += k * (norm - cand_norm);
+    cand_dip += k * (dip - cand_dip);
+    const bool stable = std::abs(norm - cand_norm) < p.reacquire_tol * cand_norm &&
+                        std::abs(dip - cand_dip) < 0.5 * p.dip_tol_deg * kRadPerDeg;
+    cand_stable_s = stable ? cand_stable_s + dt_s : 0.0;
+    if (rejected_s >= p.reacquire_s && cand_stable_s >= p.reacquire_s) {
+      m_ut = cand_norm;
+      dip_rad = cand_dip;
+      ++reacquired;
+      rejected_s = 0.0;
+      cand_stable_s = 0.0;
+      cand_norm = 0.0;
+    }
+  }
+  return FieldVerdict::kGated;
+}
+
+void FieldGate::tick(const FieldGateParams& p, double dt_s) {
+  if (!(p.reference_tau_s > 0.0)) {
+    return;
+  }
+  window_s += dt_s;
+  if (window_s >= kFieldGateWindowS) {
+    follow(p);
+  }
+}
+
+void FieldGate::follow(const FieldGateParams& p) {
+  // The reference norm and dip follow the field the gate accepted (never the gated samples), with
+  // time constant reference_tau_s over accepted time.
+  if (accepted_s > 0.0) {
+    const double k = accepted_s / (p.reference_tau_s + accepted_s);
+    const double norm = norm_sum / accepted_s;
+    const double sin_dip = std::clamp(sin_dip_sum / accepted_s, -1.0, 1.0);
+    m_ut += k * (norm - m_ut);
+    dip_rad += k * (std::asin(sin_dip) - dip_rad);
+  }
+  window_s = 0.0;
+  accepted_s = 0.0;
+  norm_sum = 0.0;
+  sin_dip_sum = 0.0;
+}
+
+double FieldGate::norm_ratio(const FieldGateParams& p) const {
+  if (!std::isfinite(last_norm_ut) || !(m_ut > 0.0) || !(p.norm_tol > 0.0)) {
+    return 0.0;
+  }
+  return (last_norm_ut - m_ut) / (p.norm_tol * m_ut);
+}
+
+double FieldGate::dip_ratio() const {
+  if (!std::isfinite(last_norm_ut) || !(sin_hi > sin_lo)) {
+    return 0.0;
+  }
+  return (last_sin_dip - std::sin(dip_rad)) / (0.5 * (sin_hi - sin_lo));
+}
+
+}  // namespace poise
