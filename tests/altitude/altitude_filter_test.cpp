@@ -1,14 +1,16 @@
 // AltitudeFilter scenarios in simulated time: rest, constant climb, bad input, configuration.
 #include "poise/altitude/altitude_filter.h"
 
+#include "poise/testing/one_hostile_sample.h"
 #include "poise/testing/param_errors.h"
 #include "poise/testing/testing.h"
 
 #include <gtest/gtest.h>
 
-#include <limits>
-
 #include <cmath>
+#include <functional>
+#include <limits>
+#include <vector>
 #include <fstream>
 #include <stdexcept>
 
@@ -186,7 +188,8 @@ TEST(AltitudeFilter, BadInputIsRejectedAndCounted) {
     EXPECT_FALSE(f.estimate().baro_fresh);
     t += kStepNs;
   }
-  EXPECT_EQ(f.rejects().bad_pressure, 5U);
+  EXPECT_EQ(f.rejects().count(RejectReason::kPressureOutOfRange), 4U);
+  EXPECT_EQ(f.rejects().count(RejectReason::kNonFinitePressure), 1U);
 
   // WHEN the accelerometer or gyro is NaN or missing THEN the sample is rejected.
   ImuSample nan_accel = level_sample(t, 5.0);
@@ -198,24 +201,83 @@ TEST(AltitudeFilter, BadInputIsRejectedAndCounted) {
   ImuSample no_accel = level_sample(t, 5.0);
   no_accel.has_accel = false;
   EXPECT_FALSE(f.update(no_accel));
-  EXPECT_EQ(f.rejects().non_finite_imu, 3U);
+  EXPECT_EQ(f.rejects().count(RejectReason::kNonFiniteAccel), 1U);
+  EXPECT_EQ(f.rejects().count(RejectReason::kNonFiniteGyro), 1U);
+  EXPECT_EQ(f.rejects().count(RejectReason::kMissingAccel), 1U);
 
   // WHEN a stamp repeats or goes back THEN it is rejected.
   EXPECT_FALSE(f.update(level_sample(t - kStepNs, 5.0)));
   EXPECT_FALSE(f.update(level_sample(t - 10 * kStepNs, 5.0)));
-  EXPECT_EQ(f.rejects().non_monotonic_stamp, 2U);
+  EXPECT_EQ(f.rejects().count(RejectReason::kNonMonotonicStamp), 2U);
 
-  // WHEN a 5 s gap arrives THEN time re-anchors (counted) and the filter keeps running.
+  // WHEN a 5 s gap arrives THEN the first two samples after it are refused (counted) and time
+  // re-anchors at the second, which agrees with the first (StampAnchor); the filter keeps running.
   t += 500 * kStepNs;
-  EXPECT_TRUE(f.update(level_sample(t, 5.0)));
-  EXPECT_EQ(f.rejects().dt_gap, 1U);
+  EXPECT_FALSE(f.update(level_sample(t, 5.0)));
+  t += kStepNs;
+  EXPECT_FALSE(f.update(level_sample(t, 5.0)));
+  EXPECT_EQ(f.rejects().count(RejectReason::kTimeGap), 2U);
   for (int k = 0; k < 50; ++k) {
     t += kStepNs;
     ASSERT_TRUE(f.update(level_sample(t, 5.0)));
   }
   EXPECT_TRUE(std::isfinite(f.estimate().height_m));
   EXPECT_NEAR(f.estimate().height_m, h_before, 0.01);
-  EXPECT_EQ(f.rejects().total(), 11U);
+  EXPECT_EQ(f.rejects().total(), 12U);
+}
+
+// Issue 19: one hostile sample between valid ones (a finite but impossible value, NaN, a stamp
+// outside [0, 2^62] ns, a stamp back in time, one far in the future) is refused by the shared
+// sample check, counted exactly once under its reason, and leaves the state untouched: the
+// output afterwards is that of a filter that never saw it. A bad pressure refuses only the
+// pressure: the oracle is then a filter that got the same sample without a pressure.
+TEST(AltitudeFilter, GivenOneHostileSampleThenItIsCountedOnceAndTheOutputIsThatOfAFilterThatNeverSawIt) {
+  constexpr double kSameAsCleanM = 1e-9;     // m (and m/s): the state is untouched, so equal
+  constexpr int kHostileAt = 300;            // inserted between samples 299 and 300
+  constexpr int kSamples = 600;
+  // A vertical oscillation, 1 m at 0.2 Hz, turning slowly so that rest is never detected.
+  const double w = 2.0 * 3.14159265358979323846 * 0.2;
+  const auto sample = [w](int k) {
+    const double t = k * kDt;
+    return level_sample(k * kStepNs, 10.0 + std::sin(w * t), -w * w * std::sin(w * t), 0.3);
+  };
+  struct Case {
+    const char* name;
+    std::function<void(ImuSample&)> spoil;
+    RejectReason reason;
+    bool whole_sample;  // false: only the pressure is refused
+  };
+  const std::vector<Case> cases = {
+      {"accel 1e308", [](ImuSample& s) { s.accel_mps2.z() = 1e308; }, RejectReason::kAccelOutOfRange, true},
+      {"gyro 1e308", [](ImuSample& s) { s.gyro_rps.x() = 1e308; }, RejectReason::kGyroOutOfRange, true},
+      {"accel NaN", [](ImuSample& s) { s.accel_mps2.x() = std::nan(""); }, RejectReason::kNonFiniteAccel, true},
+      {"stamp INT64_MAX", [](ImuSample& s) { s.stamp_ns = std::numeric_limits<int64_t>::max(); },
+       RejectReason::kStampOutOfRange, true},
+      {"stamp INT64_MIN", [](ImuSample& s) { s.stamp_ns = std::numeric_limits<int64_t>::min(); },
+       RejectReason::kStampOutOfRange, true},
+      {"stamp -1 ns", [](ImuSample& s) { s.stamp_ns = -1; }, RejectReason::kStampOutOfRange, true},
+      {"stamp back 10 ms", [](ImuSample& s) { s.stamp_ns -= kStepNs; }, RejectReason::kNonMonotonicStamp, true},
+      {"stamp +1e15 ns", [](ImuSample& s) { s.stamp_ns += 1'000'000'000'000'000; }, RejectReason::kTimeGap, true},
+      {"pressure NaN", [](ImuSample& s) { s.pressure_pa = std::nan(""); }, RejectReason::kNonFinitePressure, false},
+      {"pressure 1e308 Pa", [](ImuSample& s) { s.pressure_pa = 1e308; }, RejectReason::kPressureOutOfRange, false},
+      {"pressure 0 Pa", [](ImuSample& s) { s.pressure_pa = 0.0; }, RejectReason::kPressureOutOfRange, false},
+  };
+  for (const Case& c : cases) {
+    AltitudeFilter f;
+    AltitudeFilter clean;
+    const bool used = testing::run_with_one_hostile_sample(
+        f, clean, kSamples, kHostileAt, kStepNs / 2, c.whole_sample, sample, c.spoil,
+        [](ImuSample& s) { s.has_pressure = false; });
+    EXPECT_EQ(used, !c.whole_sample) << c.name;
+    EXPECT_EQ(f.rejects().count(c.reason), 1u) << c.name;
+    EXPECT_EQ(f.rejects().total(), 1u) << c.name;
+    EXPECT_EQ(f.state_resets(), 0u) << c.name;
+    ASSERT_TRUE(f.estimate().valid) << c.name;
+    EXPECT_NEAR(f.estimate().height_m, clean.estimate().height_m, kSameAsCleanM) << c.name;
+    EXPECT_NEAR(f.estimate().vertical_velocity_mps, clean.estimate().vertical_velocity_mps, kSameAsCleanM) << c.name;
+    // and the clean filter tracks the truth (so the comparison is of a working filter)
+    EXPECT_NEAR(clean.estimate().height_m, 10.0 + std::sin(w * (kSamples - 1) * kDt), 0.1) << c.name;
+  }
 }
 
 TEST(AltitudeFilter, InvalidParamsThrow) {
@@ -250,6 +312,8 @@ TEST(AltitudeConfig, ShippedYamlIsExactlyTheDefaultsFieldByField) {
   EXPECT_EQ(p.zupt_accel_dev_max_mps2, d.zupt_accel_dev_max_mps2);
   EXPECT_EQ(p.zupt_window_s, d.zupt_window_s);
   EXPECT_EQ(p.max_dt_s, d.max_dt_s);
+  EXPECT_EQ(p.max_gyro_rps, d.max_gyro_rps);
+  EXPECT_EQ(p.max_accel_mps2, d.max_accel_mps2);
   EXPECT_EQ(p.tilt.sigma_gyro_rps, d.tilt.sigma_gyro_rps);
   EXPECT_EQ(p.tilt.sigma_accel_mps2, d.tilt.sigma_accel_mps2);
   EXPECT_EQ(p.tilt.c_a, d.tilt.c_a);
@@ -353,7 +417,7 @@ TEST(AltitudeSources, BaroDecisionsAndInnovation) {
   s.pressure_pa = -1.0;
   ASSERT_TRUE(f.update(s));
   EXPECT_EQ(f.sources()[2].decision, SourceDecision::kRejected);
-  EXPECT_STREQ(f.sources()[2].reason, "bad_pressure");
+  EXPECT_STREQ(f.sources()[2].reason, "pressure_out_of_range");
   s.stamp_ns += 10'000'000;
   s.has_pressure = false;
   ASSERT_TRUE(f.update(s));

@@ -208,25 +208,6 @@ TEST(Attitude, WrapAngle) {
   EXPECT_NEAR(wrap_angle(2.0 * kPi + 0.1), 0.1, 1e-12);
 }
 
-TEST(TimeStep, AdvanceStampCountsRefusesAndAdvances) {
-  int64_t last = 0;
-  uint64_t non_monotonic = 0;
-  uint64_t gaps = 0;
-  TimeStep step;
-  EXPECT_TRUE(advance_stamp(1000, false, last, 0.1, non_monotonic, gaps, step));  // first sample
-  EXPECT_EQ(step.kind, TimeStep::kFirst);
-  EXPECT_EQ(last, 1000);
-  EXPECT_FALSE(advance_stamp(1000, true, last, 0.1, non_monotonic, gaps, step));  // not after
-  EXPECT_EQ(non_monotonic, 1u);
-  EXPECT_EQ(last, 1000);  // untouched
-  EXPECT_TRUE(advance_stamp(1000 + 10'000'000, true, last, 0.1, non_monotonic, gaps, step));
-  EXPECT_EQ(step.kind, TimeStep::kOk);
-  EXPECT_DOUBLE_EQ(step.dt_s, 0.01);
-  EXPECT_TRUE(advance_stamp(last + 1'000'000'000, true, last, 0.1, non_monotonic, gaps, step));
-  EXPECT_EQ(step.kind, TimeStep::kGap);
-  EXPECT_EQ(gaps, 1u);
-}
-
 TEST(TimeStep, FirstOkNonMonotonicAndGapAreTold) {
   EXPECT_EQ(time_step(5, -1, 0.5).kind, TimeStep::kFirst);
   const TimeStep ok = time_step(1'010'000'000, 1'000'000'000, 0.5);

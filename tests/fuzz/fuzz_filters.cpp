@@ -111,13 +111,15 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     if (ekf.initialized()) {
       check(poise::covariance_ok(ekf.core().state().P, false));
     }
-    (void)alt.update(s);
+    // a stamp outside [0, 2^62] ns (the shared check) is refused whatever the values
+    const bool wild_stamp = s.stamp_ns < 0 || s.stamp_ns > poise::kMaxStampNs;
+    check(!(alt.update(s) && wild_stamp));
     if (alt.estimate().valid) {
       check(std::isfinite(alt.estimate().height_m) && std::isfinite(alt.estimate().vertical_velocity_mps));
       check(poise::covariance_ok(alt.kf_covariance(), false));
       check(poise::covariance_ok(alt.tilt().covariance(), false));
     }
-    (void)veh.update(poise::vehicle_sample_from_imu(s, true, std::abs(v[7])));
+    check(!(veh.update(poise::vehicle_sample_from_imu(s, true, std::abs(v[7]))) && wild_stamp));
     if (veh.estimate().valid) {
       const Eigen::Quaterniond q = veh.estimate().q_world_body;
       check(q.coeffs().allFinite() && std::abs(q.norm() - 1.0) < 1e-6);

@@ -170,13 +170,13 @@ TEST(AltitudeNode, GivenABadBarometerWhenRunningThenBaroIsReportedRejected) {
   const msg::SourceStatus baro = published_source(*diag, "baro");
   EXPECT_TRUE(baro.fresh());
   EXPECT_FALSE(baro.fused());
-  EXPECT_EQ(baro.reason(), "bad_pressure");
+  EXPECT_EQ(baro.reason(), "pressure_out_of_range");
   expect_same_decision(baro, core_source(core.sources(), "baro"));
   // At rest for > zupt_window_s: the zero-velocity update is used.
   const msg::SourceStatus zupt = published_source(*diag, "zupt");
   EXPECT_TRUE(zupt.fused());
   expect_same_decision(zupt, core_source(core.sources(), "zupt"));
-  EXPECT_GT(published_counter(*diag, "rejected_bad_pressure"), 0U);
+  EXPECT_GT(published_counter(*diag, "pressure_out_of_range"), 0U);
 }
 
 // A core that rejects every sample is reported, not silent.

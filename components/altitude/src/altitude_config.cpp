@@ -25,6 +25,11 @@ AltitudeParams load_altitude_params(const std::string& path) {
   r.get("gravity_mps2", p.gravity_mps2);
   r.get("max_dt_s", p.max_dt_s);
 
+  YamlParamReader limits = r.child("limits");
+  limits.get("max_gyro_rps", p.max_gyro_rps);
+  limits.get("max_accel_mps2", p.max_accel_mps2);
+  limits.finish();
+
   YamlParamReader baro = r.child("barometer");
   baro.get("reference_pressure_pa", p.reference_pressure_pa);
   baro.get("paper_rounded_constants", p.paper_rounded_constants);

@@ -81,6 +81,8 @@ void AltitudeParams::validate() const {
   check.positive(zupt_accel_dev_max_mps2, "zupt.accel_dev_max_mps2", "m/s^2");
   check.non_negative(zupt_window_s, "zupt.window_s", "s");
   check.positive(max_dt_s, "max_dt_s", "s");
+  check.positive(max_gyro_rps, "limits.max_gyro_rps", "rad/s");
+  check.positive(max_accel_mps2, "limits.max_accel_mps2", "m/s^2");
   check.positive(tilt.sigma_gyro_rps, "tilt.sigma_gyro_rps", "rad/s");
   check.positive(tilt.sigma_accel_mps2, "tilt.sigma_accel_mps2", "m/s^2");
   check.require(tilt.c_a >= 0.0 && tilt.c_a < 1.0, "tilt.c_a", "in [0, 1)");
@@ -91,6 +93,10 @@ void AltitudeParams::validate() const {
 AltitudeFilter::AltitudeFilter(const AltitudeParams& params) : params_(params) {
   params_.validate();
   params_.tilt.gravity_mps2 = params_.gravity_mps2;
+  limits_.max_dt_s = params_.max_dt_s;
+  limits_.max_gyro_rps = params_.max_gyro_rps;
+  limits_.max_accel_mps2 = params_.max_accel_mps2;
+  limits_.min_accel_norm_mps2 = 0.0;  // free fall is a vertical acceleration, not a broken sensor
   s_.tilt = TiltKf(params_.tilt);
   const double r = params_.sigma_acc_mps2 / params_.sigma_baro_m;  // (14)
   k_c_ = Eigen::Vector2d(params_.gains == CfGains::kPaper ? std::sqrt(r) : std::sqrt(2.0 * r), r);
@@ -158,27 +164,26 @@ void AltitudeFilter::step_kf(double dt_s, bool baro_available, double y_b) {
 }
 
 bool AltitudeFilter::update(const ImuSample& s) {
-  if (!s.has_accel || !s.has_gyro || !s.accel_mps2.allFinite() || !s.gyro_rps.allFinite()) {
-    ++s_.rejects.non_finite_imu;
-    reject_sample("non_finite_imu");
+  ImuSample imu = s;
+  imu.has_mag = false;  // not used here: neither checked nor counted
+  const SampleCheck c = check_imu_sample(imu, s_.have_stamp ? s_.last_stamp_ns : -1, limits_, s_.rejects);
+  if (s_.anchor.reanchor(c, s.stamp_ns, limits_.max_dt_s)) {
+    s_.last_stamp_ns = s.stamp_ns;  // restart time after a confirmed jump; the state is kept
+    s_.still_time_s = 0.0;
+  }
+  if (!c.accept) {
+    reject_sample(to_string(c.reject));
     return false;
   }
-  TimeStep step;
-  if (!advance_stamp(s.stamp_ns, s_.have_stamp, s_.last_stamp_ns, params_.max_dt_s, s_.rejects.non_monotonic_stamp,
-                     s_.rejects.dt_gap, step)) {
-    reject_sample("non_monotonic_stamp");
-    return false;
-  }
-  const double dt_s = step.dt_s;
-  const bool gap = step.kind == TimeStep::kGap;
+  const double dt_s = c.dt_s;
+  s_.last_stamp_ns = s.stamp_ns;
 
   // Barometer: a bad pressure rejects only itself.
   s_.est.baro_fresh = false;
   if (s.has_pressure) {
-    const bool ok = std::isfinite(s.pressure_pa) && s.pressure_pa > 0.0 &&
-                    s.pressure_pa >= params_.min_pressure_pa &&
-                    s.pressure_pa <= params_.max_pressure_pa;
-    if (ok) {
+    const RejectReason why =
+        check_pressure(s.pressure_pa, params_.min_pressure_pa, params_.max_pressure_pa, s_.rejects);
+    if (why == RejectReason::kCount) {
       s_.last_baro_m = baro_height_m(s.pressure_pa, params_.reference_pressure_pa,
                                    params_.paper_rounded_constants);
       s_.last_baro_stamp_ns = s.stamp_ns;
@@ -186,17 +191,16 @@ bool AltitudeFilter::update(const ImuSample& s) {
       s_.est.baro_fresh = true;
       s_.est.baro_height_m = s_.last_baro_m;
     } else {
-      ++s_.rejects.bad_pressure;
-      s_.baro.mark_rejected("bad_pressure");
+      s_.baro.mark_rejected(to_string(why));
     }
   } else {
     s_.baro.mark_not_available("no_sample");
   }
-  const bool baro_ok =
-      s_.have_baro && static_cast<double>(s.stamp_ns - s_.last_baro_stamp_ns) * 1e-9 <=
-                        params_.max_baro_age_s;
+  // both stamps in [0, 2^62] ns (checked): the difference fits; negative after time restarted back
+  const double baro_age_s = static_cast<double>(s.stamp_ns - s_.last_baro_stamp_ns) * 1e-9;
+  const bool baro_ok = s_.have_baro && baro_age_s >= 0.0 && baro_age_s <= params_.max_baro_age_s;
 
-  const bool propagated = s_.have_stamp && !gap && s_.tilt.initialized();
+  const bool propagated = s_.have_stamp && s_.tilt.initialized();
   if (!propagated) {
     // First sample or re-anchored time: (re)start the tilt from the accelerometer when needed and
     // propagate nothing.

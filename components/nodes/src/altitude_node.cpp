@@ -79,13 +79,9 @@ class AltitudeNode : public ImuEstimatorNode {
     return true;
   }
   void diagnostics(DiagnosticsReport& diag) const override {
-    const AltitudeRejects& r = filter_.rejects();
     diag.sources = filter_.sources();
-    diag.counters = {{"rejected_non_finite_imu", r.non_finite_imu},
-                     {"rejected_non_monotonic_stamp", r.non_monotonic_stamp},
-                     {"time_gap", r.dt_gap},
-                     {"rejected_bad_pressure", r.bad_pressure},
-                     {"state_resets", filter_.state_resets()}};
+    diag.counters = filter_.rejects().to_map();  // per reason of the shared check
+    diag.counters["state_resets"] = filter_.state_resets();
   }
 
  private:

@@ -69,13 +69,11 @@ class VehicleNode : public ImuAttitudeNode {
     const VehicleEstimate& e = estimator_.estimate();
     const VehicleRejects& r = estimator_.rejects();
     diag.sources = estimator_.sources();
-    diag.counters = {{"rejected_non_finite_input", r.non_finite_input},
-                     {"rejected_bad_speed", r.bad_speed},
-                     {"missing_mag", r.missing_mag},
-                     {"rejected_disturbed_mag", r.disturbed_mag},
-                     {"rejected_non_monotonic_stamp", r.non_monotonic_stamp},
-                     {"time_gap", r.dt_gap},
-                     {"state_resets", estimator_.state_resets()}};
+    diag.counters = r.samples.to_map();  // per reason of the shared check
+    diag.counters["rejected_bad_speed"] = r.bad_speed;
+    diag.counters["missing_mag"] = r.missing_mag;
+    diag.counters["rejected_disturbed_mag"] = r.disturbed_mag;
+    diag.counters["state_resets"] = estimator_.state_resets();
     diag.metrics = {{"static", e.is_static ? 1.0 : 0.0, ""}, {"from_triad", e.from_triad ? 1.0 : 0.0, ""}};
   }
 

@@ -26,6 +26,13 @@ VehicleParams load_vehicle_params(const std::string& path) {
   r.get("gravity_mps2", p.gravity_mps2);
   r.get("max_dt_s", p.max_dt_s);
   r.get("mag_norm_tolerance", p.mag_norm_tolerance);
+  {
+    YamlParamReader limits = r.child("limits");
+    limits.get("max_yaw_rate_rps", p.max_yaw_rate_rps);
+    limits.get("max_accel_mps2", p.max_accel_mps2);
+    limits.get("max_mag_ut", p.max_mag_ut);
+    limits.finish();
+  }
   std::vector<double> h = {p.mag_world_ut.x(), p.mag_world_ut.y(), p.mag_world_ut.z()};
   r.get("mag_world_ut", h);
   if (h.size() != 3) {

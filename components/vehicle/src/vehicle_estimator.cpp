@@ -57,6 +57,9 @@ void VehicleParams::validate() const {
   check.positive(initial_var_angle_rad2, "ekf.initial_var_angle_rad2", "rad^2");
   check.positive(initial_var_rate_rad2ps2, "ekf.initial_var_rate_rad2ps2", "rad^2/s^2");
   check.positive(max_dt_s, "max_dt_s", "s");
+  check.positive(max_yaw_rate_rps, "limits.max_yaw_rate_rps", "rad/s");
+  check.positive(max_accel_mps2, "limits.max_accel_mps2", "m/s^2");
+  check.positive(max_mag_ut, "limits.max_mag_ut", "uT");
   check.require(mag_norm_tolerance > 0.0 && mag_norm_tolerance < 1.0, "mag_norm_tolerance", "in (0, 1) (relative)");
 }
 
@@ -99,6 +102,11 @@ bool triad_body_world(const Eigen::Vector3d& mag_body_ut, double accel_lat_g,
 
 VehicleEstimator::VehicleEstimator(const VehicleParams& params) : params_(params) {
   params_.validate();
+  limits_.max_dt_s = params_.max_dt_s;
+  limits_.max_gyro_rps = params_.max_yaw_rate_rps;
+  limits_.max_accel_mps2 = params_.max_accel_mps2;
+  limits_.max_mag_ut = params_.max_mag_ut;
+  limits_.min_accel_norm_mps2 = 0.0;  // a_x = a_y = 0 is a vehicle at rest on level ground
   reset();
 }
 
@@ -200,20 +208,24 @@ VehicleSample vehicle_sample_from_imu(const ImuSample& imu, bool has_speed, doub
 }
 
 bool VehicleEstimator::update(const VehicleSample& s) {
-  if (!std::isfinite(s.accel_lon_mps2) || !std::isfinite(s.accel_lat_mps2) ||
-      !std::isfinite(s.yaw_rate_rps)) {
-    ++s_.rejects.non_finite_input;
-    reject_sample("non_finite_input");
+  // The shared check on the signals as an IMU sample: gyro [0, 0, r], accel [a_x, a_y, 0], B.
+  ImuSample imu;
+  imu.stamp_ns = s.stamp_ns;
+  imu.gyro_rps = Eigen::Vector3d(0.0, 0.0, s.yaw_rate_rps);
+  imu.accel_mps2 = Eigen::Vector3d(s.accel_lon_mps2, s.accel_lat_mps2, 0.0);
+  imu.mag_ut = s.mag_ut;
+  imu.has_gyro = imu.has_accel = true;
+  imu.has_mag = s.has_mag;
+  const SampleCheck c = check_imu_sample(imu, s_.have_stamp ? s_.last_stamp_ns : -1, limits_, s_.rejects.samples);
+  if (s_.anchor.reanchor(c, s.stamp_ns, limits_.max_dt_s)) {
+    s_.last_stamp_ns = s.stamp_ns;  // restart time after a confirmed jump; the state is kept
+  }
+  if (!c.accept) {
+    reject_sample(to_string(c.reject));
     return false;
   }
-  TimeStep step;
-  if (!advance_stamp(s.stamp_ns, s_.have_stamp, s_.last_stamp_ns, params_.max_dt_s, s_.rejects.non_monotonic_stamp,
-                     s_.rejects.dt_gap, step)) {
-    reject_sample("non_monotonic_stamp");
-    return false;
-  }
-  const double dt_s = step.dt_s;
-  const bool gap = step.kind == TimeStep::kGap;
+  const double dt_s = c.dt_s;
+  s_.last_stamp_ns = s.stamp_ns;
 
   if (s.has_speed && std::isfinite(s.speed_mps) && s.speed_mps >= 0.0) {
     s_.last_speed_mps = s.speed_mps;
@@ -226,12 +238,12 @@ bool VehicleEstimator::update(const VehicleSample& s) {
       s_.speed.mark_not_available("no_sample");
     }
   }
-  bool mag_ok = s.has_mag && s.mag_ut.allFinite();
+  bool mag_ok = c.mag_ok;
   if (!mag_ok) {
-    ++s_.rejects.missing_mag;
     if (s.has_mag) {
-      s_.mag.mark_rejected("non_finite_mag");
+      s_.mag.mark_rejected(to_string(c.mag_reject));
     } else {
+      ++s_.rejects.missing_mag;
       s_.mag.mark_not_available("no_sample");
     }
   } else {
@@ -275,7 +287,7 @@ bool VehicleEstimator::update(const VehicleSample& s) {
     }
   }
 
-  const bool propagate = s_.have_stamp && !gap && s_.ekf_init;
+  const bool propagate = s_.have_stamp && s_.ekf_init;
   s_.have_stamp = true;
   const VehicleMode mode = params_.mode;
   const bool use_triad = mode == VehicleMode::kTriad || (mode == VehicleMode::kSwitched && is_static);

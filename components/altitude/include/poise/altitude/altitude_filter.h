@@ -28,10 +28,15 @@
 //     sample had |y_g| < zupt_gyro_max_rps and ||y_a| - g| < zupt_accel_dev_max_mps2; then v = 0.
 //   - Method 1 (two-step KF + ZUPT, ref. [8]): a 2-state linear KF on the same model, a_z as the
 //     input with process std s_acc, the baro with std s_b; ZUPT as a v = 0 pseudo-measurement.
-// Inputs are validated: non-finite IMU vectors, non-monotonic stamps and over-long gaps are
-// rejected and counted; a bad pressure (<= 0, NaN, out of range) rejects only the pressure.
+// Inputs are validated by the shared check (poise/core/sample_check.h): a missing, non-finite or
+// beyond-full-scale gyro or accelerometer, a stamp < 0 or > 2^62 ns, a stamp not after the last
+// one and an over-long gap reject the sample (counted per reason, state untouched; time restarts
+// after two samples that agree, StampAnchor); a non-finite pressure or one outside
+// [min_pressure_pa, max_pressure_pa] rejects only the pressure. Free fall (|y_a| ~ 0) is accepted:
+// it is a vertical acceleration this filter must integrate.
 #pragma once
 
+#include "poise/core/sample_check.h"
 #include "poise/core/source_report.h"
 #include "poise/core/state_health.h"
 #include "poise/core/types.h"
@@ -122,8 +127,10 @@ struct AltitudeParams {
   double zupt_accel_dev_max_mps2 = 0.15;  ///< and ||y_a| - g| below this, m/s^2
   double zupt_window_s = 0.25;            ///< for at least this long, s
 
-  // Time
-  double max_dt_s = 0.2;                  ///< a larger stamp gap re-anchors time (counted, no propagation)
+  // Time and full scale (YAML limits.*)
+  double max_dt_s = 0.2;                  ///< a larger stamp gap is refused and re-anchors time (counted)
+  double max_gyro_rps = SampleLimits{}.max_gyro_rps;      ///< |y_g| above: sample rejected, rad/s
+  double max_accel_mps2 = SampleLimits{}.max_accel_mps2;  ///< |y_a| above: sample rejected, m/s^2
 
   /// Throws std::invalid_argument naming the first key out of range, its range and unit (ParamCheck).
   void validate() const;
@@ -147,16 +154,9 @@ struct AltitudeEstimate {
   bool valid = false;                   ///< filter initialised (tilt + first baro)
 };
 
-/// Rejection counters by reason (never reset except by reset()).
-struct AltitudeRejects {
-  uint64_t non_finite_imu = 0;     ///< NaN/Inf accelerometer or gyro, or has_accel/has_gyro false
-  uint64_t non_monotonic_stamp = 0;///< stamp <= previous accepted stamp
-  uint64_t dt_gap = 0;             ///< gap > max_dt_s: time re-anchored, no propagation
-  uint64_t bad_pressure = 0;       ///< pressure <= 0, NaN or outside [min, max]
-  [[nodiscard]] uint64_t total() const {
-    return non_finite_imu + non_monotonic_stamp + dt_gap + bad_pressure;
-  }
-};
+/// Rejection counters by reason of the shared check (never reset except by reset()): the IMU
+/// reasons of check_imu_sample() and non_finite_pressure / pressure_out_of_range.
+using AltitudeRejects = RejectCounters;
 
 /// Everything the altitude filter carries from one sample to the next besides its parameters:
 /// inspect it, save it, restore it into a filter with the same parameters (`set_state`).
@@ -166,6 +166,7 @@ struct AltitudeFilterState {
   AltitudeRejects rejects;
   bool have_stamp = false;
   int64_t last_stamp_ns = 0;
+  StampAnchor anchor;  ///< restarts time after a stamp jump (two agreeing samples)
   bool have_baro = false;
   double last_baro_m = 0.0;
   int64_t last_baro_stamp_ns = 0;
@@ -198,8 +199,9 @@ class AltitudeFilter {
   [[nodiscard]] const AltitudeFilterState& state() const { return s_; }
   /// Restores a state taken from state() of a filter with the same parameters.
   void set_state(const AltitudeFilterState& state) { s_ = state; }
-  /// Processes one sample (IMU and, when has_pressure, the barometer). Returns false when the
-  /// sample was rejected as a whole (see AltitudeRejects); a bad pressure alone returns true.
+  /// Processes one sample (IMU and, when has_pressure, the barometer; a magnetometer is ignored).
+  /// Returns false when the sample was rejected as a whole (see AltitudeRejects); a bad pressure
+  /// alone returns true.
   /// False too when the update left the state non-finite or a covariance not one: the filter is
   /// then reset (counters kept), counted in state_resets() and starts again from the next sample.
   bool update(const ImuSample& sample);
@@ -216,7 +218,7 @@ class AltitudeFilter {
   [[nodiscard]] const Eigen::Matrix2d& kf_covariance() const { return s_.p_kf; }
   /// Per source for the last sample, in this order: gyro (tilt propagation), accel (tilt
   /// correction and a_z), baro (innovation eps (15) = h_b - h, m, variance s_b^2 (+ P_hh for the
-  /// two-step KF); rejected "bad_pressure"), zupt (fused when v was forced to 0; not available
+  /// two-step KF); rejected "non_finite_pressure" / "pressure_out_of_range"), zupt (fused when v was forced to 0; not available
   /// "moving" or "not_used_by_method").
   [[nodiscard]] SourceReports sources() const { return {s_.gyro, s_.accel, s_.baro, s_.zupt}; }
 
@@ -228,6 +230,7 @@ class AltitudeFilter {
   [[nodiscard]] bool uses_integral() const;
 
   AltitudeParams params_;
+  SampleLimits limits_;            ///< the shared check's limits, from the parameters
   Eigen::Vector2d k_c_{0.0, 0.0};  ///< from the parameters
   AltitudeFilterState s_;
   void reject_sample(const char* why);

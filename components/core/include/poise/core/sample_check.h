@@ -26,6 +26,8 @@ enum class RejectReason : uint8_t {
   kAccelOutOfRange,  ///< |accel| above the sensor's full scale
   kMagOutOfRange,    ///< |mag| above the sensor's full scale
   kStampOutOfRange,  ///< stamp < 0 or beyond kMaxStampNs (no sensor clock reads that)
+  kNonFinitePressure,
+  kPressureOutOfRange,  ///< static pressure outside the barometer's plausible range
   kCount
 };
 
@@ -44,6 +46,8 @@ inline const char* to_string(RejectReason r) {
     case RejectReason::kGyroOutOfRange: return "gyro_out_of_range";
     case RejectReason::kAccelOutOfRange: return "accel_out_of_range";
     case RejectReason::kMagOutOfRange: return "mag_out_of_range";
+    case RejectReason::kNonFinitePressure: return "non_finite_pressure";
+    case RejectReason::kPressureOutOfRange: return "pressure_out_of_range";
     case RejectReason::kCount: break;
   }
   return "unknown";
@@ -116,23 +120,6 @@ inline TimeStep time_step(int64_t stamp_ns, int64_t last_stamp_ns, double max_dt
   t.dt_s = static_cast<double>(stamp_ns - last_stamp_ns) * 1e-9;
   t.kind = t.dt_s > max_dt_s ? TimeStep::kGap : TimeStep::kOk;
   return t;
-}
-
-/// time_step() with the bookkeeping the single-stage filters share: a non-monotonic stamp counts
-/// in `non_monotonic` and is refused (returns false: reject the sample, state untouched); a gap
-/// counts in `gaps`; otherwise `last_stamp_ns` advances to `stamp_ns` and `step` holds the step.
-inline bool advance_stamp(int64_t stamp_ns, bool have_stamp, int64_t& last_stamp_ns, double max_dt_s,
-                          uint64_t& non_monotonic, uint64_t& gaps, TimeStep& step) {
-  step = time_step(stamp_ns, have_stamp ? last_stamp_ns : -1, max_dt_s);
-  if (step.kind == TimeStep::kNonMonotonic) {
-    ++non_monotonic;
-    return false;
-  }
-  if (step.kind == TimeStep::kGap) {
-    ++gaps;
-  }
-  last_stamp_ns = stamp_ns;
-  return true;
 }
 
 /// The largest stamp a sensor clock can plausibly give: 2^62 ns, 146 years after its zero. Stamps
@@ -214,6 +201,22 @@ inline SampleCheck check_imu_sample(const ImuSample& s, int64_t last_stamp_ns,
     }
   }
   return out;
+}
+
+/// A static pressure (Pa) against the barometer's plausible range [min_pa, max_pa]: kCount when
+/// usable, else why not (counted in `counters`). A bad pressure refuses only the pressure.
+inline RejectReason check_pressure(double pressure_pa, double min_pa, double max_pa,
+                                   RejectCounters& counters) {
+  RejectReason r = RejectReason::kCount;
+  if (!std::isfinite(pressure_pa)) {
+    r = RejectReason::kNonFinitePressure;
+  } else if (!(pressure_pa >= min_pa && pressure_pa <= max_pa)) {
+    r = RejectReason::kPressureOutOfRange;
+  }
+  if (r != RejectReason::kCount) {
+    counters.add(r);
+  }
+  return r;
 }
 
 /// Restarting time after a stamp jump (a gap forward or a step back), shared by the IMU filters.

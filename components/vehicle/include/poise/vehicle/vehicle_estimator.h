@@ -36,6 +36,7 @@
 //   underestimated while driving (measured in docs/ESTIMATORS_ALTITUDE_VEHICLE.md).
 #pragma once
 
+#include "poise/core/sample_check.h"
 #include "poise/core/source_report.h"
 #include "poise/core/state_health.h"
 #include "poise/core/types.h"
@@ -90,8 +91,11 @@ struct VehicleParams {
   double initial_var_angle_rad2 = 1e-3;        ///< P of phi, theta, psi at (re)initialisation
   double initial_var_rate_rad2ps2 = 1e-3;      ///< P of phi_dot, theta_dot
 
-  // Input validation
-  double max_dt_s = 0.2;                       ///< a larger stamp gap re-anchors time (counted)
+  // Input validation: the shared check (poise/core/sample_check.h) on [a_x, a_y], r and B
+  double max_dt_s = 0.2;                       ///< a larger stamp gap is refused and re-anchors time (counted)
+  double max_yaw_rate_rps = SampleLimits{}.max_gyro_rps;  ///< |r| above: sample rejected, rad/s (YAML limits.*)
+  double max_accel_mps2 = SampleLimits{}.max_accel_mps2;  ///< |[a_x, a_y]| above: sample rejected, m/s^2
+  double max_mag_ut = SampleLimits{}.max_mag_ut;          ///< |B| above: magnetometer rejected, uT
   double mag_norm_tolerance = 0.5;             ///< |B| outside (1 +- this) |H| is rejected as disturbed
 
   /// Throws std::invalid_argument naming the first key out of range, its range and unit (ParamCheck).
@@ -130,15 +134,14 @@ struct VehicleEstimate {
 };
 
 struct VehicleRejects {
-  uint64_t non_finite_input = 0;  ///< NaN/Inf acceleration or yaw rate: sample rejected
+  /// The shared check (check_imu_sample on a_x, a_y, r, B) per reason: non-finite or beyond full
+  /// scale, stamp out of range, not after the last one, gap: sample rejected, state untouched;
+  /// a non-finite, zero or beyond-full-scale magnetometer: treated as missing.
+  RejectCounters samples;
   uint64_t bad_speed = 0;         ///< speed negative, NaN or missing: last valid speed kept
-  uint64_t missing_mag = 0;       ///< no magnetometer (or NaN): EKF predicts only, TRIAD holds
+  uint64_t missing_mag = 0;       ///< no magnetometer: EKF predicts only, TRIAD holds
   uint64_t disturbed_mag = 0;     ///< |B| far from |H|: treated as missing
-  uint64_t non_monotonic_stamp = 0;
-  uint64_t dt_gap = 0;
-  [[nodiscard]] uint64_t total() const {
-    return non_finite_input + bad_speed + missing_mag + disturbed_mag + non_monotonic_stamp + dt_gap;
-  }
+  [[nodiscard]] uint64_t total() const { return samples.total() + bad_speed + missing_mag + disturbed_mag; }
 };
 
 /// TRIAD (9) with the virtual gravity (7): R_body_world (matrix (1)) from the magnetometer, a_y
@@ -157,6 +160,7 @@ struct VehicleEstimatorState {
   VehicleRejects rejects;
   bool have_stamp = false;
   int64_t last_stamp_ns = 0;
+  StampAnchor anchor;  ///< restarts time after a stamp jump (two agreeing samples)
   double last_speed_mps = 0.0;
   bool ekf_init = false;
   Eigen::Matrix<double, 5, 1> x = Eigen::Matrix<double, 5, 1>::Zero();  ///< [phi, phi_dot, theta, theta_dot, psi]
@@ -222,6 +226,7 @@ class VehicleEstimator {
   void reset_unhealthy();  ///< reset() keeping the counters, one reset counted
 
   VehicleParams params_;
+  SampleLimits limits_;  ///< the shared check's limits, from the parameters
   VehicleEstimatorState s_;
 };
 
