@@ -14,7 +14,11 @@
 #include <poise/msg/estimates.h>
 #include <poise/msg/visionPubSubTypes.h>
 
+#include <atomic>
 #include <cmath>
+#include <cstdint>
+#include <mutex>
+#include <string>
 
 namespace poise::nodes {
 namespace {
@@ -67,12 +71,24 @@ class SelectiveEkfNode : public ImuAttitudeNode {
             std::lock_guard<std::mutex> lock(mutex());
             track_input(host().topics.vision_pose, m.sensor_id().to_string(), m.header().seq(), info);
             ekf_.update_vision(to_vision_pose(dds::camera_pose_from_msg(m)));
-          });
+          },
+          &vision_malformed_);
     }
   }
   void stop() override {
     vision_reader_.reset();
     ImuAttitudeNode::stop();
+  }
+  /// The IMU node's status, then the vision input: "vision in N, vision malformed M".
+  [[nodiscard]] std::string status() const override {
+    std::string s = ImuAttitudeNode::status();
+    uint64_t vision_in = 0;
+    {
+      std::lock_guard<std::mutex> lock(mutex());
+      vision_in = ekf_.vision_counters().received;
+    }
+    return s + ", vision in " + std::to_string(vision_in) + ", vision malformed " +
+           std::to_string(vision_malformed_.load());
   }
 
  protected:
@@ -112,6 +128,7 @@ class SelectiveEkfNode : public ImuAttitudeNode {
     diag.counters = ekf_.imu_rejections().to_map();
     const VisionCounters& vc = ekf_.vision_counters();
     diag.counters["vision_received"] = vc.received;
+    diag.counters["vision_malformed"] = vision_malformed_.load();  // payloads that did not deserialize
     diag.counters["vision_applied"] = vc.applied;
     diag.counters["vision_out_of_order"] = vc.out_of_order;
     diag.counters["rejected_vision_too_old"] = vc.too_old;
@@ -126,6 +143,7 @@ class SelectiveEkfNode : public ImuAttitudeNode {
  private:
   SelectiveEkf ekf_;
   dds::Writer<msg::PoseEstimatePubSubType> pose_writer_;
+  std::atomic<uint64_t> vision_malformed_{0};  // vision_pose payloads dropped undecoded; outlives the reader
   std::unique_ptr<dds::Reader<msg::VisionPosePubSubType>> vision_reader_;
 };
 

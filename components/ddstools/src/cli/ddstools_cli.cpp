@@ -10,6 +10,7 @@
 #include <poise/msg/diagnosticsPubSubTypes.h>
 #include <poise/msg/estimatesPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
+#include <poise/msg/visionPubSubTypes.h>
 
 #include <fastdds/dds/topic/TopicDataType.hpp>
 
@@ -407,12 +408,12 @@ std::vector<std::uint8_t> serialized(typename PubSubType::type& msg) {
 }
 
 // The type support of a careless or hostile peer: any bytes go on the wire verbatim (0 bytes
-// included) under the ImuSample name, keyed like the real type, but it never computes a key, so
+// included) under a poise type name, keyed like the real type, but it never computes a key, so
 // samples carry no key hash and every reader must derive the instance from the bytes themselves.
-class CarelessImuType : public eprosima::fastdds::dds::TopicDataType {
+class CarelessType : public eprosima::fastdds::dds::TopicDataType {
  public:
-  CarelessImuType() {
-    setName(poise::dds::type_names::kImuSample);
+  explicit CarelessType(const char* type_name) {
+    setName(type_name);
     m_typeSize = 4096;
     m_isGetKeyDefined = true;
     auto_fill_type_object(false);
@@ -444,16 +445,58 @@ class CarelessImuType : public eprosima::fastdds::dds::TopicDataType {
   }
 };
 
-// Alternates a valid ImuSample (seq i, sensor_id imu0) with malformed_variants() of it (cycling),
-// on a reliable writer; count valid and count malformed samples. Waits for acknowledgments.
+// The valid sample i of `imu-malformed`: level, facing magnetic north, with pressure (every
+// estimator node can use it).
+std::vector<std::uint8_t> valid_imu_payload(const TestPubOptions& o, int i) {
+  poise::msg::ImuSample m;
+  m.header().stamp_ns(1000000000LL + 1000000LL * i);
+  m.header().seq(static_cast<std::uint32_t>(i));
+  m.header().frame_id("body");
+  m.sensor_id(o.sensor_id);
+  m.accel_mps2().z(9.81);
+  m.mag_ut().y(30.0);
+  m.mag_ut().z(-40.0);
+  m.pressure_pa(101325.0);
+  m.valid().accel(true);
+  m.valid().gyro(true);
+  m.valid().mag(true);
+  m.valid().pressure(true);
+  return serialized<poise::msg::ImuSamplePubSubType>(m);
+}
+
+// The valid sample i of `vision-malformed`: a camera 1 m above the world origin, level.
+std::vector<std::uint8_t> valid_vision_payload(const TestPubOptions& o, int i) {
+  poise::msg::VisionPose m;
+  const std::int64_t stamp_ns = 1000000000LL + 1000000LL * i;
+  m.header().stamp_ns(stamp_ns);
+  m.header().seq(static_cast<std::uint32_t>(i));
+  m.header().frame_id("world");
+  m.sensor_id(o.sensor_id);
+  m.capture_stamp_ns(stamp_ns);
+  m.pose_world_camera().position_m().z(1.0);
+  m.pose_world_camera().orientation().w(1.0);
+  m.pose_world_body().orientation().w(1.0);
+  for (std::size_t k = 0; k < 36; k += 7) {
+    m.covariance()[k] = 1e-4;  // diagonal: 1 cm, 0.01 rad
+  }
+  m.tag_ids({0});
+  return serialized<poise::msg::VisionPosePubSubType>(m);
+}
+
+// Alternates a valid sample (seq i, the given sensor_id) of the type (`imu-malformed`: ImuSample
+// on `imu`, `vision-malformed`: VisionPose on `vision_pose`) with malformed_variants() of it
+// (cycling), on a reliable writer; count valid and count malformed samples. Waits for
+// acknowledgments.
 void run_malformed_pub(const TestPubOptions& o) {
+  const bool vision = o.type == "vision-malformed";
   poise::dds::ParticipantOptions popts;
   popts.domain = o.domain;
   popts.name = "poise-dds-test-pub-malformed";
   poise::dds::Participant participant(popts);
-  const std::string topic_name = o.topic.empty() ? "imu" : o.topic;
-  eprosima::fastdds::dds::Topic* topic =
-      participant.topic(topic_name, eprosima::fastdds::dds::TypeSupport(new CarelessImuType()));
+  const std::string topic_name = !o.topic.empty() ? o.topic : vision ? "vision_pose" : "imu";
+  eprosima::fastdds::dds::Topic* topic = participant.topic(
+      topic_name, eprosima::fastdds::dds::TypeSupport(new CarelessType(
+                      vision ? poise::dds::type_names::kVisionPose : poise::dds::type_names::kImuSample)));
   poise::dds::detail::MatchCounter matches;
   eprosima::fastdds::dds::DataWriter* writer = poise::dds::detail::create_writer(
       participant, topic, poise::dds::QosKind::kEstimate, &matches);
@@ -469,20 +512,7 @@ void run_malformed_pub(const TestPubOptions& o) {
   int valid = 0;
   int malformed = 0;
   for (int i = 0; i < o.count && !stop_requested(); ++i) {
-    poise::msg::ImuSample m;
-    m.header().stamp_ns(1000000000LL + 1000000LL * i);
-    m.header().seq(static_cast<std::uint32_t>(i));
-    m.header().frame_id("body");
-    m.sensor_id(o.sensor_id);
-    m.accel_mps2().z(9.81);
-    m.mag_ut().y(30.0);  // level, facing magnetic north: every estimator node can use it
-    m.mag_ut().z(-40.0);
-    m.pressure_pa(101325.0);
-    m.valid().accel(true);
-    m.valid().gyro(true);
-    m.valid().mag(true);
-    m.valid().pressure(true);
-    poise::dds::RawSample good{serialized<poise::msg::ImuSamplePubSubType>(m)};
+    poise::dds::RawSample good{vision ? valid_vision_payload(o, i) : valid_imu_payload(o, i)};
     const auto variants = ddstools::malformed_variants(good.data);
     poise::dds::RawSample bad{variants[static_cast<std::size_t>(i) % variants.size()].bytes};
     valid += writer->write(&good) ? 1 : 0;
@@ -499,7 +529,7 @@ void run_malformed_pub(const TestPubOptions& o) {
 
 void run_test_pub(const TestPubOptions& o) {
   install_stop_handlers();
-  if (o.type == "imu-malformed") {
+  if (o.type == "imu-malformed" || o.type == "vision-malformed") {
     run_malformed_pub(o);
   } else if (o.type == "imu") {
     publish<poise::msg::ImuSamplePubSubType>(o, "imu", [](poise::msg::ImuSample& m, int i) {
@@ -618,11 +648,11 @@ void register_ddstools_commands(CLI::App& app) {
   CLI::App* p = app.add_subcommand("dds-test-pub", "Publish deterministic test samples (for tests)");
   p->group("");  // hidden from --help
   p->add_option("--type", pub->type,
-                "imu | diagnostics | attitude | imu-malformed (each valid ImuSample followed by "
-                "a malformed one, reliable, no key hash)")
-      ->check(CLI::IsMember({"imu", "diagnostics", "attitude", "imu-malformed"}))
+                "imu | diagnostics | attitude | imu-malformed | vision-malformed (each valid "
+                "ImuSample / VisionPose followed by a malformed one, reliable, no key hash)")
+      ->check(CLI::IsMember({"imu", "diagnostics", "attitude", "imu-malformed", "vision-malformed"}))
       ->capture_default_str();
-  p->add_option("--topic", pub->topic, "Topic name (default: imu, diagnostics, attitude/test)");
+  p->add_option("--topic", pub->topic, "Topic name (default: imu, diagnostics, attitude/test, vision_pose)");
   p->add_option("--sensor-id", pub->sensor_id, "sensor_id of every sample")->capture_default_str();
   add_domain_option(p, &pub->domain);
   p->add_option("--count", pub->count, "Samples to publish")->check(CLI::PositiveNumber);

@@ -57,7 +57,7 @@ class ImuEstimatorNode : public runtime::Component {
   virtual void diagnostics(DiagnosticsReport& diag) const = 0;
 
   /// The lock that serialises step() with other inputs of a subclass (e.g. vision).
-  std::mutex& mutex() { return mutex_; }
+  std::mutex& mutex() const { return mutex_; }
   [[nodiscard]] const std::string& sensor_id() const { return sensor_id_; }
   [[nodiscard]] const std::string& component() const { return component_; }
   runtime::HostContext& host() { return host_; }
