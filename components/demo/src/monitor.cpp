@@ -156,7 +156,8 @@ PipelineMonitor::PipelineMonitor(dds::Participant& participant, const dds::Topic
         for (const auto& c : m.counters()) {
           const std::string n = c.name().to_string();
           if (n.rfind("rejected", 0) == 0 || n.rfind("non_", 0) == 0 || n.rfind("zero_", 0) == 0 ||
-              n.rfind("missing_", 0) == 0 || n == "time_gap") {
+              n.rfind("missing_", 0) == 0 || n == "time_gap" ||
+              n.find("_out_of_range") != std::string::npos) {
             total += c.value();
           }
         }
