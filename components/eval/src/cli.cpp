@@ -130,7 +130,8 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
       if (entry.name == filter_name && entry.broad_default) {
         throw Error("--grid with filter '" + filter_name +
                     "' needs --config BASE.yaml (its figures on BROAD use a configuration other than the "
-                    "built-in defaults; e.g. config/filters/" + filter_name + "_broad.yaml)");
+                    "built-in defaults; the BROAD bases are config/filters/parallel_kf_broad.yaml and "
+                    "selective_ekf_broad.yaml)");
       }
     }
   }
