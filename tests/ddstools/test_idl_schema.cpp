@@ -7,8 +7,12 @@
 #include <poise/msg/estimatesPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
 #include <poise/msg/visionPubSubTypes.h>
+#include <poise/ros2/nav_msgsPubSubTypes.h>
+#include <poise/ros2/sensor_msgsPubSubTypes.h>
+#include <poise/ros2/tf2_msgsPubSubTypes.h>
 
 #include <string>
+#include <vector>
 
 namespace poise::ddstools {
 namespace {
@@ -125,6 +129,52 @@ TEST(IdlSchema, GivenEveryTopicTypeWhenSizedThenMaxSizeMatchesTheGeneratedTypeSu
               poise::msg::TagDetections::getKeyMaxCdrSerializedSize());
   expect_size("poise::msg::VisionPose", poise::msg::VisionPosePubSubType().m_typeSize,
               poise::msg::VisionPose::getKeyMaxCdrSerializedSize());
+}
+
+// idl/ros2: the DDS names ROS 2 uses (pkg::msg::dds_::Name_), the .msg field order, and the same
+// wire sizes as fastddsgen's type support of the same files (so `poise record` schemas match).
+TEST(IdlSchema, GivenTheRos2IdlWhenLoadedThenTypesHaveRosDdsNamesFieldOrderAndGeneratedSizes) {
+  const TypeTable& table = TypeTable::builtin();
+  const auto names_of = [&table](const std::string& type) {
+    std::vector<std::string> names;
+    for (const auto& m : table.get_struct(type).members) {
+      names.push_back(m.name);
+    }
+    return names;
+  };
+  using V = std::vector<std::string>;
+  EXPECT_EQ(names_of("builtin_interfaces::msg::dds_::Time_"), (V{"sec", "nanosec"}));
+  EXPECT_EQ(names_of("std_msgs::msg::dds_::Header_"), (V{"stamp", "frame_id"}));
+  EXPECT_EQ(names_of("geometry_msgs::msg::dds_::Quaternion_"), (V{"x", "y", "z", "w"}));
+  EXPECT_EQ(names_of("sensor_msgs::msg::dds_::Imu_"),
+            (V{"header", "orientation", "orientation_covariance", "angular_velocity",
+               "angular_velocity_covariance", "linear_acceleration",
+               "linear_acceleration_covariance"}));
+  EXPECT_EQ(names_of("sensor_msgs::msg::dds_::MagneticField_"),
+            (V{"header", "magnetic_field", "magnetic_field_covariance"}));
+  EXPECT_EQ(names_of("sensor_msgs::msg::dds_::FluidPressure_"), (V{"header", "fluid_pressure", "variance"}));
+  EXPECT_EQ(names_of("sensor_msgs::msg::dds_::Temperature_"), (V{"header", "temperature", "variance"}));
+  EXPECT_EQ(names_of("nav_msgs::msg::dds_::Odometry_"), (V{"header", "child_frame_id", "pose", "twist"}));
+  EXPECT_EQ(names_of("geometry_msgs::msg::dds_::TransformStamped_"),
+            (V{"header", "child_frame_id", "transform"}));
+  EXPECT_EQ(names_of("geometry_msgs::msg::dds_::PoseWithCovarianceStamped_"), (V{"header", "pose"}));
+  const Member& transforms = table.get_struct("tf2_msgs::msg::dds_::TFMessage_").members.at(0);
+  EXPECT_EQ(transforms.type.kind, TypeSpec::Kind::kSequence);
+  EXPECT_EQ(transforms.type.bound, 0U);  // unbounded, as ROS's TransformStamped[]
+  const auto expect_size = [&table](const std::string& name, std::size_t generated_type_size) {
+    std::size_t max = table.max_serialized_size(name);
+    max += (4 - max % 4) % 4;
+    EXPECT_EQ(max + 4, generated_type_size) << name;
+    EXPECT_FALSE(table.get_struct(name).has_key()) << name;  // ROS 2 topics are keyless
+  };
+  expect_size("sensor_msgs::msg::dds_::Imu_", sensor_msgs::msg::dds_::Imu_PubSubType().m_typeSize);
+  expect_size("sensor_msgs::msg::dds_::MagneticField_",
+              sensor_msgs::msg::dds_::MagneticField_PubSubType().m_typeSize);
+  expect_size("sensor_msgs::msg::dds_::FluidPressure_",
+              sensor_msgs::msg::dds_::FluidPressure_PubSubType().m_typeSize);
+  expect_size("nav_msgs::msg::dds_::Odometry_", nav_msgs::msg::dds_::Odometry_PubSubType().m_typeSize);
+  expect_size("tf2_msgs::msg::dds_::TFMessage_", tf2_msgs::msg::dds_::TFMessage_PubSubType().m_typeSize);
+  EXPECT_EQ(sensor_msgs::msg::dds_::Imu_PubSubType().getName(), std::string("sensor_msgs::msg::dds_::Imu_"));
 }
 
 TEST(IdlSchema, GivenConstsEnumsAndNestedModulesWhenParsedThenTheyResolve) {

@@ -25,7 +25,8 @@
 #include <poise/msg/estimatesPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
 #include <poise/msg/visionPubSubTypes.h>
-#include <ros2_typesPubSubTypes.h>
+#include <poise/ros2/geometry_msgsPubSubTypes.h>
+#include <poise/ros2/sensor_msgsPubSubTypes.h>
 
 #include <CLI/CLI.hpp>
 

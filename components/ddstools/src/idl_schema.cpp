@@ -704,12 +704,13 @@ TypeTable TypeTable::from_sources(const std::map<std::string, std::string>& file
   return table;
 }
 
-TypeTable TypeTable::from_directory(const std::string& dir) {
+namespace {
+/// Every *.idl file of `dir` by file name, added to `files`; false when `dir` cannot be opened.
+bool read_idl_files(const std::string& dir, std::map<std::string, std::string>& files) {
   DIR* d = ::opendir(dir.c_str());
   if (d == nullptr) {
-    throw SchemaError("cannot open IDL directory '" + dir + "'");
+    return false;
   }
-  std::map<std::string, std::string> files;
   while (const dirent* e = ::readdir(d)) {
     const std::string name = e->d_name;
     if (name.size() > 4 && name.compare(name.size() - 4, 4, ".idl") == 0) {
@@ -724,6 +725,16 @@ TypeTable TypeTable::from_directory(const std::string& dir) {
     }
   }
   ::closedir(d);
+  return true;
+}
+}  // namespace
+
+TypeTable TypeTable::from_directory(const std::string& dir) {
+  std::map<std::string, std::string> files;
+  if (!read_idl_files(dir, files)) {
+    throw SchemaError("cannot open IDL directory '" + dir + "'");
+  }
+  read_idl_files(dir + "/ros2", files);  // the ROS 2 types of idl/ros2, when there (docs/ROS2.md)
   if (files.empty()) {
     throw SchemaError("no .idl files in '" + dir + "'");
   }

@@ -1,4 +1,4 @@
-// Mirrors of poise messages in ROS 2 layouts (ros2_types.idl): sensor_msgs/Imu from ImuSample and
+// Mirrors of poise messages in ROS 2 layouts (idl/ros2): sensor_msgs/Imu from ImuSample and
 // geometry_msgs/PoseWithCovarianceStamped from PoseEstimate, for topics `rt/<name>` that ROS 2
 // tools read. Pure conversions (no DDS entities, no clocks): the caller passes the offset that maps
 // poise stamps (host CLOCK_MONOTONIC) onto ROS time (CLOCK_REALTIME).
@@ -6,7 +6,8 @@
 
 #include <poise/msg/estimates.h>
 #include <poise/msg/imu.h>
-#include <ros2_types.h>
+#include <poise/ros2/geometry_msgs.h>
+#include <poise/ros2/sensor_msgs.h>
 
 #include <cstdint>
 

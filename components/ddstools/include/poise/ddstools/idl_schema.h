@@ -80,10 +80,11 @@ struct ConstDef {
 /// All types from a set of IDL files. Immutable after loading; cheap to share by const reference.
 class TypeTable {
  public:
-  /// poise's own topic types: $POISE_IDL_DIR/*.idl when that variable is set, else the IDL texts
-  /// embedded into the library at build time (the installed binary needs no source tree).
+  /// poise's own topic types and the ROS 2 types: from_directory($POISE_IDL_DIR) when that variable
+  /// is set, else the IDL texts embedded into the library at build time (the installed binary
+  /// needs no source tree).
   static const TypeTable& builtin();
-  /// Every *.idl file in `dir`.
+  /// Every *.idl file in `dir` and in `dir`/ros2 when that exists (idl/ and idl/ros2/).
   static TypeTable from_directory(const std::string& dir);
   /// IDL texts by file name (e.g. {"common.idl", "..."}); #include resolves among these names.
   static TypeTable from_sources(const std::map<std::string, std::string>& files);
