@@ -23,11 +23,17 @@ bool ParallelKf::update(const ImuSample& s) {
 }
 
 bool ParallelKf::healthy() {
-  const bool full = s_.health.full_due();
-  return all_finite(s_.kf1.up_body(), s_.kf1.ext_accel_body(), s_.kf2.u(), s_.kf2.e(), s_.bias, s_.lp_accel_i,
-                    s_.gate.m_ut, s_.gate.dip_rad) &&
-         covariance_ok(s_.kf1.covariance(), full) && covariance_ok(s_.kf2.covariance(), full) &&
-         covariance_ok(s_.bias_cov, full);
+  // per sample: one sum over the state and the three covariances' diagonals, and their signs;
+  // every kFullCheckEvery-th sample the full check of each covariance (state_health.h)
+  const auto& p1 = s_.kf1.covariance();
+  const auto& p2 = s_.kf2.covariance();
+  if (!all_finite(s_.kf1.up_body(), s_.kf1.ext_accel_body(), s_.kf2.u(), s_.kf2.e(), s_.bias, s_.lp_accel_i,
+                  s_.gate.m_ut, s_.gate.dip_rad, p1.diagonal(), p2.diagonal(), s_.bias_cov.diagonal()) ||
+      !(std::min({p1.diagonal().minCoeff(), p2.diagonal().minCoeff(), s_.bias_cov.diagonal().minCoeff()}) >= 0.0)) {
+    return false;
+  }
+  return !s_.health.full_due() ||
+         (covariance_ok(p1, true) && covariance_ok(p2, true) && covariance_ok(s_.bias_cov, true));
 }
 
 void ParallelKf::reset_unhealthy() {

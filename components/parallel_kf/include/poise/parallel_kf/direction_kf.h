@@ -94,7 +94,9 @@ class DirectionKf {
     Eigen::Matrix3d n11 = a * p11 * a.transpose();
     n11.noalias() -= qg * (u_prev * u_prev.transpose());
     n11.diagonal().array() += qg * u_prev.squaredNorm();
-    p_mat_.topLeftCorner<3, 3>() = n11;
+    // exactly symmetric (the products of a P a^T round differently above and below the diagonal);
+    // the rest of P stays exactly symmetric by construction, here and in correct()
+    p_mat_.topLeftCorner<3, 3>() = 0.5 * (n11 + n11.transpose());
     p_mat_.topRightCorner<3, 3>().noalias() = c * (a * p12);
     p_mat_.bottomLeftCorner<3, 3>() = p_mat_.topRightCorner<3, 3>().transpose();
     p_mat_.bottomRightCorner<3, 3>() *= c * c;
@@ -114,11 +116,13 @@ class DirectionKf {
       const Eigen::Matrix<double, 6, 1> pht = k * p_mat_.col(i) + p_mat_.col(3 + i);  // P h^T
       const double s = k * pht[i] + pht[3 + i] + r;                                    // h P h^T + r
       const double y = z[i] - (k * x[i] + x[3 + i]);
-      const Eigen::Matrix<double, 6, 1> gain = pht / s;
-      x.noalias() += gain * y;
-      p_mat_.noalias() -= gain * pht.transpose();  // P - K h P
+      const double inv_s = 1.0 / s;
+      x.noalias() += (y * inv_s) * pht;
+      // P - K h P = P - (P h^T)(P h^T)^T / s: entry (i, j) and (j, i) are the same product, so a
+      // symmetric P stays exactly symmetric (no symmetrisation pass)
+      const Matrix6 outer = pht * pht.transpose();  // exactly symmetric: pht_i pht_j = pht_j pht_i
+      p_mat_.noalias() -= inv_s * outer;
     }
-    p_mat_ = 0.5 * (p_mat_ + p_mat_.transpose()).eval();
     u_ = x.head<3>();
     e_ = x.tail<3>();
     if (p_.renormalize) {
