@@ -4,7 +4,14 @@
 #include "poise/dds/participant.h"
 #include "poise/testing/testing.h"
 
+#include <poise/ros2/sensor_msgsPubSubTypes.h>
+
 #include <gtest/gtest.h>
+
+#include <chrono>
+#include <mutex>
+#include <thread>
+#include <vector>
 
 namespace poise::dds {
 namespace {
@@ -39,6 +46,76 @@ TEST(Participant, TopicNameCannotChangeType) {
   EXPECT_THROW((Writer<msg::AltitudeEstimatePubSubType>(participant, "shared_name")), DdsError);
   // Same name and type: the topic is reused.
   EXPECT_NO_THROW((Writer<msg::ImuSamplePubSubType>(participant, "shared_name")));
+}
+
+/// Polls `done` every 10 ms until it is true or `timeout` passes.
+template <class F>
+bool wait_until(F done, std::chrono::milliseconds timeout) {
+  const auto end = std::chrono::steady_clock::now() + timeout;
+  while (!done()) {
+    if (std::chrono::steady_clock::now() > end) {
+      return false;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return true;
+}
+
+// Issue 16: a ROS 2 driver's sensor_msgs/Imu on a topic poise reads as ImuSample is never
+// delivered; the reader's process says so once per remote type, naming the topic and both types,
+// whether the foreign writer appears after the reader or before it. Oracle: the type names the
+// generated type supports register.
+TEST(Participant, GivenWritersOfAnotherTypeOnAReadTopicThenOneWarningNamesTopicAndBothTypes) {
+  testing::DomainLease domain;
+  constexpr auto kDiscovery = std::chrono::seconds(10);  // bounded wait for discovery
+  Participant reader_side({domain.id(), "", "", "reader"});
+  std::mutex mutex;
+  std::vector<std::string> lines;
+  reader_side.set_warning_sink([&](const std::string& line) {
+    std::lock_guard<std::mutex> lock(mutex);
+    lines.push_back(line);
+  });
+  Reader<msg::ImuSamplePubSubType> reader(reader_side, "imu", [](const auto&, const auto&) {});
+
+  Participant ros_a({domain.id(), "", "", "ros_a"});
+  Participant ros_b({domain.id(), "", "", "ros_b"});
+  Writer<sensor_msgs::msg::dds_::Imu_PubSubType> foreign_a(ros_a, "imu", QosKind::kSensor);
+  Writer<sensor_msgs::msg::dds_::Imu_PubSubType> foreign_b(ros_b, "imu", QosKind::kSensor);
+  // Writers created after the foreign ones, on topics the reader side reads with their type:
+  // once these match, each participant's earlier writers have been announced (in order).
+  Writer<msg::ImuSamplePubSubType> after_a(ros_a, "probe_a");
+  Writer<msg::ImuSamplePubSubType> after_b(ros_b, "probe_b");
+  Reader<msg::ImuSamplePubSubType> probe_a(reader_side, "probe_a", [](const auto&, const auto&) {});
+  Reader<msg::ImuSamplePubSubType> probe_b(reader_side, "probe_b", [](const auto&, const auto&) {});
+  ASSERT_TRUE(probe_a.wait_for_writers(1, kDiscovery));
+  ASSERT_TRUE(probe_b.wait_for_writers(1, kDiscovery));
+  ASSERT_TRUE(wait_until([&] { return !reader_side.type_mismatches().empty(); }, kDiscovery));
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));  // a second warning would be here
+  const std::vector<TypeMismatch> seen = reader_side.type_mismatches();
+  ASSERT_EQ(seen.size(), 1U);
+  EXPECT_EQ(seen[0].topic, "imu");
+  EXPECT_EQ(seen[0].local_type, msg::ImuSamplePubSubType().getName());
+  EXPECT_EQ(seen[0].remote_type, sensor_msgs::msg::dds_::Imu_PubSubType().getName());
+  EXPECT_EQ(reader.matched(), 0);  // DDS matched neither foreign writer
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    ASSERT_EQ(lines.size(), 1U);
+    EXPECT_NE(lines[0].find("'imu'"), std::string::npos) << lines[0];
+    EXPECT_NE(lines[0].find("poise::msg::ImuSample"), std::string::npos) << lines[0];
+    EXPECT_NE(lines[0].find("sensor_msgs::msg::dds_::Imu_"), std::string::npos) << lines[0];
+    EXPECT_NE(lines[0].find("ros2_bridge"), std::string::npos) << lines[0];
+  }
+
+  // A writer already known when the reader is created is reported too.
+  Writer<msg::VehicleInputPubSubType> early(ros_a, "early", QosKind::kSensor);
+  Writer<msg::ImuSamplePubSubType> after_early(ros_a, "probe_c");
+  Reader<msg::ImuSamplePubSubType> probe_c(reader_side, "probe_c", [](const auto&, const auto&) {});
+  ASSERT_TRUE(probe_c.wait_for_writers(1, kDiscovery));  // `early` is known by now
+  Reader<msg::ImuSamplePubSubType> late(reader_side, "early", [](const auto&, const auto&) {});
+  ASSERT_TRUE(wait_until([&] { return reader_side.type_mismatches().size() == 2; }, kDiscovery));
+  const TypeMismatch second = reader_side.type_mismatches().at(1);
+  EXPECT_EQ(second.topic, "early");
+  EXPECT_EQ(second.remote_type, msg::VehicleInputPubSubType().getName());
 }
 
 }  // namespace

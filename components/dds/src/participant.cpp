@@ -3,6 +3,7 @@
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/rtps/attributes/ServerAttributes.h>
 
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
@@ -186,9 +187,90 @@ fdds::DomainParticipant* create_participant(const ParticipantOptions& options,
   return participant;
 }
 
+std::string describe(const TypeMismatch& m) {
+  std::string hint;
+  if (m.remote_type.find("::dds_::") != std::string::npos) {
+    hint = "; a ROS 2 type: bridge it with the ros2_bridge component (docs/ROS2.md)";
+  }
+  return "poise: warning: topic '" + m.topic + "' has a writer of type '" + m.remote_type +
+         "' but this process reads it as '" + m.local_type +
+         "': DDS never delivers its samples here (the types must be the same)" + hint;
+}
+
+/// Watches the built-in publication discovery for writers whose type differs from the type our
+/// readers use on the same topic name (Fast DDS 2.9 has no inconsistent-topic status).
+class Participant::DiscoveryWatch : public fdds::DomainParticipantListener {
+ public:
+  void on_publisher_discovery(fdds::DomainParticipant* /*participant*/,
+                              eprosima::fastrtps::rtps::WriterDiscoveryInfo&& info) override {
+    if (info.status != eprosima::fastrtps::rtps::WriterDiscoveryInfo::DISCOVERED_WRITER) {
+      return;
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    const std::string topic = info.info.topicName().to_string();
+    const std::string type = info.info.typeName().to_string();
+    writers_[topic].insert(type);
+    check(topic);
+  }
+  void note_reader(const std::string& topic, const std::string& type) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    readers_[topic] = type;
+    check(topic);
+  }
+  std::vector<TypeMismatch> mismatches() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return mismatches_;
+  }
+  void set_sink(std::function<void(const std::string&)> sink) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    sink_ = std::move(sink);
+  }
+
+ private:
+  /// Reports every new (topic, remote type) pair that differs from our reader's type.
+  void check(const std::string& topic) {
+    const auto reader = readers_.find(topic);
+    const auto writers = writers_.find(topic);
+    if (reader == readers_.end() || writers == writers_.end()) {
+      return;
+    }
+    for (const std::string& type : writers->second) {
+      if (type == reader->second || !warned_.insert({topic, type}).second) {
+        continue;
+      }
+      mismatches_.push_back({topic, reader->second, type});
+      const std::string line = describe(mismatches_.back());
+      if (sink_) {
+        sink_(line);
+      } else {
+        std::fprintf(stderr, "%s\n", line.c_str());
+      }
+    }
+  }
+
+  mutable std::mutex mutex_;
+  std::map<std::string, std::string> readers_;                // topic -> our type
+  std::map<std::string, std::set<std::string>> writers_;     // topic -> remote types seen
+  std::set<std::pair<std::string, std::string>> warned_;      // (topic, remote type)
+  std::vector<TypeMismatch> mismatches_;
+  std::function<void(const std::string&)> sink_;
+};
+
+void Participant::note_reader(const std::string& topic, const std::string& type) {
+  watch_->note_reader(topic, type);
+}
+
+std::vector<TypeMismatch> Participant::type_mismatches() const { return watch_->mismatches(); }
+
+void Participant::set_warning_sink(std::function<void(const std::string&)> sink) {
+  watch_->set_sink(std::move(sink));
+}
+
 Participant::Participant(const ParticipantOptions& options)
-    : domain_(options.domain), security_(security_from_env()) {
-  participant_ = create_participant(options);
+    : watch_(std::make_unique<DiscoveryWatch>()), domain_(options.domain), security_(security_from_env()) {
+  // The watch is installed at creation so that no publication discovery is missed; no status
+  // mask: entity statuses stay with the entities' own listeners.
+  participant_ = create_participant(options, watch_.get(), fdds::StatusMask::none());
   publisher_ = participant_->create_publisher(fdds::PUBLISHER_QOS_DEFAULT);
   subscriber_ = participant_->create_subscriber(fdds::SUBSCRIBER_QOS_DEFAULT);
   if (publisher_ == nullptr || subscriber_ == nullptr) {

@@ -108,7 +108,24 @@ eprosima::fastdds::dds::DomainParticipant* create_participant(
     eprosima::fastdds::dds::DomainParticipantListener* listener = nullptr,
     const eprosima::fastdds::dds::StatusMask& mask = eprosima::fastdds::dds::StatusMask::none());
 
+/// A writer seen on a topic that this participant reads, with another type: its samples never
+/// arrive (DDS matches endpoints by topic name AND type name), e.g. a ROS 2 driver's
+/// `sensor_msgs::msg::dds_::Imu_` on a topic read as `poise::msg::ImuSample`.
+struct TypeMismatch {
+  std::string topic;
+  std::string local_type;   ///< the type this participant reads the topic as
+  std::string remote_type;  ///< the type of the remote writer
+};
+
+/// The warning printed once per (topic, remote type): names the topic and both types.
+std::string describe(const TypeMismatch& mismatch);
+
 /// One DomainParticipant with one Publisher and one Subscriber, and the topics created on it.
+///
+/// Type mismatches are loud: Fast DDS 2.9 does not report inconsistent topics
+/// (on_inconsistent_topic is never called), so the participant watches the built-in publication
+/// discovery and, for every topic one of its Readers reads, warns once per remote type that
+/// differs (stderr, or the sink set by set_warning_sink) and keeps the list (type_mismatches()).
 class Participant {
  public:
   explicit Participant(const ParticipantOptions& options);
@@ -128,7 +145,17 @@ class Participant {
   eprosima::fastdds::dds::Topic* topic(const std::string& name,
                                        const eprosima::fastdds::dds::TypeSupport& type);
 
+  /// Records that a reader of this participant reads `topic` as `type` (Reader does it), so that
+  /// writers of another type on that topic, seen before or after, are reported.
+  void note_reader(const std::string& topic, const std::string& type);
+  /// Every mismatch seen so far, one per (topic, remote type), in the order they were seen.
+  [[nodiscard]] std::vector<TypeMismatch> type_mismatches() const;
+  /// Where mismatch warnings go (default: one line on stderr). Called from a Fast DDS thread.
+  void set_warning_sink(std::function<void(const std::string&)> sink);
+
  private:
+  class DiscoveryWatch;
+  std::unique_ptr<DiscoveryWatch> watch_;
   int domain_;
   std::optional<SecurityConfig> security_;
   eprosima::fastdds::dds::DomainParticipant* participant_ = nullptr;
@@ -291,6 +318,7 @@ class Reader {
     // guarded type everywhere; a raw or foreign registration leaves failures undetected here).
     listener_.guard = dynamic_cast<detail::GuardedType<PubSubType>*>(
         participant.get()->find_type(topic_->get_type_name()).get());
+    participant.note_reader(topic_name, topic_->get_type_name());  // type mismatches are loud
     reader_ = detail::create_reader(participant, topic_, kind, &listener_);
   }
   Reader(Participant& participant, const std::string& topic_name, Callback callback)
