@@ -61,5 +61,45 @@ TEST(HostFiles, GivenAnImuDelayOutOfRangeWhenCreatedThenConfigErrorNamesIt) {
   }
 }
 
+// Every attitude node takes the same north keys; a location (WMM2025) or a declination in
+// degrees is accepted, and a bad one is a ConfigError saying what to fix.
+TEST(HostFiles, GivenNorthSettingsWhenEachAttitudeNodeIsCreatedThenTheyAreAcceptedOrNamed) {
+  register_nodes();
+  const std::string good[] = {
+      "{declination_deg: 3.5}",
+      "{location: {lat_deg: 48.14, lon_deg: 11.58, alt_m: 520}, date: 2026-11-24}",
+      "{location: {lat_deg: -33.9, lon_deg: 151.2}, date: 2027.5, seed_field: false}",
+  };
+  const std::pair<std::string, std::string> bad[] = {
+      {"{declination_deg: 3.5, location: {lat_deg: 1, lon_deg: 2}}", "not both"},
+      {"{location: {lat_deg: 48}}", "lon_deg"},
+      {"{location: {lat_deg: 48, lon_deg: 11, height: 3}}", "location.height"},
+      {"{location: {lat_deg: 48, lon_deg: 11}, date: 2019-01-01}", "validity"},
+      {"{date: 2026-01-01}", "need a location"},
+      {"{declination_deg: 400}", "declination_deg"},
+  };
+  for (const char* type : {"parallel_kf", "selective_ekf", "gauss_newton", "vehicle"}) {
+    for (const std::string& params : good) {
+      SCOPED_TRACE(std::string(type) + " " + params);
+      DomainLease domain;
+      const runtime::HostSpec spec = runtime::parse_host(
+          YAML::Load("components: [{type: " + std::string(type) + ", name: n, params: " + params + "}]"), "test", ".");
+      EXPECT_NO_THROW(runtime::Host(spec, domain.id()));
+    }
+    for (const auto& [params, named] : bad) {
+      SCOPED_TRACE(std::string(type) + " " + params);
+      DomainLease domain;
+      const runtime::HostSpec spec = runtime::parse_host(
+          YAML::Load("components: [{type: " + std::string(type) + ", name: n, params: " + params + "}]"), "test", ".");
+      try {
+        runtime::Host host(spec, domain.id());
+        ADD_FAILURE() << "accepted";
+      } catch (const runtime::ConfigError& e) {
+        EXPECT_NE(std::string(e.what()).find(named), std::string::npos) << e.what();
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace poise::testing

@@ -19,7 +19,7 @@ TEST(AttitudeReport, MessageCarriesEulerAnglesAndDisturbanceNorm) {
   const msg::AttitudeEstimate m = to_attitude_msg(r, "pkf0", "parallel_kf");
   EXPECT_EQ(m.header().stamp_ns(), 5);
   EXPECT_EQ(m.header().seq(), 9U);
-  EXPECT_EQ(m.header().frame_id(), "world");
+  EXPECT_EQ(m.header().frame_id(), "enu_magnetic");  // no declination configured
   EXPECT_EQ(m.sensor_id(), "pkf0");
   EXPECT_EQ(m.filter_id(), "parallel_kf");
   EXPECT_NEAR(m.roll_rad(), 0.1, 1e-12);

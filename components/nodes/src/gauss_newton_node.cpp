@@ -1,6 +1,6 @@
 // Component `gauss_newton`: the Gauss-Newton orientation baseline on DDS.
 //   in:  imu            out: attitude/gauss_newton, diagnostics
-//   params: filter_file (YAML of GaussNewtonParams), diagnostics_every
+//   params: filter_file (YAML of GaussNewtonParams), diagnostics_every, north (imu_node.h north_keys())
 #include "poise/gauss_newton/gauss_newton.h"
 #include "poise/nodes/imu_node.h"
 #include "poise/nodes/register.h"
@@ -10,13 +10,17 @@
 namespace poise::nodes {
 namespace {
 
-GaussNewtonParams load_params(const runtime::ComponentSpec& spec) {
+GaussNewtonParams load_params(const runtime::ComponentSpec& spec, const NorthReference& north) {
   std::vector<std::string> known = NodeParams::keys();
+  known.insert(known.end(), north_keys().begin(), north_keys().end());
   known.emplace_back("filter_file");
   runtime::check_known_params(spec, known);
   const auto file = runtime::param<std::string>(spec, "filter_file", "");
   try {
-    return file.empty() ? GaussNewtonParams{} : load_gauss_newton_params(file);
+    GaussNewtonParams p = file.empty() ? GaussNewtonParams{} : load_gauss_newton_params(file);
+    double unused_magnitude_ut = 0.0;  // the baseline has no magnitude reference
+    seed_field_reference(north, unused_magnitude_ut, p.dip_deg);
+    return p;
   } catch (const std::exception& e) {
     throw runtime::ConfigError(spec.origin + ": " + e.what());
   }
@@ -25,7 +29,7 @@ GaussNewtonParams load_params(const runtime::ComponentSpec& spec) {
 class GaussNewtonNode : public ImuAttitudeNode {
  public:
   GaussNewtonNode(const runtime::ComponentSpec& spec, runtime::HostContext& host)
-      : ImuAttitudeNode(spec, host, "gauss_newton"), gn_(load_params(spec)) {}
+      : ImuAttitudeNode(spec, host, "gauss_newton"), gn_(load_params(spec, north())) {}
 
  protected:
   bool step(const ImuSample& sample) override { return gn_.update(sample); }

@@ -37,6 +37,62 @@ NodeParams node_params(const runtime::ComponentSpec& spec) {
   return p;
 }
 
+const std::vector<std::string>& north_keys() {
+  static const std::vector<std::string> k{"declination_deg", "location", "date", "magnetic_model",
+                                          "seed_field"};
+  return k;
+}
+
+namespace {
+std::string utc_today() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char buf[16];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d", &tm);
+  return buf;
+}
+}  // namespace
+
+NorthReference north_reference(const runtime::ComponentSpec& spec) {
+  NorthParams p;
+  p.declination_deg = runtime::param<double>(spec, "declination_deg", p.declination_deg);
+  p.date = runtime::param<std::string>(spec, "date", p.date);
+  p.model_file = runtime::param<std::string>(spec, "magnetic_model", p.model_file);
+  p.seed_field = runtime::param<bool>(spec, "seed_field", p.seed_field);
+  const std::string where = spec.origin + ": component '" + spec.name + "': ";
+  if (spec.params && spec.params["location"]) {
+    const YAML::Node loc = spec.params["location"];
+    if (!loc.IsMap()) {
+      throw runtime::ConfigError(where + "location must be a mapping {lat_deg, lon_deg, alt_m}");
+    }
+    for (const auto& kv : loc) {
+      const auto key = kv.first.as<std::string>();
+      if (key != "lat_deg" && key != "lon_deg" && key != "alt_m") {
+        throw runtime::ConfigError(where + "unknown key 'location." + key + "' (known: lat_deg, lon_deg, alt_m)");
+      }
+    }
+    if (!loc["lat_deg"] || !loc["lon_deg"]) {
+      throw runtime::ConfigError(where + "location needs lat_deg and lon_deg (alt_m optional, default 0)");
+    }
+    try {
+      p.location.lat_deg = loc["lat_deg"].as<double>();
+      p.location.lon_deg = loc["lon_deg"].as<double>();
+      p.location.alt_m = loc["alt_m"] ? loc["alt_m"].as<double>() : 0.0;
+    } catch (const YAML::Exception&) {
+      throw runtime::ConfigError(where + "location: lat_deg, lon_deg and alt_m must be numbers (deg, deg, m)");
+    }
+    p.has_location = true;
+  } else if (!p.date.empty() || !p.model_file.empty()) {
+    throw runtime::ConfigError(where + "date and magnetic_model need a location");
+  }
+  try {
+    return resolve_north(p, utc_today());
+  } catch (const std::exception& e) {
+    throw runtime::ConfigError(where + e.what());
+  }
+}
+
 ImuEstimatorNode::ImuEstimatorNode(const runtime::ComponentSpec& spec, runtime::HostContext& host,
                                    std::string component)
     : host_(host),
@@ -156,6 +212,7 @@ std::string ImuEstimatorNode::status() const {
 ImuAttitudeNode::ImuAttitudeNode(const runtime::ComponentSpec& spec, runtime::HostContext& host,
                                  std::string filter_id)
     : ImuEstimatorNode(spec, host, filter_id),
+      north_(north_reference(spec)),
       attitude_writer_(host.participant, host.topics.attitude(filter_id), dds::QosKind::kEstimate) {}
 
 bool ImuAttitudeNode::publish_estimate(const ImuSample& sample) {
@@ -165,6 +222,13 @@ bool ImuAttitudeNode::publish_estimate(const ImuSample& sample) {
   }
   report_.stamp_ns = sample.stamp_ns;
   report_.seq = sample.seq;
+  report_.frame_id = north_.frame_id();
+  if (north_.true_north) {  // no-op without a declination: outputs unchanged bit for bit
+    report_.q_world_body = north_.to_true(report_.q_world_body);
+    report_.covariance = north_.to_true(report_.covariance);
+    report_.ext_accel_world_mps2 = north_.to_true(report_.ext_accel_world_mps2);
+    report_.mag_disturbance_world_ut = north_.to_true(report_.mag_disturbance_world_ut);
+  }
   attitude_writer_.write(to_attitude_msg(report_, sensor_id(), component()));
   return true;
 }

@@ -1,6 +1,7 @@
 // Component `parallel_kf`: the parallel Kalman filter (paper 000) on DDS.
 //   in:  imu (ImuSample)      out: attitude/parallel_kf (AttitudeEstimate), diagnostics
-//   params: preset (default | paper), filter_file (YAML of ParallelKfParams), diagnostics_every
+//   params: preset (default | paper), filter_file (YAML of ParallelKfParams), diagnostics_every,
+//           north (declination_deg | location + date: imu_node.h north_keys())
 #include "poise/nodes/imu_node.h"
 #include "poise/nodes/register.h"
 #include "poise/parallel_kf/parallel_kf.h"
@@ -11,16 +12,18 @@
 namespace poise::nodes {
 namespace {
 
-ParallelKfParams load_params(const runtime::ComponentSpec& spec) {
+ParallelKfParams load_params(const runtime::ComponentSpec& spec, const NorthReference& north) {
   std::vector<std::string> known = NodeParams::keys();
+  known.insert(known.end(), north_keys().begin(), north_keys().end());
   known.insert(known.end(), {"preset", "filter_file"});
   runtime::check_known_params(spec, known);
   const auto file = runtime::param<std::string>(spec, "filter_file", "");
   try {
-    if (!file.empty()) {
-      return load_parallel_kf_params(file);
-    }
-    return ParallelKfParams::named(runtime::param<std::string>(spec, "preset", "default"));
+    ParallelKfParams p = file.empty() ? ParallelKfParams::named(runtime::param<std::string>(spec, "preset", "default"))
+                                      : load_parallel_kf_params(file);
+    seed_field_reference(north, p.field_magnitude_ut, p.dip_deg);
+    p.validate();
+    return p;
   } catch (const std::exception& e) {
     throw runtime::ConfigError(spec.origin + ": " + e.what());
   }
@@ -29,7 +32,7 @@ ParallelKfParams load_params(const runtime::ComponentSpec& spec) {
 class ParallelKfNode : public ImuAttitudeNode {
  public:
   ParallelKfNode(const runtime::ComponentSpec& spec, runtime::HostContext& host)
-      : ImuAttitudeNode(spec, host, "parallel_kf"), kf_(load_params(spec)) {}
+      : ImuAttitudeNode(spec, host, "parallel_kf"), kf_(load_params(spec, north())) {}
 
  protected:
   bool step(const ImuSample& sample) override { return kf_.update(sample); }

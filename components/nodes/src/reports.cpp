@@ -39,7 +39,7 @@ uint32_t sources_fused_bits(const SourceReports& sources) {
 msg::AttitudeEstimate to_attitude_msg(const AttitudeReport& r, const std::string& sensor_id,
                                       const std::string& filter_id) {
   msg::AttitudeEstimate m;
-  m.header(dds::make_header(r.stamp_ns, r.seq, "world"));
+  m.header(dds::make_header(r.stamp_ns, r.seq, r.frame_id));
   m.sensor_id(sensor_id);
   m.filter_id(filter_id);
   const Eigen::Quaterniond q = r.q_world_body.normalized();

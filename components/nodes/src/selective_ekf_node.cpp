@@ -3,7 +3,9 @@
 //   out: attitude/selective_ekf (AttitudeEstimate), pose/selective_ekf (PoseEstimate), diagnostics
 //   params: filter_file (YAML of SelectiveEkfParams), q_body_camera [w,x,y,z] and
 //           p_body_camera_m [x,y,z] (camera-to-IMU extrinsic; override the file), imu_delay_s
-//           (the IMU's group delay, s; overrides the file), diagnostics_every
+//           (the IMU's group delay, s; overrides the file), diagnostics_every, north
+//           (declination_deg | location + date: imu_node.h north_keys(); vision poses are then
+//           taken as true ENU and turned into the filter's magnetic ENU)
 // The EKF applies its own camera-to-body extrinsic to the camera pose (the message's body pose is
 // not used), so the extrinsic is configured in one place for the filter.
 #include "poise/dds/convert.h"
@@ -23,8 +25,9 @@
 namespace poise::nodes {
 namespace {
 
-SelectiveEkfParams load_params(const runtime::ComponentSpec& spec) {
+SelectiveEkfParams load_params(const runtime::ComponentSpec& spec, const NorthReference& north) {
   std::vector<std::string> known = NodeParams::keys();
+  known.insert(known.end(), north_keys().begin(), north_keys().end());
   known.insert(known.end(), {"filter_file", "q_body_camera", "p_body_camera_m", "imu_delay_s"});
   runtime::check_known_params(spec, known);
   SelectiveEkfParams p;
@@ -48,6 +51,7 @@ SelectiveEkfParams load_params(const runtime::ComponentSpec& spec) {
       p.p_body_camera_m = Eigen::Vector3d(t[0], t[1], t[2]);
     }
     p.imu_delay_s = runtime::param<double>(spec, "imu_delay_s", p.imu_delay_s);
+    seed_field_reference(north, p.field_magnitude_ut, p.dip_deg);
     validate(p);
   } catch (const std::exception& e) {
     throw runtime::ConfigError(spec.origin + ": " + e.what());
@@ -59,7 +63,7 @@ class SelectiveEkfNode : public ImuAttitudeNode {
  public:
   SelectiveEkfNode(const runtime::ComponentSpec& spec, runtime::HostContext& host)
       : ImuAttitudeNode(spec, host, "selective_ekf"),
-        ekf_(load_params(spec)),
+        ekf_(load_params(spec, north())),
         pose_writer_(host.participant, host.topics.pose("selective_ekf"), dds::QosKind::kEstimate) {}
 
   void start() override {
@@ -70,7 +74,8 @@ class SelectiveEkfNode : public ImuAttitudeNode {
           [this](const msg::VisionPose& m, const auto& info) {
             std::lock_guard<std::mutex> lock(mutex());
             track_input(host().topics.vision_pose, m.sensor_id().to_string(), m.header().seq(), info);
-            ekf_.update_vision(to_vision_pose(dds::camera_pose_from_msg(m)));
+            // a tag map on true north (declination set) -> the filter's magnetic ENU
+            ekf_.update_vision(to_vision_pose(north().to_magnetic(dds::camera_pose_from_msg(m))));
           },
           &vision_malformed_);
     }
@@ -111,13 +116,14 @@ class SelectiveEkfNode : public ImuAttitudeNode {
     }
     const AttitudeReport& report = last_report();
     msg::PoseEstimate pose;
-    pose.header(dds::make_header(sample.stamp_ns, sample.seq, "world"));
+    pose.header(dds::make_header(sample.stamp_ns, sample.seq, report.frame_id));
     pose.sensor_id(sensor_id());
     pose.filter_id("selective_ekf");
-    pose.position_m(dds::to_msg(ekf_.position_m()));
-    pose.velocity_mps(dds::to_msg(ekf_.state().v_mps));
+    pose.position_m(dds::to_msg(north().to_true(ekf_.position_m())));
+    pose.velocity_mps(dds::to_msg(north().to_true(ekf_.state().v_mps)));
     pose.q_world_body(dds::to_msg(report.q_world_body));
-    dds::to_array(pose_covariance_world(ekf_.state(), report.q_world_body), pose.covariance());
+    dds::to_array(north().rotate_covariance<9>(pose_covariance_world(ekf_.state(), ekf_.q_world_body()), false),
+                  pose.covariance());
     pose.sources_fused(report.sources_fused);
     pose_writer_.write(pose);
     return true;

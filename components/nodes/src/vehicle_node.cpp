@@ -3,7 +3,7 @@
 //   in:  imu (longitudinal/lateral specific force = body x/y, yaw rate = body z, magnetometer),
 //        vehicle_input (speed; the latest valid one is used with each IMU sample)
 //   out: attitude/vehicle (AttitudeEstimate), diagnostics
-//   params: filter_file (YAML of VehicleParams), diagnostics_every
+//   params: filter_file (YAML of VehicleParams), diagnostics_every, north (imu_node.h north_keys())
 // Body frame: x forward, y left, z up (the vehicle's axes; remap the IMU in the driver's YAML).
 #include "poise/nodes/imu_node.h"
 #include "poise/nodes/register.h"
@@ -17,6 +17,7 @@ namespace {
 
 VehicleParams load_params(const runtime::ComponentSpec& spec) {
   std::vector<std::string> known = NodeParams::keys();
+  known.insert(known.end(), north_keys().begin(), north_keys().end());  // read by ImuAttitudeNode
   known.emplace_back("filter_file");
   runtime::check_known_params(spec, known);
   const auto file = runtime::param<std::string>(spec, "filter_file", "");

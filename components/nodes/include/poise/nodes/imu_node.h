@@ -4,6 +4,7 @@
 // adapter; decisions about sources are the core's (poise/core/source_report.h).
 #pragma once
 
+#include "poise/core/north.h"
 #include "poise/core/types.h"
 #include "poise/nodes/input_health.h"
 #include "poise/nodes/reports.h"
@@ -32,6 +33,14 @@ struct NodeParams {
   static const std::vector<std::string>& keys();
 };
 NodeParams node_params(const runtime::ComponentSpec& spec);
+
+/// The keys of the north configuration every attitude node takes (host-file `params`):
+/// `declination_deg`, or `location: {lat_deg, lon_deg, alt_m}` with optional `date`
+/// (YYYY-MM-DD, default today, UTC), `magnetic_model` (a .COF file, default the built-in
+/// WMM2025) and `seed_field` (default true: the model's |B| and dip seed the field reference).
+const std::vector<std::string>& north_keys();
+/// Reads and resolves them (ConfigError naming the component and what to fix).
+NorthReference north_reference(const runtime::ComponentSpec& spec);
 
 /// The one node shape of every IMU-driven estimator: on each `imu` sample convert -> step the
 /// core -> publish the estimate (when the core has one) -> publish diagnostics every
@@ -104,10 +113,15 @@ class ImuAttitudeNode : public ImuEstimatorNode {
   /// The core's attitude for `sample` (stamp and seq are filled here); false when it has none.
   virtual bool attitude(AttitudeReport& report) const = 0;
   bool publish_estimate(const ImuSample& sample) override;
-  /// The report last published (for subclasses that publish more, e.g. a pose).
+  /// The report last published (for subclasses that publish more, e.g. a pose), in the output
+  /// frame (true ENU when a declination is configured).
   [[nodiscard]] const AttitudeReport& last_report() const { return report_; }
+  /// North as configured: outputs are rotated into true ENU when north().true_north; the core
+  /// works in magnetic ENU throughout.
+  [[nodiscard]] const NorthReference& north() const { return north_; }
 
  private:
+  NorthReference north_;
   AttitudeReport report_;
   dds::Writer<msg::AttitudeEstimatePubSubType> attitude_writer_;
 };

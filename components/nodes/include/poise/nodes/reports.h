@@ -31,6 +31,7 @@ struct AttitudeReport {
   bool mag_trusted = false;
   uint32_t sources_fused = 0;  ///< msg::SOURCE_* bits
   Eigen::Vector3d gyro_bias_rps{0, 0, 0};
+  std::string frame_id = "enu_magnetic";  ///< the world frame: enu_magnetic or enu_true (poise/core/north.h)
 };
 
 /// msg::SOURCE_* bits of the sources a core fused at this step (by source name: gyro/yaw_rate,
