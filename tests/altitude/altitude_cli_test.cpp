@@ -23,7 +23,7 @@ std::string run_cli(std::vector<const char*> args) {
 }
 
 TEST(AltitudeCli, JsonPrintsOneObjectWithBothRmse) {
-  const std::string out = run_cli({"sim", "altitude", "--profile", "random", "--method", "pi_cf_zupt",
+  const std::string out = run_cli({"sim", "altitude", "--scenario", "random", "--method", "pi_cf_zupt",
                                    "--seed", "2", "--json"});
   EXPECT_EQ(out.front(), '{');
   EXPECT_EQ(out.find('\n'), out.size() - 1);  // one line
@@ -34,13 +34,13 @@ TEST(AltitudeCli, JsonPrintsOneObjectWithBothRmse) {
 }
 
 TEST(AltitudeCli, TextNamesTheFigures) {
-  const std::string out = run_cli({"sim", "altitude", "--profile", "stairs_1_5m", "--method", "cf_zupt"});
+  const std::string out = run_cli({"sim", "altitude", "--scenario", "stairs_1_5m", "--method", "cf_zupt"});
   EXPECT_NE(out.find("vertical velocity RMSE"), std::string::npos);
   EXPECT_NE(out.find("height RMSE"), std::string::npos);
 }
 
 TEST(AltitudeCli, UnknownProfileOrMethodIsAUsageError) {
-  EXPECT_THROW(run_cli({"sim", "altitude", "--profile", "moon"}), CLI::ValidationError);
+  EXPECT_THROW(run_cli({"sim", "altitude", "--scenario", "moon"}), CLI::ValidationError);
   ::testing::internal::GetCapturedStdout();
   EXPECT_THROW(run_cli({"sim", "altitude", "--method", "magic"}), CLI::ValidationError);
   ::testing::internal::GetCapturedStdout();

@@ -43,7 +43,7 @@ std::vector<double> numbers_after(const std::string& text, const std::string& ke
 TEST(CameraCli, RenderThenDetectFindsTheTagsAtTheTrueCorners) {
   const fs::path dir = fresh_dir("render");
   const std::string img = (dir / "two.png").string();
-  const auto r = run({bin("poise"), "tags", "render", "--out", img, "--ids", "3,8", "--distance",
+  const auto r = run({bin("poise"), "tags", "render", "-o", img, "--ids", "3,8", "--distance",
                       "0.9", "--yaw", "25", "--pitch", "-10"},
                      60s);
   ASSERT_EQ(r.exit_code, 0) << r.output;
@@ -93,7 +93,7 @@ TEST(CameraCli, UnreadableImagesAreReportedAndFailTheCommand) {
 TEST(CameraCli, GivenTinyAndHugeImagesBetweenGoodOnesWhenDetectedThenTheyAreRefusedAndTheRunGoesOn) {
   const fs::path dir = fresh_dir("limits");
   const std::string good = (dir / "good.png").string();
-  ASSERT_EQ(run({bin("poise"), "tags", "render", "--out", good, "--ids", "3"}, 60s).exit_code, 0);
+  ASSERT_EQ(run({bin("poise"), "tags", "render", "-o", good, "--ids", "3"}, 60s).exit_code, 0);
   const std::string tiny = (dir / "tiny.pgm").string();
   std::ofstream(tiny, std::ios::binary) << "P5\n640 2\n255\n" << std::string(1280, '\x80');
   const std::string huge = (dir / "huge.pgm").string();  // a 20-byte file declaring 30000 x 30000

@@ -208,7 +208,7 @@ TEST(EvalCli, GivenAGridWhenEvaluatedWithFoldsThenInSampleAndCrossValidatedMeans
   const std::string b = shared + "/broad/14_undisturbed_slow_translation_with_breaks_B.hdf5";
   const std::string dir = ::testing::TempDir() + "/cv_cli";
   const std::string base = std::string(POISE_SOURCE_DIR) + "/config/filters/parallel_kf_broad.yaml";
-  const auto r = testing::run({testing::bin("poise"), "eval", "broad", "--config", base, "--out", dir, "--grid",
+  const auto r = testing::run({testing::bin("poise"), "eval", "broad", "--config", base, "--out-dir", dir, "--grid",
                                "mag_norm_tol=0.05,0.1", "--folds", "2", a, b},
                               std::chrono::seconds(120));
   EXPECT_EQ(r.exit_code, 0) << r.output;
@@ -216,18 +216,18 @@ TEST(EvalCli, GivenAGridWhenEvaluatedWithFoldsThenInSampleAndCrossValidatedMeans
   EXPECT_NE(r.output.find("cross-validated "), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("2-fold"), std::string::npos) << r.output;
   const std::string chosen = dir + "/chosen.yaml";
-  const auto t = testing::run({testing::bin("poise"), "tune", "--out", dir, "--write", chosen, "--grid",
+  const auto t = testing::run({testing::bin("poise"), "tune", "--out-dir", dir, "-o", chosen, "--grid",
                                "mag_norm_tol=0.05,0.1", a, b},
                               std::chrono::seconds(120));
   EXPECT_EQ(t.exit_code, 0) << t.output;
   const ParallelKfParams p = load_parallel_kf_params(chosen);
   EXPECT_TRUE(p.mag_norm_tol == 0.05 || p.mag_norm_tol == 0.1) << p.mag_norm_tol;
-  const auto bad = testing::run({testing::bin("poise"), "eval", "broad", "--out", dir, "--grid", "nokey", a},
+  const auto bad = testing::run({testing::bin("poise"), "eval", "broad", "--out-dir", dir, "--grid", "nokey", a},
                                 std::chrono::seconds(30));
   EXPECT_NE(bad.exit_code, 0);
   EXPECT_NE(bad.output.find("nokey"), std::string::npos) << bad.output;
   // a filter whose BROAD figures use their own configuration needs it as the grid's base
-  const auto no_base = testing::run({testing::bin("poise"), "eval", "broad", "--filter", "selective", "--out", dir,
+  const auto no_base = testing::run({testing::bin("poise"), "eval", "broad", "--filter", "selective", "--out-dir", dir,
                                      "--grid", "heading_norm_tolerance=0.05,0.1", a},
                                     std::chrono::seconds(30));
   EXPECT_EQ(no_base.exit_code, 1) << no_base.output;

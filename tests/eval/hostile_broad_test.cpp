@@ -147,21 +147,21 @@ TEST(HostileBroad, GivenTrialsWithoutScorableSamplesWhenEvaluatedThenTheyAreExcl
   SmallTrial ok;
   const std::string good = write_trial("01_level_rest", ok);
   const std::string dir = ::testing::TempDir() + "/hostile_eval";
-  const auto both = testing::run({testing::bin("poise"), "eval", "broad", "--out", dir, good, empty},
+  const auto both = testing::run({testing::bin("poise"), "eval", "broad", "--out-dir", dir, good, empty},
                                  std::chrono::seconds(60));
   EXPECT_EQ(both.exit_code, 0) << both.output;
   EXPECT_NE(both.output.find("mean all (1 trials)"), std::string::npos) << both.output;
   EXPECT_NE(both.output.find("excluded from the means: 1 trial(s) without scorable samples: 02_no_movement"),
             std::string::npos)
       << both.output;
-  const auto none = testing::run({testing::bin("poise"), "eval", "broad", "--out", dir, empty},
+  const auto none = testing::run({testing::bin("poise"), "eval", "broad", "--out-dir", dir, empty},
                                  std::chrono::seconds(60));
   EXPECT_NE(none.exit_code, 0) << none.output;
   EXPECT_NE(none.output.find("no trial has scorable samples"), std::string::npos) << none.output;
   SmallTrial fast;
   fast.rate_hz = 1e300;
   const std::string bad = write_trial("03_bad_rate", fast);
-  const auto rate = testing::run({testing::bin("poise"), "eval", "broad", "--out", dir, bad},
+  const auto rate = testing::run({testing::bin("poise"), "eval", "broad", "--out-dir", dir, bad},
                                  std::chrono::seconds(60));
   EXPECT_NE(rate.exit_code, 0) << rate.output;
   EXPECT_NE(rate.output.find(bad + ": attribute 'sampling_rate' = 1e+300 Hz"), std::string::npos) << rate.output;

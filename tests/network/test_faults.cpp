@@ -196,7 +196,7 @@ TEST(Faults, LinkCutRealImuDriverLosesNothingAtTheSourceAndFusionReportsSilenceA
   // As a sensor driver is deployed: SCHED_FIFO (`--rt-priority`), so that a loaded machine cannot
   // starve the serial reader (normal scheduling on a loaded 2-core machine once left it unread for
   // >0.1 s: the pty's buffer overflowed, 23 lines lost, although no DDS write was involved).
-  auto driver = lab.process("imu", {tools, "imu", "--port", link, "--name", "imu0", "--profile",
+  auto driver = lab.process("imu", {tools, "imu", "--port", link, "--name", "imu0", "--dds-profile",
                                     "poise_udp", "--domain", domain, "--status-period", "1",
                                     "--rt-priority", "50"});
   ASSERT_TRUE(wait_event(*attitude, "first", {{"source", "pkf"}}, kDiscoveryBound))

@@ -100,7 +100,7 @@ TEST(MultiHost, RealImuDriverAndParallelKfAcrossHosts) {
   ASSERT_TRUE(testing::wait_until([&] { return ::access(link.c_str(), F_OK) == 0; }, 10s))
       << board->output();
   const std::vector<std::string> driver_argv{tools,       "imu",       "--port",  link,
-                                             "--name",    "imu0",      "--profile", "poise_udp",
+                                             "--name",    "imu0",      "--dds-profile", "poise_udp",
                                              "--domain",  domain,      "--quiet"};
   auto driver = lab.process("imu", driver_argv);
   auto fusion = lab.process("fusion", {testing::bin("poise_net_real_fusion"), domain, "pkf"});

@@ -223,7 +223,7 @@ TEST(RecordReplay, KillMinus9LeavesEveryMessageOlderThanTheChunkAgeReadable) {
   constexpr int kMessages = 200;
   // GIVEN `poise record` running in a child process
   poise::testing::Child child({tool(), "record", "-o", file, "attitude/crash", "--domain",
-                               std::to_string(lease.id()), "--profile", kProfile});
+                               std::to_string(lease.id()), "--dds-profile", kProfile});
   dds::Participant pub({lease.id(), kProfile, "", "test_pub"});
   dds::Writer<msg::AttitudeEstimatePubSubType> writer(pub, "attitude/crash");
   ASSERT_TRUE(writer.wait_for_readers(1, kMatchTimeout)) << child.output();
@@ -262,7 +262,7 @@ TEST(RecordReplay, KillMinus9LeavesEveryMessageOlderThanTheChunkAgeReadable) {
   EXPECT_NE(info.output.find("RECOVERED"), std::string::npos) << info.output;
   EXPECT_NE(info.output.find("attitude/crash"), std::string::npos) << info.output;
   const auto rep = poise::testing::run({tool(), "replay", file, "--as-fast-as-possible", "--wait",
-                                        "0", "--domain", std::to_string(lease.id()), "--profile",
+                                        "0", "--domain", std::to_string(lease.id()), "--dds-profile",
                                         kProfile},
                                        30s);
   EXPECT_EQ(rep.exit_code, 0) << rep.output;
@@ -328,7 +328,7 @@ TEST(RecordCli, DurationEndsTheRecordingWithACompleteFile) {
   const std::string dir = testing::cases_dir("duration");
   const std::string file = dir + "/empty.mcap";
   const auto rec = poise::testing::run({tool(), "record", "-o", file, "--all", "--duration", "1",
-                                        "--domain", std::to_string(lease.id()), "--profile",
+                                        "--domain", std::to_string(lease.id()), "--dds-profile",
                                         kProfile},
                                        30s);
   EXPECT_EQ(rec.exit_code, 0) << rec.output;
@@ -340,7 +340,7 @@ TEST(RecordCli, DurationEndsTheRecordingWithACompleteFile) {
   // Ctrl-C (SIGINT) also ends it with a complete file.
   const std::string file2 = dir + "/interrupted.mcap";
   poise::testing::Child child({tool(), "record", "-o", file2, "imu", "--domain",
-                               std::to_string(lease.id()), "--profile", kProfile});
+                               std::to_string(lease.id()), "--dds-profile", kProfile});
   ASSERT_TRUE(poise::testing::wait_until(
       [&] { return child.output().find("waiting for publishers") != std::string::npos; }, 15s))
       << child.output();
@@ -353,7 +353,7 @@ TEST(RecordCli, DiskFullAndBadFilesGiveClearErrors) {
   poise::testing::DomainLease lease;
   // Recording to a full device stops at once with the reason.
   const auto full = poise::testing::run({tool(), "record", "-o", "/dev/full", "imu", "--domain",
-                                         std::to_string(lease.id()), "--profile", kProfile},
+                                         std::to_string(lease.id()), "--dds-profile", kProfile},
                                         30s);
   EXPECT_EQ(full.exit_code, 1) << full.output;
   EXPECT_NE(full.output.find("No space left on device"), std::string::npos) << full.output;
@@ -394,7 +394,7 @@ TEST(RecordCli, GivenAFileSizeLimitWhenItIsReachedThenWrittenIsWhatTheFileHoldsA
   poise::testing::Child child(
       {"/bin/sh", "-c",
        "trap '' XFSZ; exec \"$0\" --fsize=" + std::to_string(kLimitBytes) +
-           " \"$1\" record -o \"$2\" attitude/full --domain \"$3\" --profile \"$4\"",
+           " \"$1\" record -o \"$2\" attitude/full --domain \"$3\" --dds-profile \"$4\"",
        prlimit, tool(), file, std::to_string(lease.id()), kProfile});
   ASSERT_TRUE(writer.wait_for_readers(1, kMatchTimeout)) << child.output();
   for (int i = 0; i < kMessages && !child.wait_for(0s).has_value(); ++i) {

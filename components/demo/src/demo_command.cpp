@@ -319,7 +319,8 @@ void register_demo_commands(CLI::App& app) {
   demo->add_option("--intrinsics", o->intrinsics, "Camera intrinsics YAML (with --camera)")->check(CLI::ExistingFile);
   demo->add_option("--tags", o->tags, "Tag map YAML (with --camera)")->check(CLI::ExistingFile);
   demo->add_flag("--no-camera", o->no_camera, "Run without a camera (no selective EKF)");
-  demo->add_option("--out", o->out, "Report directory")->capture_default_str();
+  add_out_dir_option(demo, &o->out, "the report", false)->capture_default_str();
+  add_deprecated_alias(demo, "--out", "--out-dir", &o->out);
   demo->add_flag("--plain", o->plain, "Print status blocks instead of redrawing the screen");
   demo->callback([o] { run_demo(*o); });
 }

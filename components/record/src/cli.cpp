@@ -312,8 +312,8 @@ void add_record_commands(CLI::App& app) {
   auto rec = std::make_shared<RecordArgs>();
   CLI::App* record_cmd = app.add_subcommand(
       "record", "Record DDS topics to MCAP (payloads verbatim, omgidl schemas, QoS metadata).");
-  record_cmd->add_option("-o,--output", rec->output, "output FILE.mcap")->required();
-  record_cmd->add_option("topics", rec->topics, "topics to record");
+  add_output_file_option(record_cmd, &rec->output, "the recording, FILE.mcap", true);
+  record_cmd->add_option("topics", rec->topics, "Topics to record (TOPIC...)");
   record_cmd->add_flag("--all", rec->all, "record every topic of a poise type");
   record_cmd->add_option("--duration", rec->duration_s, "stop after S seconds (0: Ctrl-C)")
       ->check(CLI::NonNegativeNumber);
@@ -323,8 +323,8 @@ void add_record_commands(CLI::App& app) {
   record_cmd->add_option("--compression", rec->compression, "chunk compression")
       ->check(CLI::IsMember({"none", "zstd"}))
       ->capture_default_str();
-  record_cmd->add_option("--profile", rec->profile,
-                         "DDS participant profile (default $POISE_DDS_PROFILE / poise_default)");
+  add_dds_profile_option(record_cmd, &rec->profile);
+  add_deprecated_alias(record_cmd, "--profile", "--dds-profile", &rec->profile);
   add_domain_option(record_cmd, &rec->domain);
   record_cmd->callback([rec] {
     if (!rec->all && rec->topics.empty()) {
@@ -337,21 +337,24 @@ void add_record_commands(CLI::App& app) {
   CLI::App* replay_cmd = app.add_subcommand(
       "replay", "Republish an MCAP recording over DDS, byte for byte, with recorded timing.");
   replay_cmd->add_option("file", rep->file, "MCAP file")->required()->check(CLI::ExistingFile);
-  replay_cmd->add_option("--rate", rep->rate, "speed factor (2 = twice as fast)")
+  replay_cmd->add_option("topics", rep->topics, "Only these topics (TOPIC...; default: all)");
+  replay_cmd->add_option("--speed", rep->rate, "Speed factor: play this many times faster than recorded (2 = twice as fast)")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  add_deprecated_alias(replay_cmd, "--rate", "--speed", &rep->rate);
   replay_cmd->add_option("--start", rep->start_s, "start S seconds into the recording")
       ->check(CLI::NonNegativeNumber);
   replay_cmd->add_option("--end", rep->end_s, "stop S seconds into the recording")
       ->check(CLI::NonNegativeNumber);
-  replay_cmd->add_option("--topics", rep->topics, "only these topics");
+  add_deprecated_alias(replay_cmd, "--topics", "TOPIC... after the file", &rep->topics);
   replay_cmd->add_flag("--loop", rep->loop, "start again at the end (Ctrl-C to stop)");
   replay_cmd->add_flag("--as-fast-as-possible", rep->afap, "ignore the recorded timing");
   replay_cmd->add_option("--wait", rep->wait_s,
                          "wait up to S seconds for subscribers before publishing")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
-  replay_cmd->add_option("--profile", rep->profile, "DDS participant profile");
+  add_dds_profile_option(replay_cmd, &rep->profile);
+  add_deprecated_alias(replay_cmd, "--profile", "--dds-profile", &rep->profile);
   replay_cmd->add_flag("--allow-damaged", rep->allow_damaged,
                        "exit 0 although the file is incomplete or has unreadable chunks (the "
                        "readable part is replayed either way; exit code 3 otherwise)");
@@ -364,7 +367,7 @@ void add_record_commands(CLI::App& app) {
                  "the same input gives a byte-identical output). The output holds the input "
                  "messages plus processed/attitude/<name> per filter.");
   process_cmd->add_option("file", proc->file, "input MCAP file")->required()->check(CLI::ExistingFile);
-  process_cmd->add_option("-o,--output", proc->output, "output MCAP file")->required();
+  add_output_file_option(process_cmd, &proc->output, "the processed MCAP recording", true);
   process_cmd->add_option("--host", proc->host,
                           "host file: its estimator components (type, name, filter_file) and "
                           "topic names are used")
@@ -386,8 +389,8 @@ void add_record_commands(CLI::App& app) {
   bench_record->add_option("--seconds", brec->seconds_per_step, "seconds per rate step")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  bench_record->add_option("--profile", brec->profile, "DDS participant profile")
-      ->capture_default_str();
+  add_dds_profile_option(bench_record, &brec->profile)->capture_default_str();
+  add_deprecated_alias(bench_record, "--profile", "--dds-profile", &brec->profile);
   add_domain_option(bench_record, &brec->domain);
   bench_record->callback([brec] {
     try {
@@ -403,8 +406,8 @@ void add_record_commands(CLI::App& app) {
   bench_replay->add_option("--seconds", brep->recording_s, "length of the recording")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
-  bench_replay->add_option("--profile", brep->profile, "DDS participant profile")
-      ->capture_default_str();
+  add_dds_profile_option(bench_replay, &brep->profile)->capture_default_str();
+  add_deprecated_alias(bench_replay, "--profile", "--dds-profile", &brep->profile);
   add_domain_option(bench_replay, &brep->domain);
   bench_replay->callback([brep] {
     try {

@@ -157,7 +157,8 @@ void register_run_commands(CLI::App& app) {
     sub->add_option("--config", s->config, "Parameter file (YAML map)")->check(CLI::ExistingFile);
     sub->add_option("--set", s->sets, "Parameter override key=value (repeatable)");
     sub->add_option("--topic", s->topics, "Topic name override key=name, e.g. imu=imu2 (repeatable)");
-    sub->add_option("--profile", s->profile, "Participant profile (poise_default, poise_udp, poise_loopback)");
+    add_dds_profile_option(sub, &s->profile);
+    add_deprecated_alias(sub, "--profile", "--dds-profile", &s->profile);
     add_run_options(sub, s->run);
     const std::string key = type_name;
     sub->callback([s, key] {

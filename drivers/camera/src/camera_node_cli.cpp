@@ -116,8 +116,8 @@ void register_camera_node_cli(CLI::App& app) {
   cmd->add_option("--config", o->config, "Camera config YAML (see config/camera/camera.yaml)")
       ->check(CLI::ExistingFile);
   cmd->add_option("--name", o->name, "sensor_id of the published samples (default: the config's)");
-  cmd->add_option("--profile", o->profile,
-                  "Participant profile (poise_default, poise_udp, poise_loopback)");
+  add_dds_profile_option(cmd, &o->profile);
+  add_deprecated_alias(cmd, "--profile", "--dds-profile", &o->profile);
   add_domain_option(cmd, &o->domain);
   cmd->add_option("--duration", o->duration_s, "Stop after this many seconds (0: until Ctrl-C)")
       ->check(CLI::NonNegativeNumber);

@@ -70,9 +70,10 @@ void register_altitude_cli(CLI::App& app) {
   for (const auto& name : altitude_sim_profiles()) {
     profiles_help += " " + name;
   }
-  cmd->add_option("--profile", opt->profile, profiles_help)
+  cmd->add_option("--scenario", opt->profile, profiles_help)
       ->check(CLI::IsMember(altitude_sim_profiles()))
       ->capture_default_str();
+  add_deprecated_alias(cmd, "--profile", "--scenario", &opt->profile)->check(CLI::IsMember(altitude_sim_profiles()));
   cmd->add_option("--method", opt->method,
                   "two_step_kf (method 1), cf_zupt (2), pi_cf_zupt (3, paper), pi_cf (3 without ZUPT)")
       ->check(CLI::IsMember({"two_step_kf", "cf_zupt", "pi_cf_zupt", "pi_cf"}))

@@ -376,7 +376,8 @@ void register_imu_cli(CLI::App& app) {
                                                "config/drivers/imu.yaml)")
       ->check(CLI::ExistingFile);
   imu_cmd->add_option("--name", io->name, "sensor_id of the published samples")->capture_default_str();
-  imu_cmd->add_option("--profile", io->profile, "Participant profile (poise_default, poise_udp, poise_loopback)");
+  add_dds_profile_option(imu_cmd, &io->profile);
+  add_deprecated_alias(imu_cmd, "--profile", "--dds-profile", &io->profile);
   add_domain_option(imu_cmd, &io->domain);
   imu_cmd->add_option("--duration", io->duration_s, "Stop after this many seconds (0: until Ctrl-C)")
       ->check(CLI::NonNegativeNumber);
@@ -414,7 +415,7 @@ void register_imu_cli(CLI::App& app) {
   sim_cmd->add_option("--drift-ppm", so->drift_ppm, "Sensor clock drift vs host, ppm")
       ->check(CLI::Range(-50000.0, 50000.0));
   sim_cmd->add_option("--t-start-us", so->t_start_us, "Sensor clock at boot, us (test the 2^32 wrap)");
-  sim_cmd->add_option("--speed", so->speed, "Time scale: stream this many times faster than real "
+  sim_cmd->add_option("--speed", so->speed, "Speed factor: stream this many times faster than real "
                                             "time (sensor clock included)")
       ->capture_default_str()->check(CLI::Range(0.01, 100.0));
   sim_cmd->add_option("--mag-hard-iron", so->mag_hard_iron, "Distort the magnetometer: offset b, "

@@ -69,7 +69,7 @@ void print_progress(const imu::CalibrationSession& s, bool final_line) {
 
 void run_calibrate(const CalibrateOptions& o) {
   if (o.port.empty() == o.topic.empty()) {
-    throw Error("give exactly one of --port PATH or --topic NAME", kUsageExitCode);
+    throw Error("give exactly one of --port PATH or --imu-topic NAME", kUsageExitCode);
   }
   imu::DriverConfig config;
   if (!o.config.empty()) {
@@ -373,12 +373,13 @@ void add_calibrate_imu(CLI::App& app) {
       "imu", "Gyro bias (still period) + magnetometer hard/soft iron (ellipsoid fit over a "
              "rotation sequence) from the live stream; writes the driver YAML");
   cmd->add_option("--port", o->port, "Serial device (or sim-imu link) to read");
-  cmd->add_option("--topic", o->topic, "Or: an ImuSample topic (e.g. imu) published by `poise imu`");
+  cmd->add_option("--imu-topic", o->topic, "Or: an ImuSample topic (e.g. imu) published by `poise imu`");
+  add_deprecated_alias(cmd, "--topic", "--imu-topic", &o->topic);
   cmd->add_option("--baud", o->baud, "Baud rate for --port")->check(CLI::IsMember(imu::supported_bauds()));
-  cmd->add_option("--config", o->config, "Current driver YAML (limits, raw scales; with --topic also "
+  cmd->add_option("--config", o->config, "Current driver YAML (limits, raw scales; with --imu-topic also "
                                          "the calibration the publisher applies)")
       ->check(CLI::ExistingFile);
-  cmd->add_option("--output", o->output, "YAML to write (default: --config, else ./imu.yaml)");
+  add_output_file_option(cmd, &o->output, "the driver YAML (default: --config, else ./imu.yaml)", false);
   cmd->add_option("--still-s", o->still_s, "Still period for the gyro bias, s")->capture_default_str()
       ->check(CLI::Range(0.5, 120.0));
   cmd->add_option("--coverage", o->coverage, "Orientation coverage to reach before fitting (0..1)")

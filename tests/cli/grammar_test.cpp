@@ -1,0 +1,146 @@
+// GIVEN every `poise` subcommand (walked from `poise --help`, recursively) WHEN its --help is
+// printed THEN the shared options have one name and one meaning (docs/TOOLS.md "Command grammar"),
+// retired spellings are hidden, and a bad environment value never breaks --help.
+#include "poise/testing/testing.h"
+
+#include <gtest/gtest.h>
+
+#include <map>
+#include <regex>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace poise::testing {
+namespace {
+
+using namespace std::chrono_literals;
+
+struct Option {
+  std::string names;  // e.g. "-o,--output"
+  std::string text;   // type and description
+};
+
+struct Help {
+  int exit_code = 0;
+  std::vector<std::string> subcommands;
+  std::map<std::string, Option> options;  // by long name
+};
+
+Help help_of(const std::vector<std::string>& path) {
+  std::vector<std::string> argv{bin("poise")};
+  argv.insert(argv.end(), path.begin(), path.end());
+  argv.emplace_back("--help");
+  // A broken environment must not break --help.
+  const RunResult r = run(argv, 30s, {"POISE_DOMAIN=abc"});
+  Help h;
+  h.exit_code = r.exit_code;
+  std::istringstream in(r.output);
+  std::string line;
+  std::string section;
+  static const std::regex option_re(R"(^  ((?:-\w,)?(--[\w-]+))\s*(.*)$)");
+  static const std::regex sub_re(R"(^  ([a-z][\w-]*)\s{2,}.*$)");
+  Option* last = nullptr;
+  while (std::getline(in, line)) {
+    if (!line.empty() && line.back() == ':' && line[0] != ' ') {
+      section = line;
+      last = nullptr;
+      continue;
+    }
+    std::smatch m;
+    if (section == "Subcommands:" && std::regex_match(line, m, sub_re)) {
+      h.subcommands.push_back(m[1]);
+    } else if (section == "Options:" && std::regex_match(line, m, option_re)) {
+      last = &h.options[m[2]];
+      last->names = m[1];
+      last->text = m[3];
+    } else if (last != nullptr && line.size() > 30 && line.compare(0, 30, std::string(30, ' ')) == 0) {
+      last->text += " " + line.substr(30);  // description continued on the next line
+    }
+  }
+  return h;
+}
+
+void walk(const std::vector<std::string>& path, std::map<std::string, Help>& out) {
+  Help h = help_of(path);
+  std::string name = "poise";
+  for (const auto& p : path) {
+    name += " " + p;
+  }
+  for (const auto& sub : h.subcommands) {
+    std::vector<std::string> next = path;
+    next.push_back(sub);
+    walk(next, out);
+  }
+  out[name] = std::move(h);
+}
+
+bool contains(const std::string& text, const std::string& what) { return text.find(what) != std::string::npos; }
+
+TEST(CliGrammar, EverySubcommandsSharedOptionsHaveOneNameAndMeaning) {
+  std::map<std::string, Help> helps;
+  walk({}, helps);
+  ASSERT_GE(helps.size(), 30U) << "the walk found too few subcommands";
+  // The meaning of each shared option, as docs/TOOLS.md states it: a phrase its help must hold.
+  const std::map<std::string, std::string> meaning{
+      {"--output", "Output file:"},
+      {"--out-dir", "Output directory:"},
+      {"--dds-profile", "DDS participant profile"},
+      {"--domain", "DDS domain id"},
+      {"--json", "JSON"},
+      {"--rate", "Hz"},
+      {"--speed", "Speed factor"},
+      {"--duration", "FLOAT"},
+      {"--imu-topic", "topic"},
+      {"--topic", "key=name"},
+  };
+  // Spellings retired by the grammar (still accepted, hidden, with a deprecation note).
+  const std::vector<std::string> retired{"--out", "--profile", "--write", "--topics"};
+  std::map<std::string, int> uses;
+  for (const auto& [command, h] : helps) {
+    SCOPED_TRACE(command);
+    EXPECT_EQ(h.exit_code, 0) << "--help failed with POISE_DOMAIN=abc";
+    for (const auto& [name, opt] : h.options) {
+      ++uses[name];
+      for (const auto& r : retired) {
+        EXPECT_NE(name, r) << "retired spelling shown in --help";
+      }
+      const auto it = meaning.find(name);
+      if (it != meaning.end()) {
+        EXPECT_TRUE(contains(opt.text, it->second)) << name << " means '" << opt.text << "', expected '"
+                                                    << it->second << "'";
+      }
+      if (name == "--output") {
+        EXPECT_EQ(opt.names, "-o,--output");
+      }
+    }
+  }
+  // The table's options are really shared (else the check above checks nothing).
+  for (const char* shared : {"--output", "--out-dir", "--dds-profile", "--domain", "--json", "--duration"}) {
+    EXPECT_GE(uses[shared], 2) << shared;
+  }
+}
+
+TEST(CliGrammar, ABadPoiseDomainIsAnErrorNamingTheVariable) {
+  const RunResult r = run({bin("poise"), "topics", "--duration", "0.1"}, 30s, {"POISE_DOMAIN=abc"});
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_TRUE(contains(r.output, "POISE_DOMAIN='abc'")) << r.output;
+  EXPECT_FALSE(contains(r.output, "internal error")) << r.output;
+  // --domain given: the environment is not consulted
+  const RunResult given = run({bin("poise"), "topics", "--duration", "0.1", "--domain", "231"}, 30s,
+                              {"POISE_DOMAIN=abc"});
+  EXPECT_EQ(given.exit_code, 0) << given.output;
+}
+
+TEST(CliGrammar, AnOldSpellingStillWorksWithADeprecationNote) {
+  const std::string dir = ::testing::TempDir() + "/grammar_tags";
+  const RunResult r = run({bin("poise"), "tags", "render", "--out", dir + ".png", "--ids", "3"}, 60s);
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(contains(r.output, "'poise tags render --out' is deprecated, use -o/--output")) << r.output;
+  const RunResult missing = run({bin("poise"), "tags", "render", "--ids", "3"}, 60s);
+  EXPECT_EQ(missing.exit_code, 2) << missing.output;
+  EXPECT_TRUE(contains(missing.output, "--output")) << missing.output;
+}
+
+}  // namespace
+}  // namespace poise::testing
