@@ -687,6 +687,45 @@ TEST(SelectiveEkfCore, GivenQuatErrorLockoutWhenNoVisionThenImuQuatAcceptedAgain
   EXPECT_LT(r.final_error_deg, 2.0);
 }
 
+TEST(SelectiveEkfCore, GivenUnseenTiltStepWhenDerivedTiltDensityThenTiltFollowsTheLowPassTimeConstant) {
+  // GIVEN a static sensor at 200 Hz, converged for 30 s, then turned 5 deg about x without the gyro
+  // seeing it (the accelerometer and magnetometer turn, the gyro reads 0)
+  const double tau = SelectiveEkfParams{}.accel_lowpass_tau_s;  // the derived tilt time constant
+  SelectiveEkf ekf{SelectiveEkfParams{}};
+  const int64_t dt_ns = 5'000'000;
+  const double step_deg = 5.0;
+  const Eigen::Quaterniond turn(Eigen::AngleAxisd(step_deg * kRadPerDeg, Eigen::Vector3d::UnitX()));
+  std::vector<std::pair<double, double>> checks;  // (t after the step, s; tilt error, deg)
+  for (int k = 0; k <= 30 * 200 + 4 * static_cast<int>(tau * 200); ++k) {
+    ImuSample s = level_sample(int64_t{1'000'000'000} + k * dt_ns);
+    const double t_after = (k - 30 * 200) * 0.005;
+    if (t_after >= 0.0) {
+      s.accel_mps2 = turn.conjugate() * s.accel_mps2;  // body-frame readings of the turned sensor
+      s.mag_ut = turn.conjugate() * s.mag_ut;
+    }
+    ASSERT_TRUE(ekf.update_imu(s));
+    for (double tc : {1.0, 2.0, 3.0}) {
+      if (std::abs(t_after - tc * tau) < 1e-9) {
+        const Eigen::Vector3d up_est = ekf.state().q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
+        const Eigen::Vector3d up_true = s.accel_mps2.normalized();
+        checks.emplace_back(t_after, angle_between_vectors(up_est, up_true) * kDegPerRad);
+      }
+    }
+  }
+  // THEN the tilt follows the accelerometer's low-pass no more slowly than a second lag of the same
+  // time constant, e(t) <= e0 (1 + t / tau) exp(-t / tau) (two equal first-order lags in series),
+  // and never ahead of the low-pass it measures, e(t) >= e0 exp(-t / tau) (that lag alone). (The
+  // old fixed density, a ~6 s tilt time constant, is 3.8 deg at t = tau: above the first bound.)
+  constexpr double kTolDeg = 0.05;  // rounding of the discrete-time filter against the continuous lags
+  ASSERT_EQ(checks.size(), 3u);
+  for (const auto& [t, err] : checks) {
+    const double two_lags = step_deg * (1.0 + t / tau) * std::exp(-t / tau);
+    const double one_lag = step_deg * std::exp(-t / tau);
+    EXPECT_LE(err, two_lags + kTolDeg) << "t = " << t << " s";
+    EXPECT_GE(err, one_lag - kTolDeg) << "t = " << t << " s";
+  }
+}
+
 TEST(SelectiveEkfCore, GivenHeadingOffWithoutVisionWhenSplitThenMagnetometerTrustedAndPullsBack) {
   // GIVEN the same offset with the split measurements (default), 60 s (several time constants)
   const HeadingOffRun r = run_heading_off(SelectiveEkfParams{}, 6000);
@@ -707,13 +746,14 @@ void expect_same_params(const SelectiveEkfParams& a, const SelectiveEkfParams& b
   EXPECT_EQ(a.sigma_gyro_rps, b.sigma_gyro_rps);
   EXPECT_EQ(a.imu_measurement, b.imu_measurement);
   EXPECT_EQ(a.accel_lowpass_tau_s, b.accel_lowpass_tau_s);
-  EXPECT_EQ(a.sigma_tilt_rad_sqrt_s, b.sigma_tilt_rad_sqrt_s);
+  EXPECT_TRUE(same_or_both_nan(a.sigma_tilt_rad_sqrt_s, b.sigma_tilt_rad_sqrt_s));
   EXPECT_EQ(a.tilt_accel_ref_mps2, b.tilt_accel_ref_mps2);
   EXPECT_EQ(a.gravity_mps2, b.gravity_mps2);
   EXPECT_EQ(a.heading_dip_tolerance_deg, b.heading_dip_tolerance_deg);
   EXPECT_EQ(a.heading_norm_tolerance, b.heading_norm_tolerance);
   EXPECT_EQ(a.aiding_period_s, b.aiding_period_s);
   EXPECT_EQ(a.sigma_heading_rad_sqrt_s, b.sigma_heading_rad_sqrt_s);
+  EXPECT_EQ(a.heading_disturbance_weight, b.heading_disturbance_weight);
   EXPECT_EQ(a.rest_detection, b.rest_detection);
   EXPECT_EQ(a.rest_gyro_max_rps, b.rest_gyro_max_rps);
   EXPECT_EQ(a.rest_accel_max_mps2, b.rest_accel_max_mps2);

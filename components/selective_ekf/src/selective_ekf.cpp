@@ -62,12 +62,16 @@ void validate(const SelectiveEkfParams& p) {
   check.positive(p.sigma_gyro_rps, "sigma_gyro_rps", "rad/s");
   check.non_negative(p.sigma_bias_walk, "sigma_bias_walk", "rad/s/sqrt(s)");
   check.non_negative(p.accel_lowpass_tau_s, "accel_lowpass_tau_s", "s, 0 = raw accelerometer");
-  check.positive(p.sigma_tilt_rad_sqrt_s, "sigma_tilt_rad_sqrt_s", "rad sqrt(s)");
+  check.require(std::isnan(p.sigma_tilt_rad_sqrt_s) || p.sigma_tilt_rad_sqrt_s > 0.0, "sigma_tilt_rad_sqrt_s",
+                "> 0 (rad sqrt(s)) or null (derived from accel_lowpass_tau_s)");
+  check.require(!std::isnan(p.sigma_tilt_rad_sqrt_s) || p.accel_lowpass_tau_s > 0.0, "accel_lowpass_tau_s",
+                "> 0 (s) while sigma_tilt_rad_sqrt_s is null (it sets the tilt time constant)");
   check.non_negative(p.tilt_accel_ref_mps2, "tilt_accel_ref_mps2", "m/s^2, 0 = off");
   check.require(p.gravity_mps2 > 5.0 && p.gravity_mps2 < 15.0, "gravity_mps2", "in (5, 15) (m/s^2)");
   check.non_negative(p.output_max_correction_dps, "output_max_correction_dps", "deg/s, 0 = off");
   check.require(p.aiding_period_s >= 0.0 && p.aiding_period_s <= 1.0, "aiding_period_s", "in [0, 1] (s)");
   check.positive(p.sigma_heading_rad_sqrt_s, "sigma_heading_rad_sqrt_s", "rad sqrt(s)");
+  check.non_negative(p.heading_disturbance_weight, "heading_disturbance_weight", "0 = off");
   check.positive(p.rest_gyro_max_rps, "rest_gyro_max_rps", "rad/s");
   check.positive(p.rest_accel_max_mps2, "rest_accel_max_mps2", "m/s^2");
   check.non_negative(p.rest_min_s, "rest_min_s", "s");
@@ -405,6 +409,12 @@ void SelectiveEkf::process_imu(const ImuInput& in_raw, bool first_pass) {
     // Tilt and heading are spectral densities: fusing them every aiding_period_s with the variance
     // of the elapsed interval carries the same information as every sample (their bandwidth is
     // far below the aiding rate) at a fraction of the cost.
+    // Tilt noise density: configured, or the one that makes the tilt's time constant the
+    // low-pass's (with the sample interval: the gyro's share of the attitude noise)
+    in.tilt_sigma = std::isnan(p_.sigma_tilt_rad_sqrt_s)
+                        ? p_.accel_lowpass_tau_s * std::sqrt(p_.sigma_attitude_walk * p_.sigma_attitude_walk +
+                                                             p_.sigma_gyro_rps * p_.sigma_gyro_rps * std::max(in.dt_s, 0.0))
+                        : p_.sigma_tilt_rad_sqrt_s;
     // (bounded: across a re-anchored time gap nothing was integrated)
     if (x_.last_aiding_ns >= 0) {
       in.dt_s = std::min(static_cast<double>(now - x_.last_aiding_ns) * kNsToS,
@@ -529,7 +539,7 @@ void SelectiveEkf::process_tilt(const ImuInput& in, bool first_pass) {
   h.block<1, 3>(0, kTh) = e1.transpose();
   h.block<1, 3>(1, kTh) = e2.transpose();
   const Eigen::Vector2d innov(e1.dot(c), e2.dot(c));
-  const double r = p_.sigma_tilt_rad_sqrt_s * p_.sigma_tilt_rad_sqrt_s / in.dt_s * in.tilt_var_scale;
+  const double r = in.tilt_sigma * in.tilt_sigma / in.dt_s * in.tilt_var_scale;
   fuse<2>(h, innov, Eigen::Vector2d::Constant(r), kReportGateSigma, false, st);
   record(st, Decision::kFused, in.stamp_ns, first_pass);
 }
@@ -555,6 +565,11 @@ void SelectiveEkf::process_heading(const ImuInput& in, bool first_pass, bool anc
   Eigen::Matrix<double, 1, kN> h = Eigen::Matrix<double, 1, kN>::Zero();
   h.block<1, 3>(0, kTh) = u.transpose();
   double r = p_.sigma_heading_rad_sqrt_s * p_.sigma_heading_rad_sqrt_s / in.dt_s;
+  if (p_.heading_disturbance_weight > 0.0 && std::isfinite(x_.field_gate.last_norm_ut)) {
+    const double rn = x_.field_gate.norm_ratio(gp_);
+    const double rd = x_.field_gate.dip_ratio();
+    r *= 1.0 + p_.heading_disturbance_weight * (rn * rn + rd * rd);
+  }
   const Eigen::Matrix<double, 1, 1> innov(dpsi);
   if (!trusted && p_.action == ImuQuatAction::kDrop) {
     fuse<1>(h, innov, Eigen::Matrix<double, 1, 1>(r), kReportGateSigma, false, sh, true);

@@ -22,7 +22,8 @@
 //     tilt:      z_up = the accelerometer low-passed (accel_lowpass_tau_s) in a gyro-propagated,
 //                almost inertial frame, normalised; u = R(q)^T e_z. Two rows e_i . (z_up x u) = dth
 //                . e_i (e_1, e_2 orthonormal, perpendicular to u), H = [0 e_i^T 0 0 0]. Variance per
-//                row: spectral density sigma_tilt^2 / h, inflated by the recent external
+//                row: spectral density sigma_tilt^2 / h (sigma_tilt derived from
+//                accel_lowpass_tau_s by default: see the parameter), inflated by the recent external
 //                acceleration (| |a| - g | low-passed, see tilt_accel_ref_mps2).
 //     heading:   dpsi = rotation about world up taking R(q) m (horizontal part) onto magnetic north
 //                (+y ENU); one row dpsi = u . dth, H = [0 u^T 0 0 0]; variance sigma_heading^2 / h;
@@ -121,9 +122,13 @@ struct SelectiveEkfParams {
   /// accelerations average out over it while gravity (fixed in that frame) does not.
   double accel_lowpass_tau_s = 3.0;
   /// kSplit: tilt measurement noise spectral density, rad sqrt(s) (per-sample variance
-  /// sigma^2 / h). With the attitude process noise this sets the tilt time constant (about
-  /// sigma_tilt / sqrt(sigma_attitude_walk^2 + sigma_gyro^2 h): ~6 s with the defaults at 100-300 Hz).
-  double sigma_tilt_rad_sqrt_s = 0.012;
+  /// sigma^2 / h). With the attitude process noise q = sigma_attitude_walk^2 + sigma_gyro^2 h
+  /// (rad^2/s) this sets the tilt's correction time constant, sigma_tilt / sqrt(q). NaN (default):
+  /// derived so that the time constant is accel_lowpass_tau_s, sigma_tilt = tau sqrt(q) (0.0063 at
+  /// 285 Hz and 0.0067 at 100 Hz with the defaults): the low-pass has removed the external
+  /// accelerations that last less than tau, so correcting more slowly than that only leaves
+  /// the gyro's drift in for longer, and correcting faster re-admits what the low-pass removed.
+  double sigma_tilt_rad_sqrt_s = std::nan("");
   /// kSplit: external-acceleration scale of the tilt trust, m/s^2: the tilt variance is multiplied
   /// by 1 + (a_ext / tilt_accel_ref_mps2)^2 with a_ext the RMS of | |accel| - g | over
   /// accel_lowpass_tau_s. 0 = constant trust.
@@ -153,6 +158,12 @@ struct SelectiveEkfParams {
   double aiding_period_s = 0.02;
   /// kSplit: heading (magnetometer) measurement noise spectral density, rad sqrt(s).
   double sigma_heading_rad_sqrt_s = 0.04;
+  /// kSplit: the heading variance is multiplied by 1 + w (r_norm^2 + r_dip^2), r = the field's
+  /// deviation from the gate's reference over the gate's tolerance (1 at the gate): a field just
+  /// inside the gate is trusted less than a clean one. 1: the variance doubles at the gate, where
+  /// the deviation equals the tolerance (the tolerance is the scale of a field error the gate lets
+  /// through). 0 = off.
+  double heading_disturbance_weight = 1.0;
   // ---- rest detection (zero-rate measurement, observes the gyro bias)
   bool rest_detection = true;
   double rest_gyro_max_rps = 2.0 * kRadPerDeg;  ///< rest if the low-passed |gyro| stays below, rad/s
@@ -363,6 +374,7 @@ class SelectiveEkfFullState {
     // derived by preprocess() from the state's SelectiveEkfPreState (re-derived in replays)
     Eigen::Vector3d up_meas{0, 0, 1};   ///< kSplit: low-passed accelerometer direction (body)
     double tilt_var_scale = 1.0;        ///< kSplit: external-acceleration inflation
+    double tilt_sigma = 0.0;            ///< kSplit: sigma_tilt_rad_sqrt_s (configured or derived)
     bool rest = false;
   };
   struct HistoryEntry {
