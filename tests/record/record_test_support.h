@@ -4,17 +4,24 @@
 
 #include "poise/testing/testing.h"
 
+#include <gtest/gtest.h>
+
 #include <poise/msg/estimatesPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
 
 #include <fastdds/rtps/common/SerializedPayload.h>
 
 #include <chrono>
+#include <cmath>
+#include <random>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <fcntl.h>
 #include <fstream>
+#include <sstream>
 #include <string>
+#include <thread>
 #include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -47,6 +54,26 @@ inline msg::ImuSample make_imu(uint32_t i, int64_t stamp_ns) {
   m.valid().mag(i % 2 == 0);
   m.valid().pressure(true);
   m.valid().temperature(false);
+  return m;
+}
+
+/// Sample I (stamp 1 s + I * PERIOD_NS) of a level sensor turning about up at YAW_RATE_RPS, with
+/// a consistent magnetometer (world field [0, 20, -40] uT), pressure, and seeded noise (0.02 in
+/// each unit; gyro 0.002 rad/s) drawn from RNG: a skipped, repeated or reordered sample changes
+/// what a filter estimates.
+inline msg::ImuSample turning_imu(uint32_t i, int64_t period_ns, double yaw_rate_rps, std::mt19937& rng) {
+  std::normal_distribution<double> noise(0.0, 0.02);
+  const double yaw = yaw_rate_rps * static_cast<double>(static_cast<int64_t>(i) * period_ns) * 1e-9;
+  // magnetometer in the body frame: the world field rotated by -yaw about up
+  const double mx = 20.0 * std::sin(yaw);
+  const double my = 20.0 * std::cos(yaw);
+  msg::ImuSample m = make_imu(i, 1'000'000'000LL + static_cast<int64_t>(i) * period_ns);
+  m.accel_mps2(vec3(noise(rng), noise(rng), 9.81 + noise(rng)));
+  m.gyro_rps(vec3(noise(rng) * 0.1, noise(rng) * 0.1, yaw_rate_rps + noise(rng) * 0.1));
+  m.mag_ut(vec3(mx + noise(rng), my + noise(rng), -40.0 + noise(rng)));
+  m.pressure_pa(101325.0 + 10.0 * noise(rng));
+  m.valid().mag(true);
+  m.valid().pressure(true);
   return m;
 }
 
@@ -121,6 +148,21 @@ std::vector<uint8_t> serialize(const Message& message) {
   return std::vector<uint8_t>(payload.data, payload.data + payload.length);
 }
 
+/// The message of a serialized payload; a test failure (and a default message) when it does not
+/// deserialize.
+template <class PubSubType>
+typename PubSubType::type deserialize(const std::vector<uint8_t>& bytes) {
+  PubSubType type;
+  eprosima::fastrtps::rtps::SerializedPayload_t payload(static_cast<uint32_t>(bytes.size()));
+  std::memcpy(payload.data, bytes.data(), bytes.size());
+  payload.length = static_cast<uint32_t>(bytes.size());
+  typename PubSubType::type out;
+  if (!type.deserialize(&payload, &out)) {
+    ADD_FAILURE() << "a payload of " << bytes.size() << " bytes did not deserialize";
+  }
+  return out;
+}
+
 /// One expected message for validate.mjs.
 struct ExpectedValue {
   std::string topic;
@@ -159,6 +201,41 @@ inline void write_expected(const std::string& mcap_path, int64_t messages, int m
     out << ",\"value\":" << v.value_json << "}" << (i + 1 < values.size() ? ",\n" : "\n");
   }
   out << "]}\n";
+}
+
+/// Waits (bounded: 10 s) until COUNT stops growing for 500 ms.
+template <typename Count>
+void wait_quiet(Count count) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  uint64_t last = count();
+  int stable = 0;
+  while (std::chrono::steady_clock::now() < deadline && stable < 5) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const uint64_t now = count();
+    stable = now == last ? stable + 1 : 0;
+    last = now;
+  }
+}
+
+/// The project's QoS profiles with the sensor streams made reliable and deep, so that no sample
+/// is lost between publisher, component, recorder and replayer on a loaded machine (for tests
+/// about reproducing estimates, not about best-effort loss, which test_record_dds covers).
+/// Returns the file path (in DIR).
+inline std::string lossless_profiles(const std::string& dir) {
+  std::ifstream in(poise::testing::source_path("config/qos/poise_profiles.xml"));
+  std::ostringstream text;
+  text << in.rdbuf();
+  std::string xml = text.str();
+  auto replace_all = [&xml](const std::string& from, const std::string& to) {
+    for (size_t at = xml.find(from); at != std::string::npos; at = xml.find(from, at + to.size())) {
+      xml.replace(at, from.size(), to);
+    }
+  };
+  replace_all("<kind>BEST_EFFORT</kind>", "<kind>RELIABLE</kind>");
+  replace_all("<depth>32</depth>", "<depth>4096</depth>");
+  const std::string path = dir + "/lossless_profiles.xml";
+  std::ofstream(path) << xml;
+  return path;
 }
 
 /// A fresh directory for validator cases under the build tree.

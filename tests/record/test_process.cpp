@@ -20,7 +20,8 @@ using namespace std::chrono_literals;
 constexpr int kImu = 500;
 constexpr int kRejectEvery = 50;
 constexpr int kInitAfter = 10;
-constexpr double kQuatTolerance = 0.0;  // the payload carries the doubles exactly
+// The shared message conversion (nodes::to_attitude_msg) normalises the quaternion: a few ulp.
+constexpr double kQuatTolerance = 1e-15;
 constexpr double kAngleToleranceRad = 1e-12;
 
 /// A deterministic stand-in filter: yaw = 0.01 rad per accepted sample; rejects every 50th
@@ -139,7 +140,9 @@ TEST(Process, RunsFiltersOfflineDeterministicallyAndCopiesTheInput) {
       EXPECT_NEAR(e.yaw_rad(), euler_zyx_from_quat(want).z(), kAngleToleranceRad);
       EXPECT_EQ(m->publish_time_ns, static_cast<uint64_t>(e.header().stamp_ns()));
       EXPECT_EQ(e.filter_id().to_string(), "fake");
-      EXPECT_EQ(e.sensor_id().to_string(), "imu0");
+      EXPECT_EQ(e.sensor_id().to_string(), "fake");  // a filter alone is its own instance
+      // the input sample's seq (write_input: stamp = 5 s + seq * 10 ms)
+      EXPECT_EQ(e.header().stamp_ns(), 5'000'000'000LL + static_cast<int64_t>(e.header().seq()) * 10'000'000LL);
     }
   }
   EXPECT_EQ(per_topic["imu"], static_cast<uint64_t>(kImu + 1));
@@ -176,7 +179,7 @@ TEST(Process, CliRunsRealFiltersFromAHostFileAndIsReproducible) {
                                         "--host", host},
                                        60s);
     ASSERT_EQ(r.exit_code, 0) << r.output;
-    EXPECT_NE(r.output.find("component 'imu0' (imu_driver) has no offline attitude filter"),
+    EXPECT_NE(r.output.find("component 'imu0' (imu_driver) is not an estimator: skipped"),
               std::string::npos)
         << r.output;
     EXPECT_NE(r.output.find("100%"), std::string::npos) << r.output;
@@ -188,8 +191,10 @@ TEST(Process, CliRunsRealFiltersFromAHostFileAndIsReproducible) {
   for (const auto& [id, c] : out.channels()) {
     topics.insert(c.topic);
   }
-  EXPECT_EQ(topics.count("processed/attitude/pkf"), 1u);
-  EXPECT_EQ(topics.count("processed/attitude/gn"), 1u);
+  // the live topics of the components under processed/ (sensor_id = the instance name)
+  EXPECT_EQ(topics.count("processed/attitude/parallel_kf"), 1u);
+  EXPECT_EQ(topics.count("processed/attitude/gauss_newton"), 1u);
+  EXPECT_EQ(topics.count("processed/diagnostics"), 1u);
   // Unknown filter names are a clear error.
   const auto bad = poise::testing::run({std::string(POISE_RECORD_TOOL), "process", input, "-o",
                                         dir + "/bad.mcap", "--filter", "no_such_filter"},
@@ -198,7 +203,9 @@ TEST(Process, CliRunsRealFiltersFromAHostFileAndIsReproducible) {
   EXPECT_NE(bad.output.find("no_such_filter"), std::string::npos) << bad.output;
 }
 
-TEST(Process, SelectiveEkfComponentRunsOfflineOnTheImuAndSaysWhatIsLeftOut) {
+// A selective_ekf component runs as its live node does: attitude, pose and diagnostics, with the
+// host's parameters (an unknown one is refused as the node refuses it); --set changes one.
+TEST(Process, SelectiveEkfComponentPublishesWhatItsLiveNodePublishes) {
   const std::string dir = testing::cases_dir("process-selective");
   const std::string input = dir + "/input.mcap";
   write_input(input);
@@ -208,15 +215,31 @@ TEST(Process, SelectiveEkfComponentRunsOfflineOnTheImuAndSaysWhatIsLeftOut) {
   const std::string out = dir + "/out.mcap";
   const auto r = poise::testing::run({poise::testing::bin("poise"), "process", input, "-o", out, "--host", host}, 60s);
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  EXPECT_NE(r.output.find("'sekf' (selective_ekf) runs on the IMU only"), std::string::npos) << r.output;
-  EXPECT_NE(r.output.find("imu_delay_s are not applied offline"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("comparison:"), std::string::npos) << r.output;
   const McapReader reader = McapReader::open_file(out);
-  uint64_t estimates = 0;
+  std::map<std::string, uint64_t> per_topic;
   MessageCursor cursor = reader.messages();
   while (const MessageView* m = cursor.next()) {
-    estimates += m->channel->topic == "processed/attitude/sekf" ? 1 : 0;
+    ++per_topic[m->channel->topic];
   }
-  EXPECT_GT(estimates, 0u);
+  EXPECT_GT(per_topic["processed/attitude/selective_ekf"], 0u);
+  EXPECT_EQ(per_topic["processed/pose/selective_ekf"], per_topic["processed/attitude/selective_ekf"]);
+  EXPECT_EQ(per_topic["processed/diagnostics"], static_cast<uint64_t>(kImu));  // one per valid sample
+  const auto bad = poise::testing::run({poise::testing::bin("poise"), "process", input, "-o",
+                                        dir + "/bad.mcap", "--host", host, "--set", "sekf.no_such_key=1"},
+                                       60s);
+  EXPECT_EQ(bad.exit_code, 1) << bad.output;
+  EXPECT_NE(bad.output.find("no_such_key"), std::string::npos) << bad.output;
+  const auto unknown = poise::testing::run({poise::testing::bin("poise"), "process", input, "-o",
+                                            dir + "/bad.mcap", "--host", host, "--set", "nobody.imu_delay_s=0"},
+                                           60s);
+  EXPECT_EQ(unknown.exit_code, 2) << unknown.output;
+  EXPECT_NE(unknown.output.find("no component named 'nobody'"), std::string::npos) << unknown.output;
+  const auto changed = poise::testing::run({poise::testing::bin("poise"), "process", input, "-o",
+                                            dir + "/changed.mcap", "--host", host, "--set",
+                                            "sekf.imu_delay_s=0.02"},
+                                           60s);
+  EXPECT_EQ(changed.exit_code, 0) << changed.output;
 }
 
 /// Flips one byte inside the records of chunk `k` of `path` (its CRC no longer matches); returns

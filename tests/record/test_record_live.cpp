@@ -15,9 +15,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
-#include <fstream>
 #include <random>
-#include <sstream>
 #include <thread>
 
 namespace poise::record {
@@ -28,7 +26,6 @@ using namespace std::chrono_literals;
 // six participants in one process, more than the loopback profile's unicast initial peers cover.
 constexpr const char* kProfile = "poise_default";
 constexpr auto kMatchTimeout = 30s;  // discovery under a loaded CI machine
-constexpr auto kDrainTimeout = 10s;
 constexpr int kSamples = 400;
 constexpr int64_t kPeriodNs = 5'000'000;      // 200 Hz
 constexpr double kYawRateRps = 0.5;
@@ -71,20 +68,6 @@ double worst_difference(const std::map<int64_t, Eigen::Quaterniond>& a,
   return worst;
 }
 
-/// Waits (bounded) until COUNT stops growing for 500 ms.
-template <typename Count>
-void wait_quiet(Count count) {
-  const auto deadline = std::chrono::steady_clock::now() + kDrainTimeout;
-  uint64_t last = count();
-  int stable = 0;
-  while (std::chrono::steady_clock::now() < deadline && stable < 5) {
-    std::this_thread::sleep_for(100ms);
-    const uint64_t now = count();
-    stable = now == last ? stable + 1 : 0;
-    last = now;
-  }
-}
-
 runtime::HostSpec pkf_host() {
   static const bool registered = [] {
     nodes::register_parallel_kf_node(runtime::ComponentRegistry::instance());
@@ -102,31 +85,10 @@ runtime::HostSpec pkf_host() {
   return spec;
 }
 
-/// The project's QoS profiles with the sensor streams made reliable and deep, so that no IMU
-/// sample is lost between publisher, component, recorder and replayer on a loaded machine: this
-/// test is about record/replay/process reproducing estimates, not about best-effort loss (the
-/// best-effort path is covered by test_record_dds). Returns the file path.
-std::string lossless_profiles(const std::string& dir) {
-  std::ifstream in(poise::testing::source_path("config/qos/poise_profiles.xml"));
-  std::ostringstream text;
-  text << in.rdbuf();
-  std::string xml = text.str();
-  auto replace_all = [&xml](const std::string& from, const std::string& to) {
-    for (size_t at = xml.find(from); at != std::string::npos; at = xml.find(from, at + to.size())) {
-      xml.replace(at, from.size(), to);
-    }
-  };
-  replace_all("<kind>BEST_EFFORT</kind>", "<kind>RELIABLE</kind>");
-  replace_all("<depth>32</depth>", "<depth>4096</depth>");
-  const std::string path = dir + "/lossless_profiles.xml";
-  std::ofstream(path) << xml;
-  return path;
-}
-
 TEST(RecordLive, ProcessAndReplayReproduceTheLiveEstimates) {
   poise::testing::DomainLease lease;
   const std::string dir = testing::cases_dir("live");
-  ASSERT_EQ(::setenv("POISE_QOS_FILE", lossless_profiles(dir).c_str(), 1), 0);
+  ASSERT_EQ(::setenv("POISE_QOS_FILE", testing::lossless_profiles(dir).c_str(), 1), 0);
   const std::string live_file = dir + "/live.mcap";
   std::printf("seed %u\n", kSeed);
 
@@ -159,23 +121,13 @@ TEST(RecordLive, ProcessAndReplayReproduceTheLiveEstimates) {
     }
     // WHEN the IMU turns at 0.5 rad/s about up for 2 s (200 Hz, noisy)
     std::mt19937 rng(kSeed);
-    std::normal_distribution<double> noise(0.0, 0.02);
-    const Eigen::Vector3d mag_world(0.0, 20.0, -40.0);
     for (int i = 0; i < kSamples; ++i) {
-      const double yaw = kYawRateRps * i * kPeriodNs * 1e-9;
-      const Eigen::Matrix3d r_body_world =
-          Eigen::AngleAxisd(-yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-      const Eigen::Vector3d mag = r_body_world * mag_world;
-      auto m = testing::make_imu(static_cast<uint32_t>(i), 1'000'000'000LL + i * kPeriodNs);
-      m.accel_mps2(testing::vec3(noise(rng), noise(rng), 9.81 + noise(rng)));
-      m.gyro_rps(testing::vec3(noise(rng) * 0.1, noise(rng) * 0.1, kYawRateRps + noise(rng) * 0.1));
-      m.mag_ut(testing::vec3(mag.x() + noise(rng), mag.y() + noise(rng), mag.z() + noise(rng)));
-      m.valid().mag(true);
+      auto m = testing::turning_imu(static_cast<uint32_t>(i), kPeriodNs, kYawRateRps, rng);
       m.valid().pressure(false);
       imu.write(m);
       std::this_thread::sleep_for(std::chrono::nanoseconds(kPeriodNs));
     }
-    wait_quiet([&] { return recorder.written(); });
+    testing::wait_quiet([&] { return recorder.written(); });
     host.stop();
   }
   recorder.request_stop();
@@ -240,7 +192,7 @@ TEST(RecordLive, ProcessAndReplayReproduceTheLiveEstimates) {
         const ReplayStats ps = replay(po);
         EXPECT_EQ(ps.schedule.delivered, static_cast<uint64_t>(kSamples)) << plog.str();
       }
-      wait_quiet([&] { return recorder2.written(); });
+      testing::wait_quiet([&] { return recorder2.written(); });
       host.stop();
     }
     recorder2.request_stop();

@@ -10,7 +10,7 @@
 #include "poise/nodes/imu_node.h"
 #include "poise/nodes/register.h"
 
-#include <poise/msg/estimatesPubSubTypes.h>
+#include <poise/msg/estimates.h>
 
 #include <optional>
 
@@ -56,17 +56,16 @@ msg::AltitudeEstimate to_altitude_msg(const AltitudeEstimate& e, const AltitudeP
   return out;
 }
 
-class AltitudeNode : public ImuEstimatorNode {
+class AltitudeStep : public EstimatorStep {
  public:
-  AltitudeNode(const runtime::ComponentSpec& spec, runtime::HostContext& host)
-      : ImuEstimatorNode(spec, host, "altitude"),
+  explicit AltitudeStep(const runtime::ComponentSpec& spec)
+      : EstimatorStep(spec.name, "altitude"),
         relative_(runtime::param<bool>(spec, "relative_to_start", false)),
-        filter_(load_params(spec)),
-        writer_(host.participant, host.topics.altitude, dds::QosKind::kEstimate) {}
+        filter_(load_params(spec)) {}
 
- protected:
+  [[nodiscard]] unsigned kinds() const override { return kAltitudeOut; }
   bool step(const ImuSample& sample) override { return filter_.update(sample); }
-  bool publish_estimate(const ImuSample& sample) override {
+  bool estimate(const ImuSample& sample, StepOutputs& out) override {
     const AltitudeEstimate& e = filter_.estimate();
     if (!e.valid) {
       return false;
@@ -75,7 +74,7 @@ class AltitudeNode : public ImuEstimatorNode {
     if (!zero) {
       return false;  // relative_to_start: the zero is still being averaged
     }
-    writer_.write(to_altitude_msg(e, filter_.params(), *zero, sample, sensor_id()));
+    out.altitude(to_altitude_msg(e, filter_.params(), *zero, sample, sensor_id()));
     return true;
   }
   void diagnostics(DiagnosticsReport& diag) const override {
@@ -88,16 +87,18 @@ class AltitudeNode : public ImuEstimatorNode {
   bool relative_;
   AltitudeFilter filter_;
   StartZero start_zero_;
-  dds::Writer<msg::AltitudeEstimatePubSubType> writer_;
 };
 
 }  // namespace
 
+std::unique_ptr<EstimatorStep> make_altitude_step(const runtime::ComponentSpec& spec) {
+  return std::make_unique<AltitudeStep>(spec);
+}
+
 void register_altitude_node(runtime::ComponentRegistry& registry) {
-  registry.add({"altitude", "Height and vertical velocity from IMU + barometer (PI complementary filter + ZUPT)",
-                [](const runtime::ComponentSpec& spec, runtime::HostContext& host) {
-                  return std::make_unique<AltitudeNode>(spec, host);
-                }});
+  registry.add(estimator_component(
+      "altitude", "Height and vertical velocity from IMU + barometer (PI complementary filter + ZUPT)",
+      &make_altitude_step));
 }
 
 }  // namespace poise::nodes

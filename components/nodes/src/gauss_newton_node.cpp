@@ -1,6 +1,6 @@
 // Component `gauss_newton`: the Gauss-Newton orientation baseline on DDS.
 //   in:  imu            out: attitude/gauss_newton, diagnostics
-//   params: filter_file (YAML of GaussNewtonParams), diagnostics_every, north (imu_node.h north_keys())
+//   params: filter_file (YAML of GaussNewtonParams), diagnostics_every, north (estimator_step.h north_keys())
 #include "poise/gauss_newton/gauss_newton.h"
 #include "poise/nodes/imu_node.h"
 #include "poise/nodes/register.h"
@@ -26,12 +26,11 @@ GaussNewtonParams load_params(const runtime::ComponentSpec& spec, const NorthRef
   }
 }
 
-class GaussNewtonNode : public ImuAttitudeNode {
+class GaussNewtonStep : public AttitudeStep {
  public:
-  GaussNewtonNode(const runtime::ComponentSpec& spec, runtime::HostContext& host)
-      : ImuAttitudeNode(spec, host, "gauss_newton"), gn_(load_params(spec, north())) {}
+  explicit GaussNewtonStep(const runtime::ComponentSpec& spec)
+      : AttitudeStep(spec.name, "gauss_newton", north_reference(spec)), gn_(load_params(spec, north())) {}
 
- protected:
   bool step(const ImuSample& sample) override { return gn_.update(sample); }
   bool attitude(AttitudeReport& report) const override {
     if (!gn_.initialized()) {
@@ -56,11 +55,14 @@ class GaussNewtonNode : public ImuAttitudeNode {
 
 }  // namespace
 
+std::unique_ptr<EstimatorStep> make_gauss_newton_step(const runtime::ComponentSpec& spec) {
+  return std::make_unique<GaussNewtonStep>(spec);
+}
+
 void register_gauss_newton_node(runtime::ComponentRegistry& registry) {
-  registry.add({"gauss_newton", "Gauss-Newton orientation from accelerometer + magnetometer (baseline)",
-                [](const runtime::ComponentSpec& spec, runtime::HostContext& host) {
-                  return std::make_unique<GaussNewtonNode>(spec, host);
-                }});
+  registry.add(estimator_component(
+      "gauss_newton", "Gauss-Newton orientation from accelerometer + magnetometer (baseline)",
+      &make_gauss_newton_step));
 }
 
 }  // namespace poise::nodes

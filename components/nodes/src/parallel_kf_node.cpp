@@ -1,7 +1,7 @@
 // Component `parallel_kf`: the parallel Kalman filter (paper 000) on DDS.
 //   in:  imu (ImuSample)      out: attitude/parallel_kf (AttitudeEstimate), diagnostics
 //   params: preset (default | paper), filter_file (YAML of ParallelKfParams), diagnostics_every,
-//           north (declination_deg | location + date: imu_node.h north_keys())
+//           north (declination_deg | location + date: estimator_step.h north_keys())
 #include "poise/nodes/imu_node.h"
 #include "poise/nodes/register.h"
 #include "poise/parallel_kf/parallel_kf.h"
@@ -29,12 +29,11 @@ ParallelKfParams load_params(const runtime::ComponentSpec& spec, const NorthRefe
   }
 }
 
-class ParallelKfNode : public ImuAttitudeNode {
+class ParallelKfStep : public AttitudeStep {
  public:
-  ParallelKfNode(const runtime::ComponentSpec& spec, runtime::HostContext& host)
-      : ImuAttitudeNode(spec, host, "parallel_kf"), kf_(load_params(spec, north())) {}
+  explicit ParallelKfStep(const runtime::ComponentSpec& spec)
+      : AttitudeStep(spec.name, "parallel_kf", north_reference(spec)), kf_(load_params(spec, north())) {}
 
- protected:
   bool step(const ImuSample& sample) override { return kf_.update(sample); }
   bool attitude(AttitudeReport& report) const override {
     if (!kf_.initialized()) {
@@ -72,12 +71,14 @@ class ParallelKfNode : public ImuAttitudeNode {
 
 }  // namespace
 
+std::unique_ptr<EstimatorStep> make_parallel_kf_step(const runtime::ComponentSpec& spec) {
+  return std::make_unique<ParallelKfStep>(spec);
+}
+
 void register_parallel_kf_node(runtime::ComponentRegistry& registry) {
-  registry.add({"parallel_kf",
-                "Parallel Kalman filter (tilt + external acceleration | heading + magnetic disturbance)",
-                [](const runtime::ComponentSpec& spec, runtime::HostContext& host) {
-                  return std::make_unique<ParallelKfNode>(spec, host);
-                }});
+  registry.add(estimator_component(
+      "parallel_kf", "Parallel Kalman filter (tilt + external acceleration | heading + magnetic disturbance)",
+      &make_parallel_kf_step));
 }
 
 }  // namespace poise::nodes

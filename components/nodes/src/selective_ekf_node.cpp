@@ -4,8 +4,8 @@
 //   params: filter_file (YAML of SelectiveEkfParams), q_body_camera [w,x,y,z] and
 //           p_body_camera_m [x,y,z] (camera-to-IMU extrinsic; override the file), imu_delay_s
 //           (the IMU's group delay, s; overrides the file), diagnostics_every, north
-//           (declination_deg | location + date: imu_node.h north_keys(); vision poses are then
-//           taken as true ENU and turned into the filter's magnetic ENU)
+//           (declination_deg | location + date: estimator_step.h north_keys(); vision poses are
+//           then taken as true ENU and turned into the filter's magnetic ENU)
 // The EKF applies its own camera-to-body extrinsic to the camera pose (the message's body pose is
 // not used), so the extrinsic is configured in one place for the filter.
 #include "poise/dds/convert.h"
@@ -14,12 +14,10 @@
 #include "poise/selective_ekf/selective_ekf.h"
 
 #include <poise/msg/estimates.h>
-#include <poise/msg/visionPubSubTypes.h>
+#include <poise/msg/vision.h>
 
-#include <atomic>
 #include <cmath>
 #include <cstdint>
-#include <mutex>
 #include <string>
 
 namespace poise::nodes {
@@ -59,44 +57,18 @@ SelectiveEkfParams load_params(const runtime::ComponentSpec& spec, const NorthRe
   return p;
 }
 
-class SelectiveEkfNode : public ImuAttitudeNode {
+class SelectiveEkfStep : public AttitudeStep {
  public:
-  SelectiveEkfNode(const runtime::ComponentSpec& spec, runtime::HostContext& host)
-      : ImuAttitudeNode(spec, host, "selective_ekf"),
-        ekf_(load_params(spec, north())),
-        pose_writer_(host.participant, host.topics.pose("selective_ekf"), dds::QosKind::kEstimate) {}
+  explicit SelectiveEkfStep(const runtime::ComponentSpec& spec)
+      : AttitudeStep(spec.name, "selective_ekf", north_reference(spec)), ekf_(load_params(spec, north())) {}
 
-  void start() override {
-    ImuAttitudeNode::start();
-    if (!vision_reader_) {
-      vision_reader_ = std::make_unique<dds::Reader<msg::VisionPosePubSubType>>(
-          host().participant, host().topics.vision_pose, dds::QosKind::kEstimate,
-          [this](const msg::VisionPose& m, const auto& info) {
-            std::lock_guard<std::mutex> lock(mutex());
-            track_input(host().topics.vision_pose, m.sensor_id().to_string(), m.header().seq(), info);
-            // a tag map on true north (declination set) -> the filter's magnetic ENU
-            ekf_.update_vision(to_vision_pose(north().to_magnetic(dds::camera_pose_from_msg(m))));
-          },
-          &vision_malformed_);
-    }
-  }
-  void stop() override {
-    vision_reader_.reset();
-    ImuAttitudeNode::stop();
-  }
-  /// The IMU node's status, then the vision input: "vision in N, vision malformed M".
-  [[nodiscard]] std::string status() const override {
-    std::string s = ImuAttitudeNode::status();
-    uint64_t vision_in = 0;
-    {
-      std::lock_guard<std::mutex> lock(mutex());
-      vision_in = ekf_.vision_counters().received;
-    }
-    return s + ", vision in " + std::to_string(vision_in) + ", vision malformed " +
-           std::to_string(vision_malformed_.load());
+  [[nodiscard]] unsigned kinds() const override { return kAttitudeOut | kPoseOut; }
+  [[nodiscard]] bool uses_vision() const override { return true; }
+  void vision(const msg::VisionPose& m) override {
+    // a tag map on true north (declination set) -> the filter's magnetic ENU
+    ekf_.update_vision(to_vision_pose(north().to_magnetic(dds::camera_pose_from_msg(m))));
   }
 
- protected:
   bool step(const ImuSample& sample) override { return ekf_.update_imu(sample); }
   bool attitude(AttitudeReport& report) const override {
     if (!ekf_.initialized()) {
@@ -108,24 +80,25 @@ class SelectiveEkfNode : public ImuAttitudeNode {
     report.sources_fused = sources_fused_bits(selective_ekf_sources(ekf_));
     report.mag_trusted = (report.sources_fused & msg::SOURCE_MAG) != 0;
     report.mag_disturbance_angle_rad = std::abs(mag.disturbance_angle_deg - mag.reference_angle_deg) * kRadPerDeg;
+    report.gyro_bias_rps = ekf_.state().b_rps;
     return true;
   }
-  bool publish_estimate(const ImuSample& sample) override {
-    if (!ImuAttitudeNode::publish_estimate(sample)) {
+  bool estimate(const ImuSample& sample, StepOutputs& out) override {
+    if (!AttitudeStep::estimate(sample, out)) {
       return false;
     }
     const AttitudeReport& report = last_report();
     msg::PoseEstimate pose;
     pose.header(dds::make_header(sample.stamp_ns, sample.seq, report.frame_id));
     pose.sensor_id(sensor_id());
-    pose.filter_id("selective_ekf");
+    pose.filter_id(component());
     pose.position_m(dds::to_msg(north().to_true(ekf_.position_m())));
     pose.velocity_mps(dds::to_msg(north().to_true(ekf_.state().v_mps)));
     pose.q_world_body(dds::to_msg(report.q_world_body));
     dds::to_array(north().rotate_covariance<9>(pose_covariance_world(ekf_.state(), ekf_.q_world_body()), false),
                   pose.covariance());
     pose.sources_fused(report.sources_fused);
-    pose_writer_.write(pose);
+    out.pose(pose);
     return true;
   }
   void diagnostics(DiagnosticsReport& diag) const override {
@@ -134,7 +107,6 @@ class SelectiveEkfNode : public ImuAttitudeNode {
     diag.counters = ekf_.imu_rejections().to_map();
     const VisionCounters& vc = ekf_.vision_counters();
     diag.counters["vision_received"] = vc.received;
-    diag.counters["vision_malformed"] = vision_malformed_.load();  // payloads that did not deserialize
     diag.counters["vision_applied"] = vc.applied;
     diag.counters["vision_out_of_order"] = vc.out_of_order;
     diag.counters["rejected_vision_too_old"] = vc.too_old;
@@ -148,19 +120,18 @@ class SelectiveEkfNode : public ImuAttitudeNode {
 
  private:
   SelectiveEkf ekf_;
-  dds::Writer<msg::PoseEstimatePubSubType> pose_writer_;
-  std::atomic<uint64_t> vision_malformed_{0};  // vision_pose payloads dropped undecoded; outlives the reader
-  std::unique_ptr<dds::Reader<msg::VisionPosePubSubType>> vision_reader_;
 };
 
 }  // namespace
 
+std::unique_ptr<EstimatorStep> make_selective_ekf_step(const runtime::ComponentSpec& spec) {
+  return std::make_unique<SelectiveEkfStep>(spec);
+}
+
 void register_selective_ekf_node(runtime::ComponentRegistry& registry) {
-  registry.add({"selective_ekf",
-                "Selective EKF: gyro + Gauss-Newton IMU quaternion + AprilTag vision, magnetometer gated",
-                [](const runtime::ComponentSpec& spec, runtime::HostContext& host) {
-                  return std::make_unique<SelectiveEkfNode>(spec, host);
-                }});
+  registry.add(estimator_component(
+      "selective_ekf", "Selective EKF: gyro + Gauss-Newton IMU quaternion + AprilTag vision, magnetometer gated",
+      &make_selective_ekf_step));
 }
 
 }  // namespace poise::nodes

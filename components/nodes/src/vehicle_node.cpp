@@ -10,14 +10,14 @@
 #include "poise/vehicle/vehicle_estimator.h"
 
 #include <poise/msg/estimates.h>
-#include <poise/msg/imuPubSubTypes.h>
+#include <poise/msg/imu.h>
 
 namespace poise::nodes {
 namespace {
 
 VehicleParams load_params(const runtime::ComponentSpec& spec) {
   std::vector<std::string> known = NodeParams::keys();
-  known.insert(known.end(), north_keys().begin(), north_keys().end());  // read by ImuAttitudeNode
+  known.insert(known.end(), north_keys().begin(), north_keys().end());  // read by AttitudeStep
   known.emplace_back("filter_file");
   runtime::check_known_params(spec, known);
   const auto file = runtime::param<std::string>(spec, "filter_file", "");
@@ -28,30 +28,17 @@ VehicleParams load_params(const runtime::ComponentSpec& spec) {
   }
 }
 
-class VehicleNode : public ImuAttitudeNode {
+class VehicleStep : public AttitudeStep {
  public:
-  VehicleNode(const runtime::ComponentSpec& spec, runtime::HostContext& host)
-      : ImuAttitudeNode(spec, host, "vehicle"), estimator_(load_params(spec)) {}
+  explicit VehicleStep(const runtime::ComponentSpec& spec)
+      : AttitudeStep(spec.name, "vehicle", north_reference(spec)), estimator_(load_params(spec)) {}
 
-  void start() override {
-    ImuAttitudeNode::start();
-    if (!speed_reader_) {
-      speed_reader_ = std::make_unique<dds::Reader<msg::VehicleInputPubSubType>>(
-          host().participant, host().topics.vehicle_input, dds::QosKind::kSensor,
-          [this](const msg::VehicleInput& m, const auto& info) {
-            std::lock_guard<std::mutex> lock(mutex());
-            track_input(host().topics.vehicle_input, m.sensor_id().to_string(), m.header().seq(), info);
-            has_speed_ = m.speed_valid();
-            speed_mps_ = m.speed_mps();
-          });
-    }
+  [[nodiscard]] bool uses_vehicle_input() const override { return true; }
+  /// The latest VehicleInput (speed and its validity) goes with each following IMU sample.
+  void vehicle_input(const msg::VehicleInput& m) override {
+    has_speed_ = m.speed_valid();
+    speed_mps_ = m.speed_mps();
   }
-  void stop() override {
-    speed_reader_.reset();
-    ImuAttitudeNode::stop();
-  }
-
- protected:
   bool step(const ImuSample& s) override {
     return estimator_.update(vehicle_sample_from_imu(s, has_speed_, speed_mps_));
   }
@@ -80,18 +67,20 @@ class VehicleNode : public ImuAttitudeNode {
 
  private:
   VehicleEstimator estimator_;
-  std::unique_ptr<dds::Reader<msg::VehicleInputPubSubType>> speed_reader_;
   bool has_speed_ = false;
   double speed_mps_ = 0.0;
 };
 
 }  // namespace
 
+std::unique_ptr<EstimatorStep> make_vehicle_step(const runtime::ComponentSpec& spec) {
+  return std::make_unique<VehicleStep>(spec);
+}
+
 void register_vehicle_node(runtime::ComponentRegistry& registry) {
-  registry.add({"vehicle", "Vehicle attitude: TRIAD when static, roll/pitch-model EKF when driving",
-                [](const runtime::ComponentSpec& spec, runtime::HostContext& host) {
-                  return std::make_unique<VehicleNode>(spec, host);
-                }});
+  registry.add(estimator_component(
+      "vehicle", "Vehicle attitude: TRIAD when static, roll/pitch-model EKF when driving",
+      &make_vehicle_step));
 }
 
 }  // namespace poise::nodes

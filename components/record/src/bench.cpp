@@ -225,7 +225,7 @@ void bench_replay(const BenchReplayOptions& options, std::ostream& out) {
     ProcessOptions po;
     po.input = path;
     po.output = temp_path("processed");
-    po.imu_topic = "bench/replay_imu";
+    po.topics.imu = "bench/replay_imu";
     const auto t0 = Clock::now();
     const ProcessStats ps = process_recording(po, filters);
     const double dt = since(t0);

@@ -4,6 +4,8 @@
 #include "poise/record/bench.h"
 #include "poise/eval/filter_registry.h"
 #include "poise/record/info.h"
+#include "poise/nodes/register.h"
+#include "poise/record/compare.h"
 #include "poise/record/process.h"
 #include "poise/record/recorder.h"
 #include "poise/record/replayer.h"
@@ -53,7 +55,10 @@ struct ProcessArgs {
   std::string output;
   std::string host;
   std::vector<std::string> filters;
+  std::vector<std::string> sets;
   std::string imu_topic;
+  std::string order = "stamp";
+  bool compare = true;
   bool allow_damaged = false;
 };
 
@@ -83,9 +88,51 @@ std::unique_ptr<AttitudeFilter> make_offline_filter(const std::string& name, con
   }
 }
 
+/// Applies `--set NAME.key=value` (value parsed as YAML: numbers, lists, strings) to the host's
+/// components; an unknown NAME is an error naming the components.
+void apply_sets(const std::vector<std::string>& sets, runtime::HostSpec& host) {
+  for (const std::string& set : sets) {
+    const size_t dot = set.find('.');
+    const size_t eq = set.find('=');
+    if (dot == std::string::npos || eq == std::string::npos || dot == 0 || eq < dot + 2) {
+      throw Error("--set " + set + ": expected NAME.key=value (NAME: a component of the host file)",
+                  kUsageExitCode);
+    }
+    const std::string name = set.substr(0, dot);
+    const std::string key = set.substr(dot + 1, eq - dot - 1);
+    YAML::Node value;
+    try {
+      value = YAML::Load(set.substr(eq + 1));
+    } catch (const YAML::Exception& e) {
+      throw Error("--set " + set + ": the value is not YAML: " + e.what(), kUsageExitCode);
+    }
+    bool found = false;
+    std::string names;
+    for (runtime::ComponentSpec& c : host.components) {
+      names += (names.empty() ? "" : ", ") + c.name;
+      if (c.name == name) {
+        if (!c.params || !c.params.IsMap()) {
+          c.params = YAML::Node(YAML::NodeType::Map);
+        }
+        c.params[key] = value;
+        c.origin += " (with --set " + set + ")";
+        found = true;
+      }
+    }
+    if (!found) {
+      throw Error("--set " + set + ": no component named '" + name + "' in the host file (" + names + ")",
+                  kUsageExitCode);
+    }
+  }
+}
+
 void run_process(const ProcessArgs& a) {
-  std::vector<record::ProcessFilter> filters;
-  std::string imu_topic = a.imu_topic;
+  std::vector<record::ProcessComponent> components;
+  std::vector<std::string> labels;  // "name (type)" per component, for the summary
+  record::ProcessOptions o;
+  if (!a.sets.empty() && a.host.empty()) {
+    throw Error("--set changes a component of the host file: give --host HOST.yaml", kUsageExitCode);
+  }
   if (!a.host.empty()) {
     runtime::HostSpec host;
     try {
@@ -93,53 +140,56 @@ void run_process(const ProcessArgs& a) {
     } catch (const std::exception& e) {
       throw Error(e.what());
     }
-    if (imu_topic.empty()) {
-      imu_topic = host.topics.imu;
-    }
-    std::set<std::string> offline;
-    for (const auto& e : eval::registered_filters()) {
-      offline.insert(e.name);
-    }
+    apply_sets(a.sets, host);
+    o.topics = host.topics;
     for (const auto& c : host.components) {
-      std::string name = c.type;
-      const std::string file = runtime::param<std::string>(c, "filter_file", "");
-      if (name == "parallel_kf" && file.empty() &&
-          runtime::param<std::string>(c, "preset", "default") == "paper") {
-        name = "parallel_kf_paper";
+      std::unique_ptr<nodes::EstimatorStep> step;
+      nodes::NodeParams params;
+      try {
+        step = nodes::make_estimator_step(c);
+        if (step) {
+          params = nodes::node_params(c);
+        }
+      } catch (const std::exception& e) {
+        throw Error(e.what());
       }
-      if (name == "selective_ekf") {
-        name = "selective";
-        std::cerr << "poise process: component '" << c.name
-                  << "' (selective_ekf) runs on the IMU only, from its filter_file: recorded vision "
-                     "poses and the host's q_body_camera / p_body_camera_m / imu_delay_s are not "
-                     "applied offline\n";
-      }
-      if (offline.count(name) == 0) {
+      if (!step) {
         std::cerr << "poise process: component '" << c.name << "' (" << c.type
-                  << ") has no offline attitude filter: skipped\n";
+                  << ") is not an estimator: skipped\n";
         continue;
       }
-      filters.push_back({c.name, make_offline_filter(name, file)});
+      labels.push_back(c.name + " (" + c.type + ")");
+      components.push_back({std::move(step), params});
     }
   }
   for (const std::string& f : a.filters) {
     const size_t eq = f.find('=');
     const std::string name = f.substr(0, eq);
     const std::string config = eq == std::string::npos ? std::string() : f.substr(eq + 1);
-    filters.push_back({name, make_offline_filter(name, config)});
+    labels.push_back(name + " (--filter)");
+    components.push_back({record::filter_step({name, make_offline_filter(name, config)}), {}});
   }
-  if (filters.empty()) {
-    throw Error("no filter to run: give --host HOST.yaml with estimator components, or "
-                "--filter NAME[=CONFIG.yaml] (known: " + known_filters() + ")");
+  if (components.empty()) {
+    throw Error("nothing to run: give --host HOST.yaml with estimator components (" +
+                [] {
+                  std::string types;
+                  for (const auto& t : nodes::estimator_step_types()) {
+                    types += (types.empty() ? "" : ", ") + t;
+                  }
+                  return types;
+                }() +
+                "), or --filter NAME[=CONFIG.yaml] (known: " + known_filters() + ")");
   }
-  record::ProcessOptions o;
+  if (!a.imu_topic.empty()) {
+    o.topics.imu = a.imu_topic;
+  }
   o.input = a.file;
   o.output = a.output;
-  o.imu_topic = imu_topic.empty() ? "imu" : imu_topic;
+  o.order = a.order == "recorded" ? record::ProcessOrder::kRecorded : record::ProcessOrder::kStamp;
   o.progress = &std::cerr;
   record::ProcessStats stats;
   try {
-    stats = record::process_recording(o, filters);
+    stats = record::process_recording(o, components);
   } catch (const record::ReadError& e) {
     throw Error(e.what());
   } catch (const record::WriteError& e) {
@@ -157,22 +207,42 @@ void run_process(const ProcessArgs& a) {
     }
   }
   std::cerr << "poise process: " << stats.input_messages << " messages, " << stats.imu_samples
-            << " IMU samples on '" << o.imu_topic << "' (" << stats.undecodable
-            << " malformed, skipped) -> " << a.output << "\n";
+            << " IMU samples on '" << o.topics.imu << "', " << stats.vision_samples
+            << " vision poses, " << stats.vehicle_inputs << " vehicle inputs (" << stats.undecodable
+            << " malformed, skipped), in " << (a.order == "recorded" ? "recorded" : "stamp")
+            << " order -> " << a.output << "\n";
+  if (stats.imu_gaps > 0) {
+    std::cerr << "poise process: the recorded '" << o.topics.imu << "' has " << stats.imu_gaps
+              << " gap(s) in header.seq (" << stats.imu_missing
+              << " sample(s) missing): the live components may have processed samples the "
+                 "recording lacks, so estimates after a gap can differ from live\n";
+  }
   for (const auto& d : stats.undecodable_details) {
     std::cerr << "  skipped " << d << "\n";
   }
   if (stats.undecodable > stats.undecodable_details.size()) {
     std::cerr << "  ... and " << stats.undecodable - stats.undecodable_details.size()
-              << " more malformed IMU payload(s)\n";
+              << " more malformed payload(s)\n";
   }
-  for (const auto& f : filters) {
-    std::cerr << "  " << o.output_prefix << f.name << ": " << stats.estimates[f.name]
-              << " estimates, " << stats.rejected[f.name] << " samples rejected\n";
+  for (size_t i = 0; i < labels.size(); ++i) {
+    const std::string name = labels[i].substr(0, labels[i].find(' '));
+    std::cerr << "  " << labels[i] << ": " << stats.estimates[name] << " estimates, "
+              << stats.rejected[name] << " samples rejected, " << stats.diagnostics[name]
+              << " diagnostics\n";
+  }
+  for (const auto& [topic, n] : stats.per_topic) {
+    std::cerr << "  " << topic << ": " << n << " messages\n";
   }
   if (stats.imu_samples == 0) {
-    throw Error("no ImuSample messages on topic '" + o.imu_topic +
+    throw Error("no ImuSample messages on topic '" + o.topics.imu +
                 "' in the recording (use --imu-topic; `poise info` lists the topics)");
+  }
+  if (a.compare) {
+    try {
+      std::cout << record::format_comparison(record::compare_processed(a.output, o.output_prefix));
+    } catch (const record::ReadError& e) {
+      throw Error(std::string("comparison: ") + e.what());
+    }
   }
   refuse_damaged("process", stats.input_damaged(), a.allow_damaged);
 }
@@ -363,19 +433,32 @@ void add_record_commands(CLI::App& app) {
 
   auto proc = std::make_shared<ProcessArgs>();
   CLI::App* process_cmd = app.add_subcommand(
-      "process", "Run attitude filters on a recording offline (no DDS, no sleeps, deterministic: "
-                 "the same input gives a byte-identical output). The output holds the input "
-                 "messages plus processed/attitude/<name> per filter.");
+      "process", "Run a host's estimator components (or attitude filters) on a recording offline, "
+                 "through the same step logic as the live nodes: no DDS, no sleeps, deterministic "
+                 "(the same input gives a byte-identical output). The output holds the input "
+                 "messages plus processed/<topic> for every topic the components publish live; "
+                 "then a comparison with the recorded live estimates and truth/* is printed.");
   process_cmd->add_option("file", proc->file, "input MCAP file")->required()->check(CLI::ExistingFile);
   add_output_file_option(process_cmd, &proc->output, "the processed MCAP recording", true);
   process_cmd->add_option("--host", proc->host,
-                          "host file: its estimator components (type, name, filter_file) and "
-                          "topic names are used")
+                          "host file: every estimator component runs with its parameters, on the "
+                          "recorded inputs it subscribes to live (imu, vision_pose, vehicle_input; "
+                          "the host's topic names)")
       ->check(CLI::ExistingFile);
+  process_cmd->add_option("--set", proc->sets,
+                          "NAME.key=VALUE: change a parameter of the host's component NAME (as in "
+                          "its params map; VALUE is YAML, e.g. imu_delay_s=0.01, "
+                          "q_body_camera=[1,0,0,0], filter_file=other.yaml); repeatable");
   process_cmd->add_option("--filter", proc->filters,
-                          "NAME[=CONFIG.yaml]: a filter to run (repeatable); see `poise bench "
-                          "filters --help` for names");
+                          "NAME[=CONFIG.yaml]: an attitude filter to run alone (repeatable); see "
+                          "`poise bench filters --help` for names");
   process_cmd->add_option("--imu-topic", proc->imu_topic, "IMU topic (default: host file / imu)");
+  process_cmd->add_option("--order", proc->order,
+                          "input order: stamp (sample stamps; vision at its capture stamp) or "
+                          "recorded (the order the recorder received them)")
+      ->check(CLI::IsMember({"stamp", "recorded"}))
+      ->capture_default_str();
+  process_cmd->add_flag("!--no-compare", proc->compare, "do not print the comparison");
   process_cmd->add_flag("--allow-damaged", proc->allow_damaged,
                         "exit 0 although the input is incomplete or has unreadable chunks (the "
                         "readable part is processed either way; exit code 3 otherwise)");

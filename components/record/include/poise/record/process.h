@@ -1,18 +1,24 @@
-// `poise process`: runs attitude filters directly on a recording: no DDS, no clocks, no sleeps.
-// The same input and filters give a byte-identical output file (the writer's chunk clock is the
-// recording's log time).
+// `poise process`: runs estimator components on a recording offline: no DDS, no clocks, no
+// sleeps. Each component runs through the same step logic as its live node
+// (poise/nodes/estimator_step.h: StepRunner around the component's EstimatorStep), fed with the
+// recorded inputs it subscribes to live -- `imu`, `vision_pose` (at its capture stamp),
+// `vehicle_input` -- in the order of their sample stamps (or, with ProcessOrder::kRecorded, in the
+// order they were recorded). The same input and components give a byte-identical output file (the
+// writer's chunk clock is the recording's log time).
 //
-// Output: every input message copied through unchanged (same channels, times, bytes), plus one
-// channel `<prefix><name>` (AttitudeEstimate) per filter with one estimate per accepted IMU
-// sample once the filter is initialised: log_time = the IMU message's log time, publish_time =
-// header.stamp_ns = the sample stamp. Filled fields: header, sensor_id, filter_id, q_world_body,
-// roll/pitch/yaw (ZYX); the others stay 0 (the AttitudeFilter interface has no more).
+// Output: every input message copied through unchanged (same channels, times, bytes), plus what
+// the live components publish, under `<prefix>` + the live topic: processed/attitude/<filter>,
+// processed/pose/<filter>, processed/altitude, processed/diagnostics. Each output keeps the seq and
+// stamp of the IMU sample it was computed from; its log time is that sample's log time and its
+// publish time the stamp. An attitude filter given alone (ProcessFilter, `--filter`) runs as a
+// step that fills the quaternion and the Euler angles (the AttitudeFilter interface has no more).
 #pragma once
 
 #include "poise/core/attitude_filter.h"
+#include "poise/dds/topics.h"
+#include "poise/nodes/estimator_step.h"
 
 #include <cstdint>
-#include <functional>
 #include <map>
 #include <memory>
 #include <ostream>
@@ -21,16 +27,29 @@
 
 namespace poise::record {
 
+/// An attitude filter alone (sensor_id and filter id = `name`).
 struct ProcessFilter {
-  std::string name;  ///< instance name: output topic suffix and filter_id
+  std::string name;  ///< instance name: output topic suffix, filter_id and sensor_id
   std::unique_ptr<AttitudeFilter> filter;
+};
+
+/// A component run offline: its step and node parameters (diagnostics_every, input_deadline_s).
+struct ProcessComponent {
+  std::unique_ptr<nodes::EstimatorStep> step;
+  nodes::NodeParams params;
+};
+
+enum class ProcessOrder {
+  kStamp,     ///< inputs in the order of their sample stamps (vision: capture stamp); ties: recorded
+  kRecorded,  ///< inputs in the order the recording holds them (log time: arrival at the recorder)
 };
 
 struct ProcessOptions {
   std::string input;
   std::string output;
-  std::string imu_topic = "imu";
-  std::string output_prefix = "processed/attitude/";
+  dds::TopicNames topics;  ///< input topic names (imu, vision_pose, vehicle_input)
+  std::string output_prefix = "processed/";
+  ProcessOrder order = ProcessOrder::kStamp;
   bool copy_input = true;
   std::ostream* progress = nullptr;  ///< percent lines; none when null
 };
@@ -38,11 +57,17 @@ struct ProcessOptions {
 struct ProcessStats {
   uint64_t input_messages = 0;
   uint64_t imu_samples = 0;
-  uint64_t undecodable = 0;  ///< IMU payloads that are malformed (skipped, counted)
+  uint64_t vision_samples = 0;
+  uint64_t vehicle_inputs = 0;
+  uint64_t imu_gaps = 0;     ///< gaps in the recorded IMU's header.seq (per sensor, stamp order)
+  uint64_t imu_missing = 0;  ///< samples those gaps leave out (live may have processed them)
+  uint64_t undecodable = 0;  ///< input payloads that are malformed (skipped, counted)
   std::vector<std::string> undecodable_details;  ///< the first 10: position (index, offset) + why
   uint64_t damaged_chunks = 0;  ///< chunks that could not be read while processing (skipped)
-  std::map<std::string, uint64_t> estimates;  ///< per filter
-  std::map<std::string, uint64_t> rejected;   ///< per filter: update() returned false
+  std::map<std::string, uint64_t> estimates;    ///< per component (sensor_id)
+  std::map<std::string, uint64_t> rejected;     ///< per component: IMU samples its core rejected
+  std::map<std::string, uint64_t> diagnostics;  ///< per component: FilterDiagnostics written
+  std::map<std::string, uint64_t> per_topic;    ///< messages written per output topic
   bool input_complete = true;
   std::vector<std::string> input_problems;
   uint64_t corrupt_in_file = 0;  ///< FileReport::corrupt of the input
@@ -52,6 +77,11 @@ struct ProcessStats {
 };
 
 /// Throws ReadError (input) or WriteError (output).
+ProcessStats process_recording(const ProcessOptions& options, std::vector<ProcessComponent>& components);
+/// The same for attitude filters alone.
 ProcessStats process_recording(const ProcessOptions& options, std::vector<ProcessFilter>& filters);
+
+/// An attitude filter as a step (quaternion and Euler angles; sensor_id and filter id = name).
+std::unique_ptr<nodes::EstimatorStep> filter_step(ProcessFilter filter);
 
 }  // namespace poise::record

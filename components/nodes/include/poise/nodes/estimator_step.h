@@ -1,0 +1,191 @@
+// The step logic of every estimator component, without DDS and without clocks: what the live node
+// (poise/nodes/imu_node.h) and `poise process` (offline, poise/record/process.h) both run, so that
+// offline equals live when the inputs come in the same order.
+//
+//   EstimatorStep  one component's core and its conversions: input -> core -> messages
+//   StepOutputs    where the messages go (DDS writers live, MCAP channels offline)
+//   StepRunner     the node's shape around a step: counters, input health, the estimate after
+//                  each accepted IMU sample, diagnostics every `diagnostics_every` samples; the
+//                  time comes from an injected clock (the host's monotonic clock live, the
+//                  stamp of the input being processed offline)
+#pragma once
+
+#include "poise/core/north.h"
+#include "poise/core/types.h"
+#include "poise/dds/topics.h"
+#include "poise/nodes/input_health.h"
+#include "poise/nodes/reports.h"
+#include "poise/runtime/component.h"
+
+#include <poise/msg/diagnostics.h>
+#include <poise/msg/estimates.h>
+#include <poise/msg/vision.h>
+#include <poise/msg/imu.h>
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace poise::nodes {
+
+/// Node-level parameters common to every estimator node (host-file `params`).
+struct NodeParams {
+  int diagnostics_every = 1;  ///< publish diagnostics every N input samples (1 = input rate)
+  /// ... and on a timer with this period, input or not (a dead input shows as silence; live only)
+  double diagnostics_period_s = 1.0;
+  /// an input silent for longer is reported silent (`<topic>_silent`, status "no input on ...")
+  double input_deadline_s = 0.5;
+  static const std::vector<std::string>& keys();
+};
+NodeParams node_params(const runtime::ComponentSpec& spec);
+
+/// The keys of the north configuration every attitude node takes (host-file `params`):
+/// `declination_deg`, or `location: {lat_deg, lon_deg, alt_m}` with optional `date`
+/// (YYYY-MM-DD, default today, UTC), `magnetic_model` (a .COF file, default the built-in
+/// WMM2025) and `seed_field` (default true: the model's |B| and dip seed the field reference).
+const std::vector<std::string>& north_keys();
+/// Reads and resolves them (ConfigError naming the component and what to fix). Reads the date
+/// (UTC today) when a location comes without one: configuration, never per sample.
+NorthReference north_reference(const runtime::ComponentSpec& spec);
+
+/// Where the messages of a step go. A step writes only the kinds it declares (EstimatorStep::kinds).
+class StepOutputs {
+ public:
+  virtual ~StepOutputs() = default;
+  virtual void attitude(const msg::AttitudeEstimate& m) = 0;
+  virtual void pose(const msg::PoseEstimate& m) = 0;
+  virtual void altitude(const msg::AltitudeEstimate& m) = 0;
+  virtual void diagnostics(const msg::FilterDiagnostics& m) = 0;
+};
+
+/// Output kinds (bits) and secondary inputs of a step.
+enum StepKind : unsigned { kAttitudeOut = 1U, kPoseOut = 2U, kAltitudeOut = 4U };
+
+/// One estimator component's core and the conversions around it. No DDS, no clock, no logging.
+class EstimatorStep {
+ public:
+  /// `sensor_id`: the instance name (sensor_id of every message); `component`: the filter id
+  /// (attitude/<component>, pose/<component>, FilterDiagnostics.component_name).
+  EstimatorStep(std::string sensor_id, std::string component)
+      : sensor_id_(std::move(sensor_id)), component_(std::move(component)) {}
+  virtual ~EstimatorStep() = default;
+  EstimatorStep(const EstimatorStep&) = delete;
+  EstimatorStep& operator=(const EstimatorStep&) = delete;
+
+  /// StepKind bits of what estimate() writes.
+  [[nodiscard]] virtual unsigned kinds() const = 0;
+  /// Steps the core with one IMU sample; false when the core rejected it.
+  virtual bool step(const ImuSample& sample) = 0;
+  /// Writes the core's estimate(s) for `sample`; false when the core has none yet.
+  virtual bool estimate(const ImuSample& sample, StepOutputs& out) = 0;
+  /// The core's per-source report, counters and metrics, 1:1.
+  virtual void diagnostics(DiagnosticsReport& diag) const = 0;
+
+  /// Secondary inputs: the live node subscribes to those a step uses, `poise process` feeds the
+  /// recorded ones in stamp order.
+  [[nodiscard]] virtual bool uses_vision() const { return false; }
+  virtual void vision(const msg::VisionPose& /*m*/) {}
+  [[nodiscard]] virtual bool uses_vehicle_input() const { return false; }
+  virtual void vehicle_input(const msg::VehicleInput& /*m*/) {}
+
+  [[nodiscard]] const std::string& sensor_id() const { return sensor_id_; }
+  [[nodiscard]] const std::string& component() const { return component_; }
+
+ private:
+  std::string sensor_id_;
+  std::string component_;
+};
+
+/// An attitude estimator's step: writes AttitudeEstimate (every field the core has) after each
+/// accepted sample once the core is initialised, in true ENU when a north is configured.
+class AttitudeStep : public EstimatorStep {
+ public:
+  AttitudeStep(std::string sensor_id, std::string component, NorthReference north = {})
+      : EstimatorStep(std::move(sensor_id), std::move(component)), north_(std::move(north)) {}
+  [[nodiscard]] unsigned kinds() const override { return kAttitudeOut; }
+  bool estimate(const ImuSample& sample, StepOutputs& out) override;
+
+ protected:
+  /// The core's attitude (stamp and seq are filled by estimate()); false when it has none.
+  virtual bool attitude(AttitudeReport& report) const = 0;
+  /// The report last written (for steps that write more, e.g. a pose), in the output frame
+  /// (true ENU when a declination is configured).
+  [[nodiscard]] const AttitudeReport& last_report() const { return report_; }
+  /// North as configured: outputs are rotated into true ENU when north().true_north; the core
+  /// works in magnetic ENU throughout.
+  [[nodiscard]] const NorthReference& north() const { return north_; }
+
+ private:
+  NorthReference north_;
+  AttitudeReport report_;
+};
+
+using StepFactory = std::function<std::unique_ptr<EstimatorStep>(const runtime::ComponentSpec&)>;
+
+/// The node's shape around a step (the same live and offline). Not thread-safe: the live node
+/// serialises calls with its mutex; the malformed counters are atomics a DDS reader may bump.
+class StepRunner {
+ public:
+  using Clock = std::function<int64_t()>;
+  /// `clock`: ns in the domain of sample stamps (live: monotonic_ns; offline: the stamp of the
+  /// input being processed, so input health is judged on the recording's time).
+  StepRunner(std::unique_ptr<EstimatorStep> step, const NodeParams& params, dds::TopicNames topics,
+             Clock clock);
+
+  /// One IMU sample from `writer` (an identity of its publisher, for restarts): track, step,
+  /// estimate, diagnostics every `diagnostics_every` samples.
+  void imu(const ImuSample& sample, const std::string& source, const std::string& writer,
+           StepOutputs& out);
+  /// Secondary inputs (ignored when the step does not use them).
+  void vision(const msg::VisionPose& m, const std::string& writer);
+  void vehicle_input(const msg::VehicleInput& m, const std::string& writer);
+  /// The periodic diagnostics (the live timer): the core's last report, counters, input health.
+  void periodic_diagnostics(StepOutputs& out);
+
+  /// Payloads that did not deserialize (the DDS reader or the processor counts them here).
+  std::atomic<uint64_t>& imu_malformed() { return imu_malformed_; }
+  std::atomic<uint64_t>& vision_malformed() { return vision_malformed_; }
+  std::atomic<uint64_t>& vehicle_input_malformed() { return vehicle_input_malformed_; }
+
+  [[nodiscard]] EstimatorStep& step() { return *step_; }
+  [[nodiscard]] const EstimatorStep& step() const { return *step_; }
+  [[nodiscard]] const NodeParams& params() const { return params_; }
+  [[nodiscard]] const dds::TopicNames& topics() const { return topics_; }
+  [[nodiscard]] uint64_t received() const { return received_; }
+  [[nodiscard]] uint64_t published() const { return published_; }
+  [[nodiscard]] uint64_t rejected() const { return rejected_; }
+  [[nodiscard]] uint64_t diagnostics_published() const { return diagnostics_published_; }
+  [[nodiscard]] uint64_t vision_received() const { return vision_received_; }
+  [[nodiscard]] uint64_t vehicle_inputs_received() const { return vehicle_received_; }
+  /// "imu lost N, imu in N, estimates out N, rejected N, malformed N, last latency X us", then
+  /// ", vision in N, vision malformed N" / ", vehicle_input in N, vehicle_input malformed N" for
+  /// the secondary inputs the step uses; preceded by the silent inputs.
+  [[nodiscard]] std::string status() const;
+
+ private:
+  void publish_diagnostics(int64_t stamp_ns, uint32_t seq, int64_t now_ns, StepOutputs& out);
+
+  std::unique_ptr<EstimatorStep> step_;
+  NodeParams params_;
+  dds::TopicNames topics_;
+  Clock clock_;
+  uint64_t received_ = 0;
+  uint64_t published_ = 0;
+  uint64_t rejected_ = 0;
+  uint64_t diagnostics_published_ = 0;
+  uint64_t vision_received_ = 0;
+  uint64_t vehicle_received_ = 0;
+  int64_t last_latency_ns_ = 0;
+  uint64_t since_diagnostics_ = 0;
+  uint32_t last_seq_ = 0;
+  InputHealth inputs_;
+  DiagnosticsReport core_report_;  ///< the core's last diagnostics()
+  std::atomic<uint64_t> imu_malformed_{0};
+  std::atomic<uint64_t> vision_malformed_{0};
+  std::atomic<uint64_t> vehicle_input_malformed_{0};
+};
+
+}  // namespace poise::nodes

@@ -1,0 +1,200 @@
+#include "poise/nodes/estimator_step.h"
+
+#include <ctime>
+#include <sstream>
+
+namespace poise::nodes {
+
+const std::vector<std::string>& NodeParams::keys() {
+  static const std::vector<std::string> k{"diagnostics_every", "diagnostics_period_s",
+                                          "input_deadline_s"};
+  return k;
+}
+
+NodeParams node_params(const runtime::ComponentSpec& spec) {
+  NodeParams p;
+  p.diagnostics_every = runtime::param<int>(spec, "diagnostics_every", p.diagnostics_every);
+  if (p.diagnostics_every < 1) {
+    throw runtime::ConfigError(spec.origin + ": diagnostics_every must be >= 1");
+  }
+  p.diagnostics_period_s = runtime::param<double>(spec, "diagnostics_period_s", p.diagnostics_period_s);
+  if (!(p.diagnostics_period_s >= 0.01 && p.diagnostics_period_s <= 3600.0)) {
+    throw runtime::ConfigError(spec.origin + ": diagnostics_period_s must be in [0.01, 3600] s");
+  }
+  p.input_deadline_s = runtime::param<double>(spec, "input_deadline_s", p.input_deadline_s);
+  if (!(p.input_deadline_s > 0.0 && p.input_deadline_s <= 3600.0)) {
+    throw runtime::ConfigError(spec.origin + ": input_deadline_s must be in (0, 3600] s");
+  }
+  return p;
+}
+
+const std::vector<std::string>& north_keys() {
+  static const std::vector<std::string> k{"declination_deg", "location", "date", "magnetic_model",
+                                          "seed_field"};
+  return k;
+}
+
+namespace {
+std::string utc_today() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char buf[16];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d", &tm);
+  return buf;
+}
+}  // namespace
+
+NorthReference north_reference(const runtime::ComponentSpec& spec) {
+  NorthParams p;
+  p.declination_deg = runtime::param<double>(spec, "declination_deg", p.declination_deg);
+  p.date = runtime::param<std::string>(spec, "date", p.date);
+  p.model_file = runtime::param<std::string>(spec, "magnetic_model", p.model_file);
+  p.seed_field = runtime::param<bool>(spec, "seed_field", p.seed_field);
+  const std::string where = spec.origin + ": component '" + spec.name + "': ";
+  if (spec.params && spec.params["location"]) {
+    const YAML::Node loc = spec.params["location"];
+    if (!loc.IsMap()) {
+      throw runtime::ConfigError(where + "location must be a mapping {lat_deg, lon_deg, alt_m}");
+    }
+    for (const auto& kv : loc) {
+      const auto key = kv.first.as<std::string>();
+      if (key != "lat_deg" && key != "lon_deg" && key != "alt_m") {
+        throw runtime::ConfigError(where + "unknown key 'location." + key + "' (known: lat_deg, lon_deg, alt_m)");
+      }
+    }
+    if (!loc["lat_deg"] || !loc["lon_deg"]) {
+      throw runtime::ConfigError(where + "location needs lat_deg and lon_deg (alt_m optional, default 0)");
+    }
+    try {
+      p.location.lat_deg = loc["lat_deg"].as<double>();
+      p.location.lon_deg = loc["lon_deg"].as<double>();
+      p.location.alt_m = loc["alt_m"] ? loc["alt_m"].as<double>() : 0.0;
+    } catch (const YAML::Exception&) {
+      throw runtime::ConfigError(where + "location: lat_deg, lon_deg and alt_m must be numbers (deg, deg, m)");
+    }
+    p.has_location = true;
+  } else if (!p.date.empty() || !p.model_file.empty()) {
+    throw runtime::ConfigError(where + "date and magnetic_model need a location");
+  }
+  try {
+    return resolve_north(p, utc_today());
+  } catch (const std::exception& e) {
+    throw runtime::ConfigError(where + e.what());
+  }
+}
+
+bool AttitudeStep::estimate(const ImuSample& sample, StepOutputs& out) {
+  report_ = AttitudeReport{};
+  if (!attitude(report_)) {
+    return false;
+  }
+  report_.stamp_ns = sample.stamp_ns;
+  report_.seq = sample.seq;
+  report_.frame_id = north_.frame_id();
+  if (north_.true_north) {  // no-op without a declination: outputs unchanged bit for bit
+    report_.q_world_body = north_.to_true(report_.q_world_body);
+    report_.covariance = north_.to_true(report_.covariance);
+    report_.ext_accel_world_mps2 = north_.to_true(report_.ext_accel_world_mps2);
+    report_.mag_disturbance_world_ut = north_.to_true(report_.mag_disturbance_world_ut);
+  }
+  out.attitude(to_attitude_msg(report_, sensor_id(), component()));
+  return true;
+}
+
+StepRunner::StepRunner(std::unique_ptr<EstimatorStep> step, const NodeParams& params,
+                       dds::TopicNames topics, Clock clock)
+    : step_(std::move(step)),
+      params_(params),
+      topics_(std::move(topics)),
+      clock_(std::move(clock)),
+      inputs_(static_cast<int64_t>(params_.input_deadline_s * 1e9), clock_()) {
+  inputs_.expect(topics_.imu);
+}
+
+void StepRunner::imu(const ImuSample& sample, const std::string& source, const std::string& writer,
+                     StepOutputs& out) {
+  ++received_;
+  inputs_.on_sample(topics_.imu, source, sample.seq, writer, clock_());
+  last_seq_ = sample.seq;
+  if (!step_->step(sample)) {
+    ++rejected_;
+  } else if (step_->estimate(sample, out)) {
+    ++published_;
+    last_latency_ns_ = clock_() - sample.stamp_ns;
+  }
+  if (++since_diagnostics_ < static_cast<uint64_t>(params_.diagnostics_every)) {
+    return;
+  }
+  since_diagnostics_ = 0;
+  core_report_ = DiagnosticsReport{};
+  step_->diagnostics(core_report_);
+  publish_diagnostics(sample.stamp_ns, sample.seq, clock_(), out);
+}
+
+void StepRunner::vision(const msg::VisionPose& m, const std::string& writer) {
+  if (!step_->uses_vision()) {
+    return;
+  }
+  ++vision_received_;
+  inputs_.on_sample(topics_.vision_pose, m.sensor_id().to_string(), m.header().seq(), writer, clock_());
+  step_->vision(m);
+}
+
+void StepRunner::vehicle_input(const msg::VehicleInput& m, const std::string& writer) {
+  if (!step_->uses_vehicle_input()) {
+    return;
+  }
+  ++vehicle_received_;
+  inputs_.on_sample(topics_.vehicle_input, m.sensor_id().to_string(), m.header().seq(), writer,
+                    clock_());
+  step_->vehicle_input(m);
+}
+
+void StepRunner::periodic_diagnostics(StepOutputs& out) {
+  const int64_t now = clock_();
+  publish_diagnostics(now, last_seq_, now, out);
+}
+
+void StepRunner::publish_diagnostics(int64_t stamp_ns, uint32_t seq, int64_t now_ns, StepOutputs& out) {
+  DiagnosticsReport diag = core_report_;
+  diag.stamp_ns = stamp_ns;
+  diag.seq = seq;
+  diag.component = step_->component();
+  inputs_.report(now_ns, diag);
+  diag.metrics.push_back({"latency", static_cast<double>(last_latency_ns_) * 1e-6, "ms"});
+  diag.counters["samples_received"] = received_;
+  diag.counters["samples_rejected"] = rejected_;
+  diag.counters["samples_malformed"] = imu_malformed_.load();
+  diag.counters["estimates_published"] = published_;
+  if (step_->uses_vision()) {
+    diag.counters["vision_malformed"] = vision_malformed_.load();
+  }
+  if (step_->uses_vehicle_input()) {
+    diag.counters["vehicle_input_malformed"] = vehicle_input_malformed_.load();
+  }
+  out.diagnostics(to_diagnostics_msg(diag, step_->sensor_id()));
+  ++diagnostics_published_;
+}
+
+std::string StepRunner::status() const {
+  std::ostringstream os;
+  const std::string silence = describe_silence(inputs_.silent(clock_()));
+  if (!silence.empty()) {
+    os << silence << "; ";
+  }
+  os << "imu lost " << inputs_.totals(topics_.imu).lost << ", imu in " << received_
+     << ", estimates out " << published_ << ", rejected " << rejected_ << ", malformed "
+     << imu_malformed_.load() << ", last latency " << static_cast<double>(last_latency_ns_) * 1e-3
+     << " us";
+  if (step_->uses_vision()) {
+    os << ", vision in " << vision_received_ << ", vision malformed " << vision_malformed_.load();
+  }
+  if (step_->uses_vehicle_input()) {
+    os << ", vehicle_input in " << vehicle_received_ << ", vehicle_input malformed "
+       << vehicle_input_malformed_.load();
+  }
+  return os.str();
+}
+
+}  // namespace poise::nodes

@@ -1,0 +1,54 @@
+// The comparison `poise process` prints: each processed estimate (processed/<topic>) against the
+// live estimate recorded on <topic> with the same sensor_id, seq and stamp, and both against the
+// simulator's truth (truth/attitude, truth/pose, truth/altitude) with the same seq, when the
+// recording has it. Attitude: angle between the quaternions (RMSE, largest); when the
+// magnetometer was trusted (mag_trusted) or vision fused (SOURCE_VISION in sources_fused)
+// differently. Pose: distance between positions. Altitude: height difference.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace poise::record {
+
+struct Interval {
+  double start_s = 0.0;  ///< seconds from the first stamp of the series
+  double end_s = 0.0;
+  uint64_t samples = 0;
+};
+
+/// Samples where a yes/no (trusted, fused) differs between processed and live, as intervals.
+struct FlagDifference {
+  uint64_t processed_only = 0;  ///< processed yes, live no
+  uint64_t live_only = 0;       ///< live yes, processed no
+  std::vector<Interval> intervals;
+};
+
+struct SeriesComparison {
+  std::string kind;       ///< "attitude", "pose", "altitude"
+  std::string topic;      ///< the live topic, e.g. attitude/selective_ekf
+  std::string sensor_id;
+  std::string unit;       ///< "deg" (attitude), "m" (pose, altitude)
+  uint64_t processed = 0;  ///< processed estimates
+  uint64_t live = 0;       ///< recorded live estimates
+  uint64_t matched = 0;    ///< processed with a live one of the same seq and stamp
+  double rmse = 0.0;       ///< processed - live, in `unit`
+  double largest = 0.0;
+  double largest_at_s = 0.0;  ///< seconds from the first stamp of the series
+  std::string truth_topic;    ///< empty when the recording has no truth for it
+  uint64_t truth_matched = 0;           ///< processed estimates with a truth sample of the same seq
+  uint64_t truth_matched_live = 0;      ///< live estimates with one
+  double processed_truth_rmse = 0.0;    ///< in `unit`
+  double live_truth_rmse = 0.0;
+  FlagDifference mag_trust;     ///< attitude only
+  FlagDifference vision_fused;  ///< attitude only
+};
+
+/// Compares every processed/<topic> of `file` (what `poise process` wrote) with <topic> and truth.
+std::vector<SeriesComparison> compare_processed(const std::string& file,
+                                               const std::string& prefix = "processed/");
+/// The printed summary (one block per series).
+std::string format_comparison(const std::vector<SeriesComparison>& series);
+
+}  // namespace poise::record
