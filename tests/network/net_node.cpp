@@ -9,14 +9,11 @@
 //            --type diagnostics prints every FilterDiagnostics as "@diag source=... counter=N ..."
 //   capture  counts UDP/RTPS packets on an interface and those containing a byte marker (root)
 //   pose     publishes msg::PoseEstimate on `pose/<filter-id>` (fields from net_samples.h)
-//   ros2-mirror  republishes `imu` / `pose/<filter-id>` as ROS 2 sensor_msgs/Imu and
-//            geometry_msgs/PoseWithCovarianceStamped on rt/poise/imu, rt/poise/pose
 // Events: @start, @matched, @first, @resume (data again after >= --silence-ms), @summary (on exit).
 // Times are CLOCK_MONOTONIC ns (the same clock in every network namespace of the machine).
 // Security and the participant profile come from the environment (POISE_SECURITY_DIR/IDENTITY,
 // POISE_DDS_PROFILE, ROS_DISCOVERY_SERVER) exactly as for every poise process.
 #include "net_samples.h"
-#include "ros2_mirror.h"
 
 #include "poise/dds/participant.h"
 #include "poise/dds/sequence_gaps.h"
@@ -25,8 +22,6 @@
 #include <poise/msg/estimatesPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
 #include <poise/msg/visionPubSubTypes.h>
-#include <poise/ros2/geometry_msgsPubSubTypes.h>
-#include <poise/ros2/sensor_msgsPubSubTypes.h>
 
 #include <CLI/CLI.hpp>
 
@@ -313,42 +308,6 @@ int run_pose(const Common& c, const std::string& filter_id) {
   return 0;
 }
 
-/// Republishes `imu` and `pose/<filter-id>` as ROS 2 sensor_msgs/Imu and
-/// geometry_msgs/PoseWithCovarianceStamped on rt/poise/imu and rt/poise/pose (reliable, as ROS 2
-/// subscribers default to).
-int run_ros2_mirror(const Common& c, const std::string& filter_id) {
-  namespace r2 = poise::nettest::ros2;
-  dds::Participant participant = make_participant(c, "ros2_mirror");
-  timespec mono{};
-  timespec real{};
-  ::clock_gettime(CLOCK_MONOTONIC, &mono);
-  ::clock_gettime(CLOCK_REALTIME, &real);
-  const int64_t offset_ns = (static_cast<int64_t>(real.tv_sec) - static_cast<int64_t>(mono.tv_sec)) *
-                                1000000000LL + (real.tv_nsec - mono.tv_nsec);
-  event("@offset realtime_minus_monotonic_ns=%lld\n", static_cast<long long>(offset_ns));
-  dds::Writer<sensor_msgs::msg::dds_::Imu_PubSubType> imu_out(participant, "rt/poise/imu",
-                                                             dds::QosKind::kEstimate);
-  dds::Writer<geometry_msgs::msg::dds_::PoseWithCovarianceStamped_PubSubType> pose_out(
-      participant, "rt/poise/pose", dds::QosKind::kEstimate);
-  std::atomic<uint64_t> imu_n{0};
-  std::atomic<uint64_t> pose_n{0};
-  dds::Reader<msg::ImuSamplePubSubType> imu_in(
-      participant, "imu", [&](const msg::ImuSample& in, const auto& /*info*/) {
-        imu_out.write(r2::to_ros_imu(in, offset_ns));
-        imu_n.fetch_add(1);
-      });
-  dds::Reader<msg::PoseEstimatePubSubType> pose_in(
-      participant, dds::TopicNames{}.pose(filter_id),
-      [&](const msg::PoseEstimate& in, const auto& /*info*/) {
-        pose_out.write(r2::to_ros_pose(in, offset_ns));
-        pose_n.fetch_add(1);
-      });
-  run_until_stopped(c.duration_s);
-  event("@summary topic=rt/poise imu=%llu pose=%llu\n",
-        static_cast<unsigned long long>(imu_n.load()), static_cast<unsigned long long>(pose_n.load()));
-  return 0;
-}
-
 int run_fusion(const Common& c, const std::string& filter_id) {
   dds::Participant participant = make_participant(c, "fusion");
   const std::string in_topic = c.topic.empty() ? "imu" : c.topic;
@@ -553,10 +512,6 @@ int main(int argc, char** argv) {
   pose->add_option("--rate-hz", c.rate_hz, "publish rate")->check(CLI::Range(1.0, 2000.0));
   pose->add_option("--sensor-id", c.sensor_id, "sensor_id of the samples");
   pose->add_option("--filter-id", filter_id, "filter id of the topic");
-  auto* mirror = app.add_subcommand("ros2-mirror",
-                                    "republish imu and pose/<filter-id> as ROS 2 types on rt/poise/...");
-  add_common(mirror);
-  mirror->add_option("--filter-id", filter_id, "filter id of the pose topic");
   auto* watch = app.add_subcommand("watch", "report arrivals and sequence gaps on a topic");
   add_common(watch);
   watch->add_option("--type", type, "message type")
@@ -582,9 +537,6 @@ int main(int argc, char** argv) {
     }
     if (pose->parsed()) {
       return run_pose(c, filter_id);
-    }
-    if (mirror->parsed()) {
-      return run_ros2_mirror(c, filter_id);
     }
     if (watch->parsed()) {
       return run_watch(c, type);

@@ -311,4 +311,21 @@ void stop(testing::Child& child) {
   }
 }
 
+std::string cyclone_loopback_config() {
+  return "CYCLONEDDS_URI=<CycloneDDS><Domain Id=\"any\"><General><Interfaces>"
+         "<NetworkInterface name=\"lo\"/></Interfaces><AllowMulticast>false</AllowMulticast>"
+         "</General><Discovery><ParticipantIndex>auto</ParticipantIndex><Peers>"
+         "<Peer address=\"127.0.0.1\"/></Peers></Discovery></Domain></CycloneDDS>";
+}
+
+std::vector<double> split_doubles(const std::string& list) {
+  std::vector<double> out;
+  std::istringstream in(list);
+  std::string item;
+  while (std::getline(in, item, ',')) {
+    out.push_back(std::stod(item));
+  }
+  return out;
+}
+
 }  // namespace poise::nettest

@@ -85,6 +85,13 @@ std::optional<Event> wait_event(const testing::Child& child, const std::string& 
                                 const std::map<std::string, std::string>& match,
                                 std::chrono::milliseconds timeout, int64_t after_ns = 0);
 
+/// The environment entry (CYCLONEDDS_URI=...) that restricts Cyclone DDS to loopback with unicast
+/// discovery of the local participants, matching poise's `poise_loopback` profile.
+std::string cyclone_loopback_config();
+
+/// "1,2.5,-3" -> {1, 2.5, -3} (the lists the Cyclone programs print).
+std::vector<double> split_doubles(const std::string& list);
+
 /// Removes a path (e.g. the pty symlink of a `poise sim-imu` board that was killed) when it goes
 /// out of scope.
 struct RemoveOnExit {

@@ -19,15 +19,6 @@ using namespace std::chrono_literals;
 constexpr int kSamples = 20;
 constexpr const char* kCycloneReaderTimeoutS = "20";
 
-/// Cyclone DDS restricted to loopback with unicast discovery of the local participants, matching
-/// poise's `poise_loopback` profile.
-std::string cyclone_loopback_config() {
-  return "CYCLONEDDS_URI=<CycloneDDS><Domain Id=\"any\"><General><Interfaces>"
-         "<NetworkInterface name=\"lo\"/></Interfaces><AllowMulticast>false</AllowMulticast>"
-         "</General><Discovery><ParticipantIndex>auto</ParticipantIndex><Peers>"
-         "<Peer address=\"127.0.0.1\"/></Peers></Discovery></Domain></CycloneDDS>";
-}
-
 /// Runs the Fast DDS publisher and the Cyclone reader; returns the reader's @sample events.
 std::vector<Event> interop_samples(const std::string& type, const std::string& sensor_id,
                                    std::string& log) {
@@ -100,104 +91,6 @@ TEST(Interop, CycloneReadsVisionPoseWithArraysAndSequences) {
     std::ostringstream tags;
     tags << v.tag_ids[0] << "," << v.tag_ids[1] << "," << v.tag_ids[2];
     EXPECT_EQ(s.str("tags"), tags.str());
-  }
-}
-
-int64_t realtime_ns() {
-  timespec ts{};
-  ::clock_gettime(CLOCK_REALTIME, &ts);
-  return static_cast<int64_t>(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
-}
-
-std::vector<double> split_doubles(const std::string& list) {
-  std::vector<double> out;
-  std::istringstream in(list);
-  std::string item;
-  while (std::getline(in, item, ',')) {
-    out.push_back(std::stod(item));
-  }
-  return out;
-}
-
-/// Runs IMU and pose publishers, the ROS 2 mirror and a Cyclone reader of `ros_type`.
-std::vector<Event> ros2_samples(const std::string& ros_type, std::string& log) {
-  testing::DomainLease lease;
-  const std::string domain = std::to_string(lease.id());
-  const std::vector<std::string> env{"POISE_DDS_PROFILE=poise_loopback"};
-  testing::Child reader({testing::bin("poise_cyclone_reader"), "--domain", domain, "--type",
-                         ros_type, "--count", std::to_string(kSamples), "--timeout-s",
-                         kCycloneReaderTimeoutS},
-                        {cyclone_loopback_config()});
-  testing::Child mirror({testing::bin("poise_net_node"), "ros2-mirror", "--domain", domain,
-                         "--filter-id", "pkf"}, env);
-  testing::Child source(ros_type == "ros_imu"
-                            ? std::vector<std::string>{testing::bin("poise_net_node"), "imu",
-                                                       "--domain", domain, "--rate-hz", "50"}
-                            : std::vector<std::string>{testing::bin("poise_net_node"), "pose",
-                                                       "--domain", domain, "--rate-hz", "50",
-                                                       "--filter-id", "pkf"},
-                        env);
-  const auto rc = reader.wait_for(30s);
-  log = "cyclone reader:\n" + reader.output() + "mirror:\n" + mirror.output() + "source:\n" +
-        source.output();
-  EXPECT_EQ(rc, 0) << log;
-  return find_events(reader.output(), "sample", {{"type", ros_type}});
-}
-
-// ROS 2 tools read rt/<topic> with the rmw type names (sensor_msgs::msg::dds_::Imu_): an
-// independent implementation decoding the mirror with the ROS layout proves the layout.
-TEST(Interop, Ros2ImuMirrorReadAsSensorMsgsImu) {
-  const int64_t t0 = realtime_ns();
-  std::string log;
-  const auto samples = ros2_samples("ros_imu", log);
-  const int64_t t1 = realtime_ns();
-  ASSERT_EQ(samples.size(), static_cast<size_t>(kSamples)) << log;
-  for (const auto& s : samples) {
-    // The IMU values are a function of seq (net_samples.h); recover it from accel x.
-    const auto seq = static_cast<uint32_t>(std::lround((s.num("ax") - 0.25) / 1e-3));
-    const ImuValues v = imu_values(seq);
-    SCOPED_TRACE("seq " + std::to_string(seq));
-    EXPECT_EQ(s.str("frame"), "body");
-    const double stamp = s.num("sec") * 1e9 + s.num("nanosec");
-    EXPECT_GE(stamp, static_cast<double>(t0) - 1e6) << "ROS time = wall clock (1 ms slack)";
-    EXPECT_LE(stamp, static_cast<double>(t1) + 1e6);
-    EXPECT_EQ(s.num("gx"), v.gyro_rps[0]);
-    EXPECT_EQ(s.num("gy"), v.gyro_rps[1]);
-    EXPECT_EQ(s.num("gz"), v.gyro_rps[2]);
-    EXPECT_EQ(s.num("ay"), v.accel_mps2[1]);
-    EXPECT_EQ(s.num("az"), v.accel_mps2[2]);
-    EXPECT_EQ(s.num("ow"), 1.0);
-    EXPECT_EQ(split_doubles(s.str("ocov")),
-              (std::vector<double>{-1, 0, 0, 0, 0, 0, 0, 0, 0}));
-    EXPECT_EQ(split_doubles(s.str("gcov")), std::vector<double>(9, 0.0));
-    EXPECT_EQ(split_doubles(s.str("acov")), std::vector<double>(9, 0.0));
-  }
-}
-
-TEST(Interop, Ros2PoseMirrorReadAsPoseWithCovarianceStamped) {
-  std::string log;
-  const auto samples = ros2_samples("ros_pose", log);
-  ASSERT_EQ(samples.size(), static_cast<size_t>(kSamples)) << log;
-  for (const auto& s : samples) {
-    const auto seq = static_cast<uint32_t>(std::lround((s.num("px") - 10.0) / 1e-3));
-    const PoseValues v = pose_values(seq);
-    SCOPED_TRACE("seq " + std::to_string(seq));
-    EXPECT_EQ(s.str("frame"), "world");
-    EXPECT_EQ(s.num("px"), v.position_m[0]);
-    EXPECT_EQ(s.num("py"), v.position_m[1]);
-    EXPECT_EQ(s.num("pz"), v.position_m[2]);
-    EXPECT_EQ(s.num("qw"), v.q_wxyz[0]);
-    EXPECT_EQ(s.num("qx"), v.q_wxyz[1]);
-    EXPECT_EQ(s.num("qy"), v.q_wxyz[2]);
-    EXPECT_EQ(s.num("qz"), v.q_wxyz[3]);
-    const auto cov = split_doubles(s.str("cov"));
-    ASSERT_EQ(cov.size(), 36U);
-    const auto source = [](size_t i) { return i < 3 ? i : i + 3; };
-    for (size_t r = 0; r < 6; ++r) {
-      for (size_t c = 0; c < 6; ++c) {
-        EXPECT_EQ(cov[r * 6 + c], pose_covariance(source(r), source(c))) << r << "," << c;
-      }
-    }
   }
 }
 

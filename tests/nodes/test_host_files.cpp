@@ -1,5 +1,6 @@
-// The shipped host files (config/hosts/*.yaml) parse, and every estimator component in them is
+// The shipped host files (config/hosts/*.yaml) parse, and every estimator (and ROS 2 bridge) in them is
 // created with its parameters validated (drivers need their devices and are left out here).
+#include "poise/ros2_bridge/bridge.h"
 #include "poise/runtime/host.h"
 #include "poise/testing/testing.h"
 
@@ -20,11 +21,15 @@ void register_nodes() {
   if (registry.find("selective_ekf") == nullptr) {
     runtime::register_estimator_nodes(registry);
   }
+  if (registry.find("ros2_bridge") == nullptr) {
+    ros2::register_ros2_bridge(registry);
+  }
 }
 
 TEST(HostFiles, GivenEachShippedHostFileWhenLoadedThenItsEstimatorsAreCreated) {
   register_nodes();
-  const std::set<std::string> estimators{"parallel_kf", "selective_ekf", "gauss_newton", "altitude", "vehicle"};
+  const std::set<std::string> estimators{"parallel_kf", "selective_ekf", "gauss_newton", "altitude", "vehicle",
+                                         "ros2_bridge"};
   int files = 0;
   for (const auto& entry : std::filesystem::directory_iterator(source_path("config/hosts"))) {
     if (entry.path().extension() != ".yaml") {

@@ -10,6 +10,8 @@
 #include "poise/record/replayer.h"
 #include "record_test_support.h"
 
+#include <poise/ros2/sensor_msgsPubSubTypes.h>
+
 #include <gtest/gtest.h>
 
 #include <csignal>
@@ -214,6 +216,75 @@ TEST(RecordReplay, RecordsPayloadsVerbatimAndReplaysThemByteForByte) {
   for (const auto& [seq, bytes] : imu_got.by_seq) {
     EXPECT_EQ(bytes, imu_rec[seq]) << "imu #" << seq;
   }
+}
+
+// Issue 16: ROS 2 topics (rt/..., the types of idl/ros2) are recorded like poise's own: verbatim
+// payloads, the ROS IDL as the omgidl schema, publish_time = header.stamp {sec, nanosec} in ns.
+TEST(RecordReplay, GivenRos2TopicsWhenRecordedThenSchemaIsTheRosIdlAndPublishTimeTheHeaderStamp) {
+  poise::testing::DomainLease lease;
+  const std::string dir = testing::cases_dir("dds_ros2");
+  ASSERT_FALSE(dir.empty());
+  const std::string file = dir + "/ros2.mcap";
+  const std::string topic = "rt/poise/parallel_kf/imu";
+  constexpr int kCount = 20;
+  std::ostringstream log;
+  RecorderOptions ro;
+  ro.output = file;
+  ro.topics = {topic};
+  ro.domain = lease.id();
+  ro.participant_profile = kProfile;
+  ro.log = &log;
+  Recorder recorder(ro);
+  RecorderStats rstats;
+  std::thread thread([&] { rstats = recorder.run(); });
+  std::map<int64_t, std::vector<uint8_t>> sent;  // by header stamp, ns
+  {
+    dds::Participant pub({lease.id(), kProfile, "", "test_pub"});
+    dds::Writer<sensor_msgs::msg::dds_::Imu_PubSubType> imu(pub, topic, dds::QosKind::kEstimate);
+    if (!poise::testing::wait_until([&] { return recorder.subscribed() == 1 && imu.matched() > 0; },
+                                    kMatchTimeout)) {
+      recorder.request_stop();
+      thread.join();
+      FAIL() << "recorder did not subscribe/match within the timeout\n" << log.str();
+    }
+    for (int i = 0; i < kCount; ++i) {
+      sensor_msgs::msg::dds_::Imu_ m;
+      m.header().stamp().sec(1'700'000'000 + i);
+      m.header().stamp().nanosec(123'456'789U);
+      m.header().frame_id("imu_link");
+      m.orientation().w(1.0);
+      m.angular_velocity().z(0.01 * i);
+      sent[(1'700'000'000LL + i) * 1'000'000'000LL + 123'456'789LL] =
+          testing::serialize<sensor_msgs::msg::dds_::Imu_PubSubType>(m);
+      imu.write(m);
+    }
+    poise::testing::wait_until([&] { return recorder.written() >= kCount; }, kDeliveryTimeout);
+  }
+  recorder.request_stop();
+  thread.join();
+  ASSERT_TRUE(rstats.error.empty()) << rstats.error;
+  McapReader reader = McapReader::open_file(file);
+  reader.verify();
+  ASSERT_TRUE(reader.report().complete);
+  ASSERT_EQ(reader.channels().size(), 1U);
+  const Channel& channel = reader.channels().begin()->second;
+  EXPECT_EQ(channel.topic, topic);
+  EXPECT_EQ(channel.metadata.at("publish_time"), "header.stamp");
+  const auto& schema = reader.schemas().at(channel.schema_id);
+  EXPECT_EQ(schema.name, "sensor_msgs::msg::dds_::Imu_");
+  EXPECT_EQ(schema.encoding, "omgidl");
+  const std::string text(schema.data.begin(), schema.data.end());
+  EXPECT_NE(text.find("module sensor_msgs"), std::string::npos) << text;
+  EXPECT_NE(text.find("struct Time_"), std::string::npos) << "self-contained: " << text;
+  int n = 0;
+  MessageCursor cursor = reader.messages();
+  while (const MessageView* m = cursor.next()) {
+    const auto it = sent.find(static_cast<int64_t>(m->publish_time_ns));
+    ASSERT_NE(it, sent.end()) << "publish_time " << m->publish_time_ns << " is no header stamp sent";
+    EXPECT_EQ(std::vector<uint8_t>(m->data, m->data + m->size), it->second);
+    ++n;
+  }
+  EXPECT_EQ(n, kCount) << "reliable: every message";
 }
 
 TEST(RecordReplay, KillMinus9LeavesEveryMessageOlderThanTheChunkAgeReadable) {

@@ -516,6 +516,35 @@ std::optional<std::int64_t> read_header_stamp_ns(const std::uint8_t* data, std::
   return out;
 }
 
+std::optional<std::int64_t> read_ros_header_stamp_ns(const std::uint8_t* data, std::size_t size) {
+  if (data == nullptr || size < kEncapsulationSize + 8 || data[0] != 0 || data[1] > 1) {
+    return std::nullopt;
+  }
+  const bool little = data[1] == 1;
+  const auto u32 = [&](std::size_t at) {
+    std::uint32_t v = 0;
+    for (std::size_t k = 0; k < 4; ++k) {
+      const std::size_t byte = little ? k : 3 - k;
+      v |= static_cast<std::uint32_t>(data[kEncapsulationSize + at + k]) << (8 * byte);
+    }
+    return v;
+  };
+  std::int32_t sec = 0;
+  const std::uint32_t raw_sec = u32(0);
+  std::memcpy(&sec, &raw_sec, sizeof sec);
+  const std::uint32_t nanosec = u32(4);
+  if (sec < 0 || nanosec >= 1000000000U) {
+    return std::nullopt;
+  }
+  return static_cast<std::int64_t>(sec) * 1000000000LL + nanosec;
+}
+
+bool has_ros_header_stamp(const TypeTable& table, const std::string& type_name) {
+  const StructDef* s = table.find_struct(type_name);
+  return s != nullptr && !s->members.empty() && s->members[0].type.kind == TypeSpec::Kind::kStruct &&
+         s->members[0].type.name == "std_msgs::msg::dds_::Header_";
+}
+
 bool has_header_stamp(const TypeTable& table, const std::string& type_name) {
   const StructDef* s = table.find_struct(type_name);
   if (s == nullptr || s->members.empty() || s->members[0].type.kind != TypeSpec::Kind::kStruct) {

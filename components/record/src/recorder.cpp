@@ -79,7 +79,11 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
   class SubListener : public fdds::DataReaderListener {
    public:
     SubListener(Impl* impl, size_t index, std::string type)
-        : impl_(impl), index_(index), type_(std::move(type)) {}
+        : impl_(impl),
+          index_(index),
+          type_(std::move(type)),
+          poise_stamp_(ddstools::has_header_stamp(ddstools::TypeTable::builtin(), type_)),
+          ros_stamp_(ddstools::has_ros_header_stamp(ddstools::TypeTable::builtin(), type_)) {}
     void on_data_available(fdds::DataReader* reader) override {
       dds::RawSample sample;
       fdds::SampleInfo info;
@@ -100,7 +104,11 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
         p.log_ns = impl_->log_now();
         const uint64_t seq = info.sample_identity.sequence_number().to64long();
         p.sequence = static_cast<uint32_t>(seq & 0xFFFFFFFFu);
-        const std::optional<int64_t> stamp = ddstools::read_header_stamp_ns(sample.data.data(), sample.data.size());
+        // publish_time: the header stamp of poise types and of ROS 2 types, else the source time.
+        const std::optional<int64_t> stamp =
+            ros_stamp_ ? ddstools::read_ros_header_stamp_ns(sample.data.data(), sample.data.size())
+            : poise_stamp_ ? ddstools::read_header_stamp_ns(sample.data.data(), sample.data.size())
+                           : std::nullopt;
         p.publish_ns = stamp && *stamp > 0 ? *stamp : info.source_timestamp.to_ns();
         p.bytes = std::move(sample.data);
         impl_->push(std::move(p), info.sample_identity.writer_guid(), seq);
@@ -116,6 +124,8 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
     Impl* impl_;
     size_t index_;
     std::string type_;
+    bool poise_stamp_;  // header.stamp_ns (poise types)
+    bool ros_stamp_;    // header.stamp {sec, nanosec} (ROS 2 types, idl/ros2)
   };
   struct Sub {
     std::string topic;
@@ -305,7 +315,7 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
       }
       warn_once("unknown:" + d.topic,
                 "topic '" + d.topic + "' has type " + d.type +
-                    " which is not a poise IDL type: not recorded");
+                    " which is neither a poise nor a ROS 2 IDL type (idl/, idl/ros2/): not recorded");
       return;
     }
     auto s = std::make_unique<Sub>();
@@ -317,7 +327,11 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
                    {"reliability", reliability_name(d.reliability)},
                    {"durability", durability_name(d.durability)},
                    {"qos_profile", dds::profile_name(kind)},
-                   {"publish_time", "header.stamp_ns"}};
+                   {"publish_time", ddstools::has_ros_header_stamp(ddstools::TypeTable::builtin(), d.type)
+                                        ? "header.stamp"
+                                        : ddstools::has_header_stamp(ddstools::TypeTable::builtin(), d.type)
+                                              ? "header.stamp_ns"
+                                              : "source_timestamp"}};
     fdds::TypeSupport type(new dds::RawPubSubType(d.type, &ddstools::TypeTable::builtin()));
     if (participant->find_type(d.type).empty() &&
         type.register_type(participant) != ReturnCode_t::RETCODE_OK) {

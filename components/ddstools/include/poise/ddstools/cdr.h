@@ -85,4 +85,10 @@ std::optional<std::int64_t> read_header_stamp_ns(const std::uint8_t* data, std::
 /// int64 stamp_ns), so read_header_stamp_ns() is meaningful for it.
 bool has_header_stamp(const TypeTable& table, const std::string& type_name);
 
+/// header.stamp of a ROS 2 message (std_msgs/Header first: int32 sec, uint32 nanosec at payload
+/// bytes 4-11) in ns; nullopt as read_header_stamp_ns(), and when sec < 0 or nanosec >= 1e9.
+std::optional<std::int64_t> read_ros_header_stamp_ns(const std::uint8_t* data, std::size_t size);
+/// True when the first member of `type_name` is a std_msgs::msg::dds_::Header_ (idl/ros2).
+bool has_ros_header_stamp(const TypeTable& table, const std::string& type_name);
+
 }  // namespace poise::ddstools
