@@ -33,11 +33,12 @@ std::vector<std::string> lines_of(const std::string& text) {
 }
 
 // A publisher child that runs well past the test's needs; killed by ~Child.
-std::unique_ptr<Child> publisher(int domain, const std::string& type, double rate_hz) {
+// `seq_step` > 1: header.seq advances by it per sample, as if seq_step - 1 were lost each time.
+std::unique_ptr<Child> publisher(int domain, const std::string& type, double rate_hz, int seq_step = 1) {
   return std::make_unique<Child>(
       std::vector<std::string>{poise::testing::bin("poise"), "dds-test-pub", "--type", type,
                                "--domain", std::to_string(domain), "--count", "100000", "--rate",
-                               std::to_string(rate_hz)},
+                               std::to_string(rate_hz), "--seq-step", std::to_string(seq_step)},
       kEnv);
 }
 
@@ -56,7 +57,7 @@ TEST(Echo, GivenABestEffortImuPublisherWhenEchoedAsJsonThenCountDecodedSamplesAr
   }
   ASSERT_EQ(samples.size(), 3U) << r.output;
   const std::regex shape(
-      R"re(^\{"topic":"imu","type":"poise::msg::ImuSample","size":\d+,"source_timestamp_ns":\d+,)re"
+      R"re(^\{"topic":"imu","type":"poise::msg::ImuSample","size":\d+,"source_timestamp_ns":\d+,"lost_before":\d+,)re"
       R"re("data":\{"header":\{"stamp_ns":(\d+),"seq":(\d+),"frame_id":"body"\},"sensor_id":"imu0",)re"
       R"re("accel_mps2":\{"x":0\.0,"y":0\.0,"z":9\.81\},.*"valid":\{"accel":true,"gyro":true,"mag":false,)re"
       R"re("pressure":false,"temperature":false\}\}\}$)re");
@@ -69,6 +70,37 @@ TEST(Echo, GivenABestEffortImuPublisherWhenEchoedAsJsonThenCountDecodedSamplesAr
     EXPECT_EQ(std::stoll(m[1]), 1000000000LL + 1000000LL * seq) << "stamp_ns of seq " << seq;
     last_seq = seq;
   }
+}
+
+// Issue 20: best-effort loss is visible to `poise echo`. GIVEN a publisher whose header.seq
+// advances by 4 (3 missing before every sample) WHEN echoed THEN every record after the first
+// says 3 (+ 4 per sample the reader really missed) were lost before it, and the summary totals them.
+TEST(Echo, GivenSequenceGapsWhenEchoedThenEachRecordAndTheSummarySayWhatWasLost) {
+  DomainLease lease;
+  auto pub = publisher(lease.id(), "imu", 100.0, 4);
+  const auto r = run({poise::testing::bin("poise"), "echo", "imu", "--json", "--count", "5",
+                      "--domain", std::to_string(lease.id()), "--timeout", "15"},
+                     kCommandTimeout, kEnv);
+  ASSERT_EQ(r.exit_code, 0) << r.output << "\npublisher:\n" << pub->output();
+  int records = 0;
+  long total = 0;
+  for (const auto& line : lines_of(r.output)) {
+    std::smatch m;
+    if (std::regex_search(line, m, std::regex(R"re("lost_before":(\d+),)re"))) {
+      const long lost = std::stol(m[1]);
+      if (records > 0) {
+        EXPECT_GE(lost, 3) << line;
+        EXPECT_EQ((lost - 3) % 4, 0) << line;
+      }
+      total += lost;
+      ++records;
+    }
+  }
+  EXPECT_EQ(records, 5) << r.output;
+  // the summary counts every sample received, printed or still queued at --count: at least these
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(r.output, m, std::regex(R"re((\d+) lost on the way \()re"))) << r.output;
+  EXPECT_GE(std::stol(m[1]), total) << r.output;
 }
 
 TEST(Echo, GivenAReliableDiagnosticsPublisherWhenEchoedAsTextThenTheSampleIsReadable) {
@@ -176,11 +208,7 @@ TEST(Topics, GivenTwoPublishersWhenListedThenEachTopicHasItsTypeWriterAndRate) {
 // sample the best-effort reader really missed -- so lost - 3 (samples - 1) is a multiple of 4.
 TEST(Topics, GivenSequenceGapsWhenListedThenLostCountsTheMissingSamples) {
   DomainLease lease;
-  auto pub = std::make_unique<Child>(
-      std::vector<std::string>{poise::testing::bin("poise"), "dds-test-pub", "--type", "imu",
-                               "--domain", std::to_string(lease.id()), "--count", "100000",
-                               "--rate", "100", "--seq-step", "4"},
-      kEnv);
+  auto pub = publisher(lease.id(), "imu", 100.0, 4);
   const auto r = run({poise::testing::bin("poise"), "topics", "--json", "--duration", "3",
                       "--domain", std::to_string(lease.id())},
                      kCommandTimeout, kEnv);

@@ -167,5 +167,35 @@ TEST(HostileBroad, GivenTrialsWithoutScorableSamplesWhenEvaluatedThenTheyAreExcl
   EXPECT_NE(rate.output.find(bad + ": attribute 'sampling_rate' = 1e+300 Hz"), std::string::npos) << rate.output;
 }
 
+// GIVEN only undisturbed trials WHEN the table is printed THEN the disturbed mean over 0 trials is
+// "-", never 0.000 or nan, and the scored-samples column says what it counts.
+TEST(EvalTable, GivenNoDisturbedTrialWhenPrintedThenItsMeanIsADashNeverZeroOrNan) {
+  TrialResult a;
+  a.stem = "01_undisturbed_slow_rotation_A";
+  a.number = 1;
+  a.errors.total_deg = 1.5;
+  a.errors.heading_deg = 1.2;
+  a.errors.inclination_deg = 0.5;
+  a.errors.samples = 1000;
+  std::ostringstream os;
+  print_table(os, "parallel_kf", {a});
+  const std::string out = os.str();
+  std::istringstream lines(out);
+  std::string line;
+  bool seen = false;
+  while (std::getline(lines, line)) {
+    if (line.rfind("mean disturbed", 0) == 0) {
+      seen = true;
+      EXPECT_EQ(line.find("0.000"), std::string::npos) << line;
+      EXPECT_NE(line.find("(0 trials)"), std::string::npos) << line;
+      EXPECT_NE(line.find(" -"), std::string::npos) << line;
+    }
+  }
+  EXPECT_TRUE(seen) << out;
+  EXPECT_EQ(out.find("nan"), std::string::npos) << out;
+  EXPECT_NE(out.find("scored: the samples the RMSE is over"), std::string::npos) << out;
+  EXPECT_EQ(format_mean_figure(std::nan(""), 3, 6), "     -");
+}
+
 }  // namespace
 }  // namespace poise::eval

@@ -1,5 +1,6 @@
 // MCAP writer/reader: round trips in memory, chunking on size and injected time, truncation at
 // every byte, corrupted CRCs, write failures (disk full).
+#include "poise/record/info.h"
 #include "poise/record/mcap.h"
 #include "poise/testing/testing.h"
 
@@ -129,6 +130,20 @@ McapReader read_buffer(const std::vector<uint8_t>& bytes) {
   return McapReader(std::make_unique<MemorySource>(bytes));
 }
 
+/// A closed in-memory file of write_sample(count) with chunks of `chunk_size_bytes`.
+std::vector<uint8_t> sample_file(int count, std::size_t chunk_size_bytes) {
+  std::mt19937 rng(kSeed);
+  std::vector<uint8_t> buf;
+  FakeClock clock;
+  WriterOptions opt;
+  opt.chunk_size_bytes = chunk_size_bytes;
+  opt.clock = clock.fn();
+  McapWriter w(std::make_unique<MemorySink>(buf), opt);
+  write_sample(w, clock, count, 1000, rng);
+  w.close();
+  return buf;
+}
+
 TEST(Mcap, RoundTripInMemoryKeepsEveryFieldAndByte) {
   // GIVEN a writer on a memory buffer with small chunks
   std::mt19937 rng(kSeed);
@@ -170,6 +185,26 @@ TEST(Mcap, RoundTripInMemoryKeepsEveryFieldAndByte) {
   EXPECT_TRUE(v.report().complete) << joined(v.report().problems);
   EXPECT_EQ(v.report().messages, 300u);
   EXPECT_EQ(v.report().chunks, r.report().chunks);
+}
+
+// Issue 20: `poise info` and `poise info --verify` report one rate per topic: messages over the
+// recording's span, whether the counts come from the summary or from reading every chunk.
+TEST(McapInfo, GivenTheSummaryOrAFullScanWhenTopicsAreSummarisedThenTheRatesAreTheSame) {
+  const std::vector<uint8_t> buf = sample_file(301, 1000);  // 3 channels, 1 ms apart: span 0.3 s
+  const McapReader summary = read_buffer(buf);
+  McapReader scanned = read_buffer(buf);
+  scanned.verify();
+  const auto a = summarise_topics(summary);
+  const auto b = summarise_topics(scanned);
+  ASSERT_EQ(a.size(), 3U);
+  ASSERT_EQ(b.size(), 3U);
+  constexpr double kSpanS = 0.3;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    EXPECT_EQ(a[i].topic, b[i].topic);
+    EXPECT_EQ(a[i].messages, b[i].messages);
+    EXPECT_DOUBLE_EQ(a[i].rate_hz, b[i].rate_hz) << a[i].topic;
+    EXPECT_NEAR(a[i].rate_hz, static_cast<double>(a[i].messages) / kSpanS, 1e-9) << a[i].topic;
+  }
 }
 
 TEST(Mcap, ZstdRoundTrip) {
@@ -445,16 +480,7 @@ TEST(Mcap, CorruptRecordLengthResynchronisesOnTheNextChunk) {
 }
 
 TEST(Mcap, DiskFullStopsWithAFinalisedFileAtEveryFailurePoint) {
-  std::mt19937 rng(kSeed);
-  std::vector<uint8_t> reference;
-  {
-    FakeClock clock;
-    WriterOptions opt;
-    opt.chunk_size_bytes = 400;
-    opt.clock = clock.fn();
-    McapWriter w(std::make_unique<MemorySink>(reference), opt);
-    write_sample(w, clock, 60, 1000, rng);
-  }
+  const std::vector<uint8_t> reference = sample_file(60, 400);
   size_t failures_seen = 0;
   for (uint64_t capacity = 200; capacity < reference.size(); capacity += 37) {
     std::vector<uint8_t> buf;

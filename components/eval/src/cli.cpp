@@ -195,10 +195,13 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
               << (cv.in_sample[t].errors.scored() ? "" : "  (no scorable samples: excluded)") << "\n";
   }
   auto row = [&](const std::string& label, const eval::GroupMeans& m) {
-    std::cout << std::left << std::setw(26) << label << std::right << std::fixed << std::setprecision(3)
-              << std::setw(10) << m.undisturbed.total_deg << std::setw(10) << m.undisturbed.inclination_deg
-              << std::setw(10) << m.disturbed.total_deg << std::setw(10) << m.disturbed.inclination_deg
-              << std::setw(10) << m.all.total_deg << std::setw(10) << m.all.inclination_deg << "\n";
+    const int n_all = m.n_undisturbed + m.n_disturbed;
+    std::cout << std::left << std::setw(26) << label << eval::format_mean_figure(m.undisturbed.total_deg, m.n_undisturbed, 10)
+              << eval::format_mean_figure(m.undisturbed.inclination_deg, m.n_undisturbed, 10)
+              << eval::format_mean_figure(m.disturbed.total_deg, m.n_disturbed, 10)
+              << eval::format_mean_figure(m.disturbed.inclination_deg, m.n_disturbed, 10)
+              << eval::format_mean_figure(m.all.total_deg, n_all, 10)
+              << eval::format_mean_figure(m.all.inclination_deg, n_all, 10) << "\n";
   };
   std::cout << "\nmean RMSE, deg (" << in.n_undisturbed << " undisturbed, " << in.n_disturbed << " disturbed"
             << (in.unscored.empty() ? "" : ", " + std::to_string(in.unscored.size()) + " without scorable samples excluded")

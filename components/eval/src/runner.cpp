@@ -2,6 +2,7 @@
 
 #include <cstdio>
 #include <fstream>
+#include <cmath>
 #include <iomanip>
 #include <ostream>
 #include <sstream>
@@ -80,10 +81,21 @@ std::string format_trial_figure(const TrialErrors& e, double value, int width) {
   return os.str();
 }
 
+std::string format_mean_figure(double value, int n, int width) {
+  std::ostringstream os;
+  os << std::right << std::setw(width);
+  if (n > 0 && std::isfinite(value)) {
+    os << std::fixed << std::setprecision(3) << value;
+  } else {
+    os << "-";
+  }
+  return os.str();
+}
+
 void print_table(std::ostream& os, const std::string& filter_name, const std::vector<TrialResult>& results) {
   os << "BROAD RMSE (deg), filter " << filter_name << "\n";
   os << std::left << std::setw(48) << "trial" << std::right << std::setw(9) << "total" << std::setw(9)
-     << "heading" << std::setw(9) << "incl" << std::setw(10) << "samples" << "\n";
+     << "heading" << std::setw(9) << "incl" << std::setw(10) << "scored" << "\n";
   os << std::fixed << std::setprecision(3);
   for (const auto& r : results) {
     os << std::left << std::setw(48) << r.stem << format_trial_figure(r.errors, r.errors.total_deg, 9)
@@ -100,12 +112,15 @@ void print_table(std::ostream& os, const std::string& filter_name, const std::ve
   }
   const GroupMeans g = group_means(results);
   auto line = [&](const std::string& label, const TrialErrors& e, int n) {
-    os << std::left << std::setw(48) << (label + " (" + std::to_string(n) + " trials)") << std::right
-       << std::setw(9) << e.total_deg << std::setw(9) << e.heading_deg << std::setw(9) << e.inclination_deg << "\n";
+    os << std::left << std::setw(48) << (label + " (" + std::to_string(n) + " trials)")
+       << format_mean_figure(e.total_deg, n, 9) << format_mean_figure(e.heading_deg, n, 9)
+       << format_mean_figure(e.inclination_deg, n, 9) << (n == 0 ? "  no trial: no figure" : "") << "\n";
   };
   line("mean undisturbed 01-23", g.undisturbed, g.n_undisturbed);
   line("mean disturbed 24-39", g.disturbed, g.n_disturbed);
   line("mean all", g.all, g.n_undisturbed + g.n_disturbed);
+  os << "scored: the samples the RMSE is over (movement and a valid reference quaternion); the sample\n"
+        "count on stderr is every sample of the file\n";
   if (!g.unscored.empty()) {
     os << "excluded from the means: " << g.unscored.size() << " trial(s) without scorable samples:";
     for (const auto& stem : g.unscored) {

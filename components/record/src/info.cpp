@@ -22,10 +22,9 @@ std::vector<TopicSummary> summarise_topics(const McapReader& reader) {
     if (counts != report.channels.end()) {
       const ChannelCounts& c = counts->second;
       t.messages = c.messages;
-      const double span_s = static_cast<double>(c.last_log_ns - c.first_log_ns) * 1e-9;
-      if (c.messages > 1 && c.last_log_ns > c.first_log_ns) {
-        t.rate_hz = static_cast<double>(c.messages - 1) / span_s;
-      } else if (file_span_s > 0.0) {
+      // One formula whatever was read: the summary's per-channel counts (no per-channel times)
+      // or every chunk (--verify) give the same count and the same recording span.
+      if (file_span_s > 0.0) {
         t.rate_hz = static_cast<double>(t.messages) / file_span_s;
       }
     }

@@ -94,29 +94,44 @@ void run_detect(const DetectOptions& o) {
   for (const auto& path : paths) {
     std::string error;
     const cv::Mat gray = read_gray_image(path, limits, error);
+    // --json: one record per image, read or not (an image without tags is an empty list)
+    nlohmann::ordered_json record = {{"image", path}, {"family", o.family}};
+    const auto print_record = [&record] {
+      // paths need not be UTF-8: invalid bytes become U+FFFD instead of throwing
+      std::printf("%s\n", record.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
+    };
     if (gray.empty()) {
       std::fprintf(stderr, "poise: error: %s\n", error.c_str());
       ++unreadable;
+      if (o.json) {
+        record["error"] = error;
+        record["detections"] = nullptr;
+        print_record();
+      }
       continue;
     }
     const auto detections = detector->detect(gray);
     total += detections.size();
-    for (const auto& d : detections) {
-      if (o.json) {
+    if (o.json) {
+      record["width_px"] = gray.cols;
+      record["height_px"] = gray.rows;
+      record["detections"] = nlohmann::ordered_json::array();
+      for (const auto& d : detections) {
         nlohmann::ordered_json corners = nlohmann::ordered_json::array();
         for (const auto& c : d.corners_px) {
           corners.push_back({c.x(), c.y()});
         }
-        const nlohmann::ordered_json j = {{"image", path},
-                                          {"family", o.family},
-                                          {"id", d.id},
-                                          {"hamming", d.hamming},
-                                          {"decision_margin", d.decision_margin},
-                                          {"corners_px", corners},
-                                          {"center_px", {d.center_px.x(), d.center_px.y()}}};
-        // paths need not be UTF-8: invalid bytes become U+FFFD instead of throwing
-        std::printf("%s\n", j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
-      } else {
+        record["detections"].push_back({{"id", d.id},
+                                        {"hamming", d.hamming},
+                                        {"decision_margin", d.decision_margin},
+                                        {"corners_px", corners},
+                                        {"center_px", {d.center_px.x(), d.center_px.y()}}});
+      }
+      print_record();
+      continue;
+    }
+    for (const auto& d : detections) {
+      {
         std::printf("%s  id %d  hamming %d  margin %.1f  corners (%.2f, %.2f) (%.2f, %.2f) "
                     "(%.2f, %.2f) (%.2f, %.2f)\n",
                     path.c_str(), d.id, d.hamming, d.decision_margin, d.corners_px[0].x(),
@@ -345,7 +360,10 @@ void register_camera_commands(CLI::App& app) {
   detect->add_option("--family", d->family, "Tag family")
       ->check(CLI::IsMember(tag_family_names()))
       ->capture_default_str();
-  detect->add_flag("--json", d->json, "One JSON object per detection (one per line)");
+  detect->add_flag("--json", d->json,
+                   "JSON: one object per image and line: image, family, width_px, height_px, detections "
+                   "[{id, hamming, decision_margin, corners_px, center_px}] (empty when no tag is seen; "
+                   "null with an error for an unreadable image)");
   detect->add_option("--decimate", d->decimate, "Quad decimation (1 = full resolution, best recall)")
       ->check(CLI::Range(1.0, 8.0))
       ->capture_default_str();

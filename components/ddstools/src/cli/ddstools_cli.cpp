@@ -83,6 +83,7 @@ struct Received {
   poise::dds::RawSample sample;
   std::int64_t source_timestamp_ns = 0;
   std::string problem;  // non-empty: rejected as malformed (payload_problem)
+  std::uint64_t lost_before = 0;  // samples missing just before this one (header.seq gap)
 };
 
 void run_echo(const EchoOptions& o) {
@@ -118,11 +119,19 @@ void run_echo(const EchoOptions& o) {
   std::deque<Received> queue;
   std::uint64_t dropped = 0;                 // guarded by mutex
   constexpr std::size_t kMaxQueued = 10000;  // a slow terminal drops samples rather than memory
+  // Loss on the way (a best-effort topic on a busy link): gaps in header.seq per instance and
+  // writer, as `poise topics` counts them (poise types only: others carry no header.seq).
+  const bool poise_type = writer->type.rfind("poise::msg::", 0) == 0;
+  poise::dds::SequenceGaps gaps;  // guarded by mutex
   const auto enqueue = [&](const poise::dds::RawSample& s,
                            const eprosima::fastdds::dds::SampleInfo& info, const std::string& problem) {
     std::lock_guard<std::mutex> lock(mutex);
+    std::uint64_t lost = 0;
+    if (const auto seq = poise_type ? poise::dds::header_seq_from_payload(s.data) : std::nullopt) {
+      lost = gaps.on_sample(poise::dds::handle_key(info.instance_handle), *seq, poise::dds::writer_key(info)).lost;
+    }
     if (queue.size() < kMaxQueued) {
-      queue.push_back({s, info.source_timestamp.to_ns(), problem});
+      queue.push_back({s, info.source_timestamp.to_ns(), problem, lost});
     } else {
       ++dropped;
     }
@@ -172,22 +181,28 @@ void run_echo(const EchoOptions& o) {
       std::string line = "{\"topic\":" + json_string(o.topic) + ",\"type\":" +
                          json_string(writer->type) +
                          ",\"size\":" + std::to_string(r.sample.data.size()) +
-                         ",\"source_timestamp_ns\":" + std::to_string(r.source_timestamp_ns);
+                         ",\"source_timestamp_ns\":" + std::to_string(r.source_timestamp_ns) +
+                         ",\"lost_before\":" + (poise_type ? std::to_string(r.lost_before) : std::string("null"));
       line += decodable ? ",\"data\":" + body : ",\"data\":null,\"hex\":\"" + hex(r.sample.data) + "\"";
       line += "}\n";
       std::fputs(line.c_str(), stdout);
     } else {
-      std::printf("--- %s [%s] #%d, %zu bytes\n", o.topic.c_str(), writer->type.c_str(), printed,
-                  r.sample.data.size());
+      std::printf("--- %s [%s] #%d, %zu bytes%s\n", o.topic.c_str(), writer->type.c_str(), printed,
+                  r.sample.data.size(),
+                  r.lost_before == 0 ? "" : (", " + std::to_string(r.lost_before) + " lost before it (seq gap)").c_str());
       std::fputs(decodable ? body.c_str() : (hex(r.sample.data) + "\n").c_str(), stdout);
     }
     std::fflush(stdout);
   }
   std::lock_guard<std::mutex> lock(mutex);
+  const poise::dds::SequenceGaps::Totals t = gaps.totals();
+  const std::string lost = poise_type ? std::to_string(t.lost) + " lost on the way (" + std::to_string(t.gaps) +
+                                            " header.seq gap(s), " + std::to_string(t.restarts) + " publisher restart(s))"
+                                      : std::string("loss unknown (not a poise type: no header.seq)");
   std::fprintf(stderr,
-               "poise echo: %d sample(s) printed, %llu malformed rejected, %llu dropped (output "
+               "poise echo: %d sample(s) printed, %s, %llu malformed rejected, %llu dropped (output "
                "too slow)\n",
-               printed, static_cast<unsigned long long>(failed),
+               printed, lost.c_str(), static_cast<unsigned long long>(failed),
                static_cast<unsigned long long>(dropped));
 }
 

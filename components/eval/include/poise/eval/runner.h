@@ -39,6 +39,9 @@ void print_table(std::ostream& os, const std::string& filter_name, const std::ve
 
 /// `value` right-aligned in `width` with 3 decimals, or "-" when the trial has no figure.
 std::string format_trial_figure(const TrialErrors& e, double value, int width);
+/// A mean over `n` trials, right-aligned in `width`, 3 decimals; "-" over no trial or when not
+/// finite (never a 0.000 mean of nothing, never nan).
+std::string format_mean_figure(double value, int n, int width);
 
 /// Plain means of the per-trial figures. Trials without scorable samples have no figure: they
 /// are left out of every mean and counted (never averaged in as 0).

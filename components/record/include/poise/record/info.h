@@ -13,7 +13,7 @@ struct TopicSummary {
   std::string type;             ///< schema name ("" when schemaless)
   std::string message_encoding;
   uint64_t messages = 0;
-  double rate_hz = 0.0;         ///< (messages - 1) / channel span, or messages / file span
+  double rate_hz = 0.0;         ///< messages / recording span (log time, first to last message of the file); 0 for a span of 0
 };
 
 /// One entry per channel, sorted by topic.
