@@ -47,6 +47,8 @@ double difference(const std::string& kind, const Sample& a, const Sample& b) {
 }
 
 void add_flag(FlagDifference& d, bool processed, bool live, double t_s, bool* in_interval) {
+  d.processed_yes += processed ? 1 : 0;
+  d.live_yes += live ? 1 : 0;
   if (processed == live) {
     *in_interval = false;
     return;
@@ -61,11 +63,14 @@ void add_flag(FlagDifference& d, bool processed, bool live, double t_s, bool* in
 }
 
 std::string format_flag(const char* what, const FlagDifference& d) {
-  if (d.processed_only + d.live_only == 0) {
-    return std::string("    ") + what + ": the same at every matched sample\n";
-  }
   std::ostringstream os;
-  os << "    " << what << " differently at " << d.processed_only + d.live_only << " samples ("
+  os << "    " << what << " at " << d.processed_yes << " processed / " << d.live_yes
+     << " live samples; ";
+  if (d.processed_only + d.live_only == 0) {
+    os << "the same at every matched sample\n";
+    return os.str();
+  }
+  os << "differently at " << d.processed_only + d.live_only << " samples ("
      << d.processed_only << " processed only, " << d.live_only << " live only) in "
      << d.intervals.size() << " interval(s):";
   constexpr size_t kShown = 6;

@@ -20,6 +20,8 @@ struct Interval {
 
 /// Samples where a yes/no (trusted, fused) differs between processed and live, as intervals.
 struct FlagDifference {
+  uint64_t processed_yes = 0;   ///< matched samples where processed says yes
+  uint64_t live_yes = 0;        ///< matched samples where live says yes
   uint64_t processed_only = 0;  ///< processed yes, live no
   uint64_t live_only = 0;       ///< live yes, processed no
   std::vector<Interval> intervals;
