@@ -13,10 +13,12 @@
 
 #include <poise/msg/estimatesPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
+#include <poise/ros2/sensor_msgsPubSubTypes.h>
 
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <set>
@@ -244,6 +246,64 @@ TEST(Ros2Bridge, CycloneReadsEveryBridgedOutputAsTheRos2TypeFieldForField) {
     }
   }
   EXPECT_EQ(seen.size(), 8U) << log;
+}
+
+// Hostile poise-side input (any participant may publish on attitude/<f>): an estimate holding a
+// NaN or a stamp beyond ROS's int32 seconds is never written to ROS 2, it is counted; the good
+// ones around it go out. Oracle: what the test sends. A Fast DDS reader of the ROS type watches.
+TEST(Ros2Bridge, GivenNonFiniteOrUnstampableEstimatesThenNothingNonFiniteReachesRos2AndEachIsCounted) {
+  register_components();
+  testing::DomainLease lease;
+  dds::Participant participant({lease.id(), "", "", "ros2_bridge_hostile"});
+  runtime::HostContext context{participant, dds::TopicNames{}};
+  runtime::ComponentSpec spec;
+  spec.type = "ros2_bridge";
+  spec.name = "ros2";
+  spec.origin = "test";
+  spec.params = YAML::Load("{stamps: sensor, out: {attitude: [pkf], imu: false, tf: attitude/pkf}}");
+  auto bridge = runtime::ComponentRegistry::instance().find("ros2_bridge")->create(spec, context);
+  bridge->start();
+  std::mutex mutex;
+  std::vector<ros2::ros_sensor::Imu_> got;
+  dds::Reader<ros2::ros_sensor::Imu_PubSubType> ros(
+      participant, "rt/poise/pkf/imu", dds::QosKind::kEstimate, [&](const ros2::ros_sensor::Imu_& m, const auto&) {
+        std::lock_guard<std::mutex> lock(mutex);
+        got.push_back(m);
+      });
+  dds::Writer<msg::AttitudeEstimatePubSubType> att(participant, "attitude/pkf");
+  constexpr int kGood = 5;
+  for (int k = 0; k < kGood; ++k) {
+    msg::AttitudeEstimate nan = attitude_of(100 + 2 * k);
+    nan.q_world_body().x(std::numeric_limits<double>::quiet_NaN());
+    att.write(nan);
+    msg::AttitudeEstimate inf = attitude_of(101 + 2 * k);
+    inf.attitude_covariance()[4] = std::numeric_limits<double>::infinity();
+    att.write(inf);
+    msg::AttitudeEstimate far = attitude_of(0);
+    far.header().stamp_ns(int64_t{1} << 62);  // 146 years: beyond int32 seconds
+    att.write(far);
+    att.write(attitude_of(k));
+  }
+  const auto end = std::chrono::steady_clock::now() + 10s;
+  while (std::chrono::steady_clock::now() < end) {
+    std::lock_guard<std::mutex> lock(mutex);
+    if (got.size() >= static_cast<std::size_t>(kGood)) {
+      break;
+    }
+  }
+  std::this_thread::sleep_for(200ms);  // a bad one would arrive with or before the last good one
+  const std::string status = bridge->status();
+  bridge->stop();
+  std::lock_guard<std::mutex> lock(mutex);
+  ASSERT_EQ(got.size(), static_cast<std::size_t>(kGood)) << status;
+  for (std::size_t k = 0; k < got.size(); ++k) {
+    EXPECT_TRUE(ros2::all_finite(got[k]));
+    EXPECT_EQ(got[k].orientation().z(), q_of(static_cast<int>(k)).z());
+  }
+  EXPECT_NE(status.find("attitude_pkf_non_finite=10"), std::string::npos) << status;
+  EXPECT_NE(status.find("attitude_pkf_bad_stamp=5"), std::string::npos) << status;
+  EXPECT_NE(status.find("tf_non_finite=5"), std::string::npos) << status << " (NaN q; inf covariance is not in tf)";
+  EXPECT_NE(status.find("tf_bad_stamp=5"), std::string::npos) << status;
 }
 
 /// The parallel KF's estimates by seq: (stamp, q).
