@@ -2,6 +2,7 @@
 // for the same input), input copied through, one estimate per accepted sample, bad payloads
 // rejected and counted.
 #include "poise/core/attitude.h"
+#include "poise/record/compare.h"
 #include "poise/record/idl_schema.h"
 #include "poise/record/mcap.h"
 #include "poise/record/process.h"
@@ -240,6 +241,83 @@ TEST(Process, SelectiveEkfComponentPublishesWhatItsLiveNodePublishes) {
                                             "sekf.imu_delay_s=0.02"},
                                            60s);
   EXPECT_EQ(changed.exit_code, 0) << changed.output;
+}
+
+// The comparison `poise process` prints, against an oracle written by hand: live yaw 0, truth
+// yaw 0.5 deg, processed yaw 1 deg (2 deg at seq 7); the processed magnetometer untrusted at
+// seq 3, 4 and 8, vision fused only by the processed filter at seq 5; a live estimate (seq 10)
+// without a processed one; samples every 10 ms.
+TEST(Compare, GivenKnownDifferencesThenRmseLargestAndTrustIntervalsAreExact) {
+  constexpr double kDegTolerance = 1e-9;  // angles through quaternions and back, deg
+  constexpr double kSecondsTolerance = 1e-12;
+  const std::string dir = testing::cases_dir("compare");
+  const std::string path = dir + "/compare.mcap";
+  {
+    int64_t clock = 0;
+    WriterOptions opt;
+    opt.clock = [&clock] { return clock; };
+    McapWriter w(open_file_sink(path), opt);
+    const auto idl = *flattened_idl("poise::msg::AttitudeEstimate");
+    const uint16_t schema = w.add_schema("poise::msg::AttitudeEstimate", "omgidl", {idl.begin(), idl.end()});
+    const uint16_t live = w.add_channel(schema, "attitude/selective_ekf", "cdr", {});
+    const uint16_t processed = w.add_channel(schema, "processed/attitude/selective_ekf", "cdr", {});
+    const uint16_t truth = w.add_channel(schema, "truth/attitude", "cdr", {});
+    auto put = [&](uint16_t channel, uint32_t seq, double yaw_deg, bool mag, uint32_t sources) {
+      const int64_t stamp = 7'000'000'000LL + static_cast<int64_t>(seq) * 10'000'000LL;
+      clock = stamp;
+      auto m = testing::make_attitude(seq, stamp);
+      m.sensor_id(channel == truth ? "sim" : "sekf");
+      const Eigen::Quaterniond q = quat_from_euler_zyx(0.0, 0.0, yaw_deg * kRadPerDeg);
+      m.q_world_body().w(q.w());
+      m.q_world_body().x(q.x());
+      m.q_world_body().y(q.y());
+      m.q_world_body().z(q.z());
+      m.mag_trusted(mag);
+      m.sources_fused(sources);
+      const auto bytes = testing::serialize<msg::AttitudeEstimatePubSubType>(m);
+      w.write(channel, seq, static_cast<uint64_t>(stamp), static_cast<uint64_t>(stamp), bytes.data(),
+              bytes.size());
+    };
+    for (uint32_t i = 0; i <= 10; ++i) {
+      put(truth, i, 0.5, true, 0);
+      put(live, i, 0.0, true, msg::SOURCE_GYRO);
+      if (i < 10) {
+        put(processed, i, i == 7 ? 2.0 : 1.0, i != 3 && i != 4 && i != 8,
+            msg::SOURCE_GYRO | (i == 5 ? msg::SOURCE_VISION : 0U));
+      }
+    }
+    w.close();
+  }
+  const std::vector<SeriesComparison> all = compare_processed(path);
+  ASSERT_EQ(all.size(), 1U) << format_comparison(all);
+  const SeriesComparison& c = all[0];
+  EXPECT_EQ(c.topic, "attitude/selective_ekf");
+  EXPECT_EQ(c.sensor_id, "sekf");
+  EXPECT_EQ(c.processed, 10U);
+  EXPECT_EQ(c.live, 11U);
+  EXPECT_EQ(c.matched, 10U);
+  EXPECT_NEAR(c.rmse, std::sqrt((9.0 * 1.0 + 4.0) / 10.0), kDegTolerance);
+  EXPECT_NEAR(c.largest, 2.0, kDegTolerance);
+  EXPECT_NEAR(c.largest_at_s, 0.07, kSecondsTolerance);
+  EXPECT_EQ(c.truth_topic, "truth/attitude");
+  EXPECT_NEAR(c.processed_truth_rmse, std::sqrt((9.0 * 0.25 + 2.25) / 10.0), kDegTolerance);
+  EXPECT_NEAR(c.live_truth_rmse, 0.5, kDegTolerance);
+  EXPECT_EQ(c.mag_trust.processed_yes, 7U);
+  EXPECT_EQ(c.mag_trust.live_yes, 10U);
+  EXPECT_EQ(c.mag_trust.processed_only, 0U);
+  EXPECT_EQ(c.mag_trust.live_only, 3U);
+  ASSERT_EQ(c.mag_trust.intervals.size(), 2U);
+  EXPECT_NEAR(c.mag_trust.intervals[0].start_s, 0.03, kSecondsTolerance);
+  EXPECT_NEAR(c.mag_trust.intervals[0].end_s, 0.04, kSecondsTolerance);
+  EXPECT_EQ(c.mag_trust.intervals[0].samples, 2U);
+  EXPECT_NEAR(c.mag_trust.intervals[1].start_s, 0.08, kSecondsTolerance);
+  EXPECT_EQ(c.vision_fused.processed_only, 1U);
+  EXPECT_EQ(c.vision_fused.live_only, 0U);
+  ASSERT_EQ(c.vision_fused.intervals.size(), 1U);
+  EXPECT_NEAR(c.vision_fused.intervals[0].start_s, 0.05, kSecondsTolerance);
+  const std::string text = format_comparison(all);
+  EXPECT_NE(text.find("0.03-0.04 s 0.08-0.08 s"), std::string::npos) << text;
+  EXPECT_NE(text.find("1 live estimate(s) without a processed one"), std::string::npos) << text;
 }
 
 /// Flips one byte inside the records of chunk `k` of `path` (its CRC no longer matches); returns
