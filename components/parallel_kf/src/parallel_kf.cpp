@@ -396,22 +396,32 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a,
 }
 
 Eigen::Quaterniond ParallelKf::q_world_body() const {
-  Eigen::Matrix3d r_body_world;  // sR = [sX sY sZ] (2), world = NWU
-  const Eigen::Vector3d fwd = s_.heading_initialized ? s_.kf2.u() : Eigen::Vector3d::UnitX();
-  if (!s_.initialized || !body_world_axes_from_up_forward(s_.kf1.up_body(), fwd, r_body_world)) {
+  // sR = [sX sY sZ] (2), world = NWU: sZ = up, sY = sZ x forward (normalised), sX = sY x sZ
+  if (!s_.initialized) {
+    return last_q_;
+  }
+  Eigen::Vector3d z = s_.kf1.up_body();
+  if (!(p_.tilt.renormalize && p_.tilt.exact_rotation) && !safe_normalize(s_.kf1.up_body(), z)) {
+    return last_q_;  // (renormalised and exactly rotated, sZ is unit already)
+  }
+  Eigen::Vector3d y;
+  if (!safe_normalize(z.cross(s_.heading_initialized ? s_.kf2.u() : Eigen::Vector3d::UnitX()), y, 1e-9)) {
     return last_q_;
   }
   // R_ENU_body = R_ENU_NWU sR^T: rows -sY^T, sX^T, sZ^T (x_ENU = -y_NWU, y_ENU = x_NWU)
   Eigen::Matrix3d r_enu_body;
-  r_enu_body.row(0) = -r_body_world.col(1).transpose();
-  r_enu_body.row(1) = r_body_world.col(0).transpose();
-  r_enu_body.row(2) = r_body_world.col(2).transpose();
+  r_enu_body.row(0) = -y.transpose();
+  r_enu_body.row(1) = y.cross(z).transpose();
+  r_enu_body.row(2) = z.transpose();
   Eigen::Quaterniond q(r_enu_body);
   if (p_.imu_delay_s > 0.0) {
     // predicted over the sensor's group delay (state untouched): q (x) exp(w d), to first order
-    // [1, w d / 2] normalised (angle error (|w| d)^3 / 12: 1e-5 deg at 10 rad/s and 5 ms)
+    // [1, w d / 2] normalised (angle error (|w| d)^3 / 12: 1e-5 deg at 10 rad/s and 5 ms). q is
+    // unit, so the product's norm is |[1, w d / 2]|: computed from the gyro alone, off the chain
+    // of the filter's arithmetic.
     const Eigen::Vector3d half = 0.5 * p_.imu_delay_s * s_.prev_gyro;
-    q = (q * Eigen::Quaterniond(1.0, half.x(), half.y(), half.z())).normalized();
+    const double scale = 1.0 / std::sqrt(1.0 + half.squaredNorm());
+    q = q * Eigen::Quaterniond(scale, scale * half.x(), scale * half.y(), scale * half.z());
   }
   if (q.w() < 0.0) {
     q.coeffs() = -q.coeffs();

@@ -58,6 +58,7 @@ class DirectionKf {
 
   /// Starts at direction `u` (normalised) with e = 0 and covariance diag(var_u I, var_e I).
   void reset(const Eigen::Vector3d& u, double var_u, double var_e) {
+    decoupled_ = false;
     u_ = u.normalized();
     e_.setZero();
     p_mat_.setZero();
@@ -94,13 +95,13 @@ class DirectionKf {
     Eigen::Matrix3d n11 = a * p11 * a.transpose();
     n11.noalias() -= qg * (u_prev * u_prev.transpose());
     n11.diagonal().array() += qg * u_prev.squaredNorm();
-    // exactly symmetric (the products of a P a^T round differently above and below the diagonal);
-    // the rest of P stays exactly symmetric by construction, here and in correct()
-    p_mat_.topLeftCorner<3, 3>() = 0.5 * (n11 + n11.transpose());
+    p_mat_.topLeftCorner<3, 3>() = 0.5 * (n11 + n11.transpose());  // symmetric (a P a^T rounds unevenly)
     p_mat_.topRightCorner<3, 3>().noalias() = c * (a * p12);
     p_mat_.bottomLeftCorner<3, 3>() = p_mat_.topRightCorner<3, 3>().transpose();
     p_mat_.bottomRightCorner<3, 3>() *= c * c;
     p_mat_.bottomRightCorner<3, 3>().diagonal().array() += q22;
+    // c = 0: e = 0 and P = blkdiag(P11, q22 I) exactly, which correct() updates in closed form
+    decoupled_ = c == 0.0;
   }
 
   /// Measurement update with z = k u + e + n (H = [k I | I], M = sigma^2 I). `extra_var` is added
@@ -110,19 +111,21 @@ class DirectionKf {
     // M is diagonal, so the batch update equals three sequential scalar updates (rows of
     // H = [k I | I]); this avoids the 3x3 inverse and the 6x3 gain products.
     const double r = p_.sigma_meas * p_.sigma_meas + extra_var;  // (7h), (11h)
+    if (decoupled_) {
+      correct_decoupled(innov, k, r);
+      return innov;
+    }
     Eigen::Matrix<double, 6, 1> x;
     x << u_, e_;
     for (int i = 0; i < 3; ++i) {
       const Eigen::Matrix<double, 6, 1> pht = k * p_mat_.col(i) + p_mat_.col(3 + i);  // P h^T
       const double s = k * pht[i] + pht[3 + i] + r;                                    // h P h^T + r
       const double y = z[i] - (k * x[i] + x[3 + i]);
-      const double inv_s = 1.0 / s;
-      x.noalias() += (y * inv_s) * pht;
-      // P - K h P = P - (P h^T)(P h^T)^T / s: entry (i, j) and (j, i) are the same product, so a
-      // symmetric P stays exactly symmetric (no symmetrisation pass)
-      const Matrix6 outer = pht * pht.transpose();  // exactly symmetric: pht_i pht_j = pht_j pht_i
-      p_mat_.noalias() -= inv_s * outer;
+      const Eigen::Matrix<double, 6, 1> gain = pht / s;
+      x.noalias() += gain * y;
+      p_mat_.noalias() -= gain * pht.transpose();  // P - K h P
     }
+    p_mat_ = 0.5 * (p_mat_ + p_mat_.transpose()).eval();
     u_ = x.head<3>();
     e_ = x.tail<3>();
     if (p_.renormalize) {
@@ -131,12 +134,44 @@ class DirectionKf {
     return innov;
   }
 
+  /// The update of correct() when P = blkdiag(A, d I) and e = 0 (right after a prediction with
+  /// c = 0), in closed form: S = k^2 A + (d + r) I, u += k A S^-1 v, e = d S^-1 v,
+  /// A -= k^2 A S^-1 A, P12 = -k d A S^-1, P22 = d I - d^2 S^-1 (A and S^-1 commute, so A S^-1 is
+  /// symmetric). The same posterior as the three scalar updates, at about half their cost.
+  void correct_decoupled(const Eigen::Vector3d& innov, double k, double r) {
+    const Eigen::Matrix3d a = p_mat_.topLeftCorner<3, 3>();
+    const double d = p_mat_(3, 3);
+    Eigen::Matrix3d s = (k * k) * a;
+    s.diagonal().array() += d + r;
+    Eigen::Matrix3d s_inv = s.inverse();  // 3x3: cofactors
+    s_inv = 0.5 * (s_inv + s_inv.transpose()).eval();
+    Eigen::Matrix3d as = a * s_inv;
+    as = 0.5 * (as + as.transpose()).eval();
+    const Eigen::Vector3d w = s_inv * innov;
+    u_.noalias() += k * (a * w);
+    e_ = d * w;
+    Eigen::Matrix3d a_new = a;
+    a_new.noalias() -= (k * k) * (as * a);
+    p_mat_.topLeftCorner<3, 3>() = 0.5 * (a_new + a_new.transpose());
+    p_mat_.topRightCorner<3, 3>() = (-k * d) * as;
+    p_mat_.bottomLeftCorner<3, 3>() = p_mat_.topRightCorner<3, 3>().transpose();
+    p_mat_.bottomRightCorner<3, 3>() = (-d * d) * s_inv;
+    p_mat_.bottomRightCorner<3, 3>().diagonal().array() += d;
+    decoupled_ = false;
+    if (p_.renormalize) {
+      u_.normalize();
+    }
+  }
+
   [[nodiscard]] const Eigen::Vector3d& u() const { return u_; }
   [[nodiscard]] const Eigen::Vector3d& e() const { return e_; }
   [[nodiscard]] const Matrix6& covariance() const { return p_mat_; }
   /// Replaces u (e.g. after an external correction); the caller keeps it unit if it wants.
   void set_u(const Eigen::Vector3d& u) { u_ = u; }
-  void set_e(const Eigen::Vector3d& e) { e_ = e; }
+  void set_e(const Eigen::Vector3d& e) {
+    e_ = e;
+    decoupled_ = false;
+  }
 
   /// The Markov coefficient for a step of h seconds.
   [[nodiscard]] double step_c(double h_s) const {
@@ -155,6 +190,7 @@ class DirectionKf {
   Eigen::Vector3d u_{0.0, 0.0, 1.0};
   Eigen::Vector3d e_{0.0, 0.0, 0.0};
   Matrix6 p_mat_ = Matrix6::Identity();
+  bool decoupled_ = false;  // P = blkdiag(P11, d I) and e = 0: set by a prediction with c = 0
   mutable double cached_h_ = -1.0;  // step_c() cache (the pow is only recomputed when h changes)
   mutable double cached_c_ = 0.0;
 };
