@@ -12,6 +12,7 @@
 #include "poise/runtime/host.h"
 
 #include <poise/msg/estimatesPubSubTypes.h>
+#include <poise/msg/diagnosticsPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
 #include <poise/ros2/sensor_msgsPubSubTypes.h>
 
@@ -292,6 +293,32 @@ TEST(Ros2Bridge, GivenNonFiniteOrUnstampableEstimatesThenNothingNonFiniteReaches
     }
   }
   std::this_thread::sleep_for(200ms);  // a bad one would arrive with or before the last good one
+  // The counters also go out on `diagnostics` (once a second), as every node's do.
+  std::map<std::string, uint64_t> diag;
+  {
+    std::mutex diag_mutex;
+    dds::Reader<msg::FilterDiagnosticsPubSubType> diagnostics(
+        participant, "diagnostics", [&](const msg::FilterDiagnostics& m, const auto&) {
+          std::lock_guard<std::mutex> lock(diag_mutex);
+          if (m.component_name() == "ros2_bridge") {
+            for (const auto& c : m.counters()) {
+              diag[c.name().to_string()] = c.value();
+            }
+          }
+        });
+    const auto diag_end = std::chrono::steady_clock::now() + 5s;
+    while (std::chrono::steady_clock::now() < diag_end) {
+      std::lock_guard<std::mutex> lock(diag_mutex);
+      if (diag.count("samples_rejected") != 0) {
+        break;
+      }
+    }
+  }
+  // Attitude: 10 non-finite + 5 unstampable; tf: 5 NaN quaternions + 5 unstampable (an infinite
+  // covariance is not part of a transform, so those 5 transforms go out).
+  EXPECT_EQ(diag["samples_rejected"], 25U);
+  EXPECT_EQ(diag["attitude_pkf_non_finite"], 10U);
+  EXPECT_EQ(diag["ros_messages_out"], 3U * kGood) << "attitude 5, tf 5 + 5";
   const std::string status = bridge->status();
   bridge->stop();
   std::lock_guard<std::mutex> lock(mutex);

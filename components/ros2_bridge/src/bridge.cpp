@@ -2,6 +2,9 @@
 
 #include "poise/dds/convert.h"
 #include "poise/dds/participant.h"
+#include "poise/nodes/reports.h"
+
+#include <poise/msg/diagnosticsPubSubTypes.h>
 
 #include <poise/msg/estimatesPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
@@ -13,6 +16,8 @@
 #include <algorithm>
 #include <atomic>
 #include <cctype>
+#include <condition_variable>
+#include <thread>
 #include <ctime>
 #include <deque>
 #include <functional>
@@ -246,6 +251,13 @@ class Bridge : public runtime::Component {
 
   void start() override {
     running_.store(true);
+    if (!timer_.joinable()) {
+      {
+        std::lock_guard<std::mutex> lock(timer_mutex_);
+        timer_stop_ = false;
+      }
+      timer_ = std::thread([this] { run_timer(); });
+    }
     P& p = host_.participant;
     const auto& names = host_.topics;
     const bool needs_imu = config_.imu || !config_.attitude.empty() || !config_.pose.empty();
@@ -315,26 +327,26 @@ class Bridge : public runtime::Component {
     attitude_readers_.clear();
     pose_readers_.clear();
     altitude_reader_.reset();
+    {
+      std::lock_guard<std::mutex> lock(timer_mutex_);
+      timer_stop_ = true;
+    }
+    timer_cv_.notify_all();
+    if (timer_.joinable()) {
+      timer_.join();
+    }
   }
 
   [[nodiscard]] std::string status() const override {
-    std::lock_guard<std::mutex> input_lock(input_mutex_);
-    std::lock_guard<std::mutex> lock(mutex_);
+    const Counts c = counts();
     std::ostringstream os;
-    os << "ros out " << written_;
+    os << "ros out " << c.ros_out;
     if (!config_.in_imu.empty()) {
-      os << ", ros imu in -> poise imu " << assembler_.emitted() << " (mag paired "
-         << assembler_.paired_mag() << ", pressure paired " << assembler_.paired_pressure() << ")";
+      os << ", ros imu in -> poise imu " << c.imu_out << " (mag paired " << c.mag_paired
+         << ", pressure paired " << c.pressure_paired << ")";
     }
-    uint64_t rejected = assembler_.rejected_total();
-    for (const auto& [reason, n] : refused_) {
-      rejected += n;
-    }
-    os << ", rejected " << rejected;
-    for (const auto& [reason, n] : assembler_.rejected()) {
-      os << " " << reason << "=" << n;
-    }
-    for (const auto& [reason, n] : refused_) {
+    os << ", rejected " << c.rejected_total;
+    for (const auto& [reason, n] : c.rejected) {
       os << " " << reason << "=" << n;
     }
     return os.str();
@@ -498,6 +510,49 @@ class Bridge : public runtime::Component {
     }
   }
 
+  struct Counts {
+    uint64_t ros_out = 0;          // ROS messages written
+    uint64_t imu_out = 0;          // poise imu samples made from ROS input
+    uint64_t mag_paired = 0;
+    uint64_t pressure_paired = 0;
+    std::map<std::string, uint64_t> rejected;  // in: the assembler's reasons; out: <what>_non_finite, _bad_stamp
+    uint64_t rejected_total = 0;
+  };
+  Counts counts() const {
+    std::lock_guard<std::mutex> input_lock(input_mutex_);
+    std::lock_guard<std::mutex> lock(mutex_);
+    Counts c;
+    c.ros_out = written_;
+    c.imu_out = assembler_.emitted();
+    c.mag_paired = assembler_.paired_mag();
+    c.pressure_paired = assembler_.paired_pressure();
+    c.rejected = assembler_.rejected();
+    c.rejected.insert(refused_.begin(), refused_.end());  // disjoint names (imu_*/mag_* vs <what>_*)
+    for (const auto& [reason, n] : c.rejected) {
+      c.rejected_total += n;
+    }
+    return c;
+  }
+
+  /// FilterDiagnostics on `diagnostics` once a second: the counters, as every node reports.
+  void run_timer() {
+    std::unique_lock<std::mutex> timer_lock(timer_mutex_);
+    while (!timer_cv_.wait_for(timer_lock, std::chrono::seconds(1), [this] { return timer_stop_; })) {
+      nodes::DiagnosticsReport report;
+      report.stamp_ns = clock_ns(CLOCK_MONOTONIC);
+      report.seq = diagnostics_seq_++;
+      report.component = "ros2_bridge";
+      const Counts c = counts();
+      report.counters = c.rejected;
+      report.counters["ros_messages_out"] = c.ros_out;
+      report.counters["imu_samples_out"] = c.imu_out;
+      report.counters["mag_paired"] = c.mag_paired;
+      report.counters["pressure_paired"] = c.pressure_paired;
+      report.counters["samples_rejected"] = c.rejected_total;
+      diagnostics_writer_.write(nodes::to_diagnostics_msg(report, sensor_id_));
+    }
+  }
+
   struct Pending {
     int64_t stamp_ns;
     std::function<void(const msg::ImuSample*)> publish;
@@ -531,6 +586,13 @@ class Bridge : public runtime::Component {
   std::unique_ptr<dds::Reader<ros_sensor::Imu_PubSubType>> ros_imu_reader_;
   std::unique_ptr<dds::Reader<ros_sensor::MagneticField_PubSubType>> ros_mag_reader_;
   std::unique_ptr<dds::Reader<ros_sensor::FluidPressure_PubSubType>> ros_pressure_reader_;
+  dds::Writer<msg::FilterDiagnosticsPubSubType> diagnostics_writer_{host_.participant, host_.topics.diagnostics,
+                                                                    dds::QosKind::kEstimate};
+  uint32_t diagnostics_seq_ = 0;
+  std::mutex timer_mutex_;
+  std::condition_variable timer_cv_;
+  bool timer_stop_ = false;
+  std::thread timer_;
 };
 
 }  // namespace

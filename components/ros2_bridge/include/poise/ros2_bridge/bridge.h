@@ -23,6 +23,7 @@
 // Without `out`, the default publishes attitude/parallel_kf, the raw IMU and /tf from
 // attitude/parallel_kf. QoS: outputs reliable + volatile (what a default ROS 2 subscription and
 // tf2's listener match), inputs best-effort (accepts ROS sensor-data and reliable publishers).
+// Counters (out, pairings, rejections by reason) in status() and on `diagnostics` once a second.
 #pragma once
 
 #include "poise/ros2_bridge/convert.h"
