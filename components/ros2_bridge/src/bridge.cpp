@@ -219,7 +219,9 @@ class Bridge : public runtime::Component {
       const auto uses = std::count_if(topics.begin(), topics.end(),
                                       [&in](const BridgedTopic& t) { return t.ros_name == in; });
       if (!in.empty() && uses > 1) {
-        throw ConfigError(spec.origin + ": ros2_bridge: '" + in + "' is both an input and an output");
+        throw ConfigError(spec.origin + ": ros2_bridge: '" + in +
+                          "' is used more than once: inputs and outputs need distinct topics (an input "
+                          "that is also an output would loop)");
       }
     }
     P& p = host.participant;
