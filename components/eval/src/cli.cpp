@@ -1,5 +1,6 @@
 // `poise eval broad` and `poise bench filters`.
 #include "poise/cli/common.h"
+#include "poise/cli/progress.h"
 #include "poise/bench/bench.h"
 #include "poise/eval/broad.h"
 #include "poise/eval/crossval.h"
@@ -80,25 +81,29 @@ void run_eval(const std::string& filter_name, const std::string& config, const s
   make_dir(out_dir);
   auto filter = make_or_throw(filter_name, config);
   std::vector<eval::TrialResult> results;
+  std::cerr << "poise eval broad: " << files.size() << " trial(s), estimates -> "
+            << (std::filesystem::path(out_dir) / "<stem>.csv").string() << "\n";
+  Progress progress("poise eval broad", files.size());
   for (size_t i = 0; i < files.size(); ++i) {
-    std::cerr << "[" << (i + 1) << "/" << files.size() << "] " << files[i] << " ... " << std::flush;
+    progress.update(i, files[i]);
     const eval::BroadTrial trial = load_trials({files[i]}).front();
     const auto q = eval::run_filter(*filter, trial);
     const std::string csv = (std::filesystem::path(out_dir) / (trial.stem + ".csv")).string();
     eval::write_quaternion_csv(csv, q, trial.rate_hz);
     results.push_back(score(trial, q));
-    std::cerr << trial.size() << " samples";
+    std::ostringstream note;  // only what needs saying: the figures are in the table
     if (trial.invalid_reference_rows > 0) {
-      std::cerr << " (" << trial.invalid_reference_rows
-                << " reference rows are not unit quaternions: not scored)";
+      note << trial.stem << ": " << trial.invalid_reference_rows
+           << " reference rows are not unit quaternions: not scored";
     }
-    if (results.back().errors.scored()) {
-      std::cerr << ", total RMSE " << std::fixed << std::setprecision(3) << results.back().errors.total_deg << " deg";
-    } else {
-      std::cerr << ", no scorable samples (movement with a valid reference)";
+    if (!results.back().errors.scored()) {
+      note << (note.tellp() > 0 ? "; " : trial.stem + ": ") << "no scorable samples (movement with a valid reference)";
     }
-    std::cerr << " -> " << csv << "\n";
+    if (note.tellp() > 0) {
+      progress.note(note.str());
+    }
   }
+  progress.finish();
   eval::print_table(std::cout, filter_name, results);
   if (eval::group_means(results).unscored.size() == results.size()) {
     throw Error("no trial has scorable samples (samples with movement and a valid reference quaternion)");
@@ -146,6 +151,7 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
   std::ofstream table((std::filesystem::path(out_dir) / "grid_results.csv").string());
   table << "candidate,overrides,trial,total_deg,heading_deg,inclination_deg\n";
   std::vector<std::vector<eval::TrialResult>> by_candidate;
+  Progress progress("poise eval broad --grid", candidates.size() * trials.size());
   for (size_t c = 0; c < candidates.size(); ++c) {
     if (stop_requested()) {
       throw Error("interrupted");
@@ -162,17 +168,20 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
     auto filter = make_or_throw(filter_name, cfg);
     std::vector<eval::TrialResult> rs;
     for (const auto& trial : trials) {
+      progress.update(c * trials.size() + rs.size(), "candidate " + std::to_string(c + 1) + ", " + trial.stem);
       rs.push_back(score(trial, eval::run_filter(*filter, trial)));
       table << c << ",\"" << eval::describe(candidates[c]) << "\"," << rs.back().stem << std::fixed
             << std::setprecision(4) << "," << rs.back().errors.total_deg << "," << rs.back().errors.heading_deg
             << "," << rs.back().errors.inclination_deg << "\n";
     }
     const eval::GroupMeans m = eval::group_means(rs);
-    std::cerr << "[candidate " << (c + 1) << "/" << candidates.size() << "] " << eval::describe(candidates[c])
-              << std::fixed << std::setprecision(3) << ": undisturbed " << m.undisturbed.total_deg
-              << ", disturbed " << m.disturbed.total_deg << " deg\n";
+    progress.note("[candidate " + std::to_string(c + 1) + "/" + std::to_string(candidates.size()) + "] " +
+                  eval::describe(candidates[c]) + ": undisturbed" +
+                  eval::format_mean_figure(m.undisturbed.total_deg, m.n_undisturbed, 7) + ", disturbed" +
+                  eval::format_mean_figure(m.disturbed.total_deg, m.n_disturbed, 7) + " deg");
     by_candidate.push_back(std::move(rs));
   }
+  progress.finish();
   if (eval::group_means(by_candidate.front()).unscored.size() == trials.size()) {
     throw Error("no trial has scorable samples (samples with movement and a valid reference quaternion)");
   }
@@ -307,7 +316,10 @@ int run_imu_delay(const std::vector<std::string>& files, int window) {
   std::cout << std::left << std::setw(48) << "trial" << std::right << std::setw(12) << "delay ms"
             << std::setw(10) << "samples" << std::setw(14) << "rms@delay" << std::setw(12) << "rms@0"
             << std::setw(10) << "windows" << "\n";
-  for (const auto& path : files) {
+  Progress progress("poise calibrate imu-delay", files.size());
+  for (std::size_t i = 0; i < files.size(); ++i) {
+    const std::string& path = files[i];
+    progress.update(i, path);
     if (stop_requested()) {
       break;
     }
@@ -321,6 +333,7 @@ int run_imu_delay(const std::vector<std::string>& files, int window) {
     o.rate_hz = trial.rate_hz;
     o.window_samples = window;
     const eval::ImuDelayEstimate est = eval::estimate_imu_delay(trial.gyr_rps, trial.opt_quat_wxyz, trial.movement, o);
+    progress.hide();  // the row goes to stdout, perhaps the same terminal
     std::cout << std::left << std::setw(48) << trial.stem << std::right << std::fixed;
     if (!est.ok) {
       std::cout << "  no estimate: " << est.why << "\n";
@@ -332,6 +345,7 @@ int run_imu_delay(const std::vector<std::string>& files, int window) {
               << "\n";
     delays_ms.push_back(est.delay_s * 1e3);
   }
+  progress.finish();
   if (delays_ms.empty()) {
     std::cerr << "poise calibrate imu-delay: no trial gave an estimate (needs motion with a valid reference)\n";
     return 1;

@@ -404,8 +404,13 @@ Eigen::Quaterniond ParallelKf::q_world_body() const {
   if (!(p_.tilt.renormalize && p_.tilt.exact_rotation) && !safe_normalize(s_.kf1.up_body(), z)) {
     return last_q_;  // (renormalised and exactly rotated, sZ is unit already)
   }
+  // Without a magnetometer sample yet (6-axis input) heading is not observable: north is taken
+  // where ZYX yaw is 0 for the current tilt (quat_tilt_yaw0, as in every filter).
+  const Eigen::Vector3d fwd = s_.heading_initialized
+                                  ? s_.kf2.u()
+                                  : Eigen::Vector3d(quat_tilt_yaw0(z).conjugate() * Eigen::Vector3d::UnitY());
   Eigen::Vector3d y;
-  if (!safe_normalize(z.cross(s_.heading_initialized ? s_.kf2.u() : Eigen::Vector3d::UnitX()), y, 1e-9)) {
+  if (!safe_normalize(z.cross(fwd), y, 1e-9)) {
     return last_q_;
   }
   // R_ENU_body = R_ENU_NWU sR^T: rows -sY^T, sX^T, sZ^T (x_ENU = -y_NWU, y_ENU = x_NWU)

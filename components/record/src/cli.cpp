@@ -1,5 +1,6 @@
 // `poise info`, `poise record`, `poise replay`, `poise bench record`, `poise bench replay`.
 #include "poise/cli/common.h"
+#include "poise/cli/progress.h"
 #include "poise/dds/participant.h"
 #include "poise/record/bench.h"
 #include "poise/eval/filter_registry.h"
@@ -186,10 +187,14 @@ void run_process(const ProcessArgs& a) {
   o.input = a.file;
   o.output = a.output;
   o.order = a.order == "recorded" ? record::ProcessOrder::kRecorded : record::ProcessOrder::kStamp;
-  o.progress = &std::cerr;
+  Progress::Options shown;
+  shown.counts = false;  // units of three passes: the percentage says it
+  Progress progress("poise process", 100, shown);
+  o.progress = [&progress](uint64_t done, uint64_t total) { progress.update(done * 100 / total); };
   record::ProcessStats stats;
   try {
     stats = record::process_recording(o, components);
+    progress.finish();
   } catch (const record::ReadError& e) {
     throw Error(e.what());
   } catch (const record::WriteError& e) {

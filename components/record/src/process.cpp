@@ -195,7 +195,11 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
 
   // Pass 1: decode the inputs (malformed payloads are counted and named, never processed).
   const uint64_t total = std::max<uint64_t>(1, reader.report().messages);
-  int last_percent = -1;
+  const auto progress = [&options, total](uint64_t phase, uint64_t done) {
+    if (options.progress) {
+      options.progress(phase * total + done, 3 * total);  // decode, run, write
+    }
+  };
   std::vector<Input> inputs;
   uint64_t malformed_imu = 0;
   uint64_t malformed_vision = 0;
@@ -206,14 +210,7 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
     while (const MessageView* m = cursor.next()) {
       const uint64_t index = ordinal++;
       ++stats.input_messages;
-      if (options.progress != nullptr) {
-        const int percent = static_cast<int>(100 * stats.input_messages / total);
-        if (percent / 5 != last_percent / 5) {
-          last_percent = percent;
-          *options.progress << "poise process: " << percent << "% (" << stats.input_messages << "/"
-                            << total << " messages)\n";
-        }
-      }
+      progress(0, stats.input_messages);
       if (m->schema == nullptr) {
         continue;
       }
@@ -326,7 +323,9 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
   components.clear();
 
   const std::string writer_id = "recording";  // one publisher per input: no restarts offline
+  uint64_t ran = 0;
   for (const Input& in : inputs) {
+    progress(1, ++ran);
     now_ns = in.stamp_ns;
     outputs.set_trigger(in.ordinal, in.log_time_ns);
     if (const auto* imu = std::get_if<msg::ImuSample>(&in.sample)) {
@@ -372,6 +371,7 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
     uint64_t ordinal = 0;
     while (const MessageView* m = cursor.next()) {
       const uint64_t index = ordinal++;
+      progress(2, ordinal);
       log_clock = static_cast<int64_t>(m->log_time_ns);
       if (options.copy_input) {
         writer.write(channel_map.at(m->channel->id), m->sequence, m->log_time_ns, m->publish_time_ns,

@@ -736,9 +736,9 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
   in.dt_s = initialized_ ? c.dt_s : 0.0;
   last_imu_stamp_ns_ = s.stamp_ns;
   if (!initialized_) {
-    // Tilt from the accelerometer; heading from Gauss-Newton or (kSplit) the magnetometer.
-    x_.q_world_body = in.has_q_imu ? in.q_imu
-                                   : quat_from_two_vectors(in.accel, Eigen::Vector3d::UnitZ());
+    // Tilt from the accelerometer; heading from Gauss-Newton or (kSplit) the magnetometer, and
+    // without one (6-axis) ZYX yaw 0, as in every filter (quat_tilt_yaw0).
+    x_.q_world_body = in.has_q_imu ? in.q_imu : quat_tilt_yaw0(in.accel);
     if (!in.has_q_imu && in.has_mag) {
       const Eigen::Vector3d mw = x_.q_world_body * in.mag;
       if (std::hypot(mw.x(), mw.y()) > 1e-3 * in.mag.norm()) {

@@ -232,6 +232,19 @@ inline Eigen::Quaterniond quat_from_euler_zyx(double roll_rad, double pitch_rad,
                             Eigen::AngleAxisd(roll_rad, Eigen::Vector3d::UnitX()));
 }
 
+/// The attitude every filter starts from without a magnetometer (6-axis): the tilt of `up_body`
+/// (the world up axis seen in the body, e.g. the accelerometer at rest) and ZYX yaw 0, i.e. the
+/// body's x axis in the east-up plane. Heading is not observable without a magnetometer: yaw 0 is
+/// a convention, the same in every filter. Identity for a zero vector.
+inline Eigen::Quaterniond quat_tilt_yaw0(const Eigen::Vector3d& up_body) {
+  if (!(up_body.norm() > 0.0)) {
+    return Eigen::Quaterniond::Identity();
+  }
+  const double roll = std::atan2(up_body.y(), up_body.z());
+  const double pitch = std::atan2(-up_body.x(), std::hypot(up_body.y(), up_body.z()));
+  return quat_from_euler_zyx(roll, pitch, 0.0);
+}
+
 // ---------------------------------------------------------------- constructions
 /// The shortest rotation q with q * from == to (directions only; inputs need not be unit).
 /// Antiparallel inputs rotate by pi about an axis orthogonal to `from`. Identity for zero input.

@@ -28,6 +28,9 @@ struct ImuSample {
   double temperature_c = 0.0;       ///< sensor temperature, C (valid iff has_temperature)
   bool has_accel = true;
   bool has_gyro = true;
+  /// true by default (a 9-axis IMU): set false for a 6-axis IMU, whose zero magnetometer would
+  /// otherwise be rejected (and counted as zero_mag) on every sample. Without a magnetometer every
+  /// attitude filter starts at ZYX yaw 0 (quat_tilt_yaw0 in attitude.h).
   bool has_mag = true;
   bool has_pressure = false;
   bool has_temperature = false;

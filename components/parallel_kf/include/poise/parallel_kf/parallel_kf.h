@@ -45,6 +45,10 @@
 //   (docs/ESTIMATORS.md). The Gauss-Newton baseline: 34.4 / 62.4 deg.
 // Bad input (NaN, zero vectors, non-monotonic stamps, gaps) is rejected and counted; the state is
 // untouched (a gap re-anchors time).
+// 6-axis input (ImuSample::has_mag false, the default being true: set it for an IMU without a
+// magnetometer): KF2 never starts and heading is not observable; the output's yaw is ZYX 0 for
+// the current tilt (quat_tilt_yaw0, the same start as every filter) and stays 0: this filter does
+// not integrate the gyro about the vertical without a field to correct it (the selective EKF does).
 #pragma once
 
 #include "poise/core/attitude.h"

@@ -19,6 +19,7 @@
 #include "poise/nodes/estimator_step.h"
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <ostream>
@@ -51,7 +52,9 @@ struct ProcessOptions {
   std::string output_prefix = "processed/";
   ProcessOrder order = ProcessOrder::kStamp;
   bool copy_input = true;
-  std::ostream* progress = nullptr;  ///< percent lines; none when null
+  /// Called as the work advances: `done` of `total` units (decoding, running the components and
+  /// writing each count one unit per input message). Unset: no progress.
+  std::function<void(uint64_t done, uint64_t total)> progress;
 };
 
 struct ProcessStats {

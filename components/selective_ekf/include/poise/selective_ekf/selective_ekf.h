@@ -57,6 +57,10 @@
 //     before its capture stamp, predicts to the capture stamp, fuses, and replays the later events
 //     (IMU samples and other vision measurements, in stamp order). Out-of-order measurements are
 //     handled the same way (counted); older than the history -> rejected (too_old).
+//   6-axis input (ImuSample::has_mag false; the default is true, set it for an IMU without a
+//     magnetometer): the first attitude is the accelerometer's tilt with ZYX yaw 0
+//     (quat_tilt_yaw0, the same start as every filter); the gyro then carries the heading (drifting
+//     with the bias) unless vision fixes it.
 #pragma once
 
 #include "poise/core/attitude.h"
