@@ -61,6 +61,18 @@ TEST(Attitude, ExpMatchesAngleAxis) {
   EXPECT_LT(quat_angle_between(quat_exp(phi), ref), kRoundTripTol);
 }
 
+TEST(Attitude, ExpSeriesBranchMatchesTrigonometryAndIsUnit) {
+  // Below 0.05 rad quat_exp uses a series; the oracle is Eigen's AngleAxis (sin/cos).
+  constexpr double kCoeffTol = 1e-15;  // per coefficient: rounding, the truncation is < 1e-17
+  for (double angle : {1e-12, 1e-6, 1e-3, 0.01, 0.049999, 0.05, 0.2}) {
+    const Eigen::Vector3d axis = Eigen::Vector3d(0.3, -0.8, 0.52).normalized();
+    const Eigen::Quaterniond q = quat_exp(angle * axis);
+    const Eigen::Quaterniond ref(Eigen::AngleAxisd(angle, axis));
+    EXPECT_LT((q.coeffs() - ref.coeffs()).cwiseAbs().maxCoeff(), kCoeffTol) << angle;
+    EXPECT_NEAR(q.norm(), 1.0, kCoeffTol) << angle;
+  }
+}
+
 TEST(Attitude, WxyzStorageRoundTrip) {
   const Eigen::Quaterniond q(0.5, -0.5, 0.5, 0.5);
   const auto a = quat_to_wxyz(q);

@@ -114,16 +114,18 @@ inline Eigen::Quaterniond quat_align_sign(const Eigen::Quaterniond& q, const Eig
 // ---------------------------------------------------------------- exp / log
 /// Unit quaternion of a rotation vector (rad): exp(phi / 2) in quaternion algebra.
 inline Eigen::Quaterniond quat_exp(const Eigen::Vector3d& phi) {
-  const double angle = phi.norm();
-  const double half = 0.5 * angle;
-  if (angle < 1e-6) {
-    // Taylor: sin(a/2)/a = 1/2 - a^2/48, cos(a/2) = 1 - a^2/8.
-    const double s = 0.5 - angle * angle / 48.0;
-    return Eigen::Quaterniond(1.0 - angle * angle / 8.0, s * phi.x(), s * phi.y(), s * phi.z())
-        .normalized();
+  const double t2 = phi.squaredNorm();
+  if (t2 < 0.05 * 0.05) {
+    // Series in b^2 = (|phi| / 2)^2 (per-sample rotations need no trig): cos b and sin(b) / |phi|
+    // to the b^6 term, truncation below 1e-17 for |phi| < 0.05 rad, so the result is unit to rounding.
+    const double b2 = 0.25 * t2;
+    const double c = 1.0 - b2 * (1.0 / 2.0 - b2 * (1.0 / 24.0 - b2 / 720.0));
+    const double s = 0.5 * (1.0 - b2 * (1.0 / 6.0 - b2 * (1.0 / 120.0 - b2 / 5040.0)));
+    return Eigen::Quaterniond(c, s * phi.x(), s * phi.y(), s * phi.z());
   }
-  const double s = std::sin(half) / angle;
-  return Eigen::Quaterniond(std::cos(half), s * phi.x(), s * phi.y(), s * phi.z());
+  const double angle = std::sqrt(t2);
+  const double s = std::sin(0.5 * angle) / angle;
+  return Eigen::Quaterniond(std::cos(0.5 * angle), s * phi.x(), s * phi.y(), s * phi.z());
 }
 
 /// Rotation vector (rad) of a unit quaternion, angle in [0, pi] (the shorter rotation).
