@@ -389,6 +389,47 @@ TEST(Mcap, RandomCorruptionNeverCrashesTheReader) {
   }
 }
 
+TEST(Mcap, GivenAChannelNamingASchemaTheFileDoesNotDefineWhenReadThenReportedAndReadSchemaless) {
+  // GIVEN a complete file whose Channel records of channel 1 ('attitude/pkf', schema 2) name
+  // schema 9 instead (found by fuzz_mcap: `poise process` then failed with "map::at")
+  std::vector<uint8_t> bytes = sample_file(30, 1u << 20);
+  int patched = 0;
+  for (size_t i = 0; i + 13 <= bytes.size(); ++i) {
+    if (bytes[i] == static_cast<uint8_t>(Opcode::kChannel) && bytes[i + 9] == 1 &&
+        bytes[i + 10] == 0 && bytes[i + 11] == 2 && bytes[i + 12] == 0) {
+      bytes[i + 11] = 9;
+      ++patched;
+    }
+  }
+  ASSERT_GE(patched, 1);
+  // WHEN it is read (summary or scan) and verified
+  McapReader r = read_buffer(bytes);
+  for (int pass = 0; pass < 2; ++pass) {
+    SCOPED_TRACE(pass == 0 ? "open" : "verify");
+    // THEN the problem is reported and counted, the channel has no schema, every message is read
+    EXPECT_NE(joined(r.report().problems).find("refers to schema 9, which the file does not define"),
+              std::string::npos)
+        << joined(r.report().problems);
+    EXPECT_GE(r.report().corrupt, 1u);
+    EXPECT_FALSE(r.report().complete);
+    ASSERT_EQ(r.channels().count(1), 1u);
+    EXPECT_EQ(r.channels().at(1).schema_id, 0);
+    for (const auto& [id, channel] : r.channels()) {
+      EXPECT_TRUE(channel.schema_id == 0 || r.schemas().count(channel.schema_id) == 1) << id;
+    }
+    MessageCursor cursor = r.messages();
+    int n = 0;
+    while (const MessageView* m = cursor.next()) {
+      ++n;
+      if (m->channel->id == 1) {
+        EXPECT_EQ(m->schema, nullptr);
+      }
+    }
+    EXPECT_EQ(n, 30);
+    r.verify();
+  }
+}
+
 TEST(Mcap, TooShortOrForeignFilesAreRejectedClearly) {
   EXPECT_THROW(read_buffer({1, 2, 3}), ReadError);
   std::vector<uint8_t> foreign(100, 'x');

@@ -170,6 +170,20 @@ McapReader::McapReader(std::unique_ptr<Source> source) : source_(std::move(sourc
   if (!read_summary()) {
     scan();
   }
+  check_channel_schemas();
+}
+
+void McapReader::check_channel_schemas() {
+  for (auto& [id, channel] : channels_) {
+    if (channel.schema_id != 0 && schemas_.count(channel.schema_id) == 0) {
+      report_.problems.push_back("Channel " + std::to_string(id) + " ('" + channel.topic +
+                                 "') refers to schema " + std::to_string(channel.schema_id) +
+                                 ", which the file does not define: read without a schema");
+      ++report_.corrupt;
+      report_.complete = false;
+      channel.schema_id = 0;
+    }
+  }
 }
 
 McapReader McapReader::open_file(const std::string& path) {
@@ -333,6 +347,7 @@ const FileReport& McapReader::verify() {
   report_.library = library;
   report_.problems = header_problems;
   scan();
+  check_channel_schemas();
   if (had_summary && report_.problems.empty()) {
     report_.complete = true;
     report_.recovered = false;

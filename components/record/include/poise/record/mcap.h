@@ -296,6 +296,8 @@ class McapReader {
   void scan();
   void add_schema(Schema schema);
   void add_channel(Channel channel);
+  // A channel naming a schema id the file does not define: reported, counted corrupt, schemaless.
+  void check_channel_schemas();
 
   std::unique_ptr<Source> source_;
   FileReport report_;
