@@ -60,7 +60,7 @@ void on_parsed(CLI::App* sub, std::function<void()> check) {
 CLI::Option* add_output_file_option(CLI::App* sub, std::string* path, const std::string& what, bool required) {
   CLI::Option* opt = sub->add_option("-o,--output", *path, "Output file: " + what);
   if (required) {
-    require_one_of(sub, {opt});
+    opt->required();
   }
   return opt;
 }
@@ -68,7 +68,7 @@ CLI::Option* add_output_file_option(CLI::App* sub, std::string* path, const std:
 CLI::Option* add_out_dir_option(CLI::App* sub, std::string* dir, const std::string& what, bool required) {
   CLI::Option* opt = sub->add_option("--out-dir", *dir, "Output directory: " + what);
   if (required) {
-    require_one_of(sub, {opt});
+    opt->required();
   }
   return opt;
 }

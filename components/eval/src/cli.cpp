@@ -388,7 +388,7 @@ void register_eval_cli(CLI::App& app) {
       ->capture_default_str();
   broad->add_option("--config", *config, "YAML parameter file for the filter (config/filters/...)")
       ->check(CLI::ExistingFile);
-  CLI::Option* out_dir = add_out_dir_option(broad, out.get(), "the per-trial CSV files", false);
+  CLI::Option* out_dir = add_out_dir_option(broad, out.get(), "the per-trial CSV files (required)", false);
   require_one_of(broad, {out_dir, add_deprecated_alias(broad, "--out", "--out-dir", out.get())});
   broad->add_option("files", *files, "BROAD .hdf5 files")->required()->check(CLI::ExistingFile);
   auto grid = std::make_shared<GridOptions>();
@@ -433,9 +433,9 @@ void register_eval_cli(CLI::App& app) {
   tune->add_option("--folds", t_grid->folds, "Cross-validation folds (0 = leave one recording out)")
       ->check(CLI::Range(0, 1000))
       ->capture_default_str();
-  CLI::Option* t_out_dir = add_out_dir_option(tune, t_out.get(), "working files (candidate configs, per-candidate figures)", false);
+  CLI::Option* t_out_dir = add_out_dir_option(tune, t_out.get(), "working files (candidate configs, per-candidate figures) (required)", false);
   require_one_of(tune, {t_out_dir, add_deprecated_alias(tune, "--out", "--out-dir", t_out.get())});
-  CLI::Option* t_output = add_output_file_option(tune, t_write.get(), "the chosen YAML", false);
+  CLI::Option* t_output = add_output_file_option(tune, t_write.get(), "the chosen YAML (required)", false);
   require_one_of(tune, {t_output, add_deprecated_alias(tune, "--write", "-o/--output", t_write.get())});
   tune->add_option("files", *t_files,
                    "Recordings: HDF5 with imu_gyr (rad/s), imu_acc (m/s^2), imu_mag (uT), opt_quat (reference "

@@ -386,7 +386,7 @@ void register_camera_commands(CLI::App& app) {
   CLI::App* render = tags->add_subcommand(
       "render", "Render a synthetic camera image of tags (the family's own codes) and print their "
                 "true corners; for testing detection without a camera");
-  CLI::Option* render_out = add_output_file_option(render, &r->out, "the image (.png, .pgm, .jpg)", false);
+  CLI::Option* render_out = add_output_file_option(render, &r->out, "the image (.png, .pgm, .jpg) (required)", false);
   require_one_of(render, {render_out, add_deprecated_alias(render, "--out", "-o/--output", &r->out)});
   render->add_option("--family", r->family, "Tag family")
       ->check(CLI::IsMember(tag_family_names()))

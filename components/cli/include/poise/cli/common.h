@@ -62,8 +62,8 @@ void on_parsed(CLI::App* sub, std::function<void()> check);
 /// The old spelling `old_name` of `replacement` (an option of `sub` storing into `target`),
 /// accepted for one release: hidden from --help, sets the same value and prints
 /// "poise: note: '<cmd> OLD' is deprecated, use NEW (accepted until poise 0.2)" on stderr.
-/// A `required` replacement must have been added with required = false and its requirement
-/// checked through require_one_of().
+/// A required option with an old spelling is added with required = false, "(required)" in its
+/// text, and checked through require_one_of() (CLI11's own requirement would refuse the alias).
 void deprecation_note(const CLI::App* sub, const std::string& old_name, const std::string& new_name);
 template <typename T>
 CLI::Option* add_deprecated_alias(CLI::App* sub, const std::string& old_name, const std::string& new_name,
