@@ -1,5 +1,6 @@
 #include "poise/core/geomagnetic.h"
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <sstream>
