@@ -127,7 +127,8 @@ void run_echo(const EchoOptions& o) {
                            const eprosima::fastdds::dds::SampleInfo& info, const std::string& problem) {
     std::lock_guard<std::mutex> lock(mutex);
     std::uint64_t lost = 0;
-    if (const auto seq = poise_type ? poise::dds::header_seq_from_payload(s.data) : std::nullopt) {
+    // only valid payloads count: a malformed one's header.seq is whatever its bytes say
+    if (const auto seq = poise_type && problem.empty() ? poise::dds::header_seq_from_payload(s.data) : std::nullopt) {
       lost = gaps.on_sample(poise::dds::handle_key(info.instance_handle), *seq, poise::dds::writer_key(info)).lost;
     }
     if (queue.size() < kMaxQueued) {
