@@ -430,6 +430,16 @@ TEST(Mcap, GivenAChannelNamingASchemaTheFileDoesNotDefineWhenReadThenReportedAnd
   }
 }
 
+TEST(Mcap, GivenAMemorySourceWhenZeroBytesAreReadIntoAnEmptyBufferThenNothingIsTouched) {
+  // GIVEN a memory source; WHEN an empty record body is read into an empty vector (data() null;
+  // found by fuzz_mcap under UBSan: memcpy to a null pointer) THEN it returns, and a read past the
+  // end is still an IoError
+  const MemorySource source(std::vector<uint8_t>{1, 2, 3});
+  std::vector<uint8_t> empty;
+  EXPECT_NO_THROW(source.read(3, 0, empty.data()));
+  EXPECT_THROW(source.read(4, 0, empty.data()), IoError);
+}
+
 TEST(Mcap, TooShortOrForeignFilesAreRejectedClearly) {
   EXPECT_THROW(read_buffer({1, 2, 3}), ReadError);
   std::vector<uint8_t> foreign(100, 'x');

@@ -139,6 +139,9 @@ void MemorySource::read(uint64_t offset, size_t size, uint8_t* out) const {
                   std::to_string(size) + " are past its end (" + std::to_string(bytes_.size()) +
                   ")");
   }
+  if (size == 0) {
+    return;  // OUT may be the null data() of an empty buffer (memcpy needs valid pointers)
+  }
   std::memcpy(out, bytes_.data() + offset, size);
 }
 
