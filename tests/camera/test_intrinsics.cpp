@@ -65,6 +65,20 @@ TEST(Intrinsics, LoadsRosCameraInfoAndRoundTrips) {
   EXPECT_EQ(again.distortion, k.distortion);
 }
 
+TEST(Intrinsics, GivenAnOpenCvMatrixDeclaringHugeRowsWhenParsedThenAClearErrorInsteadOfAnAllocation) {
+  // GIVEN an OpenCV calibration file whose camera_matrix declares rows: 3221225472 (found by
+  // fuzz_config: OpenCV allocated rows x cols, 48 GB, before reading the data)
+  const std::string text =
+      "%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\ncamera_matrix: !!opencv-matrix\n"
+      "   rows: 3221225472\n   cols: 3\n   dt: d\n   data: [ 500.0, 0., 320., 0., 500.0, 240., 0., 0., 1. ]\n";
+  // WHEN parsed THEN the error names the file and the key
+  expect_error_containing(text, "'camera_matrix.rows' must be an integer in [0, 16]");
+  std::string big_cols = text;
+  big_cols.replace(big_cols.find("rows: 3221225472"), 16, "rows: 3");
+  big_cols.replace(big_cols.find("cols: 3"), 7, "cols: 100000");
+  expect_error_containing(big_cols, "'camera_matrix.cols' must be an integer in [0, 16]");
+}
+
 TEST(Intrinsics, ZeroFocalLengthIsAClearError) {
   expect_error_containing(ros_yaml("0, 0, 320, 0, 0, 240, 0, 0, 1"), "focal lengths must be positive");
 }

@@ -82,10 +82,22 @@ CameraIntrinsics parse_opencv(const std::string& text, const std::string& source
   if (!fs.isOpened()) {
     throw ConfigError(source + ": not a valid OpenCV YAML file");
   }
-  auto first_mat = [&fs](std::initializer_list<const char*> keys) {
+  auto first_mat = [&fs, &source](std::initializer_list<const char*> keys) {
     for (const char* key : keys) {
       cv::FileNode node = fs[key];
       if (!node.empty()) {
+        // OpenCV allocates rows x cols before it reads the data: bound them first (a camera
+        // matrix is 3x3, distortion at most 1x14), so no file can ask for gigabytes.
+        constexpr int kMaxMatrixSide = 16;
+        if (node.isMap()) {
+          for (const char* side : {"rows", "cols"}) {
+            const cv::FileNode n = node[side];
+            if (!n.isInt() || static_cast<int>(n) < 0 || static_cast<int>(n) > kMaxMatrixSide) {
+              throw ConfigError(source + ": '" + key + "." + side +
+                                "' must be an integer in [0, " + std::to_string(kMaxMatrixSide) + "]");
+            }
+          }
+        }
         cv::Mat m;
         node >> m;
         return m;
