@@ -183,7 +183,7 @@ TEST(Process, CliRunsRealFiltersFromAHostFileAndIsReproducible) {
     EXPECT_NE(r.output.find("component 'imu0' (imu_driver) is not an estimator: skipped"),
               std::string::npos)
         << r.output;
-    EXPECT_NE(r.output.find("100%"), std::string::npos) << r.output;
+    // (progress is printed only for work over 2 s: Progress.* tests it)
     outputs.push_back(read_bytes(out));
   }
   EXPECT_EQ(outputs[0], outputs[1]);
