@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <iterator>
@@ -161,6 +162,96 @@ TEST(Process, RunsFiltersOfflineDeterministicallyAndCopiesTheInput) {
     EXPECT_EQ(validation.exit_code, 0) << validation.output;
   } else {
     std::printf("independent validation not run: %s\n", validation.skip_reason.c_str());
+  }
+}
+
+/// Records the stamps of the samples it is given, in the order it is given them.
+class OrderFilter : public AttitudeFilter {
+ public:
+  explicit OrderFilter(std::vector<int64_t>* seen) : seen_(seen) {}
+  bool update(const ImuSample& s) override {
+    seen_->push_back(s.stamp_ns);
+    return true;
+  }
+  [[nodiscard]] Eigen::Quaterniond q_world_body() const override { return Eigen::Quaterniond::Identity(); }
+  [[nodiscard]] bool initialized() const override { return true; }
+  void reset() override {}
+
+ private:
+  std::vector<int64_t>* seen_;
+};
+
+TEST(Process, GivenSamplesOutOfStampOrderWhenProcessedThenTheyRunInStampOrderHoldingOnlyTheirDisplacement) {
+  // 300 IMU samples at 100 Hz; every 50th is written kDelay messages late (as a vision pose
+  // arrives after the IMU samples taken after its capture). Oracle: stamp order is increasing
+  // stamps; the farthest any sample sits after its place in that order is kDelay.
+  constexpr int kSamples = 300;
+  constexpr int kDelay = 7;
+  const std::string dir = testing::cases_dir("process_order");
+  const std::string input = dir + "/input.mcap";
+  {
+    int64_t clock = 0;
+    WriterOptions opt;
+    opt.clock = [&clock] { return clock; };
+    McapWriter w(open_file_sink(input), opt);
+    const auto idl = *flattened_idl("poise::msg::ImuSample");
+    const uint16_t s = w.add_schema("poise::msg::ImuSample", "omgidl", {idl.begin(), idl.end()});
+    const uint16_t imu = w.add_channel(s, "imu", "cdr", {});
+    std::vector<int> file_order;
+    for (int i = 0; i < kSamples; ++i) {
+      if (i % 50 == 10) {
+        continue;  // written kDelay positions later
+      }
+      file_order.push_back(i);
+      if (i % 50 == 10 + kDelay) {
+        file_order.push_back(i - kDelay);
+      }
+    }
+    ASSERT_EQ(file_order.size(), static_cast<size_t>(kSamples));
+    uint64_t log_ns = 1'000'000'000ULL;
+    for (int i : file_order) {
+      const int64_t stamp = 5'000'000'000LL + i * 10'000'000LL;
+      clock = static_cast<int64_t>(log_ns);
+      auto m = testing::make_imu(static_cast<uint32_t>(i), stamp);
+      m.accel_mps2(testing::vec3(0.0, 0.0, 9.81));
+      const auto bytes = testing::serialize<msg::ImuSamplePubSubType>(m);
+      w.write(imu, static_cast<uint32_t>(i), log_ns, static_cast<uint64_t>(stamp), bytes.data(), bytes.size());
+      log_ns += 10'000'000ULL;  // arrival order = file order
+    }
+    w.close();
+  }
+  for (const ProcessOrder order : {ProcessOrder::kStamp, ProcessOrder::kRecorded}) {
+    std::vector<int64_t> seen;
+    std::vector<ProcessFilter> filters;
+    filters.push_back({"order", std::make_unique<OrderFilter>(&seen)});
+    ProcessOptions o;
+    o.input = input;
+    o.output = dir + "/out.mcap";
+    o.order = order;
+    const ProcessStats stats = process_recording(o, filters);
+    ASSERT_EQ(seen.size(), static_cast<size_t>(kSamples));
+    if (order == ProcessOrder::kStamp) {
+      EXPECT_TRUE(std::is_sorted(seen.begin(), seen.end()));
+      EXPECT_EQ(stats.reorder_window, static_cast<uint64_t>(kDelay));
+    } else {
+      EXPECT_FALSE(std::is_sorted(seen.begin(), seen.end()));
+      EXPECT_EQ(stats.reorder_window, 0u);
+    }
+    EXPECT_EQ(stats.estimates.at("order"), static_cast<uint64_t>(kSamples));
+    // every estimate follows the input message it was computed from
+    const McapReader out = McapReader::open_file(o.output);
+    int64_t last_input_stamp = -1;
+    MessageCursor cursor = out.messages();
+    uint64_t estimates = 0;
+    while (const MessageView* m = cursor.next()) {
+      if (m->channel->topic == "imu") {
+        last_input_stamp = static_cast<int64_t>(m->publish_time_ns);
+      } else if (m->channel->topic == "processed/attitude/order") {
+        ++estimates;
+        EXPECT_EQ(static_cast<int64_t>(m->publish_time_ns), last_input_stamp);
+      }
+    }
+    EXPECT_EQ(estimates, static_cast<uint64_t>(kSamples));
   }
 }
 

@@ -215,7 +215,7 @@ void run_process(const ProcessArgs& a) {
             << " IMU samples on '" << o.topics.imu << "', " << stats.vision_samples
             << " vision poses, " << stats.vehicle_inputs << " vehicle inputs (" << stats.undecodable
             << " malformed, skipped), in " << (a.order == "recorded" ? "recorded" : "stamp")
-            << " order -> " << a.output << "\n";
+            << " order (at most " << stats.reorder_window << " input(s) held to reorder) -> " << a.output << "\n";
   if (stats.imu_gaps > 0) {
     std::cerr << "poise process: the recorded '" << o.topics.imu << "' has " << stats.imu_gaps
               << " gap(s) in header.seq (" << stats.imu_missing

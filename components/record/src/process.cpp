@@ -15,7 +15,11 @@
 
 #include <algorithm>
 #include <cstring>
+#include <deque>
 #include <optional>
+#include <queue>
+#include <set>
+#include <utility>
 #include <variant>
 
 namespace poise::record {
@@ -51,10 +55,12 @@ struct Input {
   std::variant<msg::ImuSample, msg::VisionPose, msg::VehicleInput> sample;
 };
 
-/// One message a component produced, written after the input message that caused it.
+/// One message to write: a component's output, written after the input message that caused it,
+/// or an input message copied through.
 struct Output {
-  uint64_t ordinal = 0;  ///< the input message it follows
+  uint64_t ordinal = 0;  ///< the input message it follows (or is)
   uint16_t channel = 0;
+  uint32_t sequence = 0;  ///< input copied through: its recorded sequence
   uint64_t log_time_ns = 0;
   uint64_t publish_time_ns = 0;
   std::vector<uint8_t> data;
@@ -101,11 +107,15 @@ class McapOutputs : public nodes::StepOutputs {
     put<msg::FilterDiagnosticsPubSubType>(diagnostics_channel_, m);
   }
 
-  /// The outputs in file order (after the message that caused them, in production order).
-  std::vector<Output> take_sorted() {
-    std::stable_sort(outputs_.begin(), outputs_.end(),
-                     [](const Output& a, const Output& b) { return a.ordinal < b.ordinal; });
-    return std::move(outputs_);
+  /// Takes the outputs caused by the input message `ordinal`, in production order.
+  std::vector<Output> take(uint64_t ordinal) {
+    const auto it = outputs_.find(ordinal);
+    if (it == outputs_.end()) {
+      return {};
+    }
+    std::vector<Output> out = std::move(it->second);
+    outputs_.erase(it);
+    return out;
   }
   [[nodiscard]] const std::string& topic_of(uint16_t channel) const { return topic_names_.at(channel); }
 
@@ -147,7 +157,7 @@ class McapOutputs : public nodes::StepOutputs {
     out.log_time_ns = log_time_ns_;
     out.publish_time_ns = static_cast<uint64_t>(std::max<int64_t>(0, m.header().stamp_ns()));
     out.data.assign(payload.data, payload.data + payload.length);
-    outputs_.push_back(std::move(out));
+    outputs_[ordinal_].push_back(std::move(out));
   }
 
   McapWriter& writer_;
@@ -161,7 +171,7 @@ class McapOutputs : public nodes::StepOutputs {
   uint16_t diagnostics_channel_ = 0;
   uint64_t ordinal_ = 0;
   uint64_t log_time_ns_ = 0;
-  std::vector<Output> outputs_;
+  std::map<uint64_t, std::vector<Output>> outputs_;  // by the input message that caused them
 };
 
 }  // namespace
@@ -179,6 +189,48 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
   return process_recording(options, components);
 }
 
+namespace {
+
+enum class InputKind { kNone, kImu, kVision, kVehicle };
+
+/// Decodes `m` into `in` when it is one of the inputs the components take. Returns its kind
+/// (kNone: not an input); `problem` is set when the payload is malformed.
+InputKind decode_input(const MessageView& m, const ProcessOptions& options, bool wants_vision, bool wants_vehicle,
+                       Input& in, std::optional<std::string>& problem) {
+  if (m.schema == nullptr) {
+    return InputKind::kNone;
+  }
+  const std::string& topic = m.channel->topic;
+  const std::string& type = m.schema->name;
+  if (topic == options.topics.imu && type == dds::type_names::kImuSample) {
+    msg::ImuSample s;
+    problem = decode<msg::ImuSamplePubSubType>(m, s);
+    in.stamp_ns = s.header().stamp_ns();
+    in.sample = std::move(s);
+    return InputKind::kImu;
+  }
+  if (wants_vision && topic == options.topics.vision_pose && type == dds::type_names::kVisionPose) {
+    msg::VisionPose s;
+    problem = decode<msg::VisionPosePubSubType>(m, s);
+    in.stamp_ns = s.capture_stamp_ns();
+    in.sample = std::move(s);
+    return InputKind::kVision;
+  }
+  if (wants_vehicle && topic == options.topics.vehicle_input && type == dds::type_names::kVehicleInput) {
+    msg::VehicleInput s;
+    problem = decode<msg::VehicleInputPubSubType>(m, s);
+    in.stamp_ns = s.header().stamp_ns();
+    in.sample = std::move(s);
+    return InputKind::kVehicle;
+  }
+  return InputKind::kNone;
+}
+
+/// (stamp, ordinal): the processing order of kStamp (a stable sort by stamp).
+using OrderKey = std::pair<int64_t, uint64_t>;
+
+}  // namespace
+
 ProcessStats process_recording(const ProcessOptions& options, std::vector<ProcessComponent>& components) {
   ProcessStats stats;
   const McapReader reader = McapReader::open_file(options.input);
@@ -193,17 +245,21 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
     wants_vehicle = wants_vehicle || c.step->uses_vehicle_input();
   }
 
-  // Pass 1: decode the inputs (malformed payloads are counted and named, never processed).
   const uint64_t total = std::max<uint64_t>(1, reader.report().messages);
   const auto progress = [&options, total](uint64_t phase, uint64_t done) {
     if (options.progress) {
-      options.progress(phase * total + done, 3 * total);  // decode, run, write
+      options.progress(phase * total + done, 2 * total);  // scan, then run + write
     }
   };
-  std::vector<Input> inputs;
+
+  // Pass 1, a scan: what is malformed (counted and named, never processed; the components'
+  // diagnostics carry the totals from their first message, as before), the first stamp, and how
+  // far the stamp order strays from the file order. Only (stamp, ordinal) is kept per input, so
+  // the memory used does not grow with the recording's payloads.
   uint64_t malformed_imu = 0;
   uint64_t malformed_vision = 0;
   uint64_t malformed_vehicle = 0;
+  std::vector<OrderKey> keys;  // valid inputs in file order
   {
     MessageCursor cursor = reader.messages();
     uint64_t ordinal = 0;
@@ -211,76 +267,55 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
       const uint64_t index = ordinal++;
       ++stats.input_messages;
       progress(0, stats.input_messages);
-      if (m->schema == nullptr) {
+      Input in;
+      std::optional<std::string> problem;
+      const InputKind kind = decode_input(*m, options, wants_vision, wants_vehicle, in, problem);
+      if (kind == InputKind::kNone) {
         continue;
       }
-      const std::string& topic = m->channel->topic;
-      const std::string& type = m->schema->name;
-      Input in;
-      in.ordinal = index;
-      in.log_time_ns = m->log_time_ns;
-      std::optional<std::string> problem;
       uint64_t* malformed = nullptr;
-      if (topic == options.topics.imu && type == dds::type_names::kImuSample) {
-        ++stats.imu_samples;
-        msg::ImuSample s;
-        problem = decode<msg::ImuSamplePubSubType>(*m, s);
-        in.stamp_ns = s.header().stamp_ns();
-        in.sample = std::move(s);
-        malformed = &malformed_imu;
-      } else if (wants_vision && topic == options.topics.vision_pose &&
-                 type == dds::type_names::kVisionPose) {
-        ++stats.vision_samples;
-        msg::VisionPose s;
-        problem = decode<msg::VisionPosePubSubType>(*m, s);
-        in.stamp_ns = s.capture_stamp_ns();
-        in.sample = std::move(s);
-        malformed = &malformed_vision;
-      } else if (wants_vehicle && topic == options.topics.vehicle_input &&
-                 type == dds::type_names::kVehicleInput) {
-        ++stats.vehicle_inputs;
-        msg::VehicleInput s;
-        problem = decode<msg::VehicleInputPubSubType>(*m, s);
-        in.stamp_ns = s.header().stamp_ns();
-        in.sample = std::move(s);
-        malformed = &malformed_vehicle;
-      } else {
-        continue;
+      switch (kind) {
+        case InputKind::kImu: ++stats.imu_samples; malformed = &malformed_imu; break;
+        case InputKind::kVision: ++stats.vision_samples; malformed = &malformed_vision; break;
+        case InputKind::kVehicle: ++stats.vehicle_inputs; malformed = &malformed_vehicle; break;
+        case InputKind::kNone: break;
       }
       if (problem) {
         ++*malformed;
         ++stats.undecodable;
         if (stats.undecodable_details.size() < kMaxDescribedSkips) {
-          stats.undecodable_details.push_back(describe_position(*m) + " on '" + topic + "', " +
+          stats.undecodable_details.push_back(describe_position(*m) + " on '" + m->channel->topic + "', " +
                                               std::to_string(m->size) + " bytes: " + *problem);
         }
         continue;
       }
-      inputs.push_back(std::move(in));
+      keys.emplace_back(in.stamp_ns, index);
     }
     stats.damaged_chunks = cursor.problems().size();
     for (const std::string& p : cursor.problems()) {
       stats.input_problems.push_back(p);
     }
   }
-  if (options.order == ProcessOrder::kStamp) {
-    std::stable_sort(inputs.begin(), inputs.end(),
-                     [](const Input& a, const Input& b) { return a.stamp_ns < b.stamp_ns; });
-  }
-  {  // samples the recording lacks (lost before the recorder): said, since live had them
-    std::map<std::string, uint32_t> last_seq;
-    for (const Input& in : inputs) {
-      if (const auto* imu = std::get_if<msg::ImuSample>(&in.sample)) {
-        const uint32_t seq = imu->header().seq();
-        const auto [it, first] = last_seq.try_emplace(imu->sensor_id().to_string(), seq);
-        if (!first && seq - it->second > 1U && seq - it->second < (1U << 31)) {
-          ++stats.imu_gaps;
-          stats.imu_missing += seq - it->second - 1U;
-        }
-        it->second = seq;
-      }
+  // The inputs are run in stamp order by a min-heap fed in file order: it sorts exactly when it
+  // may hold `window` + 1 inputs, where `window` is the farthest any input sits after its place
+  // in the stamp order (the vision latency in samples, typically; 0 in recorded order).
+  int64_t first_stamp_ns = keys.empty() ? 0 : keys.front().first;
+  uint64_t window = 0;
+  if (options.order == ProcessOrder::kStamp && !keys.empty()) {
+    std::vector<uint64_t> file_index(keys.size());
+    for (uint64_t i = 0; i < file_index.size(); ++i) {
+      file_index[i] = i;
+    }
+    std::stable_sort(file_index.begin(), file_index.end(),
+                     [&keys](uint64_t a, uint64_t b) { return keys[a].first < keys[b].first; });
+    first_stamp_ns = keys[file_index.front()].first;
+    for (uint64_t j = 0; j < file_index.size(); ++j) {
+      window = std::max(window, file_index[j] > j ? file_index[j] - j : 0);
     }
   }
+  keys.clear();
+  keys.shrink_to_fit();
+  stats.reorder_window = window;
 
   int64_t log_clock = 0;  // the writer's chunk clock: recording time, never the wall clock
   WriterOptions wopt;
@@ -309,7 +344,7 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
 
   // The components, each in the node's shape; time = the stamp of the input being processed.
   McapOutputs outputs(writer, options);
-  int64_t now_ns = inputs.empty() ? 0 : inputs.front().stamp_ns;
+  int64_t now_ns = first_stamp_ns;
   std::vector<std::unique_ptr<nodes::StepRunner>> runners;
   for (ProcessComponent& c : components) {
     outputs.declare(*c.step, options.topics);
@@ -322,13 +357,22 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
   }
   components.clear();
 
+  // Pass 2: run and write in one stream. Each input message is copied through, then the outputs
+  // its input caused; a message waits only while an input at or before it is not yet run.
   const std::string writer_id = "recording";  // one publisher per input: no restarts offline
-  uint64_t ran = 0;
-  for (const Input& in : inputs) {
-    progress(1, ++ran);
+  std::map<std::string, uint32_t> last_seq;   // IMU seq gaps per sensor, in processing order
+  auto run_input = [&](const Input& in) {
     now_ns = in.stamp_ns;
     outputs.set_trigger(in.ordinal, in.log_time_ns);
     if (const auto* imu = std::get_if<msg::ImuSample>(&in.sample)) {
+      // samples the recording lacks (lost before the recorder): said, since live had them
+      const uint32_t seq = imu->header().seq();
+      const auto [it, first] = last_seq.try_emplace(imu->sensor_id().to_string(), seq);
+      if (!first && seq - it->second > 1U && seq - it->second < (1U << 31)) {
+        ++stats.imu_gaps;
+        stats.imu_missing += seq - it->second - 1U;
+      }
+      it->second = seq;
       const ImuSample sample = dds::from_msg(*imu);
       const std::string source = imu->sensor_id().to_string();
       for (auto& r : runners) {
@@ -343,43 +387,77 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
         r->vehicle_input(*vehicle, writer_id);
       }
     }
-  }
-  inputs.clear();
-  inputs.shrink_to_fit();
-  for (const auto& r : runners) {
-    const std::string& name = r->step().sensor_id();
-    stats.estimates[name] += r->published();
-    stats.rejected[name] += r->rejected();
-    stats.diagnostics[name] += r->diagnostics_published();
-  }
-
-  // Pass 2: the input copied through, each output right after the message that caused it.
-  const std::vector<Output> produced = outputs.take_sorted();
+  };
+  using Queued = std::pair<OrderKey, Input>;
+  auto later = [](const Queued& a, const Queued& b) { return a.first > b.first; };
+  std::priority_queue<Queued, std::vector<Queued>, decltype(later)> to_run(later);
+  std::set<uint64_t> not_run;  // ordinals of the inputs in to_run
+  std::deque<Output> to_write;  // input messages waiting to be written (with their outputs)
   std::map<uint16_t, uint32_t> out_seq;
-  size_t next = 0;
-  auto write_outputs_until = [&](uint64_t ordinal) {
-    for (; next < produced.size() && produced[next].ordinal <= ordinal; ++next) {
-      const Output& o = produced[next];
-      log_clock = static_cast<int64_t>(o.log_time_ns);
-      writer.write(o.channel, out_seq[o.channel]++, o.log_time_ns, o.publish_time_ns, o.data.data(),
-                   o.data.size());
-      ++stats.per_topic[outputs.topic_of(o.channel)];
+  auto write_ready = [&](bool all) {
+    while (!to_write.empty() && (all || not_run.empty() || to_write.front().ordinal < *not_run.begin())) {
+      const Output& p = to_write.front();
+      log_clock = static_cast<int64_t>(p.log_time_ns);
+      if (options.copy_input) {
+        writer.write(p.channel, p.sequence, p.log_time_ns, p.publish_time_ns, p.data.data(), p.data.size());
+      }
+      for (const Output& o : outputs.take(p.ordinal)) {
+        log_clock = static_cast<int64_t>(o.log_time_ns);
+        writer.write(o.channel, out_seq[o.channel]++, o.log_time_ns, o.publish_time_ns, o.data.data(),
+                     o.data.size());
+        ++stats.per_topic[outputs.topic_of(o.channel)];
+      }
+      to_write.pop_front();
     }
+  };
+  auto run_next = [&] {
+    const Queued& next = to_run.top();
+    run_input(next.second);
+    not_run.erase(next.second.ordinal);
+    to_run.pop();
   };
   {
     MessageCursor cursor = reader.messages();
     uint64_t ordinal = 0;
     while (const MessageView* m = cursor.next()) {
       const uint64_t index = ordinal++;
-      progress(2, ordinal);
-      log_clock = static_cast<int64_t>(m->log_time_ns);
+      progress(1, ordinal);
+      Output p;
+      p.ordinal = index;
       if (options.copy_input) {
-        writer.write(channel_map.at(m->channel->id), m->sequence, m->log_time_ns, m->publish_time_ns,
-                     m->data, m->size);
+        p.channel = channel_map.at(m->channel->id);
+        p.sequence = m->sequence;
+        p.log_time_ns = m->log_time_ns;
+        p.publish_time_ns = m->publish_time_ns;
+        p.data.assign(m->data, m->data + m->size);
+      } else {
+        p.log_time_ns = m->log_time_ns;
       }
-      write_outputs_until(index);
+      to_write.push_back(std::move(p));
+      Input in;
+      std::optional<std::string> problem;
+      if (decode_input(*m, options, wants_vision, wants_vehicle, in, problem) != InputKind::kNone && !problem) {
+        in.ordinal = index;
+        in.log_time_ns = m->log_time_ns;
+        const OrderKey key = options.order == ProcessOrder::kStamp ? OrderKey{in.stamp_ns, index} : OrderKey{0, index};
+        not_run.insert(index);
+        to_run.emplace(key, std::move(in));
+        if (to_run.size() > window) {
+          run_next();
+        }
+      }
+      write_ready(false);
     }
-    write_outputs_until(UINT64_MAX);
+    while (!to_run.empty()) {
+      run_next();
+    }
+    write_ready(true);
+  }
+  for (const auto& r : runners) {
+    const std::string& name = r->step().sensor_id();
+    stats.estimates[name] += r->published();
+    stats.rejected[name] += r->rejected();
+    stats.diagnostics[name] += r->diagnostics_published();
   }
   writer.close();
   return stats;

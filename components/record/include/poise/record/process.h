@@ -67,6 +67,9 @@ struct ProcessStats {
   uint64_t undecodable = 0;  ///< input payloads that are malformed (skipped, counted)
   std::vector<std::string> undecodable_details;  ///< the first 10: position (index, offset) + why
   uint64_t damaged_chunks = 0;  ///< chunks that could not be read while processing (skipped)
+  /// Inputs held at most to run them in stamp order (how far the stamp order strays from the
+  /// file's order; 0 in recorded order): with the messages between them, all that is in memory.
+  uint64_t reorder_window = 0;
   std::map<std::string, uint64_t> estimates;    ///< per component (sensor_id)
   std::map<std::string, uint64_t> rejected;     ///< per component: IMU samples its core rejected
   std::map<std::string, uint64_t> diagnostics;  ///< per component: FilterDiagnostics written
