@@ -36,13 +36,16 @@ done
 
 # Debian 12 packages. Build: compiler, CMake, Ninja, Fast DDS + generator, Eigen, OpenCV,
 # AprilTag, yaml-cpp, CLI11, HDF5, zstd, nlohmann-json (the one JSON writer), libsystemd (sd_notify
-# for the poise@.service unit). Tests: GoogleTest, Cyclone DDS (interop), iproute2
-# (network namespaces), openssl (DDS Security), clang (fuzzing), Node.js + npm (MCAP validators),
+# for the poise@.service unit), websocketpp + standalone asio (header-only: the Foxglove WebSocket
+# server, docs/FOXGLOVE.md). Tests: GoogleTest, Cyclone DDS (interop), iproute2
+# (network namespaces), openssl (DDS Security), clang (fuzzing), Node.js + npm (MCAP validators,
+# Foxglove clients),
 # dpkg-dev (dpkg-shlibdeps for the Debian packages) and systemd (systemd-analyze verify).
 packages=(build-essential cmake ninja-build pkg-config libeigen3-dev libyaml-cpp-dev)
 if [ "$cores_only" = OFF ]; then
   packages+=(libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools
-             libcli11-dev libhdf5-dev libzstd-dev nlohmann-json3-dev libsystemd-dev)
+             libcli11-dev libhdf5-dev libzstd-dev nlohmann-json3-dev libsystemd-dev
+             libwebsocketpp-dev libasio-dev)
   if [ "$camera" = ON ]; then
     packages+=(libopencv-dev libapriltag-dev)
   fi

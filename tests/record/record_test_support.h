@@ -2,6 +2,7 @@
 // values as JSON for the independent node validator (validator/validate.mjs), and running it.
 #pragma once
 
+#include "poise/testing/npm.h"
 #include "poise/testing/testing.h"
 
 #include <gtest/gtest.h>
@@ -248,24 +249,7 @@ inline std::string cases_dir(const std::string& name) {
   return dir;
 }
 
-inline std::string find_on_path(const std::string& exe) {
-  const char* path = std::getenv("PATH");
-  std::string p = path != nullptr ? path : "/usr/bin:/bin";
-  size_t start = 0;
-  while (start <= p.size()) {
-    const size_t end = p.find(':', start);
-    const std::string dir = p.substr(start, end == std::string::npos ? std::string::npos : end - start);
-    const std::string candidate = (dir.empty() ? "." : dir) + "/" + exe;
-    if (::access(candidate.c_str(), X_OK) == 0) {
-      return candidate;
-    }
-    if (end == std::string::npos) {
-      break;
-    }
-    start = end + 1;
-  }
-  return "";
-}
+using poise::testing::find_on_path;
 
 struct NodeValidation {
   std::string skip_reason;  ///< non-empty: could not run (no node/npm, install failed)
@@ -278,43 +262,14 @@ struct NodeValidation {
 inline NodeValidation run_node_validator(const std::string& dir) {
   using namespace std::chrono_literals;
   NodeValidation result;
-  const std::string node = find_on_path("node");
-  const std::string npm = find_on_path("npm");
-  if (node.empty() || npm.empty()) {
-    result.skip_reason = "node/npm not found on PATH: the independent MCAP validator cannot run "
-                         "(install nodejs and npm)";
-    return result;
-  }
   const std::string vdir = POISE_RECORD_VALIDATOR_DIR;
-  const int lock = ::open((vdir + "/.install.lock").c_str(), O_CREAT | O_RDWR, 0644);
-  if (lock >= 0) {
-    ::flock(lock, LOCK_EX);
-  }
-  bool installed = true;
-  for (const char* pkg : {"@mcap/core", "@mcap/nodejs", "@foxglove/omgidl-parser",
-                          "@foxglove/omgidl-serialization", "@foxglove/crc", "fzstd"}) {
-    struct stat st {};
-    if (::stat((vdir + "/node_modules/" + pkg + "/package.json").c_str(), &st) != 0) {
-      installed = false;
-    }
-  }
-  if (!installed) {
-    const auto install = poise::testing::run(
-        {npm, "install", "--prefix", vdir, "--no-audit", "--no-fund", "--loglevel=error"}, 180s);
-    if (install.exit_code != 0) {
-      result.skip_reason = "npm install of the validator packages failed (exit " +
-                           std::to_string(install.exit_code) + ", offline?): " +
-                           install.output.substr(0, 600);
-    }
-  }
-  if (lock >= 0) {
-    ::flock(lock, LOCK_UN);
-    ::close(lock);
-  }
+  result.skip_reason = poise::testing::npm_install(
+      vdir, {"@mcap/core", "@mcap/nodejs", "@foxglove/omgidl-parser", "@foxglove/omgidl-serialization",
+             "@foxglove/crc", "fzstd"});
   if (!result.skip_reason.empty()) {
     return result;
   }
-  const auto run = poise::testing::run({node, vdir + "/validate.mjs", dir}, 120s);
+  const auto run = poise::testing::run({find_on_path("node"), vdir + "/validate.mjs", dir}, 120s);
   result.exit_code = run.exit_code;
   result.output = run.output;
   return result;

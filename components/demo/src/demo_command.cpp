@@ -39,6 +39,8 @@ struct DemoOptions {
   std::string out = "poise-demo-report";
   bool no_camera = false;
   bool plain = false;      // no screen redraws (automatic when stdout is not a terminal)
+  bool foxglove = false;   // --foxglove [PORT]: the foxglove_bridge component with the demo
+  std::string foxglove_port;  // "" = 8765
 };
 
 // The synthetic camera's blackouts repeat every kCameraPeriodS (two 30 s tour cycles): the tag
@@ -246,6 +248,32 @@ void run_demo(const DemoOptions& o) {
     spec.components.push_back(
         component("altitude", "altitude", map_of({{"relative_to_start", YAML::Node(true)}})));
   }
+  std::string foxglove_url;
+  if (o.foxglove) {
+    if (registry.find("foxglove_bridge") == nullptr) {
+      throw Error("--foxglove: this poise was built without the foxglove_bridge component");
+    }
+    int port = 8765;
+    try {
+      std::size_t used = 0;
+      port = o.foxglove_port.empty() ? 8765 : std::stoi(o.foxglove_port, &used);
+      if (!o.foxglove_port.empty() && used != o.foxglove_port.size()) {
+        throw std::invalid_argument("trailing characters");
+      }
+    } catch (const std::exception&) {
+      port = -1;
+    }
+    if (port < 1 || port > 65535) {
+      throw Error("--foxglove: '" + o.foxglove_port + "' is not a TCP port (1-65535)", kUsageExitCode);
+    }
+    spec.components.push_back(component("foxglove_bridge", "foxglove", map_of({{"port", YAML::Node(port)}})));
+    char host_name[256] = "localhost";
+    if (::gethostname(host_name, sizeof host_name - 1) != 0) {
+      std::snprintf(host_name, sizeof host_name, "localhost");
+    }
+    foxglove_url = "ws://" + std::string(host_name) + ":" + std::to_string(port);
+    devices += ", Foxglove " + foxglove_url;
+  }
 
   sim::SimConfig scenario;
   try {
@@ -259,6 +287,12 @@ void run_demo(const DemoOptions& o) {
   runtime::Host host(spec, o.domain);
   demo::PipelineMonitor monitor(host.participant(), spec.topics, filters);
   host.start();
+  if (!foxglove_url.empty()) {
+    std::printf("Foxglove: open %s (or ws://localhost:%s on this host) in Foxglove or Lichtblick; layout "
+                "config/foxglove/poise.json\n",
+                foxglove_url.c_str(), foxglove_url.substr(foxglove_url.rfind(':') + 1).c_str());
+    std::fflush(stdout);
+  }
   const bool redraw = !o.plain && ::isatty(STDOUT_FILENO) != 0;
   auto next_draw = std::chrono::steady_clock::now();
   while (!stop_requested() && monitor.elapsed_s() < o.duration_s) {
@@ -322,7 +356,14 @@ void register_demo_commands(CLI::App& app) {
   add_out_dir_option(demo, &o->out, "the report", false)->capture_default_str();
   add_deprecated_alias(demo, "--out", "--out-dir", &o->out);
   demo->add_flag("--plain", o->plain, "Print status blocks instead of redrawing the screen");
-  demo->callback([o] { run_demo(*o); });
+  CLI::Option* foxglove = demo->add_option("--foxglove", o->foxglove_port,
+                                           "Serve the demo to Foxglove / Lichtblick over WebSocket on PORT "
+                                           "(default 8765) and print the URL (docs/FOXGLOVE.md)")
+                              ->expected(0, 1);
+  demo->callback([o, foxglove] {
+    o->foxglove = foxglove->count() > 0;
+    run_demo(*o);
+  });
 }
 
 }  // namespace poise::cli

@@ -201,7 +201,7 @@ Host::Host(const HostSpec& spec, int domain) {
   options.name = "poise:" + (spec.components.size() == 1 ? spec.components.front().name
                                                           : std::string("host"));
   participant_ = std::make_unique<dds::Participant>(options);
-  context_ = std::make_unique<HostContext>(HostContext{*participant_, spec.topics});
+  context_ = std::make_unique<HostContext>(HostContext{*participant_, spec.topics, options});
   for (const auto& c : spec.components) {
     components_.push_back(registry.find(c.type)->create(c, *context_));
     names_.push_back(c.name);

@@ -151,7 +151,8 @@ void register_run_commands(CLI::App& app) {
       std::vector<std::string> topics;
     };
     auto s = std::make_shared<Standalone>();
-    CLI::App* sub = app.add_subcommand(dashed(type_name), type.description + " (runs alone)");
+    CLI::App* sub = app.add_subcommand(type.command.empty() ? dashed(type_name) : type.command,
+                                       type.description + " (runs alone)");
     sub->add_option("--name", s->name, "Instance name (sensor_id of its outputs; default: " +
                                             type_name + ")");
     sub->add_option("--config", s->config, "Parameter file (YAML map)")->check(CLI::ExistingFile);
@@ -161,13 +162,14 @@ void register_run_commands(CLI::App& app) {
     add_deprecated_alias(sub, "--profile", "--dds-profile", &s->profile);
     add_run_options(sub, s->run);
     const std::string key = type_name;
-    sub->callback([s, key] {
+    const std::string command = sub->get_name();
+    sub->callback([s, key, command] {
       runtime::HostSpec spec;
       spec.participant_profile = s->profile;
       runtime::ComponentSpec c;
       c.type = key;
       c.name = s->name.empty() ? key : s->name;
-      c.origin = "poise " + dashed(key);
+      c.origin = "poise " + command;
       c.params = s->config.empty() ? YAML::Node(YAML::NodeType::Map)
                                    : runtime::load_param_file(s->config);
       for (const auto& assignment : s->sets) {

@@ -37,6 +37,9 @@ struct ComponentSpec {
 struct HostContext {
   dds::Participant& participant;
   dds::TopicNames topics;
+  /// What the host's participant was made from (domain, profile, QoS file), for components that
+  /// need a participant of their own on the same domain (e.g. an observer of every topic).
+  dds::ParticipantOptions participant_options = {};
 };
 
 /// A running component. Construction creates its DDS entities (and throws on failure);
@@ -60,6 +63,8 @@ struct ComponentType {
   /// Generate `poise <name with dashes>` to run it alone. False for drivers that have their own
   /// dedicated command (e.g. `poise imu`).
   bool standalone_command = true;
+  /// Name of that command ("": the type name with dashes, e.g. `poise parallel-kf`).
+  std::string command;
 };
 
 class ComponentRegistry {

@@ -1,0 +1,230 @@
+#include "poise/foxglove/protocol.h"
+
+#include <nlohmann/json.hpp>
+
+#include <limits>
+
+namespace poise::foxglove {
+
+using nlohmann::json;
+
+namespace {
+
+std::string dump(const json& j) { return j.dump(-1, ' ', false, json::error_handler_t::replace); }
+
+/// A JSON number that is an integer in [0, 2^32): a subscription or channel id.
+std::optional<std::uint32_t> as_u32(const json& j) {
+  if (j.is_number_unsigned()) {
+    const auto v = j.get<std::uint64_t>();
+    if (v <= std::numeric_limits<std::uint32_t>::max()) {
+      return static_cast<std::uint32_t>(v);
+    }
+  } else if (j.is_number_integer()) {
+    const auto v = j.get<std::int64_t>();
+    if (v >= 0 && v <= static_cast<std::int64_t>(std::numeric_limits<std::uint32_t>::max())) {
+      return static_cast<std::uint32_t>(v);
+    }
+  }
+  return std::nullopt;
+}
+
+void put_le(std::string& out, std::uint64_t v, int bytes) {
+  for (int i = 0; i < bytes; ++i) {
+    out.push_back(static_cast<char>((v >> (8 * i)) & 0xFFu));
+  }
+}
+
+}  // namespace
+
+std::string server_info_json(const std::string& name, const std::string& session_id,
+                             const std::map<std::string, std::string>& metadata) {
+  json j = {{"op", "serverInfo"},
+            {"name", name},
+            {"capabilities", json::array()},
+            {"sessionId", session_id}};
+  j["metadata"] = json::object();
+  for (const auto& [k, v] : metadata) {
+    j["metadata"][k] = v;
+  }
+  return dump(j);
+}
+
+std::string advertise_json(const std::vector<Channel>& channels) {
+  json list = json::array();
+  for (const auto& c : channels) {
+    list.push_back({{"id", c.id},
+                    {"topic", c.topic},
+                    {"encoding", c.encoding},
+                    {"schemaName", c.schema_name},
+                    {"schema", c.schema},
+                    {"schemaEncoding", c.schema_encoding}});
+  }
+  return dump({{"op", "advertise"}, {"channels", std::move(list)}});
+}
+
+std::string unadvertise_json(const std::vector<std::uint32_t>& channel_ids) {
+  return dump({{"op", "unadvertise"}, {"channelIds", channel_ids}});
+}
+
+std::string status_json(StatusLevel level, const std::string& message) {
+  return dump({{"op", "status"}, {"level", static_cast<int>(level)}, {"message", message}});
+}
+
+std::string message_data_frame(std::uint32_t subscription_id, std::uint64_t receive_ns,
+                               const std::uint8_t* payload, std::size_t size) {
+  std::string frame;
+  frame.reserve(kMessageDataHeaderBytes + size);
+  frame.push_back(static_cast<char>(kMessageDataOpcode));
+  put_le(frame, subscription_id, 4);
+  put_le(frame, receive_ns, 8);
+  frame.append(reinterpret_cast<const char*>(payload), size);
+  return frame;
+}
+
+ClientSession::Result ClientSession::handle_text(std::string_view text,
+                                                 const std::function<bool(std::uint32_t)>& channel_known) {
+  Result out;
+  // No exceptions: a parse error gives a discarded value (nlohmann's parser is iterative, so
+  // deep nesting cannot exhaust the stack).
+  const json request = json::parse(text.begin(), text.end(), nullptr, false);
+  if (request.is_discarded()) {
+    out.replies.push_back({StatusLevel::kError, "malformed request: not valid JSON (" +
+                                                    std::to_string(text.size()) + " bytes)"});
+    return out;
+  }
+  if (!request.is_object()) {
+    out.replies.push_back({StatusLevel::kError, "malformed request: not a JSON object"});
+    return out;
+  }
+  const auto op = request.find("op");
+  if (op == request.end() || !op->is_string()) {
+    out.replies.push_back({StatusLevel::kError, "malformed request: no string field 'op'"});
+    return out;
+  }
+  const std::string name = op->get<std::string>();
+  if (name == "subscribe") {
+    subscribe(request, channel_known, out);
+  } else if (name == "unsubscribe") {
+    unsubscribe(request, out);
+  } else if (name == "advertise" || name == "unadvertise" || name == "getParameters" ||
+             name == "setParameters" || name == "subscribeParameterUpdates" ||
+             name == "unsubscribeParameterUpdates" || name == "subscribeConnectionGraph" ||
+             name == "unsubscribeConnectionGraph" || name == "fetchAsset") {
+    out.replies.push_back({StatusLevel::kError, "op '" + name +
+                                                    "' needs a capability this server does not "
+                                                    "have (it announces none)"});
+  } else {
+    out.replies.push_back({StatusLevel::kError, "unknown op '" + name.substr(0, 64) + "'"});
+  }
+  return out;
+}
+
+void ClientSession::subscribe(const json& request, const std::function<bool(std::uint32_t)>& channel_known,
+                              Result& out) {
+  const auto list = request.find("subscriptions");
+  if (list == request.end() || !list->is_array()) {
+    out.replies.push_back({StatusLevel::kError, "subscribe: 'subscriptions' must be an array"});
+    return;
+  }
+  for (const json& s : *list) {
+    const auto id = s.is_object() && s.contains("id") ? as_u32(s["id"]) : std::nullopt;
+    const auto channel = s.is_object() && s.contains("channelId") ? as_u32(s["channelId"]) : std::nullopt;
+    if (!id || !channel) {
+      out.replies.push_back({StatusLevel::kError,
+                             "subscribe: each subscription needs integer 'id' and 'channelId' in "
+                             "[0, 2^32)"});
+      continue;
+    }
+    if (!channel_known(*channel)) {
+      out.replies.push_back({StatusLevel::kError, "subscribe: unknown channel " + std::to_string(*channel)});
+      continue;
+    }
+    if (subscriptions_.count(*id) != 0) {
+      out.replies.push_back({StatusLevel::kError,
+                             "subscribe: subscription id " + std::to_string(*id) + " is already in use"});
+      continue;
+    }
+    if (subscription_for(*channel)) {
+      out.replies.push_back({StatusLevel::kError, "subscribe: channel " + std::to_string(*channel) +
+                                                      " is already subscribed (one subscription "
+                                                      "per channel)"});
+      continue;
+    }
+    if (subscriptions_.size() >= kMaxSubscriptions) {
+      out.replies.push_back({StatusLevel::kError, "subscribe: too many subscriptions"});
+      continue;
+    }
+    subscriptions_[*id] = *channel;
+    out.subscriptions_changed = true;
+  }
+}
+
+void ClientSession::unsubscribe(const json& request, Result& out) {
+  const auto list = request.find("subscriptionIds");
+  if (list == request.end() || !list->is_array()) {
+    out.replies.push_back({StatusLevel::kError, "unsubscribe: 'subscriptionIds' must be an array"});
+    return;
+  }
+  for (const json& s : *list) {
+    const auto id = as_u32(s);
+    if (!id) {
+      out.replies.push_back({StatusLevel::kError, "unsubscribe: ids must be integers in [0, 2^32)"});
+      continue;
+    }
+    if (subscriptions_.erase(*id) == 0) {
+      out.replies.push_back({StatusLevel::kWarning, "unsubscribe: no subscription " + std::to_string(*id)});
+      continue;
+    }
+    out.subscriptions_changed = true;
+  }
+}
+
+ClientSession::Reply ClientSession::binary_refused(std::size_t size) {
+  return {StatusLevel::kError, "binary client message of " + std::to_string(size) +
+                                   " bytes refused: this server takes none (no clientPublish or "
+                                   "services capability)"};
+}
+
+bool ClientSession::channel_removed(std::uint32_t channel_id) {
+  for (auto it = subscriptions_.begin(); it != subscriptions_.end(); ++it) {
+    if (it->second == channel_id) {
+      subscriptions_.erase(it);
+      return true;
+    }
+  }
+  return false;
+}
+
+std::optional<std::uint32_t> ClientSession::subscription_for(std::uint32_t channel_id) const {
+  for (const auto& [sub, channel] : subscriptions_) {
+    if (channel == channel_id) {
+      return sub;
+    }
+  }
+  return std::nullopt;
+}
+
+FrameQueue::FrameQueue(std::size_t max_frames, std::size_t max_bytes)
+    : max_frames_(max_frames == 0 ? 1 : max_frames), max_bytes_(max_bytes) {}
+
+void FrameQueue::push(std::string frame) {
+  bytes_ += frame.size();
+  frames_.push_back(std::move(frame));
+  while (frames_.size() > 1 && (frames_.size() > max_frames_ || bytes_ > max_bytes_)) {
+    bytes_ -= frames_.front().size();
+    frames_.pop_front();
+    ++dropped_;
+  }
+}
+
+bool FrameQueue::pop(std::string& out) {
+  if (frames_.empty()) {
+    return false;
+  }
+  out = std::move(frames_.front());
+  bytes_ -= out.size();
+  frames_.pop_front();
+  return true;
+}
+
+}  // namespace poise::foxglove
