@@ -2,6 +2,7 @@
 // @foxglove/ws-protocol (FoxgloveClient over `ws`) decoding the advertised omgidl schemas with
 // @foxglove/omgidl-serialization, as Foxglove does (client/client.mjs, installed into the build
 // tree at test time). Under CI=true a missing node/npm or registry is a failure, not a skip.
+#include "poise/dds/convert.h"
 #include "poise/dds/participant.h"
 #include "poise/ddstools/idl_schema.h"
 #include "poise/foxglove/bridge.h"
@@ -24,6 +25,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <ctime>
 #include <fstream>
 #include <map>
@@ -51,6 +53,15 @@ std::string require_client() {
                                                     "@foxglove/omgidl-serialization", "ws"});
 }
 
+/// Installs the client's npm packages, or skips the test (fails it under CI=true) with why not.
+#define POISE_REQUIRE_FOXGLOVE_CLIENT()          \
+  do {                                           \
+    const std::string missing = require_client(); \
+    if (!missing.empty()) {                      \
+      POISE_SKIP(missing);                       \
+    }                                            \
+  } while (false)
+
 std::int64_t realtime_ns() {
   timespec ts{};
   clock_gettime(CLOCK_REALTIME, &ts);
@@ -74,13 +85,7 @@ int free_port() {
   return ntohs(a.sin_port);
 }
 
-msg::Vector3 vec(double x, double y, double z) {
-  msg::Vector3 v;
-  v.x(x);
-  v.y(y);
-  v.z(z);
-  return v;
-}
+msg::Vector3 vec(double x, double y, double z) { return dds::to_msg(Eigen::Vector3d(x, y, z)); }
 
 /// Sample I of a level sensor turning about up at kYawRateRps (consistent magnetometer), with
 /// small distinct values in every field.
@@ -181,10 +186,7 @@ bool wait_file(const std::string& path, std::chrono::milliseconds timeout) {
 //      DDS reader of the same test got with the same seq; the transforms and plots carry the
 //      estimates' quaternions, angles and stamps.
 TEST(FoxgloveBridge, GivenLiveTopicsWhenTheWsProtocolClientDecodesThemThenTheyEqualWhatDdsDelivers) {
-  const std::string missing = require_client();
-  if (!missing.empty()) {
-    POISE_SKIP(missing);
-  }
+  POISE_REQUIRE_FOXGLOVE_CLIENT();
   constexpr int kSamples = 200;
   constexpr std::int64_t kPeriodNs = 5'000'000;  // 200 Hz
   YAML::Node params(YAML::NodeType::Map);
@@ -332,13 +334,10 @@ TEST(FoxgloveBridge, GivenLiveTopicsWhenTheWsProtocolClientDecodesThemThenTheyEq
 //      oversized request, a binary frame), then a frame beyond the hard limit, and a client
 //      connects without the subprotocol
 // THEN each malformed frame gets an error status (level 2) on a connection that stays open, the
-//      giant frame closes its connection with 1009, the handshake without subprotocol is refused
+//      giant frame closes its connection (1009, or a reset while the client still writes), the handshake without subprotocol is refused
 //      (HTTP 400), and a good client is still served afterwards.
 TEST(FoxgloveBridge, GivenMalformedClientFramesThenErrorStatusesNeverACrashAndGoodClientsAreServed) {
-  const std::string missing = require_client();
-  if (!missing.empty()) {
-    POISE_SKIP(missing);
-  }
+  POISE_REQUIRE_FOXGLOVE_CLIENT();
   Live live(YAML::Node(YAML::NodeType::Map), false);
   dds::Participant participant(test_participant(live.lease.id()));
   dds::Writer<msg::ImuSamplePubSubType> writer(participant, "imu");
@@ -370,7 +369,9 @@ TEST(FoxgloveBridge, GivenMalformedClientFramesThenErrorStatusesNeverACrashAndGo
     EXPECT_TRUE(error) << c["name"] << ": " << c["statuses"].dump();
   }
   EXPECT_TRUE(result["raw_still_open"].get<bool>());
-  EXPECT_EQ(result["huge"], 1009) << "a frame beyond the hard limit closes with 'message too big'";
+  // websocketpp closes with 1009 (message too big) as soon as it reads the frame header; the
+  // client, still writing its 8 MiB, sees either that close frame or the reset (1006).
+  EXPECT_TRUE(result["huge"] == 1009 || result["huge"] == 1006) << result["huge"];
   EXPECT_EQ(result["no_subprotocol"]["refused"], 400);
   EXPECT_EQ(result["good"]["serverInfo"]["op"], "serverInfo");
   EXPECT_GE(result["good"]["channels"].get<int>(), 1);
@@ -398,10 +399,7 @@ long rss_kib() {
 //      dropped frames are counted (diagnostics and status line), and the process's memory stays
 //      bounded.
 TEST(FoxgloveBridge, GivenAStalledClientThenTheEstimatorAndTheOtherClientKeepTheirRateAndMemoryIsBounded) {
-  const std::string missing = require_client();
-  if (!missing.empty()) {
-    POISE_SKIP(missing);
-  }
+  POISE_REQUIRE_FOXGLOVE_CLIENT();
   constexpr int kSeconds = 60;
   constexpr std::int64_t kPeriodNs = 2'000'000;  // 500 Hz
   constexpr double kRateHz = 500.0;
@@ -419,12 +417,13 @@ TEST(FoxgloveBridge, GivenAStalledClientThenTheEstimatorAndTheOtherClientKeepThe
       participant, "attitude/parallel_kf", [&](const msg::AttitudeEstimate&, const auto&) { estimates.fetch_add(1); });
   dds::Reader<msg::FilterDiagnosticsPubSubType> diag_reader(
       participant, "diagnostics", [&](const msg::FilterDiagnostics& d, const auto&) {
-        if (d.component() != "foxglove_bridge") {
+        if (d.component_name() != "foxglove_bridge") {
           return;
         }
         std::uint64_t dropped = 0;
         for (const auto& c : d.counters()) {
-          if (c.name().rfind("client_", 0) == 0 && c.name().find("_dropped") != std::string::npos) {
+          const std::string name = c.name().to_string();
+          if (name.rfind("client_", 0) == 0 && name.find("_dropped") != std::string::npos) {
             dropped += c.value();
           }
         }

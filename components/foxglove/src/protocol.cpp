@@ -12,20 +12,30 @@ namespace {
 
 std::string dump(const json& j) { return j.dump(-1, ' ', false, json::error_handler_t::replace); }
 
-/// A JSON number that is an integer in [0, 2^32): a subscription or channel id.
-std::optional<std::uint32_t> as_u32(const json& j) {
+/// A JSON number that is an integer in [0, 2^32) (a subscription or channel id) into `out`.
+bool read_u32(const json& j, std::uint32_t& out) {
+  std::uint64_t v = 0;
   if (j.is_number_unsigned()) {
-    const auto v = j.get<std::uint64_t>();
-    if (v <= std::numeric_limits<std::uint32_t>::max()) {
-      return static_cast<std::uint32_t>(v);
-    }
-  } else if (j.is_number_integer()) {
-    const auto v = j.get<std::int64_t>();
-    if (v >= 0 && v <= static_cast<std::int64_t>(std::numeric_limits<std::uint32_t>::max())) {
-      return static_cast<std::uint32_t>(v);
-    }
+    v = j.get<std::uint64_t>();
+  } else if (j.is_number_integer() && j.get<std::int64_t>() >= 0) {
+    v = static_cast<std::uint64_t>(j.get<std::int64_t>());
+  } else {
+    return false;
   }
-  return std::nullopt;
+  if (v > std::numeric_limits<std::uint32_t>::max()) {
+    return false;
+  }
+  out = static_cast<std::uint32_t>(v);
+  return true;
+}
+
+/// Member `key` of object `j` read by read_u32.
+bool read_u32(const json& j, const char* key, std::uint32_t& out) {
+  if (!j.is_object()) {
+    return false;
+  }
+  const auto it = j.find(key);
+  return it != j.end() && read_u32(*it, out);
 }
 
 void put_le(std::string& out, std::uint64_t v, int bytes) {
@@ -127,25 +137,25 @@ void ClientSession::subscribe(const json& request, const std::function<bool(std:
     return;
   }
   for (const json& s : *list) {
-    const auto id = s.is_object() && s.contains("id") ? as_u32(s["id"]) : std::nullopt;
-    const auto channel = s.is_object() && s.contains("channelId") ? as_u32(s["channelId"]) : std::nullopt;
-    if (!id || !channel) {
+    std::uint32_t id = 0;
+    std::uint32_t channel = 0;
+    if (!read_u32(s, "id", id) || !read_u32(s, "channelId", channel)) {
       out.replies.push_back({StatusLevel::kError,
                              "subscribe: each subscription needs integer 'id' and 'channelId' in "
                              "[0, 2^32)"});
       continue;
     }
-    if (!channel_known(*channel)) {
-      out.replies.push_back({StatusLevel::kError, "subscribe: unknown channel " + std::to_string(*channel)});
+    if (!channel_known(channel)) {
+      out.replies.push_back({StatusLevel::kError, "subscribe: unknown channel " + std::to_string(channel)});
       continue;
     }
-    if (subscriptions_.count(*id) != 0) {
+    if (subscriptions_.count(id) != 0) {
       out.replies.push_back({StatusLevel::kError,
-                             "subscribe: subscription id " + std::to_string(*id) + " is already in use"});
+                             "subscribe: subscription id " + std::to_string(id) + " is already in use"});
       continue;
     }
-    if (subscription_for(*channel)) {
-      out.replies.push_back({StatusLevel::kError, "subscribe: channel " + std::to_string(*channel) +
+    if (subscription_for(channel)) {
+      out.replies.push_back({StatusLevel::kError, "subscribe: channel " + std::to_string(channel) +
                                                       " is already subscribed (one subscription "
                                                       "per channel)"});
       continue;
@@ -154,7 +164,7 @@ void ClientSession::subscribe(const json& request, const std::function<bool(std:
       out.replies.push_back({StatusLevel::kError, "subscribe: too many subscriptions"});
       continue;
     }
-    subscriptions_[*id] = *channel;
+    subscriptions_[id] = channel;
     out.subscriptions_changed = true;
   }
 }
@@ -166,13 +176,13 @@ void ClientSession::unsubscribe(const json& request, Result& out) {
     return;
   }
   for (const json& s : *list) {
-    const auto id = as_u32(s);
-    if (!id) {
+    std::uint32_t id = 0;
+    if (!read_u32(s, id)) {
       out.replies.push_back({StatusLevel::kError, "unsubscribe: ids must be integers in [0, 2^32)"});
       continue;
     }
-    if (subscriptions_.erase(*id) == 0) {
-      out.replies.push_back({StatusLevel::kWarning, "unsubscribe: no subscription " + std::to_string(*id)});
+    if (subscriptions_.erase(id) == 0) {
+      out.replies.push_back({StatusLevel::kWarning, "unsubscribe: no subscription " + std::to_string(id)});
       continue;
     }
     out.subscriptions_changed = true;

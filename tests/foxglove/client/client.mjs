@@ -25,8 +25,11 @@ import fs from "node:fs";
 const { FoxgloveClient } = wsProtocol;
 const [mode, url, ...args] = process.argv.slice(2);
 
+/// JSON text of a decoded message: 64-bit integers (bigint) as strings, typed arrays (what the
+/// omgidl reader gives for primitive arrays) as arrays.
 function jsonSafe(value) {
-  return JSON.stringify(value, (_k, v) => (typeof v === "bigint" ? v.toString() : v));
+  return JSON.stringify(value, (_k, v) =>
+    typeof v === "bigint" ? v.toString() : ArrayBuffer.isView(v) && !(v instanceof DataView) ? Array.from(v) : v);
 }
 
 function decoderFor(channel) {

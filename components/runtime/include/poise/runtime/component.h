@@ -64,7 +64,7 @@ struct ComponentType {
   /// dedicated command (e.g. `poise imu`).
   bool standalone_command = true;
   /// Name of that command ("": the type name with dashes, e.g. `poise parallel-kf`).
-  std::string command;
+  std::string command{};
 };
 
 class ComponentRegistry {
