@@ -338,11 +338,14 @@ TEST(Process, SelectiveEkfComponentPublishesWhatItsLiveNodePublishes) {
 // yaw 0.5 deg, processed yaw 1 deg (2 deg at seq 7); the processed magnetometer untrusted at
 // seq 3, 4 and 8, vision fused only by the processed filter at seq 5; a live estimate (seq 10)
 // without a processed one; samples every 10 ms.
-TEST(Compare, GivenKnownDifferencesThenRmseLargestAndTrustIntervalsAreExact) {
+/// Estimates at `step_ns` apart with known differences; times in the expectations scale with it.
+void check_known_differences(int64_t step_ns) {
   constexpr double kDegTolerance = 1e-9;  // angles through quaternions and back, deg
   constexpr double kSecondsTolerance = 1e-12;
+  const double k = static_cast<double>(step_ns) / 1e7;  // the expectations below are for 10 ms
+  SCOPED_TRACE(::testing::Message() << "step " << step_ns << " ns");
   const std::string dir = testing::cases_dir("compare");
-  const std::string path = dir + "/compare.mcap";
+  const std::string path = dir + "/compare_" + std::to_string(step_ns) + ".mcap";
   {
     int64_t clock = 0;
     WriterOptions opt;
@@ -354,7 +357,7 @@ TEST(Compare, GivenKnownDifferencesThenRmseLargestAndTrustIntervalsAreExact) {
     const uint16_t processed = w.add_channel(schema, "processed/attitude/selective_ekf", "cdr", {});
     const uint16_t truth = w.add_channel(schema, "truth/attitude", "cdr", {});
     auto put = [&](uint16_t channel, uint32_t seq, double yaw_deg, bool mag, uint32_t sources) {
-      const int64_t stamp = 7'000'000'000LL + static_cast<int64_t>(seq) * 10'000'000LL;
+      const int64_t stamp = 7'000'000'000LL + static_cast<int64_t>(seq) * step_ns;
       clock = stamp;
       auto m = testing::make_attitude(seq, stamp);
       m.sensor_id(channel == truth ? "sim" : "sekf");
@@ -389,7 +392,7 @@ TEST(Compare, GivenKnownDifferencesThenRmseLargestAndTrustIntervalsAreExact) {
   EXPECT_EQ(c.matched, 10U);
   EXPECT_NEAR(c.rmse, std::sqrt((9.0 * 1.0 + 4.0) / 10.0), kDegTolerance);
   EXPECT_NEAR(c.largest, 2.0, kDegTolerance);
-  EXPECT_NEAR(c.largest_at_s, 0.07, kSecondsTolerance);
+  EXPECT_NEAR(c.largest_at_s, 0.07 * k, kSecondsTolerance * k);
   EXPECT_EQ(c.truth_topic, "truth/attitude");
   EXPECT_NEAR(c.processed_truth_rmse, std::sqrt((9.0 * 0.25 + 2.25) / 10.0), kDegTolerance);
   EXPECT_NEAR(c.live_truth_rmse, 0.5, kDegTolerance);
@@ -398,17 +401,27 @@ TEST(Compare, GivenKnownDifferencesThenRmseLargestAndTrustIntervalsAreExact) {
   EXPECT_EQ(c.mag_trust.processed_only, 0U);
   EXPECT_EQ(c.mag_trust.live_only, 3U);
   ASSERT_EQ(c.mag_trust.intervals.size(), 2U);
-  EXPECT_NEAR(c.mag_trust.intervals[0].start_s, 0.03, kSecondsTolerance);
-  EXPECT_NEAR(c.mag_trust.intervals[0].end_s, 0.04, kSecondsTolerance);
+  EXPECT_NEAR(c.mag_trust.intervals[0].start_s, 0.03 * k, kSecondsTolerance * k);
+  EXPECT_NEAR(c.mag_trust.intervals[0].end_s, 0.04 * k, kSecondsTolerance * k);
   EXPECT_EQ(c.mag_trust.intervals[0].samples, 2U);
-  EXPECT_NEAR(c.mag_trust.intervals[1].start_s, 0.08, kSecondsTolerance);
+  EXPECT_NEAR(c.mag_trust.intervals[1].start_s, 0.08 * k, kSecondsTolerance * k);
   EXPECT_EQ(c.vision_fused.processed_only, 1U);
   EXPECT_EQ(c.vision_fused.live_only, 0U);
   ASSERT_EQ(c.vision_fused.intervals.size(), 1U);
-  EXPECT_NEAR(c.vision_fused.intervals[0].start_s, 0.05, kSecondsTolerance);
+  EXPECT_NEAR(c.vision_fused.intervals[0].start_s, 0.05 * k, kSecondsTolerance * k);
   const std::string text = format_comparison(all);
-  EXPECT_NE(text.find("0.03-0.04 s 0.08-0.08 s"), std::string::npos) << text;
+  if (step_ns == 10'000'000LL) {
+    EXPECT_NE(text.find("0.03-0.04 s 0.08-0.08 s"), std::string::npos) << text;
+  }
   EXPECT_NE(text.find("1 live estimate(s) without a processed one"), std::string::npos) << text;
+}
+
+TEST(Compare, GivenKnownDifferencesThenRmseLargestAndTrustIntervalsAreExact) {
+  check_known_differences(10'000'000LL);  // 0.1 s in all
+}
+
+TEST(Compare, GivenEstimatesSpanningSeveralComparisonHorizonsThenTheFiguresAreTheSame) {
+  check_known_differences(4'000'000'000LL);  // 40 s in all: compared in several 10 s windows
 }
 
 /// Flips one byte inside the records of chunk `k` of `path` (its CRC no longer matches); returns

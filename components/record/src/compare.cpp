@@ -12,6 +12,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <iterator>
+#include <limits>
 #include <map>
 #include <sstream>
 #include <tuple>
@@ -88,144 +90,229 @@ std::string format_flag(const char* what, const FlagDifference& d) {
 
 }  // namespace
 
+namespace {
+
+/// Decodes an estimate message into (kind, sensor, seq, sample); false when it is not one.
+bool decode_estimate(const MessageView& m, std::string& kind, std::string& sensor, uint32_t& seq, Sample& s) {
+  const std::string& type = m.schema->name;
+  if (type == dds::type_names::kAttitudeEstimate) {
+    msg::AttitudeEstimate e;
+    if (decode<msg::AttitudeEstimatePubSubType>(m, e)) {
+      return false;
+    }
+    kind = "attitude";
+    s.stamp_ns = e.header().stamp_ns();
+    seq = e.header().seq();
+    sensor = e.sensor_id().to_string();
+    s.q = dds::from_msg(e.q_world_body());
+    s.mag_trusted = e.mag_trusted();
+    s.vision_fused = (e.sources_fused() & msg::SOURCE_VISION) != 0;
+    return true;
+  }
+  if (type == dds::type_names::kPoseEstimate) {
+    msg::PoseEstimate e;
+    if (decode<msg::PoseEstimatePubSubType>(m, e)) {
+      return false;
+    }
+    kind = "pose";
+    s.stamp_ns = e.header().stamp_ns();
+    seq = e.header().seq();
+    sensor = e.sensor_id().to_string();
+    s.position = dds::from_msg(e.position_m());
+    s.q = dds::from_msg(e.q_world_body());
+    return true;
+  }
+  if (type == dds::type_names::kAltitudeEstimate) {
+    msg::AltitudeEstimate e;
+    if (decode<msg::AltitudeEstimatePubSubType>(m, e)) {
+      return false;
+    }
+    kind = "altitude";
+    s.stamp_ns = e.header().stamp_ns();
+    seq = e.header().seq();
+    sensor = e.sensor_id().to_string();
+    s.height_m = e.height_m();
+    return true;
+  }
+  return false;
+}
+
+/// Per processed topic and sensor: the running sums of the comparison.
+struct Running {
+  SeriesComparison c;
+  int64_t first_stamp = 0;
+  bool mag_in = false;
+  bool vision_in = false;
+  double sum_sq = 0.0;
+  double truth_sq = 0.0;
+};
+
+/// Per live topic and sensor: its estimates and their error against truth.
+struct LiveRunning {
+  uint64_t live = 0;
+  uint64_t truth_matched = 0;
+  double truth_sq = 0.0;
+};
+
+// Estimates are compared once the newest stamp read is this far past theirs: the processed
+// estimate, the live one and the truth of a sample sit close together in the file (written
+// after the input that caused them, recorded on arrival), so only that much is held, whatever
+// the recording's length.
+constexpr int64_t kHorizonNs = 10'000'000'000LL;  // 10 s of sample time
+constexpr int64_t kFinalizeEveryNs = 1'000'000'000LL;
+
+}  // namespace
+
 std::vector<SeriesComparison> compare_processed(const std::string& file, const std::string& prefix) {
-  std::map<std::string, Series> series;  // by topic
+  std::map<std::string, Series> series;  // by topic: the estimates not yet compared
+  std::map<std::string, std::map<std::string, Running>> running;  // by processed topic, sensor
+  std::map<std::string, std::map<std::string, LiveRunning>> live_running;  // by live topic, sensor
+  std::map<std::string, std::map<uint32_t, Sample>> truth;  // by truth topic, seq
+  const auto is_processed = [&prefix](const std::string& topic) { return topic.rfind(prefix, 0) == 0; };
+  const auto is_truth = [](const std::string& topic) { return topic.rfind("truth/", 0) == 0; };
+
+  // Compares (and drops) the estimates stamped before `before`: processed first (they look up
+  // live and truth), then live (they look up truth), then truth older than the horizon.
+  const auto finalize = [&](int64_t before) {
+    for (auto& [topic, processed] : series) {
+      if (!is_processed(topic)) {
+        continue;
+      }
+      const std::string live_topic = topic.substr(prefix.size());
+      const auto live_it = series.find(live_topic);
+      const std::string truth_topic = "truth/" + processed.kind;
+      const auto truth_it = truth.find(truth_topic);
+      for (auto it = processed.samples.begin(); it != processed.samples.end();) {
+        const auto& [key, s] = *it;
+        if (s.stamp_ns >= before) {
+          ++it;
+          continue;
+        }
+        const std::string& sensor = std::get<0>(key);
+        Running& r = running[topic][sensor];
+        SeriesComparison& c = r.c;
+        if (c.processed == 0) {
+          c.kind = processed.kind;
+          c.topic = live_topic;
+          c.sensor_id = sensor;
+          c.unit = processed.kind == "attitude" ? "deg" : "m";
+          r.first_stamp = s.stamp_ns;
+        }
+        ++c.processed;
+        const double t_s = static_cast<double>(s.stamp_ns - r.first_stamp) * 1e-9;
+        if (truth_it != truth.end()) {
+          const auto t = truth_it->second.find(std::get<2>(key));
+          if (t != truth_it->second.end()) {
+            c.truth_topic = truth_topic;
+            ++c.truth_matched;
+            const double e = difference(processed.kind, s, t->second);
+            r.truth_sq += e * e;
+          }
+        }
+        if (live_it != series.end()) {
+          const auto l = live_it->second.samples.find(key);
+          if (l != live_it->second.samples.end()) {
+            ++c.matched;
+            const double d = difference(processed.kind, s, l->second);
+            r.sum_sq += d * d;
+            if (d > c.largest) {
+              c.largest = d;
+              c.largest_at_s = t_s;
+            }
+            if (processed.kind == "attitude") {
+              add_flag(c.mag_trust, s.mag_trusted, l->second.mag_trusted, t_s, &r.mag_in);
+              add_flag(c.vision_fused, s.vision_fused, l->second.vision_fused, t_s, &r.vision_in);
+            }
+          }
+        }
+        it = processed.samples.erase(it);
+      }
+    }
+    for (auto& [topic, live] : series) {
+      if (is_processed(topic) || is_truth(topic)) {
+        continue;
+      }
+      const auto truth_it = truth.find("truth/" + live.kind);
+      for (auto it = live.samples.begin(); it != live.samples.end();) {
+        const auto& [key, s] = *it;
+        if (s.stamp_ns >= before) {
+          ++it;
+          continue;
+        }
+        LiveRunning& l = live_running[topic][std::get<0>(key)];
+        ++l.live;
+        if (truth_it != truth.end()) {
+          const auto t = truth_it->second.find(std::get<2>(key));
+          if (t != truth_it->second.end()) {
+            ++l.truth_matched;
+            const double e = difference(live.kind, s, t->second);
+            l.truth_sq += e * e;
+          }
+        }
+        it = live.samples.erase(it);
+      }
+    }
+    for (auto& [topic, by_seq] : truth) {
+      for (auto it = by_seq.begin(); it != by_seq.end();) {
+        it = it->second.stamp_ns < before - kHorizonNs ? by_seq.erase(it) : std::next(it);
+      }
+    }
+  };
+
   const McapReader reader = McapReader::open_file(file);
   MessageCursor cursor = reader.messages();
+  int64_t newest = std::numeric_limits<int64_t>::min();
+  int64_t finalized_at = std::numeric_limits<int64_t>::min();
   while (const MessageView* m = cursor.next()) {
     if (m->schema == nullptr) {
       continue;
     }
-    const std::string& type = m->schema->name;
     Sample s;
     std::string sensor;
     uint32_t seq = 0;
     std::string kind;
-    if (type == dds::type_names::kAttitudeEstimate) {
-      msg::AttitudeEstimate e;
-      if (decode<msg::AttitudeEstimatePubSubType>(*m, e)) {
-        continue;
-      }
-      kind = "attitude";
-      s.stamp_ns = e.header().stamp_ns();
-      seq = e.header().seq();
-      sensor = e.sensor_id().to_string();
-      s.q = dds::from_msg(e.q_world_body());
-      s.mag_trusted = e.mag_trusted();
-      s.vision_fused = (e.sources_fused() & msg::SOURCE_VISION) != 0;
-    } else if (type == dds::type_names::kPoseEstimate) {
-      msg::PoseEstimate e;
-      if (decode<msg::PoseEstimatePubSubType>(*m, e)) {
-        continue;
-      }
-      kind = "pose";
-      s.stamp_ns = e.header().stamp_ns();
-      seq = e.header().seq();
-      sensor = e.sensor_id().to_string();
-      s.position = dds::from_msg(e.position_m());
-      s.q = dds::from_msg(e.q_world_body());
-    } else if (type == dds::type_names::kAltitudeEstimate) {
-      msg::AltitudeEstimate e;
-      if (decode<msg::AltitudeEstimatePubSubType>(*m, e)) {
-        continue;
-      }
-      kind = "altitude";
-      s.stamp_ns = e.header().stamp_ns();
-      seq = e.header().seq();
-      sensor = e.sensor_id().to_string();
-      s.height_m = e.height_m();
-    } else {
+    if (!decode_estimate(*m, kind, sensor, seq, s)) {
       continue;
     }
-    Series& ser = series[m->channel->topic];
+    const std::string& topic = m->channel->topic;
+    Series& ser = series[topic];
     ser.kind = kind;
-    ser.samples[Key{sensor, s.stamp_ns, seq}] = s;
+    if (is_truth(topic)) {
+      // truth by seq (the simulator numbers its samples as the IMU it feeds); the later one of a
+      // seq read twice, as the recording's order gives them
+      truth[topic][seq] = s;
+    } else {
+      ser.samples[Key{sensor, s.stamp_ns, seq}] = s;
+    }
+    if (s.stamp_ns > newest) {
+      newest = s.stamp_ns;
+      if (newest > std::numeric_limits<int64_t>::min() + kHorizonNs &&
+          (finalized_at == std::numeric_limits<int64_t>::min() || newest - kHorizonNs - finalized_at >= kFinalizeEveryNs)) {
+        finalized_at = newest - kHorizonNs;
+        finalize(finalized_at);
+      }
+    }
   }
+  finalize(std::numeric_limits<int64_t>::max());
 
   std::vector<SeriesComparison> out;
-  for (const auto& [topic, processed] : series) {
-    if (topic.rfind(prefix, 0) != 0) {
-      continue;
-    }
+  for (auto& [topic, by_sensor] : running) {
     const std::string live_topic = topic.substr(prefix.size());
-    const auto live_it = series.find(live_topic);
-    const std::string truth_topic = "truth/" + processed.kind;
-    const auto truth_it = series.find(truth_topic);
-    // truth by seq (the simulator numbers its samples as the IMU it feeds)
-    std::map<uint32_t, const Sample*> truth;
-    if (truth_it != series.end()) {
-      for (const auto& [key, s] : truth_it->second.samples) {
-        truth[std::get<2>(key)] = &s;
-      }
-    }
-    // one comparison per sensor_id
-    std::map<std::string, SeriesComparison> per_sensor;
-    std::map<std::string, int64_t> first_stamp;
-    std::map<std::string, std::pair<bool, bool>> in_interval;
-    std::map<std::string, double> sum_sq;
-    std::map<std::string, double> truth_sq;
-    std::map<std::string, double> live_truth_sq;
-    for (const auto& [key, s] : processed.samples) {
-      const std::string& sensor = std::get<0>(key);
-      SeriesComparison& c = per_sensor[sensor];
-      if (c.processed == 0) {
-        c.kind = processed.kind;
-        c.topic = live_topic;
-        c.sensor_id = sensor;
-        c.unit = processed.kind == "attitude" ? "deg" : "m";
-        first_stamp[sensor] = s.stamp_ns;
-      }
-      ++c.processed;
-      const double t_s = static_cast<double>(s.stamp_ns - first_stamp[sensor]) * 1e-9;
-      const auto t = truth.find(std::get<2>(key));
-      if (t != truth.end()) {
-        c.truth_topic = truth_topic;
-        ++c.truth_matched;
-        const double e = difference(processed.kind, s, *t->second);
-        truth_sq[sensor] += e * e;
-      }
-      if (live_it == series.end()) {
-        continue;
-      }
-      const auto l = live_it->second.samples.find(key);
-      if (l == live_it->second.samples.end()) {
-        continue;
-      }
-      ++c.matched;
-      const double d = difference(processed.kind, s, l->second);
-      sum_sq[sensor] += d * d;
-      if (d > c.largest) {
-        c.largest = d;
-        c.largest_at_s = t_s;
-      }
-      if (processed.kind == "attitude") {
-        auto& [mag_in, vision_in] = in_interval[sensor];
-        add_flag(c.mag_trust, s.mag_trusted, l->second.mag_trusted, t_s, &mag_in);
-        add_flag(c.vision_fused, s.vision_fused, l->second.vision_fused, t_s, &vision_in);
-      }
-    }
-    if (live_it != series.end()) {
-      for (const auto& [key, s] : live_it->second.samples) {
-        const auto pc = per_sensor.find(std::get<0>(key));
-        if (pc == per_sensor.end()) {
-          continue;
-        }
-        ++pc->second.live;
-        const auto t = truth.find(std::get<2>(key));
-        if (t != truth.end()) {
-          ++pc->second.truth_matched_live;
-          const double e = difference(processed.kind, s, *t->second);
-          live_truth_sq[std::get<0>(key)] += e * e;
+    const auto live_it = live_running.find(live_topic);
+    for (auto& [sensor, r] : by_sensor) {
+      SeriesComparison& c = r.c;
+      if (live_it != live_running.end()) {
+        const auto l = live_it->second.find(sensor);
+        if (l != live_it->second.end()) {
+          c.live = l->second.live;
+          c.truth_matched_live = l->second.truth_matched;
+          c.live_truth_rmse = l->second.truth_matched > 0
+                                  ? std::sqrt(l->second.truth_sq / static_cast<double>(l->second.truth_matched))
+                                  : 0.0;
         }
       }
-    }
-    for (auto& [sensor, c] : per_sensor) {
-      c.rmse = c.matched > 0 ? std::sqrt(sum_sq[sensor] / static_cast<double>(c.matched)) : 0.0;
-      c.processed_truth_rmse =
-          c.truth_matched > 0 ? std::sqrt(truth_sq[sensor] / static_cast<double>(c.truth_matched)) : 0.0;
-      c.live_truth_rmse = c.truth_matched_live > 0
-                              ? std::sqrt(live_truth_sq[sensor] / static_cast<double>(c.truth_matched_live))
-                              : 0.0;
+      c.rmse = c.matched > 0 ? std::sqrt(r.sum_sq / static_cast<double>(c.matched)) : 0.0;
+      c.processed_truth_rmse = c.truth_matched > 0 ? std::sqrt(r.truth_sq / static_cast<double>(c.truth_matched)) : 0.0;
       out.push_back(c);
     }
   }
