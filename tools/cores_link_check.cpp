@@ -9,6 +9,7 @@ int main() {
   poise::ImuSample s;
   s.accel_mps2 = Eigen::Vector3d(0, 0, 9.81);
   s.mag_ut = Eigen::Vector3d(0, 20, -40);
+  s.has_mag = true;
   poise::ParallelKf pkf;
   poise::GaussNewton gn;
   poise::SelectiveEkf sekf;

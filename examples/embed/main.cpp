@@ -43,6 +43,7 @@ int main() {
     s.gyro_rps = t < kRestS ? Eigen::Vector3d::Zero() : Eigen::Vector3d(tilt.conjugate() * (kTurnRate * Eigen::Vector3d::UnitZ()));
     s.accel_mps2 = truth.conjugate() * gravity_up;
     s.mag_ut = truth.conjugate() * field;
+    s.has_mag = true;  // a 9-axis sensor says so (the default is no magnetometer)
     pkf.update(s);
     sekf.update_imu(s);
   }

@@ -76,6 +76,7 @@ TEST(GaussNewton, BadInputIsRejectedAndCounted) {
   s.stamp_ns = 1000;
   s.accel_mps2 = Eigen::Vector3d(0, 0, 9.81);
   s.mag_ut = field_world();
+  s.has_mag = true;
   ASSERT_TRUE(gn.update(s));
   const Eigen::Quaterniond before = gn.result().q_world_body;
   ImuSample bad = s;

@@ -143,6 +143,7 @@ inline ImuSample rest_sample(uint32_t seq) {
   s.accel_mps2 = Eigen::Vector3d(0.0, 0.0, 9.81);
   s.gyro_rps.setZero();
   s.mag_ut = Eigen::Vector3d(0.0, 20.0, -40.0);  // north and down (dip ~63 deg)
+  s.has_mag = true;
   return s;
 }
 

@@ -17,6 +17,7 @@ ImuSample rest(int i, double mag_scale) {
   s.accel_mps2 = Eigen::Vector3d(0, 0, 9.81);
   s.gyro_rps.setZero();
   s.mag_ut = mag_scale * Eigen::Vector3d(0, 20, -40);
+  s.has_mag = true;
   return s;
 }
 

@@ -140,6 +140,7 @@ TEST(ParallelKf, BadInputIsRejectedCountedAndLeavesTheStateUntouched) {
   s.accel_mps2 = Eigen::Vector3d(0.5, -0.3, 9.8);
   s.gyro_rps = Eigen::Vector3d(0.01, 0.0, -0.02);
   s.mag_ut = Eigen::Vector3d(20.0, 5.0, -40.0);
+  s.has_mag = true;
   for (int i = 0; i < 100; ++i) {
     s.stamp_ns += 10'000'000;
     ASSERT_TRUE(kf.update(s));
@@ -305,6 +306,7 @@ NorthBiasRun run_north_bias(const ParallelKfParams& p) {
     s.gyro_rps = Eigen::Vector3d(0.0, 0.5 * kRadPerDeg, 0.0);  // body y = north (identity attitude)
     s.accel_mps2 = Eigen::Vector3d(0.0, 0.0, 9.81);
     s.mag_ut = mag_enu;
+    s.has_mag = true;
     EXPECT_TRUE(kf.update(s));
     if (k < static_cast<int>(2 * kRateHz)) {
       continue;  // start-up (field learning)
@@ -454,6 +456,7 @@ TEST(ParallelKf, GivenTheSensorClockRestartsWhenTwoSamplesAgreeThenTimeRestartsA
   s.gyro_rps = Eigen::Vector3d(0.0, 0.0, 0.01);
   s.accel_mps2 = Eigen::Vector3d(0.0, 0.0, 9.81);
   s.mag_ut = Eigen::Vector3d(0.0, 20.0, -40.0);
+  s.has_mag = true;
   for (int k = 0; k < 200; ++k) {
     s.stamp_ns = 5'000'000'000 + static_cast<int64_t>(k) * 10'000'000;
     ASSERT_TRUE(kf.update(s));
@@ -588,6 +591,7 @@ DriftRun run_field_drift(const ParallelKfParams& p) {
     s.seq = static_cast<uint32_t>(k);
     s.accel_mps2 = Eigen::Vector3d(0.0, 0.0, 9.81);
     s.mag_ut = 50.0 * scale * dir;
+    s.has_mag = true;
     EXPECT_TRUE(kf.update(s));
     if (k == n_drift - 1) {
       r.gated_during_drift = kf.mag_gated_count();
@@ -724,6 +728,7 @@ DelayRun run_delayed_sensor(const ParallelKfParams& params, double delay_s) {
     s.gyro_rps = body_rate_at(t_sensor);
     s.accel_mps2 = q.conjugate() * Eigen::Vector3d(0.0, 0.0, 9.81);
     s.mag_ut = q.conjugate() * field_enu;
+    s.has_mag = true;
     EXPECT_TRUE(kf.update(s));
     if (t >= kScoreFromS) {
       const double e = quat_angle_between(kf.q_world_body(), truth_at(t)) * kDegPerRad;

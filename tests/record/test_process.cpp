@@ -47,6 +47,15 @@ class FakeFilter : public AttitudeFilter {
   int accepted_ = 0;
 };
 
+/// An AttitudeEstimate message of a recording, deserialised.
+bool decode_attitude(const MessageView& m, msg::AttitudeEstimate& e) {
+  msg::AttitudeEstimatePubSubType type;
+  eprosima::fastrtps::rtps::SerializedPayload_t p(static_cast<uint32_t>(m.size));
+  std::memcpy(p.data, m.data, m.size);
+  p.length = static_cast<uint32_t>(m.size);
+  return type.deserialize(&p, &e);
+}
+
 std::vector<uint8_t> read_bytes(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   return std::vector<uint8_t>(std::istreambuf_iterator<char>(in), {});
@@ -101,8 +110,8 @@ TEST(Process, RunsFiltersOfflineDeterministicallyAndCopiesTheInput) {
   ProcessStats stats;
   for (int run = 0; run < 2; ++run) {
     std::vector<ProcessFilter> filters;
-    filters.push_back({"fake", std::make_unique<FakeFilter>()});
-    filters.push_back({"fake2", std::make_unique<FakeFilter>()});
+    filters.push_back({"fake", std::make_unique<FakeFilter>(), {}});
+    filters.push_back({"fake2", std::make_unique<FakeFilter>(), {}});
     ProcessOptions o;
     o.input = input;
     o.output = dir + "/out" + std::to_string(run) + ".mcap";
@@ -129,12 +138,8 @@ TEST(Process, RunsFiltersOfflineDeterministicallyAndCopiesTheInput) {
   while (const MessageView* m = cursor.next()) {
     ++per_topic[m->channel->topic];
     if (m->channel->topic == "processed/attitude/fake") {
-      msg::AttitudeEstimatePubSubType type;
-      eprosima::fastrtps::rtps::SerializedPayload_t p(static_cast<uint32_t>(m->size));
-      std::memcpy(p.data, m->data, m->size);
-      p.length = static_cast<uint32_t>(m->size);
       msg::AttitudeEstimate e;
-      ASSERT_TRUE(type.deserialize(&p, &e));
+      ASSERT_TRUE(decode_attitude(*m, e));
       ++accepted_so_far;
       const Eigen::Quaterniond want = quat_from_euler_zyx(0.0, 0.0, 0.01 * accepted_so_far);
       EXPECT_NEAR(e.q_world_body().w(), want.w(), kQuatTolerance);
@@ -293,6 +298,76 @@ TEST(Process, CliRunsRealFiltersFromAHostFileAndIsReproducible) {
                                        60s);
   EXPECT_EQ(bad.exit_code, 1) << bad.output;
   EXPECT_NE(bad.output.find("no_such_filter"), std::string::npos) << bad.output;
+}
+
+/// Every AttitudeEstimate on `topic` of an MCAP file, in file order.
+std::vector<msg::AttitudeEstimate> read_attitudes(const std::string& path, const std::string& topic) {
+  std::vector<msg::AttitudeEstimate> out;
+  const McapReader reader = McapReader::open_file(path);
+  MessageCursor cursor = reader.messages();
+  while (const MessageView* m = cursor.next()) {
+    if (m->channel->topic == topic) {
+      out.emplace_back();
+      EXPECT_TRUE(decode_attitude(*m, out.back()));
+    }
+  }
+  return out;
+}
+
+// Issue 20, true north everywhere a filter runs: `process --filter` takes the north keys through
+// --set (KEY=VALUE for every --filter filter, NAME.KEY=VALUE for one). Oracle: the conventions'
+// yaw_true = yaw_magnetic - D applied to the same filter's run without a declination.
+TEST(Process, GivenADeclinationForAFilterThenItsHeadingTurnsByItAndItsFrameIsEnuTrue) {
+  constexpr double kDeclinationDeg = 10.0;
+  constexpr double kTurnTolRad = 1e-9;  // one rotation about z of the same filter's output
+  const std::string dir = testing::cases_dir("process-north");
+  const std::string input = dir + "/input.mcap";
+  write_input(input);
+  const std::string topic = "processed/attitude/parallel_kf";
+  auto process = [&](const std::string& out, const std::vector<std::string>& extra) {
+    std::vector<std::string> argv{std::string(POISE_RECORD_TOOL), "process", input, "-o", out, "--filter",
+                                  "parallel_kf", "--no-compare"};
+    argv.insert(argv.end(), extra.begin(), extra.end());
+    return poise::testing::run(argv, 60s);
+  };
+  const auto magnetic = process(dir + "/magnetic.mcap", {});
+  ASSERT_EQ(magnetic.exit_code, 0) << magnetic.output;
+  const auto every = process(dir + "/true.mcap", {"--set", "declination_deg=10"});
+  ASSERT_EQ(every.exit_code, 0) << every.output;
+  const auto named = process(dir + "/true_named.mcap", {"--set", "parallel_kf.declination_deg=10"});
+  ASSERT_EQ(named.exit_code, 0) << named.output;
+  EXPECT_NE(every.output.find("parallel_kf (--filter, enu_true)"), std::string::npos) << every.output;
+
+  const auto m = read_attitudes(dir + "/magnetic.mcap", topic);
+  const auto t = read_attitudes(dir + "/true.mcap", topic);
+  ASSERT_GT(m.size(), 400U);
+  ASSERT_EQ(t.size(), m.size());
+  EXPECT_EQ(read_bytes(dir + "/true.mcap"), read_bytes(dir + "/true_named.mcap")) << "both spellings";
+  for (std::size_t i = 0; i < m.size(); ++i) {
+    SCOPED_TRACE(i);
+    EXPECT_EQ(m[i].header().frame_id().to_string(), "enu_magnetic");
+    EXPECT_EQ(t[i].header().frame_id().to_string(), "enu_true");
+    EXPECT_EQ(t[i].header().seq(), m[i].header().seq());
+    EXPECT_NEAR(std::remainder(t[i].yaw_rad() - (m[i].yaw_rad() - kDeclinationDeg * kRadPerDeg), 2.0 * kPi), 0.0,
+                kTurnTolRad);
+    EXPECT_NEAR(t[i].roll_rad(), m[i].roll_rad(), kTurnTolRad);
+    EXPECT_NEAR(t[i].pitch_rad(), m[i].pitch_rad(), kTurnTolRad);
+    const Eigen::Quaterniond qm(m[i].q_world_body().w(), m[i].q_world_body().x(), m[i].q_world_body().y(),
+                                m[i].q_world_body().z());
+    const Eigen::Quaterniond qt(t[i].q_world_body().w(), t[i].q_world_body().x(), t[i].q_world_body().y(),
+                                t[i].q_world_body().z());
+    EXPECT_NEAR(quat_angle_between(qt, qm), kDeclinationDeg * kRadPerDeg, kTurnTolRad);
+  }
+  // a filter parameter is not a north key: it belongs in the filter's YAML (NAME=CONFIG.yaml)
+  const auto param = process(dir + "/bad.mcap", {"--set", "sigma_mag_ut=1"});
+  EXPECT_EQ(param.exit_code, 2) << param.output;
+  EXPECT_NE(param.output.find("'sigma_mag_ut' is not a north key"), std::string::npos) << param.output;
+  // without a --filter, KEY=VALUE has nothing to apply to
+  const auto none = poise::testing::run({std::string(POISE_RECORD_TOOL), "process", input, "-o", dir + "/none.mcap",
+                                         "--set", "declination_deg=10"},
+                                        60s);
+  EXPECT_EQ(none.exit_code, 2) << none.output;
+  EXPECT_NE(none.output.find("applies to the --filter filters"), std::string::npos) << none.output;
 }
 
 // A selective_ekf component runs as its live node does: attitude, pose and diagnostics, with the
@@ -456,7 +531,7 @@ TEST(Process, GivenACorruptChunkWhenProcessedThenTheRestIsProcessedAndTheDamageR
   const uint64_t lost = damage_chunk(input, 1);
   ASSERT_GT(lost, 0u);
   std::vector<ProcessFilter> filters;
-  filters.push_back({"fake", std::make_unique<FakeFilter>()});
+  filters.push_back({"fake", std::make_unique<FakeFilter>(), {}});
   ProcessOptions o;
   o.input = input;
   o.output = dir + "/out.mcap";

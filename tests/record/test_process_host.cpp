@@ -8,6 +8,7 @@
 #include "poise/record/mcap.h"
 #include "poise/record/process.h"
 #include "poise/record/recorder.h"
+#include "recorder_thread.h"
 #include "poise/runtime/host.h"
 #include "record_test_support.h"
 
@@ -149,16 +150,9 @@ TEST(ProcessHost, GivenALiveRunFromAKnownInputOrderWhenProcessedThenEveryEstimat
   spec.participant_profile = kProfile;
 
   // GIVEN every estimator component live, and a recorder of its inputs and outputs
-  std::ostringstream log;
-  RecorderOptions ro;
-  ro.output = live_file;
+  RecorderOptions ro = testing::recorder_options(live_file, lease.id(), kProfile);
   ro.all = true;
-  ro.domain = lease.id();
-  ro.participant_profile = kProfile;
-  ro.log = &log;
-  Recorder recorder(ro);
-  RecorderStats rstats;
-  std::thread thread([&] { rstats = recorder.run(); });
+  testing::RecorderThread recorder(ro);
   {
     runtime::Host host(spec, lease.id());
     host.start();
@@ -169,15 +163,11 @@ TEST(ProcessHost, GivenALiveRunFromAKnownInputOrderWhenProcessedThenEveryEstimat
     // writers: 3 inputs + 4 attitude + 1 pose + 1 altitude + 5 diagnostics
     const bool ready = poise::testing::wait_until(
         [&] {
-          return recorder.matched_writers() >= 14 && imu.matched() >= 6 && vision.matched() >= 2 &&
+          return recorder->matched_writers() >= 14 && imu.matched() >= 6 && vision.matched() >= 2 &&
                  vehicle.matched() >= 2;
         },
         kMatchTimeout);
-    if (!ready) {
-      recorder.request_stop();
-      thread.join();
-      FAIL() << "components/recorder did not match\n" << log.str();
-    }
+    ASSERT_TRUE(recorder.matched(ready, "components/recorder did not match"));
     // WHEN the inputs are published in stamp order, each consumed by every component before the
     // next goes out: a sensor turning about up at 0.5 rad/s, seen by a camera at the body origin
     std::mt19937 rng(kSeed);
@@ -226,12 +216,11 @@ TEST(ProcessHost, GivenALiveRunFromAKnownInputOrderWhenProcessedThenEveryEstimat
             kStepTimeout);
       }
     }
-    testing::wait_quiet([&] { return recorder.written(); });
+    testing::wait_quiet([&] { return recorder->written(); });
     const std::vector<std::string> status = host.status();
     host.stop();
     if (!in_order) {
-      recorder.request_stop();
-      thread.join();
+      recorder.stop();
       std::string lines;
       for (const auto& s : status) {
         lines += s + "\n";
@@ -239,10 +228,9 @@ TEST(ProcessHost, GivenALiveRunFromAKnownInputOrderWhenProcessedThenEveryEstimat
       FAIL() << "an input was not consumed within " << kStepTimeout.count() << " s:\n" << lines;
     }
   }
-  recorder.request_stop();
-  thread.join();
+  RecorderStats rstats = recorder.stop();
   ASSERT_TRUE(rstats.error.empty()) << rstats.error;
-  ASSERT_EQ(rstats.topics["imu"].written, static_cast<uint64_t>(kSamples)) << log.str();
+  ASSERT_EQ(rstats.topics["imu"].written, static_cast<uint64_t>(kSamples)) << recorder.log();
   const auto live = estimates(live_file, "");
   std::map<std::string, size_t> live_per_topic;
   for (const auto& [key, v] : live) {

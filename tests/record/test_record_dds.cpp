@@ -7,6 +7,7 @@
 #include "poise/dds/participant.h"
 #include "poise/record/mcap.h"
 #include "poise/record/recorder.h"
+#include "recorder_thread.h"
 #include "poise/record/replayer.h"
 #include "record_test_support.h"
 
@@ -78,17 +79,10 @@ TEST(RecordReplay, RecordsPayloadsVerbatimAndReplaysThemByteForByte) {
   const int64_t t0 = 1'700'000'000'000'000'000LL;
 
   // GIVEN a recorder on "imu" and "attitude/parallel_kf"
-  std::ostringstream log;
-  RecorderOptions ro;
-  ro.output = file;
+  RecorderOptions ro = testing::recorder_options(file, lease.id(), kProfile);
   ro.topics = {"imu", "attitude/parallel_kf"};
-  ro.domain = lease.id();
-  ro.participant_profile = kProfile;
   ro.writer.max_chunk_duration_ns = 200'000'000;
-  ro.log = &log;
-  Recorder recorder(ro);
-  RecorderStats rstats;
-  std::thread thread([&] { rstats = recorder.run(); });
+  testing::RecorderThread recorder(ro);
   std::map<uint32_t, std::vector<uint8_t>> imu_sent;
   std::map<uint32_t, std::vector<uint8_t>> att_sent;
   {
@@ -96,13 +90,9 @@ TEST(RecordReplay, RecordsPayloadsVerbatimAndReplaysThemByteForByte) {
     dds::Writer<msg::ImuSamplePubSubType> imu(pub, "imu");
     dds::Writer<msg::AttitudeEstimatePubSubType> att(pub, "attitude/parallel_kf");
     const bool matched = poise::testing::wait_until(
-        [&] { return recorder.subscribed() == 2 && imu.matched() > 0 && att.matched() > 0; },
+        [&] { return recorder->subscribed() == 2 && imu.matched() > 0 && att.matched() > 0; },
         kMatchTimeout);
-    if (!matched) {
-      recorder.request_stop();
-      thread.join();
-      FAIL() << "recorder did not subscribe/match within the timeout\n" << log.str();
-    }
+    ASSERT_TRUE(recorder.matched(matched, "recorder did not subscribe/match within the timeout"));
     // WHEN 300 IMU samples (1 kHz) and 30 attitude estimates are published
     for (int i = 0; i < kImu; ++i) {
       const int64_t stamp = t0 + i * 1'000'000LL;
@@ -116,11 +106,10 @@ TEST(RecordReplay, RecordsPayloadsVerbatimAndReplaysThemByteForByte) {
       }
       std::this_thread::sleep_for(1ms);
     }
-    poise::testing::wait_until([&] { return recorder.written() >= kImu + kAttitude; },
+    poise::testing::wait_until([&] { return recorder->written() >= kImu + kAttitude; },
                                kDeliveryTimeout);
   }
-  recorder.request_stop();
-  thread.join();
+  const RecorderStats rstats = recorder.stop();
   ASSERT_TRUE(rstats.error.empty()) << rstats.error;
 
   // THEN the file is complete, reliable messages are all there, and every payload is verbatim
@@ -227,26 +216,16 @@ TEST(RecordReplay, GivenRos2TopicsWhenRecordedThenSchemaIsTheRosIdlAndPublishTim
   const std::string file = dir + "/ros2.mcap";
   const std::string topic = "rt/poise/parallel_kf/imu";
   constexpr int kCount = 20;
-  std::ostringstream log;
-  RecorderOptions ro;
-  ro.output = file;
+  RecorderOptions ro = testing::recorder_options(file, lease.id(), kProfile);
   ro.topics = {topic};
-  ro.domain = lease.id();
-  ro.participant_profile = kProfile;
-  ro.log = &log;
-  Recorder recorder(ro);
-  RecorderStats rstats;
-  std::thread thread([&] { rstats = recorder.run(); });
+  testing::RecorderThread recorder(ro);
   std::map<int64_t, std::vector<uint8_t>> sent;  // by header stamp, ns
   {
     dds::Participant pub({lease.id(), kProfile, "", "test_pub"});
     dds::Writer<sensor_msgs::msg::dds_::Imu_PubSubType> imu(pub, topic, dds::QosKind::kEstimate);
-    if (!poise::testing::wait_until([&] { return recorder.subscribed() == 1 && imu.matched() > 0; },
-                                    kMatchTimeout)) {
-      recorder.request_stop();
-      thread.join();
-      FAIL() << "recorder did not subscribe/match within the timeout\n" << log.str();
-    }
+    ASSERT_TRUE(recorder.matched(
+        poise::testing::wait_until([&] { return recorder->subscribed() == 1 && imu.matched() > 0; }, kMatchTimeout),
+        "recorder did not subscribe/match within the timeout"));
     for (int i = 0; i < kCount; ++i) {
       sensor_msgs::msg::dds_::Imu_ m;
       m.header().stamp().sec(1'700'000'000 + i);
@@ -258,10 +237,9 @@ TEST(RecordReplay, GivenRos2TopicsWhenRecordedThenSchemaIsTheRosIdlAndPublishTim
           testing::serialize<sensor_msgs::msg::dds_::Imu_PubSubType>(m);
       imu.write(m);
     }
-    poise::testing::wait_until([&] { return recorder.written() >= kCount; }, kDeliveryTimeout);
+    poise::testing::wait_until([&] { return recorder->written() >= kCount; }, kDeliveryTimeout);
   }
-  recorder.request_stop();
-  thread.join();
+  const RecorderStats rstats = recorder.stop();
   ASSERT_TRUE(rstats.error.empty()) << rstats.error;
   McapReader reader = McapReader::open_file(file);
   reader.verify();
@@ -346,18 +324,12 @@ TEST(RecordReplay, SplitSizeStartsNewCompleteFilesWithoutLosingMessages) {
   const std::string dir = testing::cases_dir("split");
   constexpr int kMessages = 300;
   constexpr uint64_t kSplitBytes = 30 * 1024;
-  std::ostringstream log;
-  RecorderOptions ro;
-  ro.output = dir + "/split.mcap";
+  RecorderOptions ro = testing::recorder_options(dir + "/split.mcap", lease.id(), kProfile);
   ro.topics = {"attitude/split"};
-  ro.domain = lease.id();
-  ro.participant_profile = kProfile;
   ro.split_size_bytes = kSplitBytes;
   ro.writer.chunk_size_bytes = 8 * 1024;
-  ro.log = &log;
-  Recorder recorder(ro);
+  testing::RecorderThread recorder(ro);
   RecorderStats stats;
-  std::thread thread([&] { stats = recorder.run(); });
   {
     dds::Participant pub({lease.id(), kProfile, "", "test_pub"});
     dds::Writer<msg::AttitudeEstimatePubSubType> writer(pub, "attitude/split");
@@ -367,12 +339,11 @@ TEST(RecordReplay, SplitSizeStartsNewCompleteFilesWithoutLosingMessages) {
         writer.write(testing::make_attitude(static_cast<uint32_t>(i), 1000 + i));
         std::this_thread::sleep_for(1ms);  // stay within the writer's keep-last history
       }
-      poise::testing::wait_until([&] { return recorder.written() >= kMessages; },
+      poise::testing::wait_until([&] { return recorder->written() >= kMessages; },
                                  kDeliveryTimeout);
     }
-    recorder.request_stop();
-    thread.join();
-    ASSERT_TRUE(matched) << log.str();
+    stats = recorder.stop();
+    ASSERT_TRUE(matched) << recorder.log();
   }
   ASSERT_TRUE(stats.error.empty()) << stats.error;
   ASSERT_GE(stats.files.size(), 3u);

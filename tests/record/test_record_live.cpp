@@ -8,6 +8,7 @@
 #include "poise/record/mcap.h"
 #include "poise/record/process.h"
 #include "poise/record/recorder.h"
+#include "recorder_thread.h"
 #include "poise/record/replayer.h"
 #include "poise/runtime/host.h"
 #include "record_test_support.h"
@@ -93,16 +94,9 @@ TEST(RecordLive, ProcessAndReplayReproduceTheLiveEstimates) {
   std::printf("seed %u\n", kSeed);
 
   // GIVEN a parallel_kf component and a recorder of its input and output
-  std::ostringstream log;
-  RecorderOptions ro;
-  ro.output = live_file;
+  RecorderOptions ro = testing::recorder_options(live_file, lease.id(), kProfile);
   ro.topics = {"imu", "attitude/parallel_kf"};
-  ro.domain = lease.id();
-  ro.participant_profile = kProfile;
-  ro.log = &log;
-  Recorder recorder(ro);
-  RecorderStats rstats;
-  std::thread thread([&] { rstats = recorder.run(); });
+  testing::RecorderThread recorder(ro);
   {
     runtime::Host host(pkf_host(), lease.id());
     host.start();
@@ -110,15 +104,11 @@ TEST(RecordLive, ProcessAndReplayReproduceTheLiveEstimates) {
     dds::Writer<msg::ImuSamplePubSubType> imu(pub, "imu");
     const bool ready = poise::testing::wait_until(
         [&] {
-          return recorder.subscribed() == 2 && recorder.matched_writers() >= 2 &&
+          return recorder->subscribed() == 2 && recorder->matched_writers() >= 2 &&
                  imu.matched() >= 2;
         },
         kMatchTimeout);
-    if (!ready) {
-      recorder.request_stop();
-      thread.join();
-      FAIL() << "component/recorder did not match\n" << log.str();
-    }
+    ASSERT_TRUE(recorder.matched(ready, "component/recorder did not match"));
     // WHEN the IMU turns at 0.5 rad/s about up for 2 s (200 Hz, noisy)
     std::mt19937 rng(kSeed);
     for (int i = 0; i < kSamples; ++i) {
@@ -127,21 +117,20 @@ TEST(RecordLive, ProcessAndReplayReproduceTheLiveEstimates) {
       imu.write(m);
       std::this_thread::sleep_for(std::chrono::nanoseconds(kPeriodNs));
     }
-    testing::wait_quiet([&] { return recorder.written(); });
+    testing::wait_quiet([&] { return recorder->written(); });
     host.stop();
   }
-  recorder.request_stop();
-  thread.join();
+  RecorderStats rstats = recorder.stop();
   ASSERT_TRUE(rstats.error.empty()) << rstats.error;
   ASSERT_EQ(rstats.topics["imu"].written, static_cast<uint64_t>(kSamples))
       << "the recorder missed IMU samples";
   const auto live = estimates(live_file, "attitude/parallel_kf");
-  ASSERT_GT(live.size(), static_cast<size_t>(kSamples / 2)) << log.str();
+  ASSERT_GT(live.size(), static_cast<size_t>(kSamples / 2)) << recorder.log();
 
   // THEN `poise process` on the recording gives the live estimates
   {
     std::vector<ProcessFilter> filters;
-    filters.push_back({"pkf", eval::make_filter("parallel_kf")});
+    filters.push_back({"pkf", eval::make_filter("parallel_kf"), {}});
     ProcessOptions po;
     po.input = live_file;
     po.output = dir + "/processed.mcap";
@@ -154,7 +143,7 @@ TEST(RecordLive, ProcessAndReplayReproduceTheLiveEstimates) {
     EXPECT_LE(worst, kSameEstimateRad);
     // The comparison is sensitive: another configuration on the same samples differs.
     std::vector<ProcessFilter> other;
-    other.push_back({"paper", eval::make_filter("parallel_kf_paper")});
+    other.push_back({"paper", eval::make_filter("parallel_kf_paper"), {}});
     po.output = dir + "/processed_paper.mcap";
     process_recording(po, other);
     const double other_worst =
@@ -169,9 +158,7 @@ TEST(RecordLive, ProcessAndReplayReproduceTheLiveEstimates) {
     RecorderOptions ro2 = ro;
     ro2.output = replay_file;
     ro2.topics = {"attitude/parallel_kf"};
-    Recorder recorder2(ro2);
-    RecorderStats r2;
-    std::thread thread2([&] { r2 = recorder2.run(); });
+    testing::RecorderThread recorder2(ro2);
     {
       runtime::Host host(pkf_host(), lease.id());
       host.start();
@@ -185,18 +172,17 @@ TEST(RecordLive, ProcessAndReplayReproduceTheLiveEstimates) {
       po.log = &plog;
       // Estimates published before recorder2 matches the component's writer would be missed.
       const bool matched = poise::testing::wait_until(
-          [&] { return recorder2.subscribed() == 1 && recorder2.matched_writers() >= 1; },
+          [&] { return recorder2->subscribed() == 1 && recorder2->matched_writers() >= 1; },
           kMatchTimeout);
       EXPECT_TRUE(matched) << "recorder2 did not match the component's estimate writer";
       if (matched) {
         const ReplayStats ps = replay(po);
         EXPECT_EQ(ps.schedule.delivered, static_cast<uint64_t>(kSamples)) << plog.str();
       }
-      testing::wait_quiet([&] { return recorder2.written(); });
+      testing::wait_quiet([&] { return recorder2->written(); });
       host.stop();
     }
-    recorder2.request_stop();
-    thread2.join();
+    recorder2.stop();
     const auto replayed = estimates(replay_file, "attitude/parallel_kf");
     size_t compared = 0;
     const double worst = worst_difference(live, replayed, &compared);

@@ -6,6 +6,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <stdexcept>
 
 namespace poise::runtime {
 namespace {
@@ -62,6 +63,30 @@ components:
   EXPECT_EQ(spec.components[0].name, "parallel_kf") << "the name defaults to the type";
   EXPECT_EQ(spec.components[1].name, "gn");
   EXPECT_EQ(spec.components[1].params["max_iterations"].as<int>(), 5);
+}
+
+// `poise run --set NAME.key=VALUE` and `poise process --set` (e.g. the north keys of one
+// component): the value is YAML, put into that component's params; errors name the assignment.
+TEST(HostFile, GivenSetsWhenAppliedThenTheNamedComponentsParamsChangeAndBadOnesAreRefused) {
+  HostSpec spec = parse("components:\n  - {type: parallel_kf, name: pkf}\n  - {type: gauss_newton, name: gn}\n");
+  apply_component_sets({"pkf.declination_deg=3.4", "pkf.location={lat_deg: 48.1, lon_deg: 11.6}",
+                        "gn.max_iterations=7"},
+                       spec);
+  EXPECT_EQ(spec.components[0].params["declination_deg"].as<double>(), 3.4);
+  EXPECT_EQ(spec.components[0].params["location"]["lon_deg"].as<double>(), 11.6);
+  EXPECT_EQ(spec.components[1].params["max_iterations"].as<int>(), 7);
+  EXPECT_NE(spec.components[0].origin.find("with --set pkf.declination_deg=3.4"), std::string::npos);
+  auto error = [&](const std::string& set) {
+    try {
+      apply_component_sets({set}, spec);
+    } catch (const std::invalid_argument& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  EXPECT_NE(error("nobody.x=1").find("no component named 'nobody' in the host file (pkf, gn)"), std::string::npos);
+  EXPECT_NE(error("declination_deg=3.4").find("expected NAME.key=value"), std::string::npos);
+  EXPECT_NE(error("pkf.x=[1,").find("not YAML"), std::string::npos);
 }
 
 TEST(HostFile, FileParametersResolveAgainstTheHostFile) {

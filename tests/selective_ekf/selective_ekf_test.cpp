@@ -204,6 +204,7 @@ ImuSample level_sample(int64_t stamp_ns) {
   s.gyro_rps = Eigen::Vector3d(0, 0, 0);
   const double dip = 60.0 * kRadPerDeg;
   s.mag_ut = 50.0 * Eigen::Vector3d(0.0, std::cos(dip), -std::sin(dip));
+  s.has_mag = true;
   return s;
 }
 

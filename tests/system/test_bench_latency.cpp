@@ -15,7 +15,7 @@ using namespace std::chrono_literals;
 TEST(BenchLatency, ShortRunPrintsPipelineHopPtyAndCpuRowsWithSamples) {
   DomainLease domain;
   const auto r = run({bin("poise"), "bench", "latency", "--domain", std::to_string(domain.id()), "--rates", "200",
-                      "--seconds", "1", "--window", "0.5"},
+                      "--duration", "1", "--window", "0.5"},
                      150s);
   ASSERT_EQ(r.exit_code, 0) << r.output;
   // rate row: pipeline p50/p99/max | hop p50/p99/max | ratio | rounds | CPU

@@ -34,6 +34,7 @@ VehicleSample static_sample(int64_t stamp_ns, double roll, double pitch, double 
   s.accel_lat_mps2 = f.y();
   s.yaw_rate_rps = 0.0;
   s.mag_ut = r * h;
+  s.has_mag = true;
   s.speed_mps = 0.0;
   return s;
 }
@@ -165,6 +166,7 @@ TEST(VehicleEstimator, GivenSteadyTurnThenEkfMatchesTheSuspensionEquilibrium) {
     s.accel_lat_mps2 = f.y();
     s.yaw_rate_rps = std::cos(roll_eq) * r;
     s.mag_ut = rbw * p.mag_world_ut;
+    s.has_mag = true;
     s.speed_mps = v;
     ASSERT_TRUE(est.update(s));
     yaw = wrap_angle(yaw + r * 0.01);
@@ -383,6 +385,7 @@ TEST(VehicleSources, DisturbedMagAndBadSpeedAreReportedRejected) {
   s.stamp_ns = 1'000'000'000;
   s.accel_lat_mps2 = 0.0;
   s.mag_ut = VehicleParams{}.mag_world_ut;
+  s.has_mag = true;
   s.speed_mps = 0.0;
   ASSERT_TRUE(est.update(s));
   SourceReports r = est.sources();

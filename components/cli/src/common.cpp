@@ -2,6 +2,7 @@
 
 #include <atomic>
 #include <csignal>
+#include <ctime>
 #include <cstdlib>
 #include <functional>
 #include <iostream>
@@ -77,6 +78,15 @@ CLI::Option* add_dds_profile_option(CLI::App* sub, std::string* profile) {
   return sub->add_option("--dds-profile", *profile,
                          "DDS participant profile: poise_default, poise_udp, poise_loopback or one of "
                          "$POISE_QOS_FILE (default: $POISE_DDS_PROFILE, else poise_default)");
+}
+
+std::string utc_today() {
+  const std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char buf[16];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d", &tm);
+  return buf;
 }
 
 void deprecation_note(const CLI::App* sub, const std::string& old_name, const std::string& new_name) {

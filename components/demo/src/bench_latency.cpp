@@ -525,7 +525,8 @@ void register_bench_latency(CLI::App& app) {
   CLI::App* cmd = bench->add_subcommand(
       "latency", "Pipeline latency (pty line -> estimate in another process) vs a bare DDS hop; CPU per component");
   add_domain_option(cmd, &o->domain);
-  cmd->add_option("--seconds", o->seconds, "Measurement time per rate and path, s")->check(CLI::Range(1.0, 600.0))->capture_default_str();
+  cmd->add_option("--duration", o->seconds, "Measurement time per rate and path, s")->check(CLI::Range(1.0, 600.0))->capture_default_str();
+  add_deprecated_alias(cmd, "--seconds", "--duration", &o->seconds)->check(CLI::Range(1.0, 600.0));
   cmd->add_option("--diagnostics-every", o->diagnostics_every,
                   "parallel_kf publishes FilterDiagnostics every N samples (1 = input rate, the default)")
       ->check(CLI::Range(1, 100000))

@@ -159,6 +159,7 @@ ImuSample BroadTrial::sample(size_t k) const {
   s.gyro_rps = gyr_rps[k];
   s.accel_mps2 = acc_mps2[k];
   s.mag_ut = mag_ut[k];
+  s.has_mag = true;  // imu_mag is part of the layout
   return s;
 }
 

@@ -6,6 +6,7 @@
 #include "poise/eval/crossval.h"
 #include "poise/eval/filter_registry.h"
 #include "poise/eval/imu_delay.h"
+#include "poise/eval/north_filter.h"
 #include "poise/eval/runner.h"
 #include "poise/sim/sensor_simulator.h"
 
@@ -36,12 +37,39 @@ std::string filter_list() {
   return s;
 }
 
-std::unique_ptr<AttitudeFilter> make_or_throw(const std::string& name, const std::string& config) {
+std::unique_ptr<AttitudeFilter> make_or_throw(const std::string& name, const std::string& config,
+                                              const NorthReference& north) {
   try {
-    return eval::make_filter_for_broad(name, config);
+    return eval::with_north(eval::make_filter_for_broad(name, config), north);
   } catch (const std::exception& e) {
     throw Error(std::string(e.what()) + "; filters:" + filter_list());
   }
+}
+
+/// `--set KEY=VALUE` (the north keys, as in a host file's component params): the north every
+/// filter of the command outputs in; said on stderr when it is true north.
+NorthReference north_option(const std::vector<std::string>& sets, const std::string& command) {
+  NorthReference north;
+  try {
+    north = eval::north_from_sets(sets, utc_today());
+  } catch (const std::invalid_argument& e) {
+    throw Error(e.what(), kUsageExitCode);
+  }
+  if (north.true_north) {
+    std::cerr << command << ": outputs in true ENU (" << north.frame_id() << "), declination "
+              << north.declination_rad / kRadPerDeg << " deg east (" << north.source << ")\n";
+  }
+  return north;
+}
+
+/// Adds `--set KEY=VALUE` for the north keys.
+void add_north_set_option(CLI::App* sub, std::vector<std::string>* sets) {
+  sub->add_option("--set", *sets,
+                  "KEY=VALUE: true north, as in a host file's component params (repeatable): "
+                  "declination_deg=D (deg east), or location={lat_deg: .., lon_deg: .., alt_m: ..} "
+                  "with optional date=YYYY-MM-DD (WMM2025); outputs then in true ENU")
+      ->allow_extra_args(false)
+      ->type_name("KEY=VALUE");
 }
 
 std::vector<eval::BroadTrial> load_trials(const std::vector<std::string>& files) {
@@ -77,9 +105,9 @@ void make_dir(const std::string& dir) {
 }
 
 void run_eval(const std::string& filter_name, const std::string& config, const std::string& out_dir,
-              const std::vector<std::string>& files) {
+              const std::vector<std::string>& files, const NorthReference& north) {
   make_dir(out_dir);
-  auto filter = make_or_throw(filter_name, config);
+  auto filter = make_or_throw(filter_name, config, north);
   std::vector<eval::TrialResult> results;
   std::cerr << "poise eval broad: " << files.size() << " trial(s), estimates -> "
             << (std::filesystem::path(out_dir) / "<stem>.csv").string() << "\n";
@@ -119,7 +147,7 @@ struct GridOptions {
 /// and returns the cross-validation (with the candidates) for `poise tune`.
 std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
     const std::string& filter_name, const std::string& config, const std::string& out_dir,
-    const std::vector<std::string>& files, const GridOptions& g, bool broad) {
+    const std::vector<std::string>& files, const GridOptions& g, bool broad, const NorthReference& north) {
   make_dir(out_dir);
   std::vector<eval::GridAxis> axes;
   try {
@@ -165,7 +193,7 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
         throw Error(e.what());
       }
     }
-    auto filter = make_or_throw(filter_name, cfg);
+    auto filter = make_or_throw(filter_name, cfg, north);
     std::vector<eval::TrialResult> rs;
     for (const auto& trial : trials) {
       progress.update(c * trials.size() + rs.size(), "candidate " + std::to_string(c + 1) + ", " + trial.stem);
@@ -236,7 +264,7 @@ std::string default_broad_dir() {
 }
 
 void run_bench(const std::string& file_arg, const std::string& broad_dir, int repeats,
-               const std::vector<std::string>& only) {
+               const std::vector<std::string>& only, const NorthReference& north) {
   install_stop_handlers();
   std::string file = file_arg;
   if (file.empty() && std::filesystem::is_directory(broad_dir)) {
@@ -291,7 +319,7 @@ void run_bench(const std::string& file_arg, const std::string& broad_dir, int re
     if (!only.empty() && std::find(only.begin(), only.end(), entry.name) == only.end()) {
       continue;
     }
-    auto f = entry.broad_default ? entry.broad_default() : entry.factory("");
+    auto f = eval::with_north(entry.broad_default ? entry.broad_default() : entry.factory(""), north);
     double sink = 0.0;
     const BenchFigures best = best_of_runs(static_cast<int>(samples.size()), repeats, [&] {
       f->reset();
@@ -401,17 +429,20 @@ void register_eval_cli(CLI::App& app) {
                     "Cross-validation folds for --grid (trial i is in fold i mod K; 0 = leave one trial out)")
       ->check(CLI::Range(0, 1000))
       ->capture_default_str();
+  auto sets = std::make_shared<std::vector<std::string>>();
+  add_north_set_option(broad, sets.get());
   broad->callback([=]() {
     install_stop_handlers();
+    const NorthReference north = north_option(*sets, "poise eval broad");
     if (grid->grid.empty()) {
       if (grid->folds != 0) {
         std::cerr << "poise eval broad: --folds without --grid: no parameter is chosen, so the in-sample "
                      "figure below is also the cross-validated one\n";
       }
-      run_eval(*filter, *config, *out, *files);
+      run_eval(*filter, *config, *out, *files, north);
       return;
     }
-    run_grid(*filter, *config, *out, *files, *grid, true);
+    run_grid(*filter, *config, *out, *files, *grid, true, north);
   });
 
   CLI::App* tune = app.add_subcommand(
@@ -443,9 +474,12 @@ void register_eval_cli(CLI::App& app) {
                    "trial numbers >= 24 in the file name count as disturbed")
       ->required()
       ->check(CLI::ExistingFile);
+  auto t_sets = std::make_shared<std::vector<std::string>>();
+  add_north_set_option(tune, t_sets.get());
   tune->callback([=]() {
     install_stop_handlers();
-    const auto [cv, candidates] = run_grid(*t_filter, *t_config, *t_out, *t_files, *t_grid, false);
+    const NorthReference north = north_option(*t_sets, "poise tune");
+    const auto [cv, candidates] = run_grid(*t_filter, *t_config, *t_out, *t_files, *t_grid, false, north);
     const eval::GroupMeans in_means = eval::group_means(cv.in_sample);
     const eval::GroupMeans cv_means = eval::group_means(cv.cross_validated);
     std::ostringstream header;
@@ -476,12 +510,14 @@ void register_eval_cli(CLI::App& app) {
       ->capture_default_str();
   bench->add_flag("--list", *list, "List the registered filters and exit");
   bench->add_option("--filter", *only, "Only these filters (repeatable; default: all)");
+  auto b_sets = std::make_shared<std::vector<std::string>>();
+  add_north_set_option(bench, b_sets.get());
   bench->callback([=]() {
     if (*list) {
       std::cout << "filters:" << filter_list() << "\n";
       return;
     }
-    run_bench(*file, *dir, *repeats, *only);
+    run_bench(*file, *dir, *repeats, *only, north_option(*b_sets, "poise bench filters"));
   });
 }
 

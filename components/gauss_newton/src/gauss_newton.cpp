@@ -16,6 +16,9 @@ void GaussNewtonParams::validate(const char* filter) const {
   check.positive(mag_weight, "mag_weight", "relative to the accelerometer rows");
   check.require(std::isnan(dip_deg) || std::abs(dip_deg) <= 90.0, "dip_deg", "in [-90, 90] (deg) or null");
   check.require(startup_samples >= 1, "startup_samples", ">= 1 (samples)");
+  check.require(use_magnetometer != MagnetometerUse::kOff, "use_magnetometer",
+                "auto or true (Gauss-Newton needs the magnetometer in every sample; for 6-axis input "
+                "use parallel_kf or selective_ekf)");
   poise::validate(limits, check);
 }
 
@@ -69,7 +72,7 @@ GaussNewtonResult GaussNewton::solve(const Eigen::Vector3d& accel, const Eigen::
 }
 
 bool GaussNewton::update(const ImuSample& s) {
-  const SampleCheck c = check_imu_sample(s, s_.last_stamp_ns, p_.limits, s_.rejections);
+  const SampleCheck c = check_imu_sample(s, s_.last_stamp_ns, p_.limits, s_.rejections, p_.use_magnetometer);
   if (s_.anchor.reanchor(c, s.stamp_ns, p_.limits.max_dt_s)) {
     s_.last_stamp_ns = s.stamp_ns;
   }
@@ -80,10 +83,10 @@ bool GaussNewton::update(const ImuSample& s) {
   }
   if (!c.mag_ok) {  // the solution needs both vectors
     s_.accel.mark_rejected("no_mag");
-    if (s.has_mag) {
+    if (c.mag_reject != RejectReason::kCount) {
       s_.mag.mark_rejected(to_string(c.mag_reject));
     } else {
-      s_.mag.mark_not_available("no_sample");
+      s_.mag.mark_not_available(c.mag_absent);
     }
     return false;
   }
@@ -151,13 +154,15 @@ GaussNewtonParams load_gauss_newton_params(const std::string& path) {
         p.dip_deg = kv.second.IsNull() ? std::nan("") : kv.second.as<double>();
       } else if (key == "startup_samples") {
         p.startup_samples = kv.second.as<int>();
+      } else if (key == "use_magnetometer") {
+        p.use_magnetometer = read_magnetometer_use(kv.second);
       } else {
         throw std::runtime_error("unknown key");
       }
     } catch (const std::exception& e) {
       throw std::runtime_error(path + ": key '" + key + "': " + e.what() +
                                " (keys: max_iterations, tolerance_rad, mag_weight, dip_deg, "
-                               "startup_samples)");
+                               "startup_samples, use_magnetometer)");
     }
   }
   try {

@@ -1,6 +1,8 @@
 #include "poise/nodes/estimator_step.h"
 
-#include <ctime>
+#include "poise/cli/common.h"
+#include "poise/core/north_yaml.h"
+
 #include <sstream>
 
 namespace poise::nodes {
@@ -28,57 +30,12 @@ NodeParams node_params(const runtime::ComponentSpec& spec) {
   return p;
 }
 
-const std::vector<std::string>& north_keys() {
-  static const std::vector<std::string> k{"declination_deg", "location", "date", "magnetic_model",
-                                          "seed_field"};
-  return k;
-}
-
-namespace {
-std::string utc_today() {
-  const std::time_t now = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&now, &tm);
-  char buf[16];
-  std::strftime(buf, sizeof buf, "%Y-%m-%d", &tm);
-  return buf;
-}
-}  // namespace
+const std::vector<std::string>& north_keys() { return north_param_keys(); }
 
 NorthReference north_reference(const runtime::ComponentSpec& spec) {
-  NorthParams p;
-  p.declination_deg = runtime::param<double>(spec, "declination_deg", p.declination_deg);
-  p.date = runtime::param<std::string>(spec, "date", p.date);
-  p.model_file = runtime::param<std::string>(spec, "magnetic_model", p.model_file);
-  p.seed_field = runtime::param<bool>(spec, "seed_field", p.seed_field);
   const std::string where = spec.origin + ": component '" + spec.name + "': ";
-  if (spec.params && spec.params["location"]) {
-    const YAML::Node loc = spec.params["location"];
-    if (!loc.IsMap()) {
-      throw runtime::ConfigError(where + "location must be a mapping {lat_deg, lon_deg, alt_m}");
-    }
-    for (const auto& kv : loc) {
-      const auto key = kv.first.as<std::string>();
-      if (key != "lat_deg" && key != "lon_deg" && key != "alt_m") {
-        throw runtime::ConfigError(where + "unknown key 'location." + key + "' (known: lat_deg, lon_deg, alt_m)");
-      }
-    }
-    if (!loc["lat_deg"] || !loc["lon_deg"]) {
-      throw runtime::ConfigError(where + "location needs lat_deg and lon_deg (alt_m optional, default 0)");
-    }
-    try {
-      p.location.lat_deg = loc["lat_deg"].as<double>();
-      p.location.lon_deg = loc["lon_deg"].as<double>();
-      p.location.alt_m = loc["alt_m"] ? loc["alt_m"].as<double>() : 0.0;
-    } catch (const YAML::Exception&) {
-      throw runtime::ConfigError(where + "location: lat_deg, lon_deg and alt_m must be numbers (deg, deg, m)");
-    }
-    p.has_location = true;
-  } else if (!p.date.empty() || !p.model_file.empty()) {
-    throw runtime::ConfigError(where + "date and magnetic_model need a location");
-  }
   try {
-    return resolve_north(p, utc_today());
+    return resolve_north(read_north_params(spec.params), cli::utc_today());
   } catch (const std::exception& e) {
     throw runtime::ConfigError(where + e.what());
   }

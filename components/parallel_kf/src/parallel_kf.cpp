@@ -105,6 +105,7 @@ void ParallelKf::reset() {
   s_.kf2.reset(Eigen::Vector3d::UnitX(), kInitVarDirection, kInitVarDisturbanceUt2);
   s_.initialized = false;
   s_.heading_initialized = false;
+  s_.heading_from_gyro = false;
   s_.last_stamp_ns = -1;
   s_.prev_gyro.setZero();
   s_.rejections = RejectCounters{};
@@ -130,7 +131,7 @@ void ParallelKf::reset() {
 }
 
 bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
-  c = check_imu_sample(s, s_.last_stamp_ns, p_.limits, s_.rejections);
+  c = check_imu_sample(s, s_.last_stamp_ns, p_.limits, s_.rejections, p_.use_magnetometer);
   if (s_.anchor.reanchor(c, s.stamp_ns, p_.limits.max_dt_s)) {
     s_.last_stamp_ns = s.stamp_ns;  // restart time after a confirmed jump; attitude kept
     return false;
@@ -216,6 +217,13 @@ void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
     if (!s_.gate.learnt) {
       s_.gate.step(gp_, s.mag_ut, s_.kf1.up_body(), 0.0);  // learning
     }
+  } else {
+    // 6-axis: KF2 carries north at ZYX yaw 0 for this tilt (horizontal), propagated by the gyro
+    // and never corrected: the heading follows the gyro from the stated start
+    const Eigen::Vector3d north = quat_tilt_yaw0(s_.kf1.up_body()).conjugate() * Eigen::Vector3d::UnitY();
+    s_.kf2.reset(north, kInitVarDirection, kInitVarDisturbanceUt2);
+    s_.heading_initialized = true;
+    s_.heading_from_gyro = true;
   }
   s_.prev_gyro = s.gyro_rps;
   s_.r_ib.setIdentity();
@@ -347,9 +355,10 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a,
   if (!mag_ok) {
     return;
   }
-  if (!s_.heading_initialized) {
+  if (!s_.heading_initialized || s_.heading_from_gyro) {  // the first field: heading observable now
     s_.kf2.reset(mag.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
     s_.heading_initialized = true;
+    s_.heading_from_gyro = false;
   }
   const FieldVerdict verdict = s_.gate.step(gp_, mag, s_.kf1.up_body(), dt);
   if (std::isfinite(s_.gate.last_norm_ut)) {
@@ -404,8 +413,8 @@ Eigen::Quaterniond ParallelKf::q_world_body() const {
   if (!(p_.tilt.renormalize && p_.tilt.exact_rotation) && !safe_normalize(s_.kf1.up_body(), z)) {
     return last_q_;  // (renormalised and exactly rotated, sZ is unit already)
   }
-  // Without a magnetometer sample yet (6-axis input) heading is not observable: north is taken
-  // where ZYX yaw is 0 for the current tilt (quat_tilt_yaw0, as in every filter).
+  // KF2 always holds a direction once initialised (the field, or 6-axis the gyro-propagated
+  // yaw-0 north); a restored state without one takes north at ZYX yaw 0 (quat_tilt_yaw0).
   const Eigen::Vector3d fwd = s_.heading_initialized
                                   ? s_.kf2.u()
                                   : Eigen::Vector3d(quat_tilt_yaw0(z).conjugate() * Eigen::Vector3d::UnitY());

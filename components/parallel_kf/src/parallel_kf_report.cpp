@@ -80,10 +80,10 @@ void ParallelKf::report(const ImuSample& s, const SampleCheck& c, bool accepted,
 
   // KF2's magnetometer
   if (!c.mag_ok) {
-    if (s.has_mag) {
+    if (c.mag_reject != RejectReason::kCount) {
       mag_src_.mark_rejected(to_string(c.mag_reject));
     } else {
-      mag_src_.mark_not_available("no_sample");
+      mag_src_.mark_not_available(c.mag_absent);  // none in the sample, or use_magnetometer: false
     }
     return;
   }

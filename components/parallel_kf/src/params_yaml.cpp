@@ -88,6 +88,8 @@ const std::vector<Field>& fields() {
       make("share_tilt_correction", &ParallelKfParams::share_tilt_correction),
       make("accel_lowpass_order", &ParallelKfParams::accel_lowpass_order),
       make("motion_bias_heading", &ParallelKfParams::motion_bias_heading),
+      {"use_magnetometer",
+       [](ParallelKfParams& p, const YAML::Node& n) { p.use_magnetometer = read_magnetometer_use(n); }},
       make_limits("min_accel_norm_mps2", &SampleLimits::min_accel_norm_mps2),
       make_limits("min_mag_norm_ut", &SampleLimits::min_mag_norm_ut),
       make_limits("max_gyro_rps", &SampleLimits::max_gyro_rps),

@@ -221,7 +221,7 @@ void bench_replay(const BenchReplayOptions& options, std::ostream& out) {
   // Offline processing (no DDS): the parallel KF over the same recording.
   {
     std::vector<ProcessFilter> filters;
-    filters.push_back({"parallel_kf", eval::make_filter("parallel_kf")});
+    filters.push_back({"parallel_kf", eval::make_filter("parallel_kf"), {}});
     ProcessOptions po;
     po.input = path;
     po.output = temp_path("processed");

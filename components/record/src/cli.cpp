@@ -4,6 +4,7 @@
 #include "poise/dds/participant.h"
 #include "poise/record/bench.h"
 #include "poise/eval/filter_registry.h"
+#include "poise/eval/north_filter.h"
 #include "poise/record/info.h"
 #include "poise/nodes/register.h"
 #include "poise/record/compare.h"
@@ -14,8 +15,11 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <iostream>
+#include <map>
 #include <memory>
+#include <stdexcept>
 
 namespace poise::cli {
 
@@ -89,50 +93,47 @@ std::unique_ptr<AttitudeFilter> make_offline_filter(const std::string& name, con
   }
 }
 
-/// Applies `--set NAME.key=value` (value parsed as YAML: numbers, lists, strings) to the host's
-/// components; an unknown NAME is an error naming the components.
-void apply_sets(const std::vector<std::string>& sets, runtime::HostSpec& host) {
-  for (const std::string& set : sets) {
-    const size_t dot = set.find('.');
-    const size_t eq = set.find('=');
-    if (dot == std::string::npos || eq == std::string::npos || dot == 0 || eq < dot + 2) {
-      throw Error("--set " + set + ": expected NAME.key=value (NAME: a component of the host file)",
-                  kUsageExitCode);
-    }
-    const std::string name = set.substr(0, dot);
-    const std::string key = set.substr(dot + 1, eq - dot - 1);
-    YAML::Node value;
-    try {
-      value = YAML::Load(set.substr(eq + 1));
-    } catch (const YAML::Exception& e) {
-      throw Error("--set " + set + ": the value is not YAML: " + e.what(), kUsageExitCode);
-    }
-    bool found = false;
-    std::string names;
-    for (runtime::ComponentSpec& c : host.components) {
-      names += (names.empty() ? "" : ", ") + c.name;
-      if (c.name == name) {
-        if (!c.params || !c.params.IsMap()) {
-          c.params = YAML::Node(YAML::NodeType::Map);
-        }
-        c.params[key] = value;
-        c.origin += " (with --set " + set + ")";
-        found = true;
-      }
-    }
-    if (!found) {
-      throw Error("--set " + set + ": no component named '" + name + "' in the host file (" + names + ")",
-                  kUsageExitCode);
-    }
-  }
-}
-
 void run_process(const ProcessArgs& a) {
   std::vector<record::ProcessComponent> components;
   std::vector<std::string> labels;  // "name (type)" per component, for the summary
   record::ProcessOptions o;
-  if (!a.sets.empty() && a.host.empty()) {
-    throw Error("--set changes a component of the host file: give --host HOST.yaml", kUsageExitCode);
+  // --set: NAME.key=VALUE changes the host's component NAME; for a --filter NAME, and KEY=VALUE
+  // without NAME for every --filter filter, the north keys (eval::north_from_sets).
+  std::vector<std::string> filter_names;
+  for (const std::string& f : a.filters) {
+    filter_names.push_back(f.substr(0, f.find('=')));
+  }
+  std::vector<std::string> host_sets;
+  std::vector<std::string> every_filter_sets;
+  std::map<std::string, std::vector<std::string>> filter_sets;
+  for (const std::string& set : a.sets) {
+    const size_t eq = set.find('=');
+    const size_t dot = set.find('.');
+    if (dot == std::string::npos || dot > eq) {
+      every_filter_sets.push_back(set);
+    } else if (std::find(filter_names.begin(), filter_names.end(), set.substr(0, dot)) != filter_names.end()) {
+      filter_sets[set.substr(0, dot)].push_back(set.substr(dot + 1));
+    } else {
+      host_sets.push_back(set);
+    }
+  }
+  if (!every_filter_sets.empty() && a.filters.empty()) {
+    throw Error("--set " + every_filter_sets.front() +
+                    ": KEY=VALUE without NAME applies to the --filter filters; for a component of the host "
+                    "file write NAME.key=VALUE",
+                kUsageExitCode);
+  }
+  if (!host_sets.empty() && a.host.empty()) {
+    throw Error("--set " + host_sets.front() + ": NAME.key=VALUE changes a component of the host file (give "
+                    "--host HOST.yaml) or a --filter NAME (" +
+                    (filter_names.empty() ? std::string("none given") : "given: " + [&] {
+                      std::string n;
+                      for (const auto& f : filter_names) {
+                        n += (n.empty() ? "" : ", ") + f;
+                      }
+                      return n;
+                    }()) + ")",
+                kUsageExitCode);
   }
   if (!a.host.empty()) {
     runtime::HostSpec host;
@@ -141,7 +142,11 @@ void run_process(const ProcessArgs& a) {
     } catch (const std::exception& e) {
       throw Error(e.what());
     }
-    apply_sets(a.sets, host);
+    try {
+      runtime::apply_component_sets(host_sets, host);
+    } catch (const std::invalid_argument& e) {
+      throw Error(e.what(), kUsageExitCode);
+    }
     o.topics = host.topics;
     for (const auto& c : host.components) {
       std::unique_ptr<nodes::EstimatorStep> step;
@@ -167,8 +172,16 @@ void run_process(const ProcessArgs& a) {
     const size_t eq = f.find('=');
     const std::string name = f.substr(0, eq);
     const std::string config = eq == std::string::npos ? std::string() : f.substr(eq + 1);
-    labels.push_back(name + " (--filter)");
-    components.push_back({record::filter_step({name, make_offline_filter(name, config)}), {}});
+    std::vector<std::string> sets = every_filter_sets;
+    sets.insert(sets.end(), filter_sets[name].begin(), filter_sets[name].end());
+    NorthReference north;
+    try {
+      north = eval::north_from_sets(sets, utc_today());
+    } catch (const std::invalid_argument& e) {
+      throw Error("filter '" + name + "': " + e.what(), kUsageExitCode);
+    }
+    labels.push_back(name + " (--filter" + (north.true_north ? ", " + std::string(north.frame_id()) : "") + ")");
+    components.push_back({record::filter_step({name, make_offline_filter(name, config), north}), {}});
   }
   if (components.empty()) {
     throw Error("nothing to run: give --host HOST.yaml with estimator components (" +
@@ -453,7 +466,12 @@ void add_record_commands(CLI::App& app) {
   process_cmd->add_option("--set", proc->sets,
                           "NAME.key=VALUE: change a parameter of the host's component NAME (as in "
                           "its params map; VALUE is YAML, e.g. imu_delay_s=0.01, "
-                          "q_body_camera=[1,0,0,0], filter_file=other.yaml); repeatable");
+                          "q_body_camera=[1,0,0,0], filter_file=other.yaml); for a --filter NAME, and "
+                          "KEY=VALUE without NAME for every --filter filter, the north keys "
+                          "(declination_deg=D, location={lat_deg: .., lon_deg: ..}, date=...): "
+                          "output in true ENU, frame id enu_true; repeatable")
+      ->allow_extra_args(false)
+      ->type_name("[NAME.]KEY=VALUE");
   process_cmd->add_option("--filter", proc->filters,
                           "NAME[=CONFIG.yaml]: an attitude filter to run alone (repeatable); see "
                           "`poise bench filters --help` for names");
@@ -474,9 +492,10 @@ void add_record_commands(CLI::App& app) {
   CLI::App* bench_record = bench->add_subcommand(
       "record", "Recorder throughput: MCAP writer alone, then DDS -> recorder at rising rates "
                 "(best-effort ImuSample, loopback) until messages are lost.");
-  bench_record->add_option("--seconds", brec->seconds_per_step, "seconds per rate step")
+  bench_record->add_option("--duration", brec->seconds_per_step, "how long each rate step runs, s")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  add_deprecated_alias(bench_record, "--seconds", "--duration", &brec->seconds_per_step)->check(CLI::PositiveNumber);
   add_dds_profile_option(bench_record, &brec->profile)->capture_default_str();
   add_deprecated_alias(bench_record, "--profile", "--dds-profile", &brec->profile);
   add_domain_option(bench_record, &brec->domain);
@@ -491,9 +510,10 @@ void add_record_commands(CLI::App& app) {
   CLI::App* bench_replay = bench->add_subcommand(
       "replay", "Replay speed as a multiple of real time for a 1 kHz IMU recording (reader "
                 "alone, then over DDS as fast as possible).");
-  bench_replay->add_option("--seconds", brep->recording_s, "length of the recording")
+  bench_replay->add_option("--duration", brep->recording_s, "length of the recording, s")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  add_deprecated_alias(bench_replay, "--seconds", "--duration", &brep->recording_s)->check(CLI::PositiveNumber);
   add_dds_profile_option(bench_replay, &brep->profile)->capture_default_str();
   add_deprecated_alias(bench_replay, "--profile", "--dds-profile", &brep->profile);
   add_domain_option(bench_replay, &brep->domain);

@@ -32,7 +32,7 @@ std::vector<uint8_t> bytes_of(const std::string& s) { return std::vector<uint8_t
 class FilterStep : public nodes::AttitudeStep {
  public:
   explicit FilterStep(ProcessFilter f)
-      : AttitudeStep(f.name, f.name), filter_(std::move(f.filter)) {}
+      : AttitudeStep(f.name, f.name, f.north), filter_(std::move(f.filter)) {}
   bool step(const ImuSample& sample) override { return filter_->update(sample); }
   bool attitude(nodes::AttitudeReport& report) const override {
     if (!filter_->initialized()) {

@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <set>
+#include <stdexcept>
 
 namespace poise::runtime {
 namespace fs = std::filesystem;
@@ -242,6 +243,41 @@ std::vector<std::string> Host::status() const {
     }
   }
   return lines;
+}
+
+void apply_component_sets(const std::vector<std::string>& sets, HostSpec& host) {
+  for (const std::string& set : sets) {
+    const size_t eq = set.find('=');
+    const size_t dot = set.find('.');
+    if (eq == std::string::npos || dot == std::string::npos || dot == 0 || dot > eq || eq < dot + 2) {
+      throw std::invalid_argument("--set " + set + ": expected NAME.key=value (NAME: a component of the host file)");
+    }
+    const std::string name = set.substr(0, dot);
+    const std::string key = set.substr(dot + 1, eq - dot - 1);
+    YAML::Node value;
+    try {
+      value = parse_yaml(set.substr(eq + 1), "--set " + set);
+    } catch (const std::runtime_error& e) {
+      throw std::invalid_argument("--set " + set + ": the value is not YAML: " + e.what());
+    }
+    bool found = false;
+    std::string names;
+    for (ComponentSpec& c : host.components) {
+      names += (names.empty() ? "" : ", ") + c.name;
+      if (c.name == name) {
+        if (!c.params || !c.params.IsMap()) {
+          c.params = YAML::Node(YAML::NodeType::Map);
+        }
+        c.params[key] = value;
+        c.origin += " (with --set " + set + ")";
+        found = true;
+      }
+    }
+    if (!found) {
+      throw std::invalid_argument("--set " + set + ": no component named '" + name + "' in the host file (" +
+                                  names + ")");
+    }
+  }
 }
 
 }  // namespace poise::runtime

@@ -123,8 +123,14 @@ void register_run_commands(CLI::App& app) {
       "run", "Run drivers and components in one process from a host file (see config/hosts/)");
   run->add_option("host", *host_path, "Host file (YAML)");
   run->add_flag("--list", *list, "List the component types and exit");
+  auto run_sets = std::make_shared<std::vector<std::string>>();
+  run->add_option("--set", *run_sets,
+                  "NAME.key=VALUE: change a parameter of the host's component NAME (as in its params "
+                  "map; VALUE is YAML, e.g. pkf.declination_deg=3.4); repeatable")
+      ->allow_extra_args(false)
+      ->type_name("NAME.KEY=VALUE");
   add_run_options(run, *options);
-  run->callback([options, host_path, list] {
+  run->callback([options, host_path, list, run_sets] {
     if (*list) {
       for (const auto& [name, type] : runtime::ComponentRegistry::instance().types()) {
         std::printf("%-18s %s\n", name.c_str(), type.description.c_str());
@@ -134,7 +140,13 @@ void register_run_commands(CLI::App& app) {
     if (host_path->empty()) {
       throw Error("poise run needs a host file (e.g. config/hosts/robot.yaml)", kUsageExitCode);
     }
-    run_host(runtime::load_host_file(*host_path), *options);
+    runtime::HostSpec host = runtime::load_host_file(*host_path);
+    try {
+      runtime::apply_component_sets(*run_sets, host);
+    } catch (const std::invalid_argument& e) {
+      throw Error(e.what(), kUsageExitCode);
+    }
+    run_host(host, *options);
   });
 
   // One `poise <component>` command per component type, to run it alone (one process each).

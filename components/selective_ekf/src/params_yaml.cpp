@@ -175,6 +175,7 @@ SelectiveEkfParams load_selective_ekf_params(const std::string& path) {
       {"max_gyro_rps", d(p.limits.max_gyro_rps)},
       {"max_accel_mps2", d(p.limits.max_accel_mps2)},
       {"max_mag_ut", d(p.limits.max_mag_ut)},
+      {"use_magnetometer", [&p](const YAML::Node& n) { p.use_magnetometer = read_magnetometer_use(n); }},
       {"gauss_newton",
        [&](const YAML::Node& n) {
          if (!n.IsMap()) {

@@ -708,7 +708,7 @@ void SelectiveEkf::preprocess(ImuInput& in) {
 }
 
 bool SelectiveEkf::update_imu(const ImuSample& s) {
-  const SampleCheck c = check_imu_sample(s, last_imu_stamp_ns_, p_.limits, rejections_);
+  const SampleCheck c = check_imu_sample(s, last_imu_stamp_ns_, p_.limits, rejections_, p_.use_magnetometer);
   if (anchor_.reanchor(c, s.stamp_ns, p_.limits.max_dt_s)) {
     // Confirmed time jump: keep the state, restart time here; the history cannot span it.
     last_imu_stamp_ns_ = s.stamp_ns;
@@ -724,7 +724,8 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
   in.stamp_ns = s.stamp_ns - imu_delay_ns_;  // state time: when the measured motion happened
   in.gyro = s.gyro_rps;
   in.accel = s.accel_mps2;
-  in.mag = s.mag_ut;
+  // switched off (use_magnetometer: false): not even its value goes in, as from a 6-axis sensor
+  in.mag = p_.use_magnetometer == MagnetometerUse::kOff ? Eigen::Vector3d::Zero() : s.mag_ut;
   in.has_mag = c.mag_ok;
   const bool split = p_.imu_measurement == ImuMeasurement::kSplit;
   if (c.mag_ok) {

@@ -393,6 +393,7 @@ SimSample SensorSimulator::next() {
                    noise3(n.sigma_accel_mps2);
   imu.mag_ut = r_wb.transpose() * (tr.mag_earth_world_ut + tr.mag_disturbance_world_ut) +
                noise3(n.sigma_mag_ut);
+  imu.has_mag = true;  // the simulated sensor is 9-axis
   imu.has_pressure = cfg_.has_pressure;
   if (cfg_.has_pressure) {
     imu.pressure_pa = isa_pressure_pa(tr.altitude_m) + n.baro_drift_pa_per_s * t_s_ +

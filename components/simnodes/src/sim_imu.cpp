@@ -102,6 +102,7 @@ class SimImu : public runtime::Component {
       line.accel_mps2 = s.imu.accel_mps2;
       line.gyro_rps = s.imu.gyro_rps;
       line.mag_ut = s.imu.mag_ut;
+      line.has_mag = s.imu.has_mag;
       line.has_pressure = s.imu.has_pressure;
       line.pressure_pa = s.imu.pressure_pa;
       line.has_temperature = s.imu.has_temperature;

@@ -26,6 +26,15 @@ VehicleParams load_vehicle_params(const std::string& path) {
   r.get("gravity_mps2", p.gravity_mps2);
   r.get("max_dt_s", p.max_dt_s);
   r.get("mag_norm_tolerance", p.mag_norm_tolerance);
+  YAML::Node use_mag;
+  r.get("use_magnetometer", use_mag);
+  if (!use_mag.IsNull()) {  // given
+    try {
+      p.use_magnetometer = read_magnetometer_use(use_mag);
+    } catch (const YAML::Exception&) {
+      r.fail("use_magnetometer", "must be auto, true or false (got '" + YAML::Dump(use_mag) + "')");
+    }
+  }
   {
     YamlParamReader limits = r.child("limits");
     limits.get("max_yaw_rate_rps", p.max_yaw_rate_rps);

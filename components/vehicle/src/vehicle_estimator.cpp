@@ -216,7 +216,8 @@ bool VehicleEstimator::update(const VehicleSample& s) {
   imu.mag_ut = s.mag_ut;
   imu.has_gyro = imu.has_accel = true;
   imu.has_mag = s.has_mag;
-  const SampleCheck c = check_imu_sample(imu, s_.have_stamp ? s_.last_stamp_ns : -1, limits_, s_.rejects.samples);
+  const SampleCheck c = check_imu_sample(imu, s_.have_stamp ? s_.last_stamp_ns : -1, limits_, s_.rejects.samples,
+                                         params_.use_magnetometer);
   if (s_.anchor.reanchor(c, s.stamp_ns, limits_.max_dt_s)) {
     s_.last_stamp_ns = s.stamp_ns;  // restart time after a confirmed jump; the state is kept
   }
@@ -240,11 +241,13 @@ bool VehicleEstimator::update(const VehicleSample& s) {
   }
   bool mag_ok = c.mag_ok;
   if (!mag_ok) {
-    if (s.has_mag) {
+    if (c.mag_reject != RejectReason::kCount) {
       s_.mag.mark_rejected(to_string(c.mag_reject));
     } else {
-      ++s_.rejects.missing_mag;
-      s_.mag.mark_not_available("no_sample");
+      if (params_.use_magnetometer != MagnetometerUse::kOff) {
+        ++s_.rejects.missing_mag;  // not when switched off (use_magnetometer: false)
+      }
+      s_.mag.mark_not_available(c.mag_absent);
     }
   } else {
     // The disturbance test as a gate: |B| - |H| against tolerance |H| (uT).

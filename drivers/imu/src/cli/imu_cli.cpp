@@ -208,6 +208,7 @@ std::string make_line(const ImuSample& s, uint32_t seq, uint32_t t_us, bool raw_
     r.accel_mps2 = s.accel_mps2;
     r.gyro_rps = s.gyro_rps;
     r.mag_ut = s.mag_ut;
+    r.has_mag = s.has_mag;
     r.has_pressure = s.has_pressure;
     r.pressure_pa = s.pressure_pa;
     r.has_temperature = s.has_temperature;
@@ -225,6 +226,7 @@ std::string make_line(const ImuSample& s, uint32_t seq, uint32_t t_us, bool raw_
     c.gyro[u] = to_counts(s.gyro_rps(i), k.gyro_lsb_per_dps * 180.0 / kPi);
     c.mag[u] = to_counts(s.mag_ut(i), k.mag_lsb_per_gauss / 100.0);
   }
+  c.has_mag = s.has_mag;
   c.has_pressure = s.has_pressure;
   c.pressure_pa = static_cast<int32_t>(std::lround(s.pressure_pa));
   c.has_temperature = s.has_temperature;

@@ -403,8 +403,9 @@ void add_bench_imu(CLI::App& app) {
   cmd->add_flag("--latency", o->latency, "Also measure the end-to-end latency through `poise imu`");
   cmd->add_option("--rate", o->rate_hz, "Line rate for --latency, Hz")->capture_default_str()
       ->check(CLI::Range(1.0, 5000.0));
-  cmd->add_option("--seconds", o->seconds, "Duration of the --latency run, s")->capture_default_str()
+  cmd->add_option("--duration", o->seconds, "Duration of the --latency run, s")->capture_default_str()
       ->check(CLI::Range(0.5, 600.0));
+  add_deprecated_alias(cmd, "--seconds", "--duration", &o->seconds)->check(CLI::Range(0.5, 600.0));
   add_domain_option(cmd, &o->domain);
   cmd->callback([o] {
     bench_parser(*o);

@@ -86,6 +86,9 @@ void require_one_of(CLI::App* sub, std::vector<CLI::Option*> options);
 CLI::App* subcommand_group(CLI::App& parent, const std::string& name,
                            const std::string& description);
 
+/// Today's date in UTC, YYYY-MM-DD (the default date of the magnetic model, poise/core/north.h).
+std::string utc_today();
+
 /// True once SIGINT or SIGTERM has been received (after install_stop_handlers()).
 bool stop_requested();
 /// Installs SIGINT/SIGTERM handlers that set stop_requested(); idempotent.

@@ -28,6 +28,7 @@ enum class RejectReason : uint8_t {
   kStampOutOfRange,  ///< stamp < 0 or beyond kMaxStampNs (no sensor clock reads that)
   kNonFinitePressure,
   kPressureOutOfRange,  ///< static pressure outside the barometer's plausible range
+  kNoMagnetometer,   ///< use_magnetometer: true, and the sample carries no magnetometer
   kCount
 };
 
@@ -48,6 +49,7 @@ inline const char* to_string(RejectReason r) {
     case RejectReason::kMagOutOfRange: return "mag_out_of_range";
     case RejectReason::kNonFinitePressure: return "non_finite_pressure";
     case RejectReason::kPressureOutOfRange: return "pressure_out_of_range";
+    case RejectReason::kNoMagnetometer: return "no_magnetometer";
     case RejectReason::kCount: break;
   }
   return "unknown";
@@ -76,6 +78,39 @@ struct RejectCounters {
   }
 };
 
+/// Whether an attitude filter uses the magnetometer (`use_magnetometer` in every attitude
+/// filter's configuration):
+///   kAuto      (`auto`, the default) when the sample carries one (ImuSample::has_mag);
+///   kRequired  (`true`) every sample must carry one: a sample without is refused whole, counted
+///              as no_magnetometer and reported rejected for every source, never used silently;
+///   kOff       (`false`) never: 6-axis even when the sample carries one (its magnetometer is
+///              neither checked nor counted; reported not available, "use_magnetometer_false").
+enum class MagnetometerUse : uint8_t { kAuto = 0, kRequired, kOff };
+
+/// The configuration spelling: "auto", "true", "false".
+inline const char* to_string(MagnetometerUse u) {
+  switch (u) {
+    case MagnetometerUse::kAuto: return "auto";
+    case MagnetometerUse::kRequired: return "true";
+    case MagnetometerUse::kOff: return "false";
+  }
+  return "auto";
+}
+
+/// Parses "auto", "true" or "false" (exactly); false for anything else.
+inline bool parse_magnetometer_use(const std::string& text, MagnetometerUse& out) {
+  if (text == "auto") {
+    out = MagnetometerUse::kAuto;
+  } else if (text == "true") {
+    out = MagnetometerUse::kRequired;
+  } else if (text == "false") {
+    out = MagnetometerUse::kOff;
+  } else {
+    return false;
+  }
+  return true;
+}
+
 /// Limits for check_imu_sample().
 struct SampleLimits {
   double min_accel_norm_mps2 = 0.5;  ///< below: "zero" accelerometer (free fall is not usable)
@@ -99,6 +134,9 @@ struct SampleCheck {
   /// or absent); the reasons the cores report per source.
   RejectReason reject = RejectReason::kCount;
   RejectReason mag_reject = RejectReason::kCount;
+  /// Why no magnetometer was checked (mag_reject kCount and !mag_ok): none in the sample
+  /// ("no_sample") or switched off by use_magnetometer: false ("use_magnetometer_false").
+  const char* mag_absent = "no_sample";
 };
 
 /// One stamp against the previous accepted one: the time check every estimator core shares.
@@ -128,9 +166,11 @@ constexpr int64_t kMaxStampNs = int64_t{1} << 62;
 
 /// Validates `s`; counts every problem found in `counters`. `last_stamp_ns` < 0 means "no
 /// previous sample". Non-monotonic stamps are rejected; a gap above max_dt_s is rejected
-/// (counted) with reanchor = true. When to restart time after either: StampAnchor.
+/// (counted) with reanchor = true. When to restart time after either: StampAnchor. `mag_use`:
+/// the filter's use_magnetometer (MagnetometerUse above).
 inline SampleCheck check_imu_sample(const ImuSample& s, int64_t last_stamp_ns,
-                                    const SampleLimits& lim, RejectCounters& counters) {
+                                    const SampleLimits& lim, RejectCounters& counters,
+                                    MagnetometerUse mag_use = MagnetometerUse::kAuto) {
   SampleCheck out;
   if (s.stamp_ns < 0 || s.stamp_ns > kMaxStampNs) {  // keeps every stamp difference in int64
     out.reject = RejectReason::kStampOutOfRange;
@@ -144,6 +184,11 @@ inline SampleCheck check_imu_sample(const ImuSample& s, int64_t last_stamp_ns,
   }
   if (!s.has_accel) {
     out.reject = RejectReason::kMissingAccel;
+    counters.add(out.reject);
+    return out;
+  }
+  if (!s.has_mag && mag_use == MagnetometerUse::kRequired) {
+    out.reject = RejectReason::kNoMagnetometer;
     counters.add(out.reject);
     return out;
   }
@@ -186,7 +231,9 @@ inline SampleCheck check_imu_sample(const ImuSample& s, int64_t last_stamp_ns,
   }
   out.dt_s = step.dt_s;
   out.accept = true;
-  if (s.has_mag) {
+  if (mag_use == MagnetometerUse::kOff) {
+    out.mag_absent = "use_magnetometer_false";
+  } else if (s.has_mag) {
     if (!s.mag_ut.allFinite()) {
       out.mag_reject = RejectReason::kNonFiniteMag;
       counters.add(out.mag_reject);

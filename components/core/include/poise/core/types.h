@@ -28,10 +28,13 @@ struct ImuSample {
   double temperature_c = 0.0;       ///< sensor temperature, C (valid iff has_temperature)
   bool has_accel = true;
   bool has_gyro = true;
-  /// true by default (a 9-axis IMU): set false for a 6-axis IMU, whose zero magnetometer would
-  /// otherwise be rejected (and counted as zero_mag) on every sample. Without a magnetometer every
-  /// attitude filter starts at ZYX yaw 0 (quat_tilt_yaw0 in attitude.h).
-  bool has_mag = true;
+  /// The sample carries a magnetometer reading (mag_ut valid). false by default: a sample has a
+  /// magnetometer only when its source says so (the serial driver per line, the simulator, the DDS
+  /// conversion from the wire's valid.mag, BROAD files). Without one (6-axis) every attitude filter
+  /// starts at ZYX yaw 0 (quat_tilt_yaw0 in attitude.h) and integrates the gyro about the vertical;
+  /// each filter's use_magnetometer (auto | true | false, MagnetometerUse in sample_check.h)
+  /// decides what it does with one.
+  bool has_mag = false;
   bool has_pressure = false;
   bool has_temperature = false;
 };

@@ -3,6 +3,8 @@
 // link yaml-cpp themselves (the estimator cores keep it a private dependency).
 #pragma once
 
+#include "poise/core/sample_check.h"
+
 #include <yaml-cpp/yaml.h>
 
 #include <cstddef>
@@ -83,6 +85,18 @@ YAML::Node load_yaml_file(const std::string& path, const std::string& what) {
   }
   check_yaml_tree<Error>(root, path);
   return root;
+}
+
+/// `use_magnetometer: auto | true | false` (MagnetometerUse, sample_check.h), the same key in every
+/// attitude filter's configuration. Anything else throws YAML::Exception "must be auto, true or
+/// false (got '...')" (the loaders add the file and the key).
+inline MagnetometerUse read_magnetometer_use(const YAML::Node& n) {
+  MagnetometerUse u = MagnetometerUse::kAuto;
+  if (!n.IsScalar() || !parse_magnetometer_use(n.Scalar(), u)) {
+    throw YAML::Exception(n.Mark(), "use_magnetometer must be auto, true or false (got '" +
+                                        (n.IsScalar() ? n.Scalar() : YAML::Dump(n)) + "')");
+  }
+  return u;
 }
 
 /// Reads the keys of one YAML mapping into fields, remembering which keys are known so that

@@ -36,6 +36,11 @@ struct GaussNewtonParams {
   double dip_deg = std::nan("");   ///< NaN: learn at start-up; else the configured dip, deg
   int startup_samples = 50;        ///< samples averaged to learn the dip
   SampleLimits limits;             ///< input validation
+  /// `use_magnetometer`: auto (default) or true. The solution needs the field in every sample, so
+  /// a sample without a magnetometer is refused either way: auto reports its accelerometer rejected
+  /// "no_mag" (not counted), true counts it no_magnetometer. false (6-axis) is refused by
+  /// validate(): this filter cannot run without a magnetometer.
+  MagnetometerUse use_magnetometer = MagnetometerUse::kAuto;
   /// Throws std::invalid_argument naming the key and its range (ParamCheck); `filter` names the
   /// section in messages.
   void validate(const char* filter = "gauss_newton") const;

@@ -45,10 +45,13 @@
 //   (docs/ESTIMATORS.md). The Gauss-Newton baseline: 34.4 / 62.4 deg.
 // Bad input (NaN, zero vectors, non-monotonic stamps, gaps) is rejected and counted; the state is
 // untouched (a gap re-anchors time).
-// 6-axis input (ImuSample::has_mag false, the default being true: set it for an IMU without a
-// magnetometer): KF2 never starts and heading is not observable; the output's yaw is ZYX 0 for
-// the current tilt (quat_tilt_yaw0, the same start as every filter) and stays 0: this filter does
-// not integrate the gyro about the vertical without a field to correct it (the selective EKF does).
+// 6-axis input (ImuSample::has_mag false, the default: a sample has a magnetometer only when its
+// source says so; or use_magnetometer: false): heading is not observable. The filter starts at
+// ZYX yaw 0 for the accelerometer's tilt (quat_tilt_yaw0, the same start as every filter) and
+// KF2 then carries that north (horizontal, no dip) propagated by the gyro and tilt-corrected like
+// sX', never corrected by a field: the heading follows the gyro, drifting with its bias (as the
+// selective EKF's). The first magnetometer sample (use_magnetometer: auto) restarts KF2 on the
+// field. use_magnetometer: true refuses every sample without a magnetometer (no_magnetometer).
 #pragma once
 
 #include "poise/core/attitude.h"
@@ -186,6 +189,10 @@ struct ParallelKfParams {
   double mag_soft_weight = 0.0;
 
   SampleLimits limits;              ///< input validation
+  /// `use_magnetometer`: auto (default) = the magnetometer when the sample carries one
+  /// (ImuSample::has_mag); false = 6-axis even when it does (heading from the gyro alone); true =
+  /// every sample must carry one (a sample without is refused, counted no_magnetometer).
+  MagnetometerUse use_magnetometer = MagnetometerUse::kAuto;
 
   /// The faithful paper configuration (Table 1 noise, c_a = c_d = 0.1 per step, no extensions).
   static ParallelKfParams paper();
@@ -231,6 +238,8 @@ struct ParallelKfState {
   DirectionKf kf2;
   bool initialized = false;
   bool heading_initialized = false;
+  /// 6-axis: KF2 holds north at the start's yaw 0 propagated by the gyro, not a field direction
+  bool heading_from_gyro = false;
   int64_t last_stamp_ns = -1;
   Eigen::Vector3d prev_gyro{0, 0, 0};  ///< bias-corrected s_G at k-1
   RejectCounters rejections;
@@ -315,8 +324,9 @@ class ParallelKf {
   ///   mag    KF2's heading update: innovation [|s_M| - m (uT), dip - alpha (rad)], variance the
   ///          squared gate tolerances, so test ratio > 1 <=> outside the gate. Rejected
   ///          "disturbed" (gated), fused "forced_after_max_reject" (used although gated, after
-  ///          mag_max_reject_s), not available "learning_field" / "no_sample", rejected with the
-  ///          sample check's reason (non_finite_mag, zero_mag) or the whole sample's.
+  ///          mag_max_reject_s), not available "learning_field" / "no_sample" /
+  ///          "use_magnetometer_false", rejected with the sample check's reason (non_finite_mag,
+  ///          zero_mag) or the whole sample's (no_magnetometer with use_magnetometer: true).
   /// Innovations and test ratios are computed here, on demand (update() only records decisions).
   [[nodiscard]] SourceReports sources() const;
 

@@ -32,6 +32,7 @@ namespace poise::record {
 struct ProcessFilter {
   std::string name;  ///< instance name: output topic suffix, filter_id and sensor_id
   std::unique_ptr<AttitudeFilter> filter;
+  NorthReference north;  ///< outputs in true ENU (frame id enu_true) when a declination is set
 };
 
 /// A component run offline: its step and node parameters (diagnostics_every, input_deadline_s).

@@ -42,6 +42,12 @@ HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std
 /// Applies a `topics:` map onto names; throws ConfigError on unknown keys.
 void apply_topic_overrides(const YAML::Node& map, const std::string& origin, dds::TopicNames& names);
 
+/// Applies `--set NAME.key=VALUE` assignments (VALUE read as YAML: numbers, lists, maps,
+/// strings) to the params of the host's component NAME (`poise run`, `poise process`). Throws
+/// std::invalid_argument naming the assignment when it is not NAME.key=VALUE, VALUE is not YAML
+/// or no component is called NAME (the message lists them).
+void apply_component_sets(const std::vector<std::string>& sets, HostSpec& host);
+
 /// Loads a YAML parameter file as a map (ConfigError if missing or not a map).
 YAML::Node load_param_file(const std::string& path);
 

@@ -57,8 +57,8 @@
 //     before its capture stamp, predicts to the capture stamp, fuses, and replays the later events
 //     (IMU samples and other vision measurements, in stamp order). Out-of-order measurements are
 //     handled the same way (counted); older than the history -> rejected (too_old).
-//   6-axis input (ImuSample::has_mag false; the default is true, set it for an IMU without a
-//     magnetometer): the first attitude is the accelerometer's tilt with ZYX yaw 0
+//   6-axis input (ImuSample::has_mag false, the default: a sample has a magnetometer only when its
+//     source says so; or use_magnetometer: false): the first attitude is the accelerometer's tilt with ZYX yaw 0
 //     (quat_tilt_yaw0, the same start as every filter); the gyro then carries the heading (drifting
 //     with the bias) unless vision fixes it.
 #pragma once
@@ -228,6 +228,10 @@ struct SelectiveEkfParams {
   double init_sigma_velocity_mps = 1.0;
 
   SampleLimits limits;                 ///< IMU input validation (NaN, zero, dt)
+  /// `use_magnetometer`: auto (default) = the magnetometer (heading, q_imu) when the sample carries
+  /// one (ImuSample::has_mag); false = 6-axis even when it does (the gyro carries the heading); true
+  /// = every sample must carry one (a sample without is refused, counted no_magnetometer).
+  MagnetometerUse use_magnetometer = MagnetometerUse::kAuto;
   /// The q_imu source. 2 iterations from the previous estimate: on BROAD the benchmark figures are
   /// identical to 5 iterations (3 decimals) at ~60 % of the Gauss-Newton cost.
   GaussNewtonParams gauss_newton = [] {

@@ -97,6 +97,10 @@ struct VehicleParams {
   double max_accel_mps2 = SampleLimits{}.max_accel_mps2;  ///< |[a_x, a_y]| above: sample rejected, m/s^2
   double max_mag_ut = SampleLimits{}.max_mag_ut;          ///< |B| above: magnetometer rejected, uT
   double mag_norm_tolerance = 0.5;             ///< |B| outside (1 +- this) |H| is rejected as disturbed
+  /// `use_magnetometer`: auto (default) = B when the sample carries one (has_mag); false = never
+  /// (yaw from r alone, not counted as missing_mag); true = every sample must carry one (a sample
+  /// without is refused, counted no_magnetometer).
+  MagnetometerUse use_magnetometer = MagnetometerUse::kAuto;
 
   /// Throws std::invalid_argument naming the first key out of range, its range and unit (ParamCheck).
   void validate() const;
@@ -113,7 +117,7 @@ struct VehicleSample {
   double accel_lat_mps2 = 0.0;    ///< a_y: specific force along body y (left), m/s^2
   double yaw_rate_rps = 0.0;      ///< r: body-z angular rate, rad/s
   Eigen::Vector3d mag_ut{0.0, 0.0, 0.0};  ///< B_m: magnetometer, body frame, uT
-  bool has_mag = true;
+  bool has_mag = false;           ///< B_m valid: only when the source says so (as ImuSample::has_mag)
   double speed_mps = 0.0;         ///< v: forward speed over ground, m/s (>= 0)
   bool has_speed = true;
 };
