@@ -228,7 +228,7 @@ TEST(Process, GivenSamplesOutOfStampOrderWhenProcessedThenTheyRunInStampOrderHol
   for (const ProcessOrder order : {ProcessOrder::kStamp, ProcessOrder::kRecorded}) {
     std::vector<int64_t> seen;
     std::vector<ProcessFilter> filters;
-    filters.push_back({"order", std::make_unique<OrderFilter>(&seen)});
+    filters.push_back({"order", std::make_unique<OrderFilter>(&seen), {}});
     ProcessOptions o;
     o.input = input;
     o.output = dir + "/out.mcap";
