@@ -44,6 +44,26 @@ void register_components() {
   }
 }
 
+/// A ros2_bridge component named "ros2", started on its own domain (a lease) and participant
+/// with `params` (YAML): the setup every bridge test shares.
+struct StartedBridge {
+  StartedBridge(const std::string& participant_name, const std::string& params)
+      : participant({lease.id(), "", "", participant_name}), context{participant, dds::TopicNames{}} {
+    register_components();
+    runtime::ComponentSpec spec;
+    spec.type = "ros2_bridge";
+    spec.name = "ros2";
+    spec.origin = "test";
+    spec.params = YAML::Load(params);
+    bridge = runtime::ComponentRegistry::instance().find("ros2_bridge")->create(spec, context);
+    bridge->start();
+  }
+  testing::DomainLease lease;
+  dds::Participant participant;
+  runtime::HostContext context;
+  std::unique_ptr<runtime::Component> bridge;
+};
+
 // --- the poise messages of round k (stamps in sensor mode: header.stamp = stamp_ns) ---
 constexpr int64_t kT0 = 1'000'000'000;     // 1 s
 constexpr int64_t kPeriod = 20'000'000;    // 20 ms
@@ -122,19 +142,12 @@ constexpr double kRotTol = 1e-12;  // one rotation of O(1) vectors, rounding onl
 constexpr int kPerTopic = 10;
 
 TEST(Ros2Bridge, CycloneReadsEveryBridgedOutputAsTheRos2TypeFieldForField) {
-  register_components();
-  testing::DomainLease lease;
-  dds::Participant participant({lease.id(), "", "", "ros2_bridge_test"});
-  runtime::HostContext context{participant, dds::TopicNames{}};
-  runtime::ComponentSpec spec;
-  spec.type = "ros2_bridge";
-  spec.name = "ros2";
-  spec.origin = "test";
-  spec.params = YAML::Load(
-      "{namespace: /poise, world_frame: map, body_frame: imu_link, stamps: sensor,"
-      " out: {attitude: [pkf], pose: [sekf], imu: true, altitude: true, tf: attitude/pkf}}");
-  auto bridge = runtime::ComponentRegistry::instance().find("ros2_bridge")->create(spec, context);
-  bridge->start();
+  StartedBridge started("ros2_bridge_test",
+                        "{namespace: /poise, world_frame: map, body_frame: imu_link, stamps: sensor,"
+                        " out: {attitude: [pkf], pose: [sekf], imu: true, altitude: true, tf: attitude/pkf}}");
+  testing::DomainLease& lease = started.lease;
+  dds::Participant& participant = started.participant;
+  auto& bridge = started.bridge;
   dds::Writer<msg::ImuSamplePubSubType> imu(participant, "imu", dds::QosKind::kSensor);
   dds::Writer<msg::AttitudeEstimatePubSubType> att(participant, "attitude/pkf");
   dds::Writer<msg::PoseEstimatePubSubType> pose(participant, "pose/sekf");
@@ -253,17 +266,9 @@ TEST(Ros2Bridge, CycloneReadsEveryBridgedOutputAsTheRos2TypeFieldForField) {
 // NaN or a stamp beyond ROS's int32 seconds is never written to ROS 2, it is counted; the good
 // ones around it go out. Oracle: what the test sends. A Fast DDS reader of the ROS type watches.
 TEST(Ros2Bridge, GivenNonFiniteOrUnstampableEstimatesThenNothingNonFiniteReachesRos2AndEachIsCounted) {
-  register_components();
-  testing::DomainLease lease;
-  dds::Participant participant({lease.id(), "", "", "ros2_bridge_hostile"});
-  runtime::HostContext context{participant, dds::TopicNames{}};
-  runtime::ComponentSpec spec;
-  spec.type = "ros2_bridge";
-  spec.name = "ros2";
-  spec.origin = "test";
-  spec.params = YAML::Load("{stamps: sensor, out: {attitude: [pkf], imu: false, tf: attitude/pkf}}");
-  auto bridge = runtime::ComponentRegistry::instance().find("ros2_bridge")->create(spec, context);
-  bridge->start();
+  StartedBridge started("ros2_bridge_hostile", "{stamps: sensor, out: {attitude: [pkf], imu: false, tf: attitude/pkf}}");
+  dds::Participant& participant = started.participant;
+  auto& bridge = started.bridge;
   std::mutex mutex;
   std::vector<ros2::ros_sensor::Imu_> got;
   dds::Reader<ros2::ros_sensor::Imu_PubSubType> ros(
