@@ -93,6 +93,7 @@ TEST(CliGrammar, EverySubcommandsSharedOptionsHaveOneNameAndMeaning) {
       {"--duration", "FLOAT"},
       {"--imu-topic", "topic"},
       {"--topic", "key=name"},
+      {"--set", "KEY=VALUE"},
   };
   // Spellings retired by the grammar (still accepted, hidden, with a deprecation note).
   const std::vector<std::string> retired{"--out", "--profile", "--write", "--topics", "--seconds"};
@@ -116,7 +117,7 @@ TEST(CliGrammar, EverySubcommandsSharedOptionsHaveOneNameAndMeaning) {
     }
   }
   // The table's options are really shared (else the check above checks nothing).
-  for (const char* shared : {"--output", "--out-dir", "--dds-profile", "--domain", "--json", "--duration"}) {
+  for (const char* shared : {"--output", "--out-dir", "--dds-profile", "--domain", "--json", "--duration", "--set"}) {
     EXPECT_GE(uses[shared], 2) << shared;
   }
 }

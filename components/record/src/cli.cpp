@@ -464,7 +464,7 @@ void add_record_commands(CLI::App& app) {
                           "the host's topic names)")
       ->check(CLI::ExistingFile);
   process_cmd->add_option("--set", proc->sets,
-                          "NAME.key=VALUE: change a parameter of the host's component NAME (as in "
+                          "NAME.KEY=VALUE: change a parameter of the host's component NAME (as in "
                           "its params map; VALUE is YAML, e.g. imu_delay_s=0.01, "
                           "q_body_camera=[1,0,0,0], filter_file=other.yaml); for a --filter NAME, and "
                           "KEY=VALUE without NAME for every --filter filter, the north keys "

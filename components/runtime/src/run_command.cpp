@@ -125,7 +125,7 @@ void register_run_commands(CLI::App& app) {
   run->add_flag("--list", *list, "List the component types and exit");
   auto run_sets = std::make_shared<std::vector<std::string>>();
   run->add_option("--set", *run_sets,
-                  "NAME.key=VALUE: change a parameter of the host's component NAME (as in its params "
+                  "NAME.KEY=VALUE: change a parameter of the host's component NAME (as in its params "
                   "map; VALUE is YAML, e.g. pkf.declination_deg=3.4); repeatable")
       ->allow_extra_args(false)
       ->type_name("NAME.KEY=VALUE");
@@ -168,7 +168,11 @@ void register_run_commands(CLI::App& app) {
     sub->add_option("--name", s->name, "Instance name (sensor_id of its outputs; default: " +
                                             type_name + ")");
     sub->add_option("--config", s->config, "Parameter file (YAML map)")->check(CLI::ExistingFile);
-    sub->add_option("--set", s->sets, "Parameter override key=value (repeatable)");
+    sub->add_option("--set", s->sets,
+                    "KEY=VALUE: parameter override, as in a host file's params (VALUE is YAML; e.g. "
+                    "declination_deg=3.4); repeatable")
+        ->allow_extra_args(false)
+        ->type_name("KEY=VALUE");
     sub->add_option("--topic", s->topics, "Topic name override key=name, e.g. imu=imu2 (repeatable)");
     add_dds_profile_option(sub, &s->profile);
     add_deprecated_alias(sub, "--profile", "--dds-profile", &s->profile);
