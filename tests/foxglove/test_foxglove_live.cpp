@@ -492,5 +492,39 @@ TEST(FoxgloveBridge, GivenAStalledClientThenTheEstimatorAndTheOtherClientKeepThe
   EXPECT_LT(rss_max - rss15, kMaxGrowthKib);
 }
 
+// GIVEN `poise demo --foxglove PORT`
+// WHEN it runs
+// THEN it prints the URL to open and serves the demo's estimates to a client on that port; a port
+//      that is not one is a usage error (exit 2).
+TEST(FoxgloveDemo, GivenTheFoxgloveFlagThenTheDemoPrintsTheUrlAndServesItsEstimates) {
+  POISE_REQUIRE_FOXGLOVE_CLIENT();
+  poise::testing::DomainLease lease;
+  const int port = free_port();
+  const std::string dir = temp_dir("demo");
+  poise::testing::Child demo({poise::testing::bin("poise"), "demo", "--foxglove", std::to_string(port), "--duration",
+                              "10", "--plain", "--domain", std::to_string(lease.id()), "--out-dir", dir + "/report"});
+  const std::string url_line = "Foxglove: open ws://";
+  ASSERT_TRUE(poise::testing::wait_until(
+      [&] {
+        const std::string out = demo.output();
+        return out.find(url_line) != std::string::npos && out.find(":" + std::to_string(port) + " ") != std::string::npos;
+      },
+      30s))
+      << demo.output();
+  const auto r = poise::testing::run({poise::testing::find_on_path("node"), client_dir() + "/client.mjs", "decode",
+                                      "ws://127.0.0.1:" + std::to_string(port), dir + "/out.jsonl", dir + "/ready", "20",
+                                      "15", "attitude/parallel_kf"},
+                                     60s);
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto lines = read_lines(dir + "/out.jsonl");
+  ASSERT_GE(lines.size(), 2u) << "no attitude/parallel_kf message from the demo";
+  EXPECT_EQ(lines[1]["topic"], "attitude/parallel_kf");
+  EXPECT_EQ(lines[1]["message"]["filter_id"], "parallel_kf");
+  const auto code = demo.wait_for(60s);
+  EXPECT_TRUE(code.has_value() && *code == 0) << demo.output();
+  const auto bad = poise::testing::run({poise::testing::bin("poise"), "demo", "--foxglove", "70000", "--duration", "1"}, 30s);
+  EXPECT_EQ(bad.exit_code, 2) << bad.output;
+}
+
 }  // namespace
 }  // namespace poise::foxglove
