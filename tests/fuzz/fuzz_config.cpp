@@ -1,5 +1,5 @@
 // Fuzz target for the remaining configuration loaders (issue 19): host files
-// (poise::runtime::parse_host), camera intrinsics (poise and OpenCV FileStorage / ROS camera_info
+// (poise::runtime::parse_host), camera intrinsics (OpenCV calibration YAML / ROS camera_info
 // forms), tag maps and the camera configuration. Invariant: each loader returns or throws a
 // std::exception with a message (ConfigError naming the file and key); no crash, no UB, no foreign
 // exception.

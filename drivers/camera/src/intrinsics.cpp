@@ -3,7 +3,7 @@
 
 #include <yaml-cpp/yaml.h>
 
-#include <opencv2/core/persistence.hpp>
+#include <opencv2/core/mat.hpp>
 
 #include <cmath>
 #include <fstream>
@@ -72,56 +72,83 @@ void fill_from_matrix(CameraIntrinsics& out, const cv::Mat& k, const cv::Mat& d,
   }
 }
 
+// OpenCV's own YAML reader (cv::FileStorage, OpenCV 4.6) loops forever on some malformed files
+// (found by fuzz_config), so calibration files, which come from outside, are read with yaml-cpp:
+// the "%YAML:1.0" first line OpenCV writes is dropped, a matrix is a map {rows, cols, dt, data}
+// (tag !!opencv-matrix).
 CameraIntrinsics parse_opencv(const std::string& text, const std::string& source) {
-  cv::FileStorage fs;
+  std::string body = text;
+  if (body.rfind("%YAML:", 0) == 0) {
+    const std::size_t eol = body.find('\n');
+    body = eol == std::string::npos ? std::string() : body.substr(eol + 1);
+  }
+  YAML::Node root;
   try {
-    fs.open(text, cv::FileStorage::READ | cv::FileStorage::MEMORY | cv::FileStorage::FORMAT_YAML);
-  } catch (const cv::Exception& e) {
+    root = YAML::Load(body);
+  } catch (const YAML::Exception& e) {
     throw ConfigError(source + ": not a valid OpenCV YAML file: " + e.what());
   }
-  if (!fs.isOpened()) {
-    throw ConfigError(source + ": not a valid OpenCV YAML file");
+  if (!root.IsMap()) {
+    throw ConfigError(source + ": not a valid OpenCV YAML file (expected a map of named entries)");
   }
-  auto first_mat = [&fs, &source](std::initializer_list<const char*> keys) {
+  // A camera matrix is 3x3, distortion at most 1x14: a larger side is refused before anything is
+  // allocated, so no file can ask for gigabytes.
+  constexpr int kMaxMatrixSide = 16;
+  auto first_mat = [&root, &source](std::initializer_list<const char*> keys) {
     for (const char* key : keys) {
-      cv::FileNode node = fs[key];
-      if (!node.empty()) {
-        // OpenCV allocates rows x cols before it reads the data: bound them first (a camera
-        // matrix is 3x3, distortion at most 1x14), so no file can ask for gigabytes.
-        constexpr int kMaxMatrixSide = 16;
-        if (node.isMap()) {
-          for (const char* side : {"rows", "cols"}) {
-            const cv::FileNode n = node[side];
-            if (!n.isInt() || static_cast<int>(n) < 0 || static_cast<int>(n) > kMaxMatrixSide) {
-              throw ConfigError(source + ": '" + key + "." + side +
-                                "' must be an integer in [0, " + std::to_string(kMaxMatrixSide) + "]");
-            }
-          }
-        }
-        cv::Mat m;
-        node >> m;
-        return m;
+      const YAML::Node node = root[key];
+      if (!node) {
+        continue;
       }
+      if (!node.IsMap()) {
+        throw ConfigError(source + ": '" + key + "' is not an OpenCV matrix ({rows, cols, dt, data})");
+      }
+      int side[2] = {0, 0};
+      const char* names[2] = {"rows", "cols"};
+      for (int i = 0; i < 2; ++i) {
+        const YAML::Node n = node[names[i]];
+        int v = -1;
+        if (n && n.IsScalar() && YAML::convert<int>::decode(n, v) && v >= 0 && v <= kMaxMatrixSide) {
+          side[i] = v;
+          continue;
+        }
+        throw ConfigError(source + ": '" + key + "." + names[i] + "' must be an integer in [0, " +
+                          std::to_string(kMaxMatrixSide) + "]");
+      }
+      const YAML::Node data = node["data"];
+      if (!data || !data.IsSequence()) {
+        throw ConfigError(source + ": '" + key + "' has no 'data' list");
+      }
+      if (data.size() != static_cast<std::size_t>(side[0] * side[1])) {
+        throw ConfigError(source + ": '" + key + "' declares " + std::to_string(side[0]) + "x" +
+                          std::to_string(side[1]) + " but has " + std::to_string(data.size()) + " values");
+      }
+      cv::Mat m(side[0], side[1], CV_64F);
+      for (int i = 0; i < side[0] * side[1]; ++i) {
+        double v = 0.0;
+        if (!data[static_cast<std::size_t>(i)].IsScalar() ||
+            !YAML::convert<double>::decode(data[static_cast<std::size_t>(i)], v)) {
+          throw ConfigError(source + ": '" + key + "' data[" + std::to_string(i) + "] is not a number");
+        }
+        m.at<double>(i / side[1], i % side[1]) = v;
+      }
+      return m;
     }
     return cv::Mat();
   };
-  auto first_int = [&fs](std::initializer_list<const char*> keys) {
+  auto first_int = [&root](std::initializer_list<const char*> keys) {
     for (const char* key : keys) {
-      cv::FileNode node = fs[key];
-      if (!node.empty() && node.isInt()) {
-        return static_cast<int>(node);
+      const YAML::Node node = root[key];
+      int v = 0;
+      if (node && node.IsScalar() && YAML::convert<int>::decode(node, v)) {
+        return v;
       }
     }
     return 0;
   };
   CameraIntrinsics out;
-  try {
-    fill_from_matrix(out, first_mat({"camera_matrix", "cameraMatrix", "K"}),
-                     first_mat({"distortion_coefficients", "distCoeffs", "dist_coeffs", "D"}),
-                     source);
-  } catch (const cv::Exception& e) {
-    throw ConfigError(source + ": cannot read the camera matrix: " + e.what());
-  }
+  fill_from_matrix(out, first_mat({"camera_matrix", "cameraMatrix", "K"}),
+                   first_mat({"distortion_coefficients", "distCoeffs", "dist_coeffs", "D"}), source);
   out.width_px = first_int({"image_width", "imageWidth", "width"});
   out.height_px = first_int({"image_height", "imageHeight", "height"});
   return out;
