@@ -492,6 +492,41 @@ TEST(FoxgloveBridge, GivenAStalledClientThenTheEstimatorAndTheOtherClientKeepThe
   EXPECT_LT(rss_max - rss15, kMaxGrowthKib);
 }
 
+// GIVEN a bridge serving a topic
+// WHEN the topic's only writer goes away for longer than unadvertise_after_s, then comes back
+// THEN the client is told the channel is gone (unadvertise), then it is advertised again under the
+//      same id with the same topic, encoding and schema.
+TEST(FoxgloveBridge, GivenATopicWhoseWritersLeaveAndReturnThenItIsUnadvertisedAndAdvertisedAgainWithItsId) {
+  POISE_REQUIRE_FOXGLOVE_CLIENT();
+  YAML::Node params(YAML::NodeType::Map);
+  params["unadvertise_after_s"] = 0.5;
+  Live live(params, false);
+  dds::Participant participant(test_participant(live.lease.id()));
+  auto writer = std::make_unique<dds::Writer<msg::ImuSamplePubSubType>>(participant, "imu");
+  ASSERT_TRUE(writer->wait_for_readers(1, kMatchTimeout));
+  const std::string dir = temp_dir("unadvertise");
+  poise::testing::Child client({poise::testing::find_on_path("node"), client_dir() + "/client.mjs", "decode",
+                                live.url(), dir + "/out.jsonl", dir + "/ready", "1000000", "8", "imu"});
+  ASSERT_TRUE(wait_file(dir + "/ready", 30s)) << client.output();
+  writer.reset();  // the only writer of imu leaves
+  std::this_thread::sleep_for(2500ms);
+  writer = std::make_unique<dds::Writer<msg::ImuSamplePubSubType>>(participant, "imu");
+  const auto code = client.wait_for(30s);
+  ASSERT_TRUE(code.has_value() && *code == 0) << client.output();
+  const auto lines = read_lines(dir + "/out.jsonl");
+  ASSERT_FALSE(lines.empty());
+  std::vector<json> imu;
+  for (const auto& c : lines[0]["channels"]) {
+    if (c["topic"] == "imu") {
+      imu.push_back(c);
+    }
+  }
+  ASSERT_EQ(imu.size(), 2u) << lines[0].dump();
+  EXPECT_EQ(imu[0], imu[1]) << "the same id, encoding and schema";
+  ASSERT_EQ(lines[0]["unadvertised"].size(), 1u) << lines[0].dump();
+  EXPECT_EQ(lines[0]["unadvertised"][0], imu[0]["id"]);
+}
+
 // GIVEN `poise demo --foxglove PORT`
 // WHEN it runs
 // THEN it prints the URL to open and serves the demo's estimates to a client on that port; a port

@@ -7,7 +7,7 @@
 //       subscribes to TOPIC... once advertised (writes READY), decodes every message with the
 //       channel's advertised schema, stops after COUNT messages per topic or TIMEOUT_S; OUT gets
 //       one JSON line per message {topic, receive_ns, message} (64-bit integers as strings) and a
-//       first line {serverInfo, channels, statuses}.
+//       first line {serverInfo, channels (every advertisement), unadvertised (ids), statuses}.
 //   node client.mjs malformed URL OUT
 //       sends every kind of malformed client frame over a raw `ws` socket and records the server's
 //       answers; then checks a good FoxgloveClient is still served. OUT: one JSON document.
@@ -52,7 +52,7 @@ async function decode() {
   const [out, ready, countText, timeoutText, ...topics] = args;
   const count = Number(countText);
   const client = connect();
-  const header = { serverInfo: null, channels: [], statuses: [] };
+  const header = { serverInfo: null, channels: [], unadvertised: [], statuses: [] };
   const lines = [];
   const subs = new Map();  // subscription id -> {topic, decode}
   const counts = new Map(topics.map((t) => [t, 0]));
@@ -60,6 +60,7 @@ async function decode() {
   const finished = new Promise((resolve) => (done = resolve));
   client.on("serverInfo", (info) => (header.serverInfo = info));
   client.on("status", (s) => header.statuses.push(s));
+  client.on("unadvertise", (ids) => header.unadvertised.push(...ids));
   client.on("error", (e) => header.statuses.push({ level: "client-error", message: String(e) }));
   client.on("advertise", (channels) => {
     for (const ch of channels) {
