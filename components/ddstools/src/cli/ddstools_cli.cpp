@@ -213,6 +213,10 @@ void run_echo(const EchoOptions& o) {
 struct TopicsOptions {
   int domain = 0;
   double duration_s = 2.0;
+  /// Discovery before the sampling window: Fast DDS announces a participant every 3 s after its
+  /// first few announcements, and a writer was measured taking up to 2.4 s to be seen on an idle
+  /// loopback (longer on a loaded machine), so a shorter wait lists a domain incompletely.
+  double discovery_s = 3.0;
   bool json = false;
 };
 
@@ -238,11 +242,15 @@ void run_topics(const TopicsOptions& o) {
   install_stop_handlers();
   const ddstools::TypeTable& table = type_table();
   TopicObserver observer(observer_options(o.domain, "poise-topics"));
-  std::fprintf(stderr, "poise topics: sampling domain %d for %.1f s\n", o.domain, o.duration_s);
+  std::fprintf(stderr, "poise topics: discovering domain %d for %.1f s, then sampling for %.1f s\n", o.domain,
+               o.discovery_s, o.duration_s);
   std::map<std::string, std::shared_ptr<TopicStats>> stats;  // by topic
   const auto start = Clock::now();
-  const auto end = start + std::chrono::duration_cast<Clock::duration>(
-                               std::chrono::duration<double>(o.duration_s));
+  // Writers are subscribed as soon as they are seen; samples count from the window's start.
+  const auto window = start + std::chrono::duration_cast<Clock::duration>(
+                                  std::chrono::duration<double>(o.discovery_s));
+  const auto end = window + std::chrono::duration_cast<Clock::duration>(
+                                std::chrono::duration<double>(o.duration_s));
   while (Clock::now() < end && !stop_requested()) {
     for (const auto& w : observer.writers()) {
       if (stats.count(w.topic) != 0) {
@@ -253,9 +261,12 @@ void run_topics(const TopicsOptions& o) {
       stats[w.topic] = s;
       try {
         observer.subscribe(w, &table,
-                           [s](const poise::dds::RawSample& sample,
-                               const eprosima::fastdds::dds::SampleInfo& info) {
+                           [s, window](const poise::dds::RawSample& sample,
+                                       const eprosima::fastdds::dds::SampleInfo& info) {
                              const auto now = Clock::now();
+                             if (now < window) {
+                               return;  // still discovering
+                             }
                              std::lock_guard<std::mutex> lock(s->mutex);
                              const auto seq = s->poise_type
                                                   ? poise::dds::header_seq_from_payload(sample.data)
@@ -272,9 +283,12 @@ void run_topics(const TopicsOptions& o) {
                              s->bytes += sample.data.size();
                            },
                            {},
-                           [s](const poise::dds::RawSample& /*sample*/,
-                               const eprosima::fastdds::dds::SampleInfo& /*info*/,
-                               const std::string& /*problem*/) {
+                           [s, window](const poise::dds::RawSample& /*sample*/,
+                                       const eprosima::fastdds::dds::SampleInfo& /*info*/,
+                                       const std::string& /*problem*/) {
+                             if (Clock::now() < window) {
+                               return;  // still discovering
+                             }
                              std::lock_guard<std::mutex> lock(s->mutex);
                              ++s->malformed;
                            });
@@ -654,8 +668,12 @@ void register_ddstools_commands(CLI::App& app) {
   CLI::App* t = app.add_subcommand(
       "topics", "List the topics with writers on a domain, with type, writer count, rate and bandwidth");
   add_domain_option(t, &topics->domain);
-  t->add_option("--duration", topics->duration_s, "Seconds to discover and sample")
+  t->add_option("--duration", topics->duration_s, "Seconds to sample (after --discovery)")
       ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  t->add_option("--discovery", topics->discovery_s,
+                "Seconds to discover writers before sampling (a writer can take up to ~3 s to be seen)")
+      ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   t->add_flag("--json", topics->json, "One JSON document instead of a table");
   t->callback([topics] { run_topics(*topics); });
