@@ -4,9 +4,13 @@
 #include "poise/core/attitude.h"
 #include "poise/eval/filter_registry.h"
 #include "poise/eval/north_filter.h"
+#include "poise/gauss_newton/gauss_newton.h"
+#include "poise/parallel_kf/parallel_kf.h"
+#include "poise/selective_ekf/selective_ekf.h"
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -63,6 +67,57 @@ TEST(NorthFromSets, GivenADeclinationThenTheWrappedFiltersHeadingIsTheMagneticOn
   // without a declination the filter is returned as it is
   AttitudeFilter* raw = magnetic.get();
   EXPECT_EQ(with_north(std::move(magnetic), NorthReference{}).get(), raw);
+}
+
+/// Records what it is seeded with.
+class SeedProbe : public AttitudeFilter {
+ public:
+  bool update(const ImuSample& /*s*/) override { return true; }
+  [[nodiscard]] Eigen::Quaterniond q_world_body() const override { return Eigen::Quaterniond::Identity(); }
+  [[nodiscard]] bool initialized() const override { return true; }
+  void reset() override {}
+  void seed_field(double field_ut, double dip_deg) override {
+    field = field_ut;
+    dip = dip_deg;
+  }
+  double field = -1.0;
+  double dip = -1.0;
+};
+
+TEST(NorthFromSets, GivenALocationThenTheModelsFieldSeedsTheFiltersFieldReferenceUnlessConfigured) {
+  // Oracle: the model's |B| and dip as resolve_north gives them (checked against NOAA's test
+  // values by the geomagnetic tests); a configured reference is the user's and stays.
+  const NorthReference north = north_from_sets({"location={lat_deg: 48.14, lon_deg: 11.58}", "date=2026-11-24"}, "x");
+  ASSERT_FALSE(std::isnan(north.field_ut));
+  ASSERT_FALSE(std::isnan(north.dip_deg));
+  auto probe = std::make_unique<SeedProbe>();
+  SeedProbe* seen = probe.get();
+  const auto wrapped = with_north(std::move(probe), north);
+  EXPECT_EQ(seen->field, north.field_ut);
+  EXPECT_EQ(seen->dip, north.dip_deg);
+
+  ParallelKfFilter pkf;
+  pkf.seed_field(north.field_ut, north.dip_deg);
+  EXPECT_EQ(pkf.core().params().field_magnitude_ut, north.field_ut);
+  EXPECT_EQ(pkf.core().params().dip_deg, north.dip_deg);
+  ParallelKfParams configured;
+  configured.field_magnitude_ut = 48.0;
+  configured.dip_deg = 64.0;
+  ParallelKfFilter kept(configured);
+  kept.seed_field(north.field_ut, north.dip_deg);
+  EXPECT_EQ(kept.core().params().field_magnitude_ut, 48.0);
+  EXPECT_EQ(kept.core().params().dip_deg, 64.0);
+  SelectiveEkfFilter sekf;
+  sekf.seed_field(north.field_ut, north.dip_deg);
+  EXPECT_EQ(sekf.core().params().field_magnitude_ut, north.field_ut);
+  EXPECT_EQ(sekf.core().params().dip_deg, north.dip_deg);
+  GaussNewtonFilter gn;
+  gn.seed_field(north.field_ut, north.dip_deg);
+  EXPECT_EQ(gn.core().params().dip_deg, north.dip_deg);
+  // a declination alone carries no field: nothing changes
+  ParallelKfFilter plain;
+  plain.seed_field(std::nan(""), std::nan(""));
+  EXPECT_TRUE(std::isnan(plain.core().params().field_magnitude_ut));
 }
 
 }  // namespace

@@ -75,6 +75,7 @@ std::unique_ptr<AttitudeFilter> with_north(std::unique_ptr<AttitudeFilter> filte
   if (!north.true_north) {
     return filter;
   }
+  filter->seed_field(north.field_ut, north.dip_deg);  // a location: the model's |B| and dip
   return std::make_unique<NorthFilter>(std::move(filter), north);
 }
 

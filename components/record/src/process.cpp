@@ -32,7 +32,9 @@ std::vector<uint8_t> bytes_of(const std::string& s) { return std::vector<uint8_t
 class FilterStep : public nodes::AttitudeStep {
  public:
   explicit FilterStep(ProcessFilter f)
-      : AttitudeStep(f.name, f.name, f.north), filter_(std::move(f.filter)) {}
+      : AttitudeStep(f.name, f.name, f.north), filter_(std::move(f.filter)) {
+    filter_->seed_field(f.north.field_ut, f.north.dip_deg);  // a location: the model's |B| and dip
+  }
   bool step(const ImuSample& sample) override { return filter_->update(sample); }
   bool attitude(nodes::AttitudeReport& report) const override {
     if (!filter_->initialized()) {

@@ -27,6 +27,11 @@ class AttitudeFilter {
   virtual void reset() = 0;
   /// Rejection counters by reason (for reports); empty when the filter keeps none.
   [[nodiscard]] virtual std::map<std::string, uint64_t> rejections() const { return {}; }
+  /// Seeds the start-up magnetic field reference (|B| uT, dip deg below the horizontal, e.g.
+  /// from the World Magnetic Model at the recording's location) where the filter's own is not
+  /// configured (NaN); a NaN argument changes nothing. Call before the first sample; the filter
+  /// starts again. Filters without a field reference ignore it.
+  virtual void seed_field(double /*field_ut*/, double /*dip_deg*/) {}
 };
 
 }  // namespace poise

@@ -112,15 +112,21 @@ struct NorthReference {
 /// give declination_deg there).
 NorthReference resolve_north(const NorthParams& p, const std::string& today);
 
+/// Writes a field (|B| uT, dip deg; NaN = none) into a filter's start-up reference where the
+/// filter's own value is not configured (NaN).
+inline void seed_field_reference(double field_ut, double dip_deg_in, double& field_magnitude_ut, double& dip_deg) {
+  if (std::isnan(field_magnitude_ut) && !std::isnan(field_ut)) {
+    field_magnitude_ut = field_ut;
+  }
+  if (std::isnan(dip_deg) && !std::isnan(dip_deg_in)) {
+    dip_deg = dip_deg_in;
+  }
+}
+
 /// Writes the model's field into a filter's start-up reference (|B| uT, dip deg) when `north`
 /// carries one and the filter's own value is not configured (NaN).
 inline void seed_field_reference(const NorthReference& north, double& field_magnitude_ut, double& dip_deg) {
-  if (std::isnan(field_magnitude_ut) && !std::isnan(north.field_ut)) {
-    field_magnitude_ut = north.field_ut;
-  }
-  if (std::isnan(dip_deg) && !std::isnan(north.dip_deg)) {
-    dip_deg = north.dip_deg;
-  }
+  seed_field_reference(north.field_ut, north.dip_deg, field_magnitude_ut, dip_deg);
 }
 
 }  // namespace poise

@@ -17,6 +17,7 @@
 
 #include "poise/core/attitude.h"
 #include "poise/core/attitude_filter.h"
+#include "poise/core/north.h"
 #include "poise/core/sample_check.h"
 #include "poise/core/source_report.h"
 #include "poise/core/state_health.h"
@@ -100,6 +101,7 @@ class GaussNewton {
   [[nodiscard]] const GaussNewtonState& state() const { return s_; }
   /// Restores a state taken from state() of a filter with the same parameters.
   void set_state(const GaussNewtonState& state) { s_ = state; }
+  [[nodiscard]] const GaussNewtonParams& params() const { return p_; }
 
  private:
   [[nodiscard]] bool healthy() const;
@@ -117,6 +119,12 @@ class GaussNewtonFilter : public AttitudeFilter {
   [[nodiscard]] Eigen::Quaterniond q_world_body() const override { return gn_.result().q_world_body; }
   [[nodiscard]] bool initialized() const override { return gn_.initialized(); }
   void reset() override { gn_.reset(); }
+  void seed_field(double field_ut, double dip_deg) override {
+    GaussNewtonParams p = gn_.params();
+    double unused_magnitude_ut = 0.0;  // the baseline has no magnitude reference
+    seed_field_reference(field_ut, dip_deg, unused_magnitude_ut, p.dip_deg);
+    gn_ = GaussNewton(p);
+  }
   [[nodiscard]] std::map<std::string, uint64_t> rejections() const override {
     auto m = gn_.rejections().to_map();
     if (gn_.state_resets() != 0) {

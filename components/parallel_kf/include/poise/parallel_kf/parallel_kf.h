@@ -56,6 +56,7 @@
 
 #include "poise/core/attitude.h"
 #include "poise/core/attitude_filter.h"
+#include "poise/core/north.h"
 #include "poise/core/field_gate.h"
 #include "poise/core/lowpass.h"
 #include "poise/core/rest_detector.h"
@@ -374,6 +375,11 @@ class ParallelKfFilter : public AttitudeFilter {
   [[nodiscard]] Eigen::Quaterniond q_world_body() const override { return kf_.q_world_body(); }
   [[nodiscard]] bool initialized() const override { return kf_.initialized(); }
   void reset() override { kf_.reset(); }
+  void seed_field(double field_ut, double dip_deg) override {
+    ParallelKfParams p = kf_.params();
+    seed_field_reference(field_ut, dip_deg, p.field_magnitude_ut, p.dip_deg);
+    kf_ = ParallelKf(p);
+  }
   [[nodiscard]] std::map<std::string, uint64_t> rejections() const override {
     auto m = kf_.rejections().to_map();
     if (kf_.mag_gated_count() != 0) {

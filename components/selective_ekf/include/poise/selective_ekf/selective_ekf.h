@@ -66,6 +66,7 @@
 #include "poise/core/attitude.h"
 #include "poise/core/rest_detector.h"
 #include "poise/core/attitude_filter.h"
+#include "poise/core/north.h"
 #include "poise/core/field_gate.h"
 #include "poise/core/sample_check.h"
 #include "poise/core/source_report.h"
@@ -539,6 +540,11 @@ class SelectiveEkfFilter : public AttitudeFilter {
   [[nodiscard]] Eigen::Quaterniond q_world_body() const override { return ekf_.q_world_body(); }
   [[nodiscard]] bool initialized() const override { return ekf_.initialized(); }
   void reset() override { ekf_.reset(); }
+  void seed_field(double field_ut, double dip_deg) override {
+    SelectiveEkfParams p = ekf_.params();
+    seed_field_reference(field_ut, dip_deg, p.field_magnitude_ut, p.dip_deg);
+    ekf_ = SelectiveEkf(p);
+  }
   [[nodiscard]] std::map<std::string, uint64_t> rejections() const override;
   [[nodiscard]] SelectiveEkf& core() { return ekf_; }
   [[nodiscard]] const SelectiveEkf& core() const { return ekf_; }
