@@ -79,6 +79,25 @@ TEST(Intrinsics, GivenAnOpenCvMatrixDeclaringHugeRowsWhenParsedThenAClearErrorIn
   expect_error_containing(big_cols, "'camera_matrix.cols' must be an integer in [0, 16]");
 }
 
+TEST(Intrinsics, GivenAHostileOpenCvFileWhenParsedThenEachFlawIsAClearErrorNamingIt) {
+  const std::string good =
+      "%YAML:1.0\n---\nimage_width: 640\nimage_height: 480\ncamera_matrix: !!opencv-matrix\n"
+      "   rows: 3\n   cols: 3\n   dt: d\n   data: [ 500.0, 0., 320., 0., 500.0, 240., 0., 0., 1. ]\n";
+  EXPECT_NEAR(parse_intrinsics(good, "good").fx_px, 500.0, kExact);
+  auto with = [&good](const std::string& from, const std::string& to) {
+    std::string t = good;
+    t.replace(t.find(from), from.size(), to);
+    return t;
+  };
+  expect_error_containing(with("image_height: 480\n", "image_height: 480\nimage_width: 320\n"),
+                          "key 'image_width' is given twice");
+  expect_error_containing(with("0., 0., 1. ]", ".nan, 0., 1. ]"), "camera_matrix.data[6]");  // bare .nan refused
+  expect_error_containing(with("0., 0., 1. ]", "\".nan\", 0., 1. ]"), "not of the form");  // must-be-zero entry
+  expect_error_containing(with("500.0, 0., 320.", "1e308, 0., 320."), "fx/fy");
+  expect_error_containing(with("0., 0., 1. ]", "0., 1. ]"), "declares 3x3 but has 8 values");
+  expect_error_containing(with("   data: [", "   data: {a: 1}\n   other: ["), "has no 'data' list");
+}
+
 TEST(Intrinsics, ZeroFocalLengthIsAClearError) {
   expect_error_containing(ros_yaml("0, 0, 320, 0, 0, 240, 0, 0, 1"), "focal lengths must be positive");
 }

@@ -14,6 +14,7 @@
 #include <cmath>
 #include <fstream>
 #include <iterator>
+#include <limits>
 
 namespace poise::record {
 namespace {
@@ -413,6 +414,28 @@ TEST(Process, SelectiveEkfComponentPublishesWhatItsLiveNodePublishes) {
 // yaw 0.5 deg, processed yaw 1 deg (2 deg at seq 7); the processed magnetometer untrusted at
 // seq 3, 4 and 8, vision fused only by the processed filter at seq 5; a live estimate (seq 10)
 // without a processed one; samples every 10 ms.
+/// A file of AttitudeEstimate channels <live_topic>, processed/<live_topic> and truth/attitude,
+/// its chunk clock at `*clock`.
+struct AttitudeFile {
+  AttitudeFile(const std::string& path, const std::string& live_topic, int64_t* clock)
+      : w(open_file_sink(path), options(clock)) {
+    const auto idl = *flattened_idl("poise::msg::AttitudeEstimate");
+    const uint16_t schema = w.add_schema("poise::msg::AttitudeEstimate", "omgidl", {idl.begin(), idl.end()});
+    live = w.add_channel(schema, live_topic, "cdr", {});
+    processed = w.add_channel(schema, "processed/" + live_topic, "cdr", {});
+    truth = w.add_channel(schema, "truth/attitude", "cdr", {});
+  }
+  static WriterOptions options(int64_t* clock) {
+    WriterOptions opt;
+    opt.clock = [clock] { return *clock; };
+    return opt;
+  }
+  McapWriter w;
+  uint16_t live = 0;
+  uint16_t processed = 0;
+  uint16_t truth = 0;
+};
+
 /// Estimates at `step_ns` apart with known differences; times in the expectations scale with it.
 void check_known_differences(int64_t step_ns) {
   constexpr double kDegTolerance = 1e-9;  // angles through quaternions and back, deg
@@ -423,14 +446,11 @@ void check_known_differences(int64_t step_ns) {
   const std::string path = dir + "/compare_" + std::to_string(step_ns) + ".mcap";
   {
     int64_t clock = 0;
-    WriterOptions opt;
-    opt.clock = [&clock] { return clock; };
-    McapWriter w(open_file_sink(path), opt);
-    const auto idl = *flattened_idl("poise::msg::AttitudeEstimate");
-    const uint16_t schema = w.add_schema("poise::msg::AttitudeEstimate", "omgidl", {idl.begin(), idl.end()});
-    const uint16_t live = w.add_channel(schema, "attitude/selective_ekf", "cdr", {});
-    const uint16_t processed = w.add_channel(schema, "processed/attitude/selective_ekf", "cdr", {});
-    const uint16_t truth = w.add_channel(schema, "truth/attitude", "cdr", {});
+    AttitudeFile file(path, "attitude/selective_ekf", &clock);
+    McapWriter& w = file.w;
+    const uint16_t live = file.live;
+    const uint16_t processed = file.processed;
+    const uint16_t truth = file.truth;
     auto put = [&](uint16_t channel, uint32_t seq, double yaw_deg, bool mag, uint32_t sources) {
       const int64_t stamp = 7'000'000'000LL + static_cast<int64_t>(seq) * step_ns;
       clock = stamp;
@@ -497,6 +517,40 @@ TEST(Compare, GivenKnownDifferencesThenRmseLargestAndTrustIntervalsAreExact) {
 
 TEST(Compare, GivenEstimatesSpanningSeveralComparisonHorizonsThenTheFiguresAreTheSame) {
   check_known_differences(4'000'000'000LL);  // 40 s in all: compared in several 10 s windows
+}
+
+TEST(Compare, GivenStampsAtTheEndsOfInt64WhenComparedThenEveryEstimateIsCountedAndNothingOverflows) {
+  // Stamps come from the file: the comparison's time arithmetic must stay inside int64_t (a
+  // sanitizer build turns an overflow into a failure) and count every estimate.
+  const std::string dir = testing::cases_dir("compare_hostile");
+  const std::string path = dir + "/hostile.mcap";
+  const int64_t stamps[] = {std::numeric_limits<int64_t>::min() + 1, -5, 0, 7'000'000'000LL,
+                            std::numeric_limits<int64_t>::max() - 1, std::numeric_limits<int64_t>::max()};
+  {
+    int64_t clock = 0;
+    AttitudeFile file(path, "attitude/x", &clock);
+    McapWriter& w = file.w;
+    const uint16_t live = file.live;
+    const uint16_t processed = file.processed;
+    const uint16_t truth = file.truth;
+    uint32_t seq = 0;
+    for (const int64_t stamp : stamps) {
+      for (const uint16_t channel : {truth, live, processed}) {
+        auto m = testing::make_attitude(seq, stamp);
+        m.sensor_id(channel == truth ? "sim" : "x");
+        const auto bytes = testing::serialize<msg::AttitudeEstimatePubSubType>(m);
+        w.write(channel, seq, static_cast<uint64_t>(seq), 0, bytes.data(), bytes.size());
+      }
+      ++seq;
+    }
+    w.close();
+  }
+  const std::vector<SeriesComparison> all = compare_processed(path);
+  ASSERT_EQ(all.size(), 1U) << format_comparison(all);
+  EXPECT_EQ(all[0].processed, std::size(stamps));
+  EXPECT_EQ(all[0].live, std::size(stamps));
+  EXPECT_EQ(all[0].matched, std::size(stamps));
+  EXPECT_EQ(all[0].rmse, 0.0);
 }
 
 /// Flips one byte inside the records of chunk `k` of `path` (its CRC no longer matches); returns

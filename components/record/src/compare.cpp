@@ -171,9 +171,10 @@ std::vector<SeriesComparison> compare_processed(const std::string& file, const s
   const auto is_processed = [&prefix](const std::string& topic) { return topic.rfind(prefix, 0) == 0; };
   const auto is_truth = [](const std::string& topic) { return topic.rfind("truth/", 0) == 0; };
 
-  // Compares (and drops) the estimates stamped before `before`: processed first (they look up
-  // live and truth), then live (they look up truth), then truth older than the horizon.
-  const auto finalize = [&](int64_t before) {
+  // Compares (and drops) the estimates stamped before `before` (every one with `all`, at the end:
+  // a stamp may be INT64_MAX): processed first (they look up live and truth), then live (they
+  // look up truth), then truth older than the horizon.
+  const auto finalize = [&](int64_t before, bool all) {
     for (auto& [topic, processed] : series) {
       if (!is_processed(topic)) {
         continue;
@@ -184,7 +185,7 @@ std::vector<SeriesComparison> compare_processed(const std::string& file, const s
       const auto truth_it = truth.find(truth_topic);
       for (auto it = processed.samples.begin(); it != processed.samples.end();) {
         const auto& [key, s] = *it;
-        if (s.stamp_ns >= before) {
+        if (!all && s.stamp_ns >= before) {
           ++it;
           continue;
         }
@@ -199,7 +200,7 @@ std::vector<SeriesComparison> compare_processed(const std::string& file, const s
           r.first_stamp = s.stamp_ns;
         }
         ++c.processed;
-        const double t_s = static_cast<double>(s.stamp_ns - r.first_stamp) * 1e-9;
+        const double t_s = (static_cast<double>(s.stamp_ns) - static_cast<double>(r.first_stamp)) * 1e-9;
         if (truth_it != truth.end()) {
           const auto t = truth_it->second.find(std::get<2>(key));
           if (t != truth_it->second.end()) {
@@ -235,7 +236,7 @@ std::vector<SeriesComparison> compare_processed(const std::string& file, const s
       const auto truth_it = truth.find("truth/" + live.kind);
       for (auto it = live.samples.begin(); it != live.samples.end();) {
         const auto& [key, s] = *it;
-        if (s.stamp_ns >= before) {
+        if (!all && s.stamp_ns >= before) {
           ++it;
           continue;
         }
@@ -252,9 +253,12 @@ std::vector<SeriesComparison> compare_processed(const std::string& file, const s
         it = live.samples.erase(it);
       }
     }
+    // stamps come from the file: every difference below is kept inside int64_t
+    const int64_t truth_before =
+        before > std::numeric_limits<int64_t>::min() + kHorizonNs ? before - kHorizonNs : std::numeric_limits<int64_t>::min();
     for (auto& [topic, by_seq] : truth) {
       for (auto it = by_seq.begin(); it != by_seq.end();) {
-        it = it->second.stamp_ns < before - kHorizonNs ? by_seq.erase(it) : std::next(it);
+        it = it->second.stamp_ns < truth_before ? by_seq.erase(it) : std::next(it);
       }
     }
   };
@@ -286,14 +290,16 @@ std::vector<SeriesComparison> compare_processed(const std::string& file, const s
     }
     if (s.stamp_ns > newest) {
       newest = s.stamp_ns;
+      // finalized_at <= newest - kHorizonNs <= INT64_MAX - kHorizonNs: the sum cannot overflow
       if (newest > std::numeric_limits<int64_t>::min() + kHorizonNs &&
-          (finalized_at == std::numeric_limits<int64_t>::min() || newest - kHorizonNs - finalized_at >= kFinalizeEveryNs)) {
+          (finalized_at == std::numeric_limits<int64_t>::min() ||
+           newest - kHorizonNs >= finalized_at + kFinalizeEveryNs)) {
         finalized_at = newest - kHorizonNs;
-        finalize(finalized_at);
+        finalize(finalized_at, false);
       }
     }
   }
-  finalize(std::numeric_limits<int64_t>::max());
+  finalize(std::numeric_limits<int64_t>::max(), true);
 
   std::vector<SeriesComparison> out;
   for (auto& [topic, by_sensor] : running) {

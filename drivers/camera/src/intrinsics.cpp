@@ -47,8 +47,9 @@ void fill_from_matrix(CameraIntrinsics& out, const cv::Mat& k, const cv::Mat& d,
   }
   cv::Mat k64;
   k.convertTo(k64, CV_64F);
-  if (std::abs(k64.at<double>(1, 0)) > 0.0 || std::abs(k64.at<double>(2, 0)) > 0.0 ||
-      std::abs(k64.at<double>(2, 1)) > 0.0 || std::abs(k64.at<double>(2, 2) - 1.0) > 1e-9) {
+  // written so that a NaN entry fails the test too
+  if (!(k64.at<double>(1, 0) == 0.0 && k64.at<double>(2, 0) == 0.0 && k64.at<double>(2, 1) == 0.0 &&
+        std::abs(k64.at<double>(2, 2) - 1.0) <= 1e-9)) {
     throw ConfigError(source +
                       ": camera matrix is not of the form [fx s cx; 0 fy cy; 0 0 1] (is it "
                       "transposed or a projection matrix?)");
@@ -82,12 +83,8 @@ CameraIntrinsics parse_opencv(const std::string& text, const std::string& source
     const std::size_t eol = body.find('\n');
     body = eol == std::string::npos ? std::string() : body.substr(eol + 1);
   }
-  YAML::Node root;
-  try {
-    root = YAML::Load(body);
-  } catch (const YAML::Exception& e) {
-    throw ConfigError(source + ": not a valid OpenCV YAML file: " + e.what());
-  }
+  // the project's strict reader: duplicate keys and bare .nan/.inf refused, naming the line
+  const YAML::Node root = parse_yaml<ConfigError>(body, source);
   if (!root.IsMap()) {
     throw ConfigError(source + ": not a valid OpenCV YAML file (expected a map of named entries)");
   }

@@ -668,12 +668,13 @@ void register_ddstools_commands(CLI::App& app) {
   CLI::App* t = app.add_subcommand(
       "topics", "List the topics with writers on a domain, with type, writer count, rate and bandwidth");
   add_domain_option(t, &topics->domain);
+  // bounded: the seconds become int64 nanoseconds (1e308 s would overflow)
   t->add_option("--duration", topics->duration_s, "Seconds to sample (after --discovery)")
-      ->check(CLI::PositiveNumber)
+      ->check(CLI::Range(1e-3, 86400.0))
       ->capture_default_str();
   t->add_option("--discovery", topics->discovery_s,
                 "Seconds to discover writers before sampling (a writer can take up to ~3 s to be seen)")
-      ->check(CLI::NonNegativeNumber)
+      ->check(CLI::Range(0.0, 3600.0))
       ->capture_default_str();
   t->add_flag("--json", topics->json, "One JSON document instead of a table");
   t->callback([topics] { run_topics(*topics); });
