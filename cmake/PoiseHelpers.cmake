@@ -1,13 +1,24 @@
 # Shared CMake helpers for poise targets.
 
 # Add every immediate subdirectory of DIR that contains a CMakeLists.txt (sorted, deterministic).
+# A subdirectory without one that only groups folders (components/estimators/, components/bridges/)
+# is descended into, one level.
 function(poise_add_subdirectories dir)
   file(GLOB children LIST_DIRECTORIES true RELATIVE ${CMAKE_CURRENT_SOURCE_DIR}/${dir}
        ${CMAKE_CURRENT_SOURCE_DIR}/${dir}/*)
   list(SORT children)
   foreach(child IN LISTS children)
-    if(EXISTS ${CMAKE_CURRENT_SOURCE_DIR}/${dir}/${child}/CMakeLists.txt)
+    set(path ${CMAKE_CURRENT_SOURCE_DIR}/${dir}/${child})
+    if(EXISTS ${path}/CMakeLists.txt)
       add_subdirectory(${dir}/${child})
+    elseif(IS_DIRECTORY ${path} AND NOT child STREQUAL "include" AND NOT child STREQUAL "src")
+      file(GLOB grandchildren LIST_DIRECTORIES true RELATIVE ${path} ${path}/*)
+      list(SORT grandchildren)
+      foreach(grandchild IN LISTS grandchildren)
+        if(EXISTS ${path}/${grandchild}/CMakeLists.txt)
+          add_subdirectory(${dir}/${child}/${grandchild})
+        endif()
+      endforeach()
     endif()
   endforeach()
 endfunction()
@@ -113,7 +124,7 @@ void register_all_modules([[maybe_unused]] CLI::App& app) {
 ${calls}}
 }  // namespace poise::cli
 ")
-  add_executable(poise ${PROJECT_SOURCE_DIR}/components/cli/src/main.cpp ${out})
+  add_executable(poise ${PROJECT_SOURCE_DIR}/tools/poise/cli/src/main.cpp ${out})
   target_link_libraries(poise PRIVATE poise_cli_common poise_runtime ${targets} ${ctargets})
   poise_target_warnings(poise)
   set_target_properties(poise PROPERTIES RUNTIME_OUTPUT_DIRECTORY ${PROJECT_BINARY_DIR}/bin)

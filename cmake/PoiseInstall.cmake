@@ -6,10 +6,12 @@
 include(GNUInstallDirs)
 include(CMakePackageConfigHelpers)
 
-# The cores, in link order (a library before what it needs) and their source directories.
+# The cores, in link order (a library before what it needs) and their source directories (layers 0
+# and 1 of docs/DEVELOPING.md: components/core and components/estimators/*).
 set(POISE_CORE_TARGETS poise_selective_ekf poise_gauss_newton poise_parallel_kf poise_altitude
     poise_tilt_kf poise_vehicle poise_core)
-set(POISE_CORE_DIRS core parallel_kf gauss_newton selective_ekf altitude vehicle)
+set(POISE_CORE_DIRS components/core components/estimators/parallel_kf components/estimators/gauss_newton
+    components/estimators/selective_ekf components/estimators/altitude components/estimators/vehicle)
 
 function(poise_install_cores)
   foreach(t IN LISTS POISE_CORE_TARGETS)
@@ -21,7 +23,7 @@ function(poise_install_cores)
           ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR} COMPONENT dev
           INCLUDES DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
   foreach(d IN LISTS POISE_CORE_DIRS)
-    install(DIRECTORY ${PROJECT_SOURCE_DIR}/components/${d}/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}
+    install(DIRECTORY ${PROJECT_SOURCE_DIR}/${d}/include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}
             COMPONENT dev)
   endforeach()
   set(cmake_dir ${CMAKE_INSTALL_LIBDIR}/cmake/poise)

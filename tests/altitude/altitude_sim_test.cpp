@@ -1,6 +1,6 @@
 // Paper 003 Table 3 claims reproduced on the seeded simulator (with margins), plus simulator
 // sanity checks.
-#include "poise/altitude/altitude_eval.h"
+#include "poise/eval/altitude_eval.h"
 
 #include <gtest/gtest.h>
 

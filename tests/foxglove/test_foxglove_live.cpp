@@ -4,7 +4,7 @@
 // tree at test time). Under CI=true a missing node/npm or registry is a failure, not a skip.
 #include "poise/dds/convert.h"
 #include "poise/dds/participant.h"
-#include "poise/ddstools/idl_schema.h"
+#include "poise/schema/idl_schema.h"
 #include "poise/foxglove/bridge.h"
 #include "poise/nodes/register.h"
 #include "poise/runtime/host.h"
@@ -232,7 +232,7 @@ TEST(FoxgloveBridge, GivenLiveTopicsWhenTheWsProtocolClientDecodesThemThenTheyEq
   ASSERT_FALSE(lines.empty());
   const json& header = lines.front();
   EXPECT_EQ(header["serverInfo"]["op"], "serverInfo");
-  const auto& table = ddstools::TypeTable::builtin();
+  const auto& table = schema::TypeTable::builtin();
   std::map<std::string, json> channels;
   for (const auto& c : header["channels"]) {
     channels[c["topic"].get<std::string>()] = c;

@@ -112,29 +112,29 @@ TEST(FoxgloveProtocol, GivenAFullQueueThenTheOldestFramesAreDroppedAndCounted) {
   EXPECT_EQ(bytes.dropped(), 4u);
 }
 
-ddstools::Value leaf(double d) {
-  ddstools::Value v;
-  v.kind = ddstools::Value::Kind::kFloat;
+schema::Value leaf(double d) {
+  schema::Value v;
+  v.kind = schema::Value::Kind::kFloat;
   v.d = d;
   return v;
 }
 
-ddstools::Value node(std::vector<std::pair<std::string, ddstools::Value>> fields) {
-  ddstools::Value v;
-  v.kind = ddstools::Value::Kind::kStruct;
+schema::Value node(std::vector<std::pair<std::string, schema::Value>> fields) {
+  schema::Value v;
+  v.kind = schema::Value::Kind::kStruct;
   v.fields = std::move(fields);
   return v;
 }
 
-ddstools::Value attitude(std::int64_t stamp, double w, double x, double y, double z) {
-  ddstools::Value s;
-  s.kind = ddstools::Value::Kind::kInt;
+schema::Value attitude(std::int64_t stamp, double w, double x, double y, double z) {
+  schema::Value s;
+  s.kind = schema::Value::Kind::kInt;
   s.i = stamp;
-  ddstools::Value trusted;
-  trusted.kind = ddstools::Value::Kind::kBool;
+  schema::Value trusted;
+  trusted.kind = schema::Value::Kind::kBool;
   trusted.b = true;
-  ddstools::Value filter;
-  filter.kind = ddstools::Value::Kind::kString;
+  schema::Value filter;
+  filter.kind = schema::Value::Kind::kString;
   filter.s = "parallel_kf";
   return node({{"header", node({{"stamp_ns", s}})},
                {"filter_id", filter},

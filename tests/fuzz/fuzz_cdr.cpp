@@ -7,8 +7,8 @@
 // a crash, UB or an out-of-bounds read is a finding); payload_problem() agrees with decode(); a
 // decoded value converts to JSON and text and yields its key; the header stamp readers never read
 // past the payload.
-#include "poise/ddstools/cdr.h"
-#include "poise/ddstools/idl_schema.h"
+#include "poise/schema/cdr.h"
+#include "poise/schema/idl_schema.h"
 
 #include <cstddef>
 #include <cstdint>
@@ -17,7 +17,7 @@
 #include <string>
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  using namespace poise::ddstools;
+  using namespace poise::schema;
   const TypeTable& table = TypeTable::builtin();
   const void* nul = std::memchr(data, 0, size);
   const size_t name_len = nul != nullptr ? static_cast<size_t>(static_cast<const uint8_t*>(nul) - data) : 0;

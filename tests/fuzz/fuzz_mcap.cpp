@@ -5,8 +5,8 @@
 // reads it; iteration then never throws, yields messages whose views lie inside the reader's
 // buffer and whose channel and schema exist; nothing crashes, hangs
 // or allocates beyond the file's size by more than the reader's record limit.
-#include "poise/ddstools/cdr.h"
-#include "poise/ddstools/idl_schema.h"
+#include "poise/schema/cdr.h"
+#include "poise/schema/idl_schema.h"
 #include "poise/record/io.h"
 #include "poise/record/mcap.h"
 
@@ -30,7 +30,7 @@ void read_all(const poise::record::McapReader& reader, poise::record::ReadFilter
     for (size_t k = 0; k < m->size; ++k) sink ^= m->data[k];
     (void)poise::record::describe_position(*m);
     if (m->schema != nullptr) {
-      (void)poise::ddstools::payload_problem(poise::ddstools::TypeTable::builtin(), m->schema->name,
+      (void)poise::schema::payload_problem(poise::schema::TypeTable::builtin(), m->schema->name,
                                              m->data, m->size);
     }
   }

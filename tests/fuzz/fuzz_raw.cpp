@@ -9,9 +9,9 @@
 // never fails and gives the undecodable instance to every payload that does not decode;
 // serialize() refuses what is not a payload or does not fit; an accepted payload comes back from
 // the finalised file byte for byte, in a complete file. Nothing crashes.
-#include "poise/ddstools/cdr.h"
-#include "poise/ddstools/idl_schema.h"
-#include "poise/ddstools/raw_type.h"
+#include "poise/schema/cdr.h"
+#include "poise/schema/idl_schema.h"
+#include "poise/schema/raw_type.h"
 #include "poise/record/io.h"
 #include "poise/record/mcap.h"
 
@@ -36,7 +36,7 @@ void check(bool ok) {
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace poise;
-  const ddstools::TypeTable& table = ddstools::TypeTable::builtin();
+  const schema::TypeTable& table = schema::TypeTable::builtin();
   const void* nul = std::memchr(data, 0, size);
   if (nul == nullptr) return 0;
   const size_t name_len = static_cast<size_t>(static_cast<const uint8_t*>(nul) - data);
@@ -52,7 +52,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   check(raw.deserialize(&payload, &sample));
   check(sample.data == bytes);
   const std::optional<std::string> problem =
-      ddstools::payload_problem(table, type, sample.data.data(), sample.data.size());
+      schema::payload_problem(table, type, sample.data.data(), sample.data.size());
   if (raw.m_isGetKeyDefined) {
     rtps::InstanceHandle_t handle;
     check(raw.getKey(&sample, &handle, false));
@@ -76,10 +76,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
 
   // Recorder side: the header stamp as publish time, then the MCAP writer.
   std::optional<int64_t> stamp;
-  if (ddstools::has_ros_header_stamp(table, type)) {
-    stamp = ddstools::read_ros_header_stamp_ns(sample.data.data(), sample.data.size());
-  } else if (ddstools::has_header_stamp(table, type)) {
-    stamp = ddstools::read_header_stamp_ns(sample.data.data(), sample.data.size());
+  if (schema::has_ros_header_stamp(table, type)) {
+    stamp = schema::read_ros_header_stamp_ns(sample.data.data(), sample.data.size());
+  } else if (schema::has_header_stamp(table, type)) {
+    stamp = schema::read_header_stamp_ns(sample.data.data(), sample.data.size());
   }
   const uint64_t publish_ns = stamp.value_or(0) > 0 ? static_cast<uint64_t>(stamp.value_or(0)) : 0;
   std::vector<uint8_t> file;

@@ -17,7 +17,7 @@
 #include "poise/dds/convert.h"
 #include "poise/dds/participant.h"
 #include "poise/imu/faults.h"
-#include "poise/imu/imu_node.h"
+#include "poise/imu/imu_driver_node.h"
 #include "poise/imu/pty_link.h"
 #include "poise/runtime/host.h"
 #include "poise/testing/testing.h"

@@ -1,4 +1,4 @@
-// `poise` with only the record commands (same exit-code conventions as components/cli), so the
+// `poise` with only the record commands (same exit-code conventions as tools/poise/cli), so the
 // recorder tests do not depend on every other CLI module being built.
 #include "poise/cli/common.h"
 

@@ -2,10 +2,10 @@
 // for the same input), input copied through, one estimate per accepted sample, bad payloads
 // rejected and counted.
 #include "poise/core/attitude.h"
-#include "poise/record/compare.h"
+#include "poise/process/compare.h"
 #include "poise/record/idl_schema.h"
 #include "poise/record/mcap.h"
-#include "poise/record/process.h"
+#include "poise/process/process.h"
 #include "record_test_support.h"
 
 #include <gtest/gtest.h>

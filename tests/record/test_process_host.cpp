@@ -4,9 +4,9 @@
 // 1e-9 -- the live node and the processor run the same step logic.
 #include "poise/dds/participant.h"
 #include "poise/nodes/register.h"
-#include "poise/record/compare.h"
+#include "poise/process/compare.h"
 #include "poise/record/mcap.h"
-#include "poise/record/process.h"
+#include "poise/process/process.h"
 #include "poise/record/recorder.h"
 #include "recorder_thread.h"
 #include "poise/runtime/host.h"

@@ -46,7 +46,7 @@ Message deserialize(const uint8_t* data, size_t size) {
   return m;
 }
 
-// The raw payload type and the stamp reader are ddstools' (tests/ddstools); here the file names.
+// The raw payload type and the stamp reader are schema's (tests/schema); here the file names.
 TEST(Recorder, SplitFileNamesAreNumbered) {
   EXPECT_EQ(split_file_name("out.mcap", 2), "out_002.mcap");
   EXPECT_EQ(split_file_name("dir/x", 0), "dir/x_000.mcap");

@@ -6,7 +6,7 @@
 #include "poise/eval/filter_registry.h"
 #include "poise/nodes/register.h"
 #include "poise/record/mcap.h"
-#include "poise/record/process.h"
+#include "poise/process/process.h"
 #include "poise/record/recorder.h"
 #include "recorder_thread.h"
 #include "poise/record/replayer.h"

@@ -1,4 +1,4 @@
-// The bridge's conversions (components/ros2_bridge/convert.h): field order, units, frames,
+// The bridge's conversions (components/bridges/ros2_bridge/convert.h): field order, units, frames,
 // REP 145 covariance conventions, the 9x9 -> 6x6 covariance re-layout and the stamp mapping, each
 // against an oracle written here by hand.
 #include "poise/ros2_bridge/convert.h"

@@ -1,4 +1,4 @@
-// The ROS IMU input (components/ros2_bridge/input.h): pairing of Imu with MagneticField and
+// The ROS IMU input (components/bridges/ros2_bridge/input.h): pairing of Imu with MagneticField and
 // FluidPressure streams by stamp, each at its own rate, and hostile messages rejected by reason.
 // Oracles: the stamps and values the test sends.
 #include "poise/ros2_bridge/input.h"

@@ -1,8 +1,8 @@
 // Selective EKF: closed-form checks, bad input, capture-time vision and simulated scenarios
 // (GIVEN/WHEN/THEN, seeded, simulated time).
 #include "poise/selective_ekf/selective_ekf.h"
-#include "poise/selective_ekf/vision_synth.h"
-#include "poise/selective_ekf/eval_plugin.h"
+#include "poise/sim/vision_synth.h"
+#include "poise/eval/selective_ekf_eval.h"
 #include "poise/eval/broad.h"
 #include "poise/eval/imu_delay.h"
 #include "poise/eval/filter_registry.h"

@@ -1,5 +1,5 @@
 // Paper 001's qualitative results reproduced on the vehicle simulator (seeded, with margins).
-#include "poise/vehicle/vehicle_eval.h"
+#include "poise/eval/vehicle_eval.h"
 
 #include "poise/core/attitude.h"
 

@@ -7,7 +7,7 @@
 //           diagnostics_every
 #include "poise/altitude/altitude_filter.h"
 #include "poise/dds/convert.h"
-#include "poise/nodes/imu_node.h"
+#include "poise/nodes/imu_estimator_node.h"
 #include "poise/nodes/register.h"
 
 #include <poise/msg/estimates.h>

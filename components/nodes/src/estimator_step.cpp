@@ -1,7 +1,7 @@
 #include "poise/nodes/estimator_step.h"
 
-#include "poise/cli/common.h"
 #include "poise/core/north_yaml.h"
+#include "poise/runtime/utc_date.h"
 
 #include <sstream>
 
@@ -35,7 +35,7 @@ const std::vector<std::string>& north_keys() { return north_param_keys(); }
 NorthReference north_reference(const runtime::ComponentSpec& spec) {
   const std::string where = spec.origin + ": component '" + spec.name + "': ";
   try {
-    return resolve_north(read_north_params(spec.params), cli::utc_today());
+    return resolve_north(read_north_params(spec.params), runtime::utc_today());
   } catch (const std::exception& e) {
     throw runtime::ConfigError(where + e.what());
   }

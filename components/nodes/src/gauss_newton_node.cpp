@@ -2,7 +2,7 @@
 //   in:  imu            out: attitude/gauss_newton, diagnostics
 //   params: filter_file (YAML of GaussNewtonParams), diagnostics_every, north (estimator_step.h north_keys())
 #include "poise/gauss_newton/gauss_newton.h"
-#include "poise/nodes/imu_node.h"
+#include "poise/nodes/imu_estimator_node.h"
 #include "poise/nodes/register.h"
 
 #include <poise/msg/estimates.h>

@@ -2,7 +2,7 @@
 //   in:  imu (ImuSample)      out: attitude/parallel_kf (AttitudeEstimate), diagnostics
 //   params: preset (default | paper), filter_file (YAML of ParallelKfParams), diagnostics_every,
 //           north (declination_deg | location + date: estimator_step.h north_keys())
-#include "poise/nodes/imu_node.h"
+#include "poise/nodes/imu_estimator_node.h"
 #include "poise/nodes/register.h"
 #include "poise/parallel_kf/parallel_kf.h"
 

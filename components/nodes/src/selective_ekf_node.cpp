@@ -9,7 +9,7 @@
 // The EKF applies its own camera-to-body extrinsic to the camera pose (the message's body pose is
 // not used), so the extrinsic is configured in one place for the filter.
 #include "poise/dds/convert.h"
-#include "poise/nodes/imu_node.h"
+#include "poise/nodes/imu_estimator_node.h"
 #include "poise/nodes/register.h"
 #include "poise/selective_ekf/selective_ekf.h"
 

@@ -5,7 +5,7 @@
 //   out: attitude/vehicle (AttitudeEstimate), diagnostics
 //   params: filter_file (YAML of VehicleParams), diagnostics_every, north (imu_node.h north_keys())
 // Body frame: x forward, y left, z up (the vehicle's axes; remap the IMU in the driver's YAML).
-#include "poise/nodes/imu_node.h"
+#include "poise/nodes/imu_estimator_node.h"
 #include "poise/nodes/register.h"
 #include "poise/vehicle/vehicle_estimator.h"
 

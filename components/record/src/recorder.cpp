@@ -3,8 +3,8 @@
 #include "poise/dds/participant.h"
 #include "poise/dds/topics.h"
 #include "poise/record/idl_schema.h"
-#include "poise/ddstools/cdr.h"
-#include "poise/ddstools/raw_type.h"
+#include "poise/schema/cdr.h"
+#include "poise/schema/raw_type.h"
 
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/domain/DomainParticipantListener.hpp>
@@ -82,8 +82,8 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
         : impl_(impl),
           index_(index),
           type_(std::move(type)),
-          poise_stamp_(ddstools::has_header_stamp(ddstools::TypeTable::builtin(), type_)),
-          ros_stamp_(ddstools::has_ros_header_stamp(ddstools::TypeTable::builtin(), type_)) {}
+          poise_stamp_(schema::has_header_stamp(schema::TypeTable::builtin(), type_)),
+          ros_stamp_(schema::has_ros_header_stamp(schema::TypeTable::builtin(), type_)) {}
     void on_data_available(fdds::DataReader* reader) override {
       dds::RawSample sample;
       fdds::SampleInfo info;
@@ -91,8 +91,8 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
         if (!info.valid_data) {
           continue;
         }
-        const std::optional<std::string> problem = ddstools::payload_problem(
-            ddstools::TypeTable::builtin(), type_, sample.data.data(), sample.data.size());
+        const std::optional<std::string> problem = schema::payload_problem(
+            schema::TypeTable::builtin(), type_, sample.data.data(), sample.data.size());
         if (problem) {
           std::ostringstream from;
           from << info.sample_identity.writer_guid();
@@ -106,8 +106,8 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
         p.sequence = static_cast<uint32_t>(seq & 0xFFFFFFFFu);
         // publish_time: the header stamp of poise types and of ROS 2 types, else the source time.
         const std::optional<int64_t> stamp =
-            ros_stamp_ ? ddstools::read_ros_header_stamp_ns(sample.data.data(), sample.data.size())
-            : poise_stamp_ ? ddstools::read_header_stamp_ns(sample.data.data(), sample.data.size())
+            ros_stamp_ ? schema::read_ros_header_stamp_ns(sample.data.data(), sample.data.size())
+            : poise_stamp_ ? schema::read_header_stamp_ns(sample.data.data(), sample.data.size())
                            : std::nullopt;
         p.publish_ns = stamp && *stamp > 0 ? *stamp : info.source_timestamp.to_ns();
         p.bytes = std::move(sample.data);
@@ -327,12 +327,12 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
                    {"reliability", reliability_name(d.reliability)},
                    {"durability", durability_name(d.durability)},
                    {"qos_profile", dds::profile_name(kind)},
-                   {"publish_time", ddstools::has_ros_header_stamp(ddstools::TypeTable::builtin(), d.type)
+                   {"publish_time", schema::has_ros_header_stamp(schema::TypeTable::builtin(), d.type)
                                         ? "header.stamp"
-                                        : ddstools::has_header_stamp(ddstools::TypeTable::builtin(), d.type)
+                                        : schema::has_header_stamp(schema::TypeTable::builtin(), d.type)
                                               ? "header.stamp_ns"
                                               : "source_timestamp"}};
-    fdds::TypeSupport type(new dds::RawPubSubType(d.type, &ddstools::TypeTable::builtin()));
+    fdds::TypeSupport type(new dds::RawPubSubType(d.type, &schema::TypeTable::builtin()));
     if (participant->find_type(d.type).empty() &&
         type.register_type(participant) != ReturnCode_t::RETCODE_OK) {
       throw dds::DdsError("cannot register the raw type " + d.type);

@@ -2,8 +2,8 @@
 
 #include "poise/dds/participant.h"
 #include "poise/dds/topics.h"
-#include "poise/ddstools/cdr.h"
-#include "poise/ddstools/raw_type.h"
+#include "poise/schema/cdr.h"
+#include "poise/schema/raw_type.h"
 
 #include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
 
@@ -72,7 +72,7 @@ ReplayStats replay(const ReplayOptions& options) {
       log << "poise replay: skipping '" << channel.topic << "' (no DDS type or not CDR)\n";
       continue;
     }
-    const ddstools::TypeTable& table = ddstools::TypeTable::builtin();
+    const schema::TypeTable& table = schema::TypeTable::builtin();
     if (table.find_struct(type_name) == nullptr) {
       log << "poise replay: '" << channel.topic << "' has type " << type_name
           << " unknown to this build: published unkeyed\n";
@@ -133,8 +133,8 @@ ReplayStats replay(const ReplayOptions& options) {
       return false;
     }
     Output& out = found->second;
-    const std::optional<std::string> problem = ddstools::payload_problem(
-        ddstools::TypeTable::builtin(), out.type_name, m.data, m.size);
+    const std::optional<std::string> problem = schema::payload_problem(
+        schema::TypeTable::builtin(), out.type_name, m.data, m.size);
     if (problem) {
       if (++stats.malformed <= kMaxDescribedSkips) {
         log << "poise replay: skipped " << describe_position(m) << " on '" << m.channel->topic

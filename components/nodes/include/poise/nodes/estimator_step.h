@@ -1,5 +1,5 @@
 // The step logic of every estimator component, without DDS and without clocks: what the live node
-// (poise/nodes/imu_node.h) and `poise process` (offline, poise/record/process.h) both run, so that
+// (poise/nodes/imu_estimator_node.h) and `poise process` (offline, poise/process/process.h) both run, so that
 // offline equals live when the inputs come in the same order.
 //
 //   EstimatorStep  one component's core and its conversions: input -> core -> messages

@@ -1,9 +1,9 @@
 // omgidl schemas for MCAP channels: one self-contained IDL text per type. The one flattener and
-// the one embedded IDL table are ddstools' (poise/ddstools/idl_schema.h); this is the recorder's
+// the one embedded IDL table are schema's (poise/schema/idl_schema.h); this is the recorder's
 // view of them.
 #pragma once
 
-#include "poise/ddstools/idl_schema.h"
+#include "poise/schema/idl_schema.h"
 
 #include <optional>
 #include <string>
@@ -13,7 +13,7 @@ namespace poise::record {
 /// The self-contained IDL text of SCOPED_NAME ("poise::msg::ImuSample") and every type it depends
 /// on (TypeTable::flatten), or nullopt when `table` has no such struct.
 inline std::optional<std::string> flattened_idl(
-    const std::string& scoped_name, const ddstools::TypeTable& table = ddstools::TypeTable::builtin()) {
+    const std::string& scoped_name, const schema::TypeTable& table = schema::TypeTable::builtin()) {
   if (table.find_struct(scoped_name) == nullptr) {
     return std::nullopt;
   }

@@ -5,7 +5,7 @@
 //  - log_time = reception (log clock, default CLOCK_REALTIME ns); publish_time = Header.stamp_ns
 //    read from the payload (bytes 4-11), or the writer's source timestamp when it has none;
 //  - sequence = the DDS writer's sample sequence number (low 32 bits): gaps reveal losses.
-// Every payload is checked against its IDL type before it is queued (ddstools::payload_problem):
+// Every payload is checked against its IDL type before it is queued (schema::payload_problem):
 // a malformed one from any participant is counted per topic, reported, and not written; the
 // recording goes on.
 #pragma once

@@ -1,0 +1,62 @@
+// Line charts written as PNG (drawn with OpenCV), for reports a person looks at: `poise demo`
+// writes estimate-vs-truth, disturbance and altitude charts with them.
+#pragma once
+
+#include <array>
+#include <string>
+#include <vector>
+
+namespace poise::charts {
+
+/// One line of a chart.
+struct Series {
+  std::string label;
+  std::vector<double> x;
+  std::vector<double> y;
+  std::array<int, 3> rgb{31, 119, 180};
+  int thickness = 2;
+  bool dashed = false;
+};
+
+/// A shaded band on the x axis (e.g. "magnet near", "tag lost").
+struct Band {
+  double x0 = 0.0;
+  double x1 = 0.0;
+  std::string label;
+  std::array<int, 3> rgb{255, 200, 120};
+};
+
+/// One panel: axes, series, bands.
+struct Panel {
+  std::string title;
+  std::string x_label = "time [s]";
+  std::string y_label;
+  std::vector<Series> series;
+  std::vector<Band> bands;
+  /// Fixed y range when y_min < y_max; otherwise fitted to the data (with a margin).
+  double y_min = 0.0;
+  double y_max = 0.0;
+};
+
+/// A column of panels sharing the x axis, written as one PNG.
+struct Figure {
+  std::string title;
+  std::vector<Panel> panels;
+  int width_px = 1400;
+  int panel_height_px = 320;
+};
+
+/// True when PNG charts can be written (poise built with OpenCV, i.e. POISE_WITH_CAMERA=ON).
+bool png_supported();
+
+/// Writes `figure` to `path` (PNG). Throws std::runtime_error if the file cannot be written, or
+/// when !png_supported().
+void write_png(const Figure& figure, const std::string& path);
+
+/// A palette of distinguishable colours (index wraps).
+std::array<int, 3> palette(int index);
+
+/// "Nice" tick values covering [lo, hi] (about `target` of them).
+std::vector<double> nice_ticks(double lo, double hi, int target = 6);
+
+}  // namespace poise::charts

@@ -1,0 +1,468 @@
+#include "poise/process/process.h"
+
+#include "poise/core/attitude.h"
+#include "poise/dds/convert.h"
+#include "poise/record/idl_schema.h"
+#include "poise/record/mcap.h"
+#include "decode.h"
+
+#include <poise/msg/diagnosticsPubSubTypes.h>
+#include <poise/msg/estimatesPubSubTypes.h>
+#include <poise/msg/imuPubSubTypes.h>
+#include <poise/msg/visionPubSubTypes.h>
+
+#include <fastdds/rtps/common/SerializedPayload.h>
+
+#include <algorithm>
+#include <cstring>
+#include <deque>
+#include <optional>
+#include <queue>
+#include <set>
+#include <utility>
+#include <variant>
+
+namespace poise::record {
+
+namespace {
+
+std::vector<uint8_t> bytes_of(const std::string& s) { return std::vector<uint8_t>(s.begin(), s.end()); }
+
+/// An attitude filter alone, as a step: quaternion and Euler angles only.
+class FilterStep : public nodes::AttitudeStep {
+ public:
+  explicit FilterStep(ProcessFilter f)
+      : AttitudeStep(f.name, f.name, f.north), filter_(std::move(f.filter)) {
+    filter_->seed_field(f.north.field_ut, f.north.dip_deg);  // a location: the model's |B| and dip
+  }
+  bool step(const ImuSample& sample) override { return filter_->update(sample); }
+  bool attitude(nodes::AttitudeReport& report) const override {
+    if (!filter_->initialized()) {
+      return false;
+    }
+    report.q_world_body = filter_->q_world_body();
+    return true;
+  }
+  void diagnostics(nodes::DiagnosticsReport& /*diag*/) const override {}
+
+ private:
+  std::unique_ptr<AttitudeFilter> filter_;
+};
+
+/// One recorded input, decoded.
+struct Input {
+  uint64_t ordinal = 0;   ///< position of its message in the recording (0-based)
+  uint64_t log_time_ns = 0;
+  int64_t stamp_ns = 0;   ///< the sample stamp it is ordered by
+  std::variant<msg::ImuSample, msg::VisionPose, msg::VehicleInput> sample;
+};
+
+/// One message to write: a component's output, written after the input message that caused it,
+/// or an input message copied through.
+struct Output {
+  uint64_t ordinal = 0;  ///< the input message it follows (or is)
+  uint16_t channel = 0;
+  uint32_t sequence = 0;  ///< input copied through: its recorded sequence
+  uint64_t log_time_ns = 0;
+  uint64_t publish_time_ns = 0;
+  std::vector<uint8_t> data;
+};
+
+/// The MCAP side of StepOutputs: serialises each message onto its processed/... channel.
+class McapOutputs : public nodes::StepOutputs {
+ public:
+  McapOutputs(McapWriter& writer, const ProcessOptions& options)
+      : writer_(writer), options_(options) {}
+
+  /// Declares the channels of a step's outputs (once per topic, in call order: deterministic).
+  void declare(const nodes::EstimatorStep& step, const dds::TopicNames& topics) {
+    const unsigned kinds = step.kinds();
+    if ((kinds & nodes::kAttitudeOut) != 0U) {
+      attitude_topics_[step.component()] =
+          channel(topics.attitude(step.component()), dds::type_names::kAttitudeEstimate);
+    }
+    if ((kinds & nodes::kPoseOut) != 0U) {
+      pose_topics_[step.component()] =
+          channel(topics.pose(step.component()), dds::type_names::kPoseEstimate);
+    }
+    if ((kinds & nodes::kAltitudeOut) != 0U) {
+      altitude_channel_ = channel(topics.altitude, dds::type_names::kAltitudeEstimate);
+    }
+    diagnostics_channel_ = channel(topics.diagnostics, dds::type_names::kFilterDiagnostics);
+  }
+  /// The input message the next outputs follow.
+  void set_trigger(uint64_t ordinal, uint64_t log_time_ns) {
+    ordinal_ = ordinal;
+    log_time_ns_ = log_time_ns;
+  }
+
+  void attitude(const msg::AttitudeEstimate& m) override {
+    put<msg::AttitudeEstimatePubSubType>(attitude_topics_.at(m.filter_id().to_string()), m);
+  }
+  void pose(const msg::PoseEstimate& m) override {
+    put<msg::PoseEstimatePubSubType>(pose_topics_.at(m.filter_id().to_string()), m);
+  }
+  void altitude(const msg::AltitudeEstimate& m) override {
+    put<msg::AltitudeEstimatePubSubType>(altitude_channel_, m);
+  }
+  void diagnostics(const msg::FilterDiagnostics& m) override {
+    put<msg::FilterDiagnosticsPubSubType>(diagnostics_channel_, m);
+  }
+
+  /// Takes the outputs caused by the input message `ordinal`, in production order.
+  std::vector<Output> take(uint64_t ordinal) {
+    const auto it = outputs_.find(ordinal);
+    if (it == outputs_.end()) {
+      return {};
+    }
+    std::vector<Output> out = std::move(it->second);
+    outputs_.erase(it);
+    return out;
+  }
+  [[nodiscard]] const std::string& topic_of(uint16_t channel) const { return topic_names_.at(channel); }
+
+ private:
+  uint16_t channel(const std::string& live_topic, const std::string& type) {
+    const std::string topic = options_.output_prefix + live_topic;
+    const auto it = channels_.find(topic);
+    if (it != channels_.end()) {
+      return it->second;
+    }
+    auto schema = schemas_.find(type);
+    if (schema == schemas_.end()) {
+      schema = schemas_.emplace(type, writer_.add_schema(type, "omgidl", bytes_of(*flattened_idl(type)))).first;
+    }
+    const uint16_t id = writer_.add_channel(schema->second, topic, "cdr",
+                                            {{"dds_type", type},
+                                             {"reliability", "RELIABLE"},
+                                             {"durability", "VOLATILE"},
+                                             {"qos_profile", "estimate"},
+                                             {"publish_time", "header.stamp_ns"},
+                                             {"produced_by", "poise process"}});
+    channels_[topic] = id;
+    topic_names_[id] = topic;
+    return id;
+  }
+
+  template <typename PubSubType>
+  void put(uint16_t channel, const typename PubSubType::type& m) {
+    PubSubType type;
+    eprosima::fastrtps::rtps::SerializedPayload_t payload(type.getSerializedSizeProvider(
+        const_cast<typename PubSubType::type*>(&m))());
+    std::memset(payload.data, 0, payload.max_size);  // padding bytes are not written
+    if (!type.serialize(const_cast<typename PubSubType::type*>(&m), &payload)) {
+      throw WriteError("could not serialise a " + std::string(type.getName()) + " (a build defect)");
+    }
+    Output out;
+    out.ordinal = ordinal_;
+    out.channel = channel;
+    out.log_time_ns = log_time_ns_;
+    out.publish_time_ns = static_cast<uint64_t>(std::max<int64_t>(0, m.header().stamp_ns()));
+    out.data.assign(payload.data, payload.data + payload.length);
+    outputs_[ordinal_].push_back(std::move(out));
+  }
+
+  McapWriter& writer_;
+  const ProcessOptions& options_;
+  std::map<std::string, uint16_t> schemas_;
+  std::map<std::string, uint16_t> channels_;
+  std::map<uint16_t, std::string> topic_names_;
+  std::map<std::string, uint16_t> attitude_topics_;  // by filter id
+  std::map<std::string, uint16_t> pose_topics_;      // by filter id
+  uint16_t altitude_channel_ = 0;
+  uint16_t diagnostics_channel_ = 0;
+  uint64_t ordinal_ = 0;
+  uint64_t log_time_ns_ = 0;
+  std::map<uint64_t, std::vector<Output>> outputs_;  // by the input message that caused them
+};
+
+}  // namespace
+
+std::unique_ptr<nodes::EstimatorStep> filter_step(ProcessFilter filter) {
+  return std::make_unique<FilterStep>(std::move(filter));
+}
+
+ProcessStats process_recording(const ProcessOptions& options, std::vector<ProcessFilter>& filters) {
+  std::vector<ProcessComponent> components;
+  for (ProcessFilter& f : filters) {
+    components.push_back({filter_step(std::move(f)), nodes::NodeParams{}});
+  }
+  filters.clear();
+  return process_recording(options, components);
+}
+
+namespace {
+
+enum class InputKind { kNone, kImu, kVision, kVehicle };
+
+/// Decodes `m` into `in` when it is one of the inputs the components take. Returns its kind
+/// (kNone: not an input); `problem` is set when the payload is malformed.
+InputKind decode_input(const MessageView& m, const ProcessOptions& options, bool wants_vision, bool wants_vehicle,
+                       Input& in, std::optional<std::string>& problem) {
+  if (m.schema == nullptr) {
+    return InputKind::kNone;
+  }
+  const std::string& topic = m.channel->topic;
+  const std::string& type = m.schema->name;
+  if (topic == options.topics.imu && type == dds::type_names::kImuSample) {
+    msg::ImuSample s;
+    problem = decode<msg::ImuSamplePubSubType>(m, s);
+    in.stamp_ns = s.header().stamp_ns();
+    in.sample = std::move(s);
+    return InputKind::kImu;
+  }
+  if (wants_vision && topic == options.topics.vision_pose && type == dds::type_names::kVisionPose) {
+    msg::VisionPose s;
+    problem = decode<msg::VisionPosePubSubType>(m, s);
+    in.stamp_ns = s.capture_stamp_ns();
+    in.sample = std::move(s);
+    return InputKind::kVision;
+  }
+  if (wants_vehicle && topic == options.topics.vehicle_input && type == dds::type_names::kVehicleInput) {
+    msg::VehicleInput s;
+    problem = decode<msg::VehicleInputPubSubType>(m, s);
+    in.stamp_ns = s.header().stamp_ns();
+    in.sample = std::move(s);
+    return InputKind::kVehicle;
+  }
+  return InputKind::kNone;
+}
+
+/// (stamp, ordinal): the processing order of kStamp (a stable sort by stamp).
+using OrderKey = std::pair<int64_t, uint64_t>;
+
+}  // namespace
+
+ProcessStats process_recording(const ProcessOptions& options, std::vector<ProcessComponent>& components) {
+  ProcessStats stats;
+  const McapReader reader = McapReader::open_file(options.input);
+  stats.input_complete = reader.report().complete;
+  stats.input_problems = reader.report().problems;
+  stats.corrupt_in_file = reader.report().corrupt;
+
+  bool wants_vision = false;
+  bool wants_vehicle = false;
+  for (const ProcessComponent& c : components) {
+    wants_vision = wants_vision || c.step->uses_vision();
+    wants_vehicle = wants_vehicle || c.step->uses_vehicle_input();
+  }
+
+  const uint64_t total = std::max<uint64_t>(1, reader.report().messages);
+  const auto progress = [&options, total](uint64_t phase, uint64_t done) {
+    if (options.progress) {
+      options.progress(phase * total + done, 2 * total);  // scan, then run + write
+    }
+  };
+
+  // Pass 1, a scan: what is malformed (counted and named, never processed; the components'
+  // diagnostics carry the totals from their first message, as before), the first stamp, and how
+  // far the stamp order strays from the file order. Only (stamp, ordinal) is kept per input, so
+  // the memory used does not grow with the recording's payloads.
+  uint64_t malformed_imu = 0;
+  uint64_t malformed_vision = 0;
+  uint64_t malformed_vehicle = 0;
+  std::vector<OrderKey> keys;  // valid inputs in file order
+  {
+    MessageCursor cursor = reader.messages();
+    uint64_t ordinal = 0;
+    while (const MessageView* m = cursor.next()) {
+      const uint64_t index = ordinal++;
+      ++stats.input_messages;
+      progress(0, stats.input_messages);
+      Input in;
+      std::optional<std::string> problem;
+      const InputKind kind = decode_input(*m, options, wants_vision, wants_vehicle, in, problem);
+      if (kind == InputKind::kNone) {
+        continue;
+      }
+      uint64_t* malformed = nullptr;
+      switch (kind) {
+        case InputKind::kImu: ++stats.imu_samples; malformed = &malformed_imu; break;
+        case InputKind::kVision: ++stats.vision_samples; malformed = &malformed_vision; break;
+        case InputKind::kVehicle: ++stats.vehicle_inputs; malformed = &malformed_vehicle; break;
+        case InputKind::kNone: break;
+      }
+      if (problem) {
+        ++*malformed;
+        ++stats.undecodable;
+        if (stats.undecodable_details.size() < kMaxDescribedSkips) {
+          stats.undecodable_details.push_back(describe_position(*m) + " on '" + m->channel->topic + "', " +
+                                              std::to_string(m->size) + " bytes: " + *problem);
+        }
+        continue;
+      }
+      keys.emplace_back(in.stamp_ns, index);
+    }
+    stats.damaged_chunks = cursor.problems().size();
+    for (const std::string& p : cursor.problems()) {
+      stats.input_problems.push_back(p);
+    }
+  }
+  // The inputs are run in stamp order by a min-heap fed in file order: it sorts exactly when it
+  // may hold `window` + 1 inputs, where `window` is the farthest any input sits after its place
+  // in the stamp order (the vision latency in samples, typically; 0 in recorded order).
+  int64_t first_stamp_ns = keys.empty() ? 0 : keys.front().first;
+  uint64_t window = 0;
+  if (options.order == ProcessOrder::kStamp && !keys.empty()) {
+    std::vector<uint64_t> file_index(keys.size());
+    for (uint64_t i = 0; i < file_index.size(); ++i) {
+      file_index[i] = i;
+    }
+    std::stable_sort(file_index.begin(), file_index.end(),
+                     [&keys](uint64_t a, uint64_t b) { return keys[a].first < keys[b].first; });
+    first_stamp_ns = keys[file_index.front()].first;
+    for (uint64_t j = 0; j < file_index.size(); ++j) {
+      window = std::max(window, file_index[j] > j ? file_index[j] - j : 0);
+    }
+  }
+  keys.clear();
+  keys.shrink_to_fit();
+  stats.reorder_window = window;
+
+  int64_t log_clock = 0;  // the writer's chunk clock: recording time, never the wall clock
+  WriterOptions wopt;
+  wopt.clock = [&log_clock] { return log_clock; };
+  std::unique_ptr<Sink> sink;
+  try {
+    sink = open_file_sink(options.output);
+  } catch (const IoError& e) {
+    throw WriteError(e.what());
+  }
+  McapWriter writer(std::move(sink), wopt);
+
+  // Input channels copied through (ids remapped), in id order: deterministic.
+  std::map<uint16_t, uint16_t> schema_map;
+  std::map<uint16_t, uint16_t> channel_map;
+  if (options.copy_input) {
+    for (const auto& [id, schema] : reader.schemas()) {
+      schema_map[id] = writer.add_schema(schema.name, schema.encoding, schema.data);
+    }
+    for (const auto& [id, channel] : reader.channels()) {
+      const uint16_t schema_id = channel.schema_id == 0 ? 0 : schema_map.at(channel.schema_id);
+      channel_map[id] =
+          writer.add_channel(schema_id, channel.topic, channel.message_encoding, channel.metadata);
+    }
+  }
+
+  // The components, each in the node's shape; time = the stamp of the input being processed.
+  McapOutputs outputs(writer, options);
+  int64_t now_ns = first_stamp_ns;
+  std::vector<std::unique_ptr<nodes::StepRunner>> runners;
+  for (ProcessComponent& c : components) {
+    outputs.declare(*c.step, options.topics);
+    auto runner = std::make_unique<nodes::StepRunner>(std::move(c.step), c.params, options.topics,
+                                                      [&now_ns] { return now_ns; });
+    runner->imu_malformed().store(malformed_imu);
+    runner->vision_malformed().store(malformed_vision);
+    runner->vehicle_input_malformed().store(malformed_vehicle);
+    runners.push_back(std::move(runner));
+  }
+  components.clear();
+
+  // Pass 2: run and write in one stream. Each input message is copied through, then the outputs
+  // its input caused; a message waits only while an input at or before it is not yet run.
+  const std::string writer_id = "recording";  // one publisher per input: no restarts offline
+  std::map<std::string, uint32_t> last_seq;   // IMU seq gaps per sensor, in processing order
+  auto run_input = [&](const Input& in) {
+    now_ns = in.stamp_ns;
+    outputs.set_trigger(in.ordinal, in.log_time_ns);
+    if (const auto* imu = std::get_if<msg::ImuSample>(&in.sample)) {
+      // samples the recording lacks (lost before the recorder): said, since live had them
+      const uint32_t seq = imu->header().seq();
+      const auto [it, first] = last_seq.try_emplace(imu->sensor_id().to_string(), seq);
+      if (!first && seq - it->second > 1U && seq - it->second < (1U << 31)) {
+        ++stats.imu_gaps;
+        stats.imu_missing += seq - it->second - 1U;
+      }
+      it->second = seq;
+      const ImuSample sample = dds::from_msg(*imu);
+      const std::string source = imu->sensor_id().to_string();
+      for (auto& r : runners) {
+        r->imu(sample, source, writer_id, outputs);
+      }
+    } else if (const auto* vision = std::get_if<msg::VisionPose>(&in.sample)) {
+      for (auto& r : runners) {
+        r->vision(*vision, writer_id);
+      }
+    } else if (const auto* vehicle = std::get_if<msg::VehicleInput>(&in.sample)) {
+      for (auto& r : runners) {
+        r->vehicle_input(*vehicle, writer_id);
+      }
+    }
+  };
+  using Queued = std::pair<OrderKey, Input>;
+  auto later = [](const Queued& a, const Queued& b) { return a.first > b.first; };
+  std::priority_queue<Queued, std::vector<Queued>, decltype(later)> to_run(later);
+  std::set<uint64_t> not_run;  // ordinals of the inputs in to_run
+  std::deque<Output> to_write;  // input messages waiting to be written (with their outputs)
+  std::map<uint16_t, uint32_t> out_seq;
+  auto write_ready = [&](bool all) {
+    while (!to_write.empty() && (all || not_run.empty() || to_write.front().ordinal < *not_run.begin())) {
+      const Output& p = to_write.front();
+      log_clock = static_cast<int64_t>(p.log_time_ns);
+      if (options.copy_input) {
+        writer.write(p.channel, p.sequence, p.log_time_ns, p.publish_time_ns, p.data.data(), p.data.size());
+      }
+      for (const Output& o : outputs.take(p.ordinal)) {
+        log_clock = static_cast<int64_t>(o.log_time_ns);
+        writer.write(o.channel, out_seq[o.channel]++, o.log_time_ns, o.publish_time_ns, o.data.data(),
+                     o.data.size());
+        ++stats.per_topic[outputs.topic_of(o.channel)];
+      }
+      to_write.pop_front();
+    }
+  };
+  auto run_next = [&] {
+    const Queued& next = to_run.top();
+    run_input(next.second);
+    not_run.erase(next.second.ordinal);
+    to_run.pop();
+  };
+  {
+    MessageCursor cursor = reader.messages();
+    uint64_t ordinal = 0;
+    while (const MessageView* m = cursor.next()) {
+      const uint64_t index = ordinal++;
+      progress(1, ordinal);
+      Output p;
+      p.ordinal = index;
+      if (options.copy_input) {
+        p.channel = channel_map.at(m->channel->id);
+        p.sequence = m->sequence;
+        p.log_time_ns = m->log_time_ns;
+        p.publish_time_ns = m->publish_time_ns;
+        p.data.assign(m->data, m->data + m->size);
+      } else {
+        p.log_time_ns = m->log_time_ns;
+      }
+      to_write.push_back(std::move(p));
+      Input in;
+      std::optional<std::string> problem;
+      if (decode_input(*m, options, wants_vision, wants_vehicle, in, problem) != InputKind::kNone && !problem) {
+        in.ordinal = index;
+        in.log_time_ns = m->log_time_ns;
+        const OrderKey key = options.order == ProcessOrder::kStamp ? OrderKey{in.stamp_ns, index} : OrderKey{0, index};
+        not_run.insert(index);
+        to_run.emplace(key, std::move(in));
+        if (to_run.size() > window) {
+          run_next();
+        }
+      }
+      write_ready(false);
+    }
+    while (!to_run.empty()) {
+      run_next();
+    }
+    write_ready(true);
+  }
+  for (const auto& r : runners) {
+    const std::string& name = r->step().sensor_id();
+    stats.estimates[name] += r->published();
+    stats.rejected[name] += r->rejected();
+    stats.diagnostics[name] += r->diagnostics_published();
+  }
+  writer.close();
+  return stats;
+}
+
+}  // namespace poise::record
