@@ -204,6 +204,8 @@ void McapReader::add_channel(Channel channel) {
   channels_[id] = std::move(channel);
 }
 
+// not split: the MCAP footer -> summary -> index walk, where each record's offsets are checked
+// against the one before before anything is trusted.
 bool McapReader::read_summary() {
   const uint64_t size = report_.file_size;
   if (size < 8 + kRecordHeader + kFooterRecord + 8) {
@@ -355,6 +357,139 @@ const FileReport& McapReader::verify() {
   return report_;
 }
 
+void McapReader::count_message(uint16_t channel_id, uint64_t log_time) {
+  ChannelCounts& c = report_.channels[channel_id];
+  if (c.messages == 0 || log_time < c.first_log_ns) {
+    c.first_log_ns = log_time;
+  }
+  c.last_log_ns = std::max(c.last_log_ns, log_time);
+  ++c.messages;
+  const bool first = report_.messages == 0;
+  if (first || log_time < report_.start_ns) {
+    report_.start_ns = log_time;
+  }
+  if (first || log_time > report_.end_ns) {
+    report_.end_ns = log_time;
+  }
+  ++report_.messages;
+}
+
+std::optional<uint64_t> McapReader::find_chunk(uint64_t from) const {
+  const uint64_t size = report_.file_size;
+  constexpr size_t kWindow = 1 << 20;
+  constexpr uint64_t kChunkFixed = 8 + 8 + 8 + 4 + 4;
+  std::vector<uint8_t> window;
+  for (uint64_t base = from; base + kRecordHeader + kChunkFixed < size; base += kWindow) {
+    const size_t n = static_cast<size_t>(std::min<uint64_t>(kWindow + 128, size - base));
+    window.resize(n);
+    source_->read(base, n, window.data());
+    for (size_t i = 0; i < std::min(kWindow, n); ++i) {
+      if (window[i] != static_cast<uint8_t>(Opcode::kChunk) || i + kRecordHeader + kChunkFixed > n) {
+        continue;
+      }
+      const uint8_t* r = window.data() + i;
+      const uint64_t len = get_u64(r + 1);
+      const uint64_t start = get_u64(r + 9);
+      const uint64_t end = get_u64(r + 17);
+      const uint32_t clen = get_u32(r + 9 + 28);
+      if (clen > 16 || start > end || len > size - base - i - kRecordHeader ||
+          i + kRecordHeader + kChunkFixed + clen + 8 > n) {
+        continue;
+      }
+      const uint64_t rlen = get_u64(r + kRecordHeader + kChunkFixed + clen);
+      if (len == kChunkFixed + clen + 8 + rlen) {
+        return base + i;
+      }
+    }
+  }
+  return std::nullopt;
+}
+
+void McapReader::scan_chunk(uint64_t pos, const std::vector<uint8_t>& record, ScanState& state) {
+  const uint8_t* body = record.data() + kRecordHeader;
+  const size_t body_len = record.size() - kRecordHeader;
+  std::vector<uint8_t> records;
+  try {
+    records = chunk_records(body, body_len);
+  } catch (const ReadError& e) {
+    ++state.chunk_fail;
+    ++report_.corrupt;
+    report_.problems.push_back("chunk " + at_byte(pos) + " (" + std::to_string(record.size()) +
+                               " bytes): " + e.what() + "; its messages are skipped");
+    return;
+  }
+  ChunkLocation loc{pos, record.size(), get_u64(body), get_u64(body + 8), true};
+  for_each_record(records.data(), records.size(), "chunk",
+                  [&](uint8_t rop, const uint8_t* rbody, size_t rlen, size_t) {
+                    if (rop == static_cast<uint8_t>(Opcode::kSchema)) {
+                      add_schema(parse_schema(rbody, rlen));
+                    } else if (rop == static_cast<uint8_t>(Opcode::kChannel)) {
+                      add_channel(parse_channel(rbody, rlen));
+                    } else if (rop == static_cast<uint8_t>(Opcode::kMessage)) {
+                      Parser p(rbody, rlen, "Message");
+                      const uint16_t channel_id = p.u16();
+                      p.u32();
+                      count_message(channel_id, p.u64());
+                    }
+                  });
+  chunks_.push_back(loc);
+  ++report_.chunks;
+}
+
+bool McapReader::scan_record(uint64_t pos, const std::vector<uint8_t>& record, ScanState& state) {
+  const uint8_t op = record[0];
+  const uint8_t* body = record.data() + kRecordHeader;
+  const size_t body_len = record.size() - kRecordHeader;
+  bool stop = false;
+  try {
+    switch (static_cast<Opcode>(op)) {
+      case Opcode::kHeader:
+        break;
+      case Opcode::kSchema:
+        add_schema(parse_schema(body, body_len));
+        break;
+      case Opcode::kChannel:
+        add_channel(parse_channel(body, body_len));
+        break;
+      case Opcode::kMessage: {
+        Parser p(body, body_len, "Message");
+        const uint16_t channel_id = p.u16();
+        p.u32();
+        const uint64_t log_time = p.u64();
+        count_message(channel_id, log_time);
+        chunks_.push_back({pos, record.size(), log_time, log_time, false});
+        break;
+      }
+      case Opcode::kChunk:
+        scan_chunk(pos, record, state);
+        break;
+      case Opcode::kDataEnd: {
+        Parser p(body, body_len, "Data End");
+        const uint32_t stored = p.u32();
+        if (stored != 0 && state.crc_valid && stored != state.data_crc) {
+          ++report_.corrupt;
+          report_.problems.push_back("data section CRC mismatch (stored " + std::to_string(stored) +
+                                     ", computed " + std::to_string(state.data_crc) +
+                                     "): some bytes are corrupt");
+        }
+        state.saw_data_end = true;
+        stop = true;
+        break;
+      }
+      case Opcode::kFooter:
+        stop = true;
+        break;
+      default:
+        break;  // indexes, attachments, metadata: not needed to read messages
+    }
+  } catch (const ReadError& e) {
+    ++report_.corrupt;
+    report_.problems.push_back(std::string(opcode_name(op)) + " record " + at_byte(pos) + ": " + e.what() +
+                               "; skipped");
+  }
+  return stop;
+}
+
 void McapReader::scan() {
   const uint64_t size = report_.file_size;
   chunks_.clear();
@@ -362,70 +497,17 @@ void McapReader::scan() {
   report_.chunks = 0;
   report_.channels.clear();
   report_.complete = false;
-  bool first_time = true;
-  uint64_t chunk_fail = 0;
+  ScanState state;
   uint64_t last_good_end = 8;
-  bool saw_data_end = false;
-  bool crc_valid = true;
   uint8_t magic[8];
   source_->read(0, 8, magic);
-  uint32_t data_crc = crc32_update(0, magic, 8);
+  state.data_crc = crc32_update(0, magic, 8);
   std::vector<uint8_t> record;
-
-  auto count_message = [&](uint16_t channel_id, uint64_t log_time) {
-    ChannelCounts& c = report_.channels[channel_id];
-    if (c.messages == 0 || log_time < c.first_log_ns) {
-      c.first_log_ns = log_time;
-    }
-    c.last_log_ns = std::max(c.last_log_ns, log_time);
-    ++c.messages;
-    if (first_time || log_time < report_.start_ns) {
-      report_.start_ns = log_time;
-    }
-    if (first_time || log_time > report_.end_ns) {
-      report_.end_ns = log_time;
-    }
-    first_time = false;
-    ++report_.messages;
-  };
-
-  // Finds the next offset > FROM where a plausible Chunk record starts.
-  auto find_chunk = [&](uint64_t from) -> std::optional<uint64_t> {
-    constexpr size_t kWindow = 1 << 20;
-    constexpr uint64_t kChunkFixed = 8 + 8 + 8 + 4 + 4;
-    std::vector<uint8_t> window;
-    for (uint64_t base = from; base + kRecordHeader + kChunkFixed < size; base += kWindow) {
-      const size_t n = static_cast<size_t>(std::min<uint64_t>(kWindow + 128, size - base));
-      window.resize(n);
-      source_->read(base, n, window.data());
-      for (size_t i = 0; i < std::min(kWindow, n); ++i) {
-        if (window[i] != static_cast<uint8_t>(Opcode::kChunk) ||
-            i + kRecordHeader + kChunkFixed > n) {
-          continue;
-        }
-        const uint8_t* r = window.data() + i;
-        const uint64_t len = get_u64(r + 1);
-        const uint64_t start = get_u64(r + 9);
-        const uint64_t end = get_u64(r + 17);
-        const uint32_t clen = get_u32(r + 9 + 28);
-        if (clen > 16 || start > end || len > size - base - i - kRecordHeader ||
-            i + kRecordHeader + kChunkFixed + clen + 8 > n) {
-          continue;
-        }
-        const uint64_t rlen = get_u64(r + kRecordHeader + kChunkFixed + clen);
-        if (len == kChunkFixed + clen + 8 + rlen) {
-          return base + i;
-        }
-      }
-    }
-    return std::nullopt;
-  };
 
   uint64_t pos = 8;
   while (pos < size) {
     if (size - pos < kRecordHeader) {
-      report_.problems.push_back("the file ends inside a record header " + at_byte(pos) +
-                                 ": cut short");
+      report_.problems.push_back("the file ends inside a record header " + at_byte(pos) + ": cut short");
       break;
     }
     uint8_t head[kRecordHeader];
@@ -438,125 +520,44 @@ void McapReader::scan() {
       if (!valid_op) {
         why = "invalid record opcode " + std::to_string(op) + " " + at_byte(pos);
       } else {
-        why = "the file ends inside a " + std::string(opcode_name(op)) + " record " +
-              at_byte(pos) + " (it needs " + std::to_string(len) + " bytes, " +
-              std::to_string(size - pos - kRecordHeader) + " are present)";
+        why = "the file ends inside a " + std::string(opcode_name(op)) + " record " + at_byte(pos) +
+              " (it needs " + std::to_string(len) + " bytes, " + std::to_string(size - pos - kRecordHeader) +
+              " are present)";
       }
       const std::optional<uint64_t> next = find_chunk(pos + 1);
       if (next) {
         report_.problems.push_back(why + ": skipped " + std::to_string(*next - pos) +
-                                   " corrupt bytes, resumed at the chunk at byte " +
-                                   std::to_string(*next));
-        crc_valid = false;
+                                   " corrupt bytes, resumed at the chunk at byte " + std::to_string(*next));
+        state.crc_valid = false;
         ++report_.corrupt;
         pos = *next;
         continue;
       }
-      report_.problems.push_back(why + ": the file was cut short (writer killed or out of "
-                                       "space?); everything after byte " +
+      report_.problems.push_back(why + ": the file was cut short (writer killed or out of space?); everything after byte " +
                                  std::to_string(pos) + " is lost");
       break;
     }
     record.resize(static_cast<size_t>(kRecordHeader + len));
     source_->read(pos, record.size(), record.data());
-    const uint8_t* body = record.data() + kRecordHeader;
-    const size_t body_len = static_cast<size_t>(len);
-    bool stop = false;
-    try {
-      switch (static_cast<Opcode>(op)) {
-        case Opcode::kHeader:
-          break;
-        case Opcode::kSchema:
-          add_schema(parse_schema(body, body_len));
-          break;
-        case Opcode::kChannel:
-          add_channel(parse_channel(body, body_len));
-          break;
-        case Opcode::kMessage: {
-          Parser p(body, body_len, "Message");
-          const uint16_t channel_id = p.u16();
-          p.u32();
-          const uint64_t log_time = p.u64();
-          count_message(channel_id, log_time);
-          chunks_.push_back({pos, record.size(), log_time, log_time, false});
-          break;
-        }
-        case Opcode::kChunk: {
-          std::vector<uint8_t> records;
-          try {
-            records = chunk_records(body, body_len);
-          } catch (const ReadError& e) {
-            ++chunk_fail;
-            ++report_.corrupt;
-            report_.problems.push_back("chunk " + at_byte(pos) + " (" +
-                                       std::to_string(record.size()) + " bytes): " + e.what() +
-                                       "; its messages are skipped");
-            break;
-          }
-          ChunkLocation loc{pos, record.size(), get_u64(body), get_u64(body + 8), true};
-          for_each_record(records.data(), records.size(), "chunk",
-                          [&](uint8_t rop, const uint8_t* rbody, size_t rlen, size_t) {
-                            if (rop == static_cast<uint8_t>(Opcode::kSchema)) {
-                              add_schema(parse_schema(rbody, rlen));
-                            } else if (rop == static_cast<uint8_t>(Opcode::kChannel)) {
-                              add_channel(parse_channel(rbody, rlen));
-                            } else if (rop == static_cast<uint8_t>(Opcode::kMessage)) {
-                              Parser p(rbody, rlen, "Message");
-                              const uint16_t channel_id = p.u16();
-                              p.u32();
-                              count_message(channel_id, p.u64());
-                            }
-                          });
-          chunks_.push_back(loc);
-          ++report_.chunks;
-          break;
-        }
-        case Opcode::kDataEnd: {
-          Parser p(body, body_len, "Data End");
-          const uint32_t stored = p.u32();
-          if (stored != 0 && crc_valid && stored != data_crc) {
-            ++report_.corrupt;
-            report_.problems.push_back("data section CRC mismatch (stored " +
-                                       std::to_string(stored) + ", computed " +
-                                       std::to_string(data_crc) + "): some bytes are corrupt");
-          }
-          saw_data_end = true;
-          stop = true;
-          break;
-        }
-        case Opcode::kFooter:
-          stop = true;
-          break;
-        default:
-          break;  // indexes, attachments, metadata: not needed to read messages
-      }
-    } catch (const ReadError& e) {
-      ++report_.corrupt;
-      report_.problems.push_back(std::string(opcode_name(op)) + " record " + at_byte(pos) +
-                                 ": " + e.what() + "; skipped");
-    }
-    data_crc = crc32_update(data_crc, record.data(), record.size());
+    const bool stop = scan_record(pos, record, state);
+    state.data_crc = crc32_update(state.data_crc, record.data(), record.size());
     pos += record.size();
     last_good_end = pos;
     if (stop) {
       break;
     }
   }
-  if (!saw_data_end) {
-    report_.problems.push_back("no Data End record: recovered " +
-                               std::to_string(report_.messages) + " messages in " +
-                               std::to_string(report_.chunks) + " complete chunks (bytes 0-" +
-                               std::to_string(last_good_end) + " of " + std::to_string(size) +
-                               ")");
-  } else if (chunk_fail > 0) {
+  if (!state.saw_data_end) {
+    report_.problems.push_back("no Data End record: recovered " + std::to_string(report_.messages) +
+                               " messages in " + std::to_string(report_.chunks) + " complete chunks (bytes 0-" +
+                               std::to_string(last_good_end) + " of " + std::to_string(size) + ")");
+  } else if (state.chunk_fail > 0) {
     report_.problems.push_back("recovered " + std::to_string(report_.messages) + " messages in " +
-                               std::to_string(report_.chunks) + " chunks; " +
-                               std::to_string(chunk_fail) + " corrupt chunks skipped");
+                               std::to_string(report_.chunks) + " chunks; " + std::to_string(state.chunk_fail) +
+                               " corrupt chunks skipped");
   }
   std::stable_sort(chunks_.begin(), chunks_.end(),
-                   [](const ChunkLocation& a, const ChunkLocation& b) {
-                     return a.start_ns < b.start_ns;
-                   });
+                   [](const ChunkLocation& a, const ChunkLocation& b) { return a.start_ns < b.start_ns; });
   report_.recovered = true;
 }
 

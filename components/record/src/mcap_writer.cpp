@@ -278,6 +278,8 @@ void McapWriter::close_chunk() {
   chunk_messages_ = 0;
 }
 
+// not split: the MCAP summary section written in the order the specification gives (schemas,
+// channels, statistics, indexes, offsets, footer), with one running CRC.
 void McapWriter::finalise() {
   std::vector<uint8_t> out;
   size_t at = begin_record(out, Opcode::kDataEnd);

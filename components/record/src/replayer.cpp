@@ -43,6 +43,8 @@ struct Output {
 
 }  // namespace
 
+// not split: one replay's lifecycle (open, writers per channel, match wait, schedule, drain) whose
+// steps share the participant and the writers.
 ReplayStats replay(const ReplayOptions& options) {
   std::ostream& log = options.log != nullptr ? *options.log : std::cerr;
   McapReader reader = McapReader::open_file(options.input);

@@ -845,6 +845,8 @@ std::string module_of(const std::string& scoped) {
 
 }  // namespace
 
+// not split: one depth-first walk that collects the types a struct needs and prints them in
+// dependency order inside their modules.
 std::string TypeTable::flatten(std::string_view scoped_name) const {
   const StructDef& root = get_struct(scoped_name);
 

@@ -94,6 +94,55 @@ std::vector<std::string> scenario_names() {
   return {"static_magnet", "fast_motion", "random_motion", "demo", "tour"};
 }
 
+namespace {
+
+MotionSegment still(const char* name, double duration_s) {
+  MotionSegment m;
+  m.name = name;
+  m.duration_s = duration_s;
+  return m;
+}
+
+/// Random rotation (peak rate, typical frequency), a pull towards level, random translation.
+MotionSegment moving(const char* name, double duration_s, double rotation_amplitude_rps, double rotation_freq_hz,
+                     double level_gain_per_s, double accel_amplitude_mps2, double accel_freq_hz) {
+  MotionSegment m = still(name, duration_s);
+  m.rotation_amplitude_rps = rotation_amplitude_rps;
+  m.rotation_freq_hz = rotation_freq_hz;
+  m.level_gain_per_s = level_gain_per_s;
+  m.accel_amplitude_mps2 = accel_amplitude_mps2;
+  m.accel_freq_hz = accel_freq_hz;
+  return m;
+}
+
+/// A person's handheld motion (the demo's and the tour's).
+MotionSegment handheld(double duration_s) { return moving("handheld", duration_s, 0.8, 0.25, 0.5, 1.5, 0.8); }
+
+/// Handheld motion while climbing at a constant vertical speed (stairs).
+MotionSegment stairs(const char* name, double duration_s, double climb_rate_mps) {
+  MotionSegment m = handheld(duration_s);
+  m.name = name;
+  m.climb_rate_mps = climb_rate_mps;
+  return m;
+}
+
+MagnetEpisode magnet(double start_s, double ramp_s, double hold_s, const Eigen::Vector3d& field_ut,
+                     bool body_fixed = false) {
+  MagnetEpisode m;
+  m.start_s = start_s;
+  m.ramp_s = ramp_s;
+  m.hold_s = hold_s;
+  m.field_ut = field_ut;
+  m.body_fixed = body_fixed;
+  return m;
+}
+
+// The magnet brought near and the one attached to the device (demo and tour).
+const Eigen::Vector3d kNearMagnetUt(30.0, 10.0, -20.0);
+const Eigen::Vector3d kAttachedMagnetUt(0.0, 25.0, 10.0);
+
+}  // namespace
+
 SimConfig make_scenario(const std::string& name, double rate_hz, uint64_t seed) {
   SimConfig c;
   c.name = name;
@@ -101,119 +150,38 @@ SimConfig make_scenario(const std::string& name, double rate_hz, uint64_t seed) 
   c.seed = seed;
   c.noise.gyro_bias_rps = Eigen::Vector3d(0.3, -0.2, 0.25) * kRadPerDeg;
   c.q0_world_body = quat_from_euler_zyx(5.0 * kRadPerDeg, -3.0 * kRadPerDeg, 40.0 * kRadPerDeg);
-  MotionSegment rest;
-  rest.name = "static";
   if (name == "static_magnet") {
-    // A static sensor; a magnet approaches (3 s), stays 15 s, leaves; later a second, weaker one.
-    rest.duration_s = 80.0;
-    c.segments = {rest};
+    // A static sensor; a magnet approaches (3 s), stays 15 s, leaves; later a second, weaker one
+    // (the first ~35 uT, comparable to the earth's field).
+    c.segments = {still("static", 80.0)};
     c.duration_s = 80.0;
-    MagnetEpisode m1;
-    m1.start_s = 15.0;
-    m1.ramp_s = 3.0;
-    m1.hold_s = 15.0;
-    m1.field_ut = Eigen::Vector3d(25.0, -15.0, 20.0);  // ~35 uT, comparable to the earth's field
-    MagnetEpisode m2 = m1;
-    m2.start_s = 50.0;
-    m2.field_ut = Eigen::Vector3d(-10.0, 8.0, -6.0);
-    c.magnets = {m1, m2};
+    c.magnets = {magnet(15.0, 3.0, 15.0, Eigen::Vector3d(25.0, -15.0, 20.0)),
+                 magnet(50.0, 3.0, 15.0, Eigen::Vector3d(-10.0, 8.0, -6.0))};
   } else if (name == "fast_motion") {
-    rest.duration_s = 5.0;
-    MotionSegment fast;
-    fast.name = "fast";
-    fast.duration_s = 40.0;
-    fast.rotation_amplitude_rps = 4.0;  // up to ~230 deg/s per axis
-    fast.rotation_freq_hz = 1.0;
-    fast.level_gain_per_s = 0.5;
-    fast.accel_amplitude_mps2 = 12.0;
-    fast.accel_freq_hz = 1.5;
-    MotionSegment end_rest = rest;
-    c.segments = {rest, fast, end_rest};
+    const MotionSegment rest = still("static", 5.0);
+    // up to ~230 deg/s per axis
+    c.segments = {rest, moving("fast", 40.0, 4.0, 1.0, 0.5, 12.0, 1.5), rest};
     c.duration_s = c.cycle_s();
   } else if (name == "random_motion") {
-    rest.duration_s = 5.0;
-    MotionSegment slow;
-    slow.name = "random";
-    slow.duration_s = 30.0;
-    slow.rotation_amplitude_rps = 1.2;
-    slow.rotation_freq_hz = 0.3;
-    slow.level_gain_per_s = 0.2;
-    slow.accel_amplitude_mps2 = 3.0;
-    slow.accel_freq_hz = 0.6;
-    MotionSegment pause = rest;
-    pause.name = "break";
-    pause.duration_s = 5.0;
-    c.segments = {rest, slow, pause, slow, pause};
+    const MotionSegment slow = moving("random", 30.0, 1.2, 0.3, 0.2, 3.0, 0.6);
+    const MotionSegment pause = still("break", 5.0);
+    c.segments = {still("static", 5.0), slow, pause, slow, pause};
     c.duration_s = c.cycle_s();
   } else if (name == "demo") {
-    // Endless: handheld motion, magnet episodes while resting and while moving, stairs.
-    rest.duration_s = 6.0;
-    MotionSegment walk;
-    walk.name = "handheld";
-    walk.duration_s = 20.0;
-    walk.rotation_amplitude_rps = 0.8;
-    walk.rotation_freq_hz = 0.25;
-    walk.level_gain_per_s = 0.5;
-    walk.accel_amplitude_mps2 = 1.5;
-    walk.accel_freq_hz = 0.8;
-    MotionSegment up = walk;
-    up.name = "stairs_up";
-    up.duration_s = 15.0;
-    up.climb_rate_mps = 0.2;  // 3 m in 15 s
-    MotionSegment down = up;
-    down.name = "stairs_down";
-    down.climb_rate_mps = -0.2;
-    c.segments = {rest, walk, rest, up, rest, down, rest, walk};
+    // Endless: handheld motion, magnet episodes while resting and while moving, stairs (3 m in 15 s).
+    const MotionSegment rest = still("static", 6.0);
+    c.segments = {rest, handheld(20.0), rest, stairs("stairs_up", 15.0, 0.2), rest,
+                  stairs("stairs_down", 15.0, -0.2), rest, handheld(20.0)};
     c.duration_s = 0.0;
-    MagnetEpisode near;
-    near.start_s = 8.0;
-    near.ramp_s = 2.0;
-    near.hold_s = 10.0;
-    near.field_ut = Eigen::Vector3d(30.0, 10.0, -20.0);
-    MagnetEpisode attached;
-    attached.start_s = 30.0;
-    attached.ramp_s = 1.0;
-    attached.hold_s = 6.0;
-    attached.field_ut = Eigen::Vector3d(0.0, 25.0, 10.0);
-    attached.body_fixed = true;
-    c.magnets = {near, attached};
+    c.magnets = {magnet(8.0, 2.0, 10.0, kNearMagnetUt), magnet(30.0, 1.0, 6.0, kAttachedMagnetUt, true)};
   } else if (name == "tour") {
     // Every episode of the demo in one 30 s cycle: rest, handheld motion with a magnet brought
-    // near and taken away, stairs up and down (1.5 m), a magnet attached to the device.
-    rest.duration_s = 3.0;
-    MotionSegment walk;
-    walk.name = "handheld";
-    walk.duration_s = 8.0;
-    walk.rotation_amplitude_rps = 0.8;
-    walk.rotation_freq_hz = 0.25;
-    walk.level_gain_per_s = 0.5;
-    walk.accel_amplitude_mps2 = 1.5;
-    walk.accel_freq_hz = 0.8;
-    MotionSegment pause = rest;
-    pause.duration_s = 2.0;
-    MotionSegment up = walk;
-    up.name = "stairs_up";
-    up.duration_s = 6.0;
-    up.climb_rate_mps = 0.25;  // 1.5 m in 6 s
-    MotionSegment down = up;
-    down.name = "stairs_down";
-    down.climb_rate_mps = -0.25;
-    MotionSegment end = rest;
-    end.duration_s = 3.0;
-    c.segments = {rest, walk, pause, up, pause, down, end};  // 3+8+2+6+2+6+3 = 30 s
+    // near and taken away, stairs up and down (1.5 m in 6 s), a magnet attached to the device.
+    const MotionSegment pause = still("static", 2.0);
+    c.segments = {still("static", 3.0), handheld(8.0), pause, stairs("stairs_up", 6.0, 0.25), pause,
+                  stairs("stairs_down", 6.0, -0.25), still("static", 3.0)};  // 3+8+2+6+2+6+3 = 30 s
     c.duration_s = 0.0;
-    MagnetEpisode near;
-    near.start_s = 5.0;
-    near.ramp_s = 1.5;
-    near.hold_s = 4.0;
-    near.field_ut = Eigen::Vector3d(30.0, 10.0, -20.0);
-    MagnetEpisode attached;
-    attached.start_s = 22.0;
-    attached.ramp_s = 1.0;
-    attached.hold_s = 4.0;
-    attached.field_ut = Eigen::Vector3d(0.0, 25.0, 10.0);
-    attached.body_fixed = true;
-    c.magnets = {near, attached};
+    c.magnets = {magnet(5.0, 1.5, 4.0, kNearMagnetUt), magnet(22.0, 1.0, 4.0, kAttachedMagnetUt, true)};
   } else {
     std::string known;
     for (const auto& n : scenario_names()) {

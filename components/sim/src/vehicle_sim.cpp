@@ -130,6 +130,8 @@ const std::vector<std::string>& vehicle_sim_scenarios() {
   return kNames;
 }
 
+// not split: one integration loop of the vehicle model, the sensor outputs computed beside the
+// state they come from.
 std::vector<VehicleSimSample> simulate_vehicle(const VehicleSimConfig& cfg) {
   if (!(cfg.rate_hz > 0.0) || !std::isfinite(cfg.rate_hz)) {
     throw std::invalid_argument("vehicle simulator: rate_hz must be > 0");

@@ -179,6 +179,8 @@ void CameraPipeline::set_world_pose_params(const WorldPoseParams& params) {
   config_.world_pose = params;
 }
 
+// not split: one frame through the pipeline in order (checks, detection, per-tag pose, world pose,
+// timing), each stage's rejections counted where they happen.
 FrameResult CameraPipeline::process(const Frame& frame) {
   const auto t0 = std::chrono::steady_clock::now();
   FrameResult out;

@@ -144,6 +144,8 @@ void validate_world_pose_params(const WorldPoseParams& p) {
   }
 }
 
+// not split: one estimate in its order (hypotheses per tag, consensus, refinement, ambiguity test)
+// over shared observation arrays.
 WorldPoseResult estimate_world_pose(const std::vector<TagObservation>& observations,
                                     const cv::Matx33d& camera_matrix,
                                     const WorldPoseParams& params) {

@@ -118,6 +118,7 @@ bool is_supported_baud(int baud) {
   return std::find(b.begin(), b.end(), baud) != b.end();
 }
 
+// not split: one table of keys read in the file's documented order, each line a key and its unit.
 DriverConfig parse_driver_config(const std::string& yaml_text, const std::string& origin) {
   Reader rd(origin);
   const YAML::Node root = parse_yaml<ConfigError>(yaml_text, origin);

@@ -113,6 +113,8 @@ uint8_t nmea_checksum(std::string_view payload) {
   return cs;
 }
 
+// not split: the line grammar of docs/SERIAL_PROTOCOL.md field by field, each rejection named where
+// its field is read.
 ParseResult LineParser::parse(std::string_view line) const {
   if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
   if (line.size() > kMaxLineBytes) return reject(RejectReason::kOverlong);

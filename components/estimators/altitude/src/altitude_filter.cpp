@@ -163,6 +163,8 @@ void AltitudeFilter::step_kf(double dt_s, bool baro_available, double y_b) {
   }
 }
 
+// not split: one filter step in the paper's order (sample checks, tilt KF, vertical acceleration,
+// ZUPT, barometer correction, report).
 bool AltitudeFilter::update(const ImuSample& s) {
   ImuSample imu = s;
   imu.has_mag = false;  // not used here: neither checked nor counted

@@ -59,6 +59,7 @@ void apply(const YAML::Node& node, const std::map<std::string, Setter>& setters,
 
 }  // namespace
 
+// not split: one table of keys read in the file's documented order, each line a key and its unit.
 SelectiveEkfParams load_selective_ekf_params(const std::string& path) {
   YAML::Node root;
   try {

@@ -207,6 +207,8 @@ VehicleSample vehicle_sample_from_imu(const ImuSample& imu, bool has_speed, doub
   return v;
 }
 
+// not split: one filter step in the paper's order (sample checks, static test, TRIAD or EKF predict
+// and correct, report); the state it updates is read top to bottom.
 bool VehicleEstimator::update(const VehicleSample& s) {
   // The shared check on the signals as an IMU sample: gyro [0, 0, r], accel [a_x, a_y, 0], B.
   ImuSample imu;

@@ -257,6 +257,8 @@ class PtyEcho {
 /// the `poise run` child (imu_driver + parallel_kf) and times write -> attitude/parallel_kf
 /// received. Hop: the `--hop-publisher` child publishes stamped AttitudeEstimates while resumed
 /// (SIGUSR1 toggles it) and this process times stamp -> received.
+// not split: one measurement's lifecycle (children started, alternating windows, children stopped)
+// whose parts share the child processes and the timing buffers.
 RateResult measure_rate(const BenchOptions& o, double rate, bool pipeline_realtime) {
   const std::string link = "/tmp/poise-bench-imu-" + std::to_string(::getpid());
   imu::PtyLink pty(link);

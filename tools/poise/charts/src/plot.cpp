@@ -43,6 +43,7 @@ void text(cv::Mat& img, const std::string& s, cv::Point at, double scale, int th
   cv::putText(img, s, at, cv::FONT_HERSHEY_SIMPLEX, scale, kTextColour, thickness, cv::LINE_AA);
 }
 
+// not split: one panel drawn back to front (frame, bands, grid, series, legend) on shared scales.
 void draw_panel(cv::Mat& img, const Panel& panel, const cv::Rect& area, double x_lo, double x_hi) {
   double y_lo = panel.y_min;
   double y_hi = panel.y_max;

@@ -189,6 +189,8 @@ std::string dashboard(const DemoOptions& o, const demo::PipelineMonitor& monitor
   return os.str();
 }
 
+// not split: the demo's script in the order it runs (host file, scenario, host + monitor, dashboard
+// loop, report); each step uses what the one before built.
 void run_demo(const DemoOptions& o) {
   install_stop_handlers();
   auto& registry = runtime::ComponentRegistry::instance();

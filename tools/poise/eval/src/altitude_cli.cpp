@@ -1,5 +1,6 @@
 // `poise sim altitude`: simulate a paper-003 test profile, run the altitude filter, print RMSE.
 #include "poise/eval/altitude_eval.h"
+#include "poise/bench/bench_cli.h"
 #include "poise/cli/common.h"
 
 #include <CLI/CLI.hpp>
@@ -31,25 +32,16 @@ std::string score_json(const AltitudeScore& s, const AltitudeParams& p) {
 
 }  // namespace
 
+// not split: the options and help of `sim altitude` and `bench altitude` in the order --help
+// prints them.
 void register_altitude_cli(CLI::App& app) {
-  CLI::App* bench_group = subcommand_group(app, "bench", "Benchmarks (figures printed, not asserted)");
-  CLI::App* bench = bench_group->add_subcommand(
-      "altitude", "Cost of the altitude filter (tilt KF included) per sample, on the simulated test 1");
-  auto bench_samples = std::make_shared<int>(200000);
-  auto bench_method = std::make_shared<std::string>("pi_cf_zupt");
-  bench->add_option("--samples", *bench_samples, "Samples per run (best of 3 runs)")
-      ->check(CLI::Range(1, 100000000))
-      ->capture_default_str();
-  bench->add_option("--method", *bench_method, "Method to time")
-      ->check(CLI::IsMember({"two_step_kf", "cf_zupt", "pi_cf_zupt", "pi_cf"}))
-      ->capture_default_str();
-  bench->callback([bench_samples, bench_method]() {
-    AltitudeParams p;
-    parse_altitude_method(*bench_method, p.method);
-    const AltitudeBenchFigures f = bench_altitude(*bench_samples, 3, p);
-    std::printf("altitude %s: %.0f ns/sample cpu, %.0f ns/sample wall (best of 3 x %d samples)\n",
-                bench_method->c_str(), f.cpu_ns_per_sample, f.wall_ns_per_sample, *bench_samples);
-  });
+  add_variant_bench(app, "altitude", "Cost of the altitude filter (tilt KF included) per sample, on the simulated test 1",
+                    "--method", "Method to time", {"two_step_kf", "cf_zupt", "pi_cf_zupt", "pi_cf"}, "pi_cf_zupt",
+                    [](int samples, int repeats, const std::string& method) {
+                      AltitudeParams p;
+                      parse_altitude_method(method, p.method);
+                      return bench_altitude(samples, repeats, p);
+                    });
 
   CLI::App* sim_group = subcommand_group(app, "sim", "Simulators: run an estimator on synthetic data");
   CLI::App* cmd = sim_group->add_subcommand(

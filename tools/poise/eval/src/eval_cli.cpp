@@ -146,6 +146,8 @@ struct GridOptions {
 
 /// Runs every grid candidate on every trial, prints the in-sample and cross-validated figures,
 /// and returns the cross-validation (with the candidates) for `poise tune`.
+// not split: the grid's three phases (run every candidate on every trial, fold, print) share the
+// per-candidate results table.
 std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
     const std::string& filter_name, const std::string& config, const std::string& out_dir,
     const std::vector<std::string>& files, const GridOptions& g, bool broad, const NorthReference& north) {
@@ -390,6 +392,8 @@ int run_imu_delay(const std::vector<std::string>& files, int window) {
 
 }  // namespace
 
+// not split: the options and help of `calibrate imu-delay`, `eval broad`, `tune` and `bench filters`
+// in the order --help prints them.
 void register_eval_cli(CLI::App& app) {
   CLI::App* calibrate = subcommand_group(app, "calibrate", "Guided sensor calibration");
   CLI::App* delay = calibrate->add_subcommand(

@@ -1,5 +1,6 @@
 // `poise sim vehicle`: simulate a paper-001 case, run TRIAD alone, EKF alone and the switched
 // estimator, print roll/pitch/yaw RMSE.
+#include "poise/bench/bench_cli.h"
 #include "poise/cli/common.h"
 #include "poise/eval/vehicle_eval.h"
 
@@ -39,24 +40,13 @@ void print_row(const char* label, const Rpy& r) {
 }  // namespace
 
 void register_vehicle_cli(CLI::App& app) {
-  CLI::App* bench_group = subcommand_group(app, "bench", "Benchmarks (figures printed, not asserted)");
-  CLI::App* bench = bench_group->add_subcommand(
-      "vehicle", "Cost of the vehicle estimator per sample, on the simulated mountain road");
-  auto bench_samples = std::make_shared<int>(200000);
-  auto bench_mode = std::make_shared<std::string>("switched");
-  bench->add_option("--samples", *bench_samples, "Samples per run (best of 3 runs)")
-      ->check(CLI::Range(1, 100000000))
-      ->capture_default_str();
-  bench->add_option("--mode", *bench_mode, "switched, triad or ekf")
-      ->check(CLI::IsMember({"switched", "triad", "ekf"}))
-      ->capture_default_str();
-  bench->callback([bench_samples, bench_mode]() {
-    VehicleParams p;
-    parse_vehicle_mode(*bench_mode, p.mode);
-    const VehicleBenchFigures f = bench_vehicle(*bench_samples, 3, p);
-    std::printf("vehicle %s: %.0f ns/sample cpu, %.0f ns/sample wall (best of 3 x %d samples)\n",
-                bench_mode->c_str(), f.cpu_ns_per_sample, f.wall_ns_per_sample, *bench_samples);
-  });
+  add_variant_bench(app, "vehicle", "Cost of the vehicle estimator per sample, on the simulated mountain road",
+                    "--mode", "switched, triad or ekf", {"switched", "triad", "ekf"}, "switched",
+                    [](int samples, int repeats, const std::string& mode) {
+                      VehicleParams p;
+                      parse_vehicle_mode(mode, p.mode);
+                      return bench_vehicle(samples, repeats, p);
+                    });
 
   CLI::App* sim_group = subcommand_group(app, "sim", "Simulators: run an estimator on synthetic data");
   CLI::App* cmd = sim_group->add_subcommand(

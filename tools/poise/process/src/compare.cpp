@@ -163,110 +163,184 @@ constexpr int64_t kFinalizeEveryNs = 1'000'000'000LL;
 
 }  // namespace
 
-std::vector<SeriesComparison> compare_processed(const std::string& file, const std::string& prefix) {
-  std::map<std::string, Series> series;  // by topic: the estimates not yet compared
-  std::map<std::string, std::map<std::string, Running>> running;  // by processed topic, sensor
-  std::map<std::string, std::map<std::string, LiveRunning>> live_running;  // by live topic, sensor
-  std::map<std::string, std::map<uint32_t, Sample>> truth;  // by truth topic, seq
-  const auto is_processed = [&prefix](const std::string& topic) { return topic.rfind(prefix, 0) == 0; };
-  const auto is_truth = [](const std::string& topic) { return topic.rfind("truth/", 0) == 0; };
+namespace {
+
+/// The comparison as it reads a file in one stream: estimates wait until the newest stamp is
+/// kHorizonNs past them, then are compared and dropped.
+class StreamComparison {
+ public:
+  explicit StreamComparison(std::string prefix) : prefix_(std::move(prefix)) {}
+
+  /// One decoded estimate or truth sample of `topic`.
+  void add(const std::string& topic, const std::string& kind, const std::string& sensor, uint32_t seq,
+           const Sample& s) {
+    Series& ser = series_[topic];
+    ser.kind = kind;
+    if (is_truth(topic)) {
+      // truth by seq (the simulator numbers its samples as the IMU it feeds); the later one of a
+      // seq read twice, as the recording's order gives them
+      truth_[topic][seq] = s;
+    } else {
+      ser.samples[Key{sensor, s.stamp_ns, seq}] = s;
+    }
+    if (s.stamp_ns > newest_) {
+      newest_ = s.stamp_ns;
+      // finalized_at_ <= newest_ - kHorizonNs <= INT64_MAX - kHorizonNs: the sum cannot overflow
+      if (newest_ > std::numeric_limits<int64_t>::min() + kHorizonNs &&
+          (finalized_at_ == std::numeric_limits<int64_t>::min() ||
+           newest_ - kHorizonNs >= finalized_at_ + kFinalizeEveryNs)) {
+        finalized_at_ = newest_ - kHorizonNs;
+        finalize(finalized_at_, false);
+      }
+    }
+  }
+
+  /// Compares what is left and gives one comparison per processed topic and sensor.
+  std::vector<SeriesComparison> finish() {
+    finalize(std::numeric_limits<int64_t>::max(), true);
+    std::vector<SeriesComparison> out;
+    for (auto& [topic, by_sensor] : running_) {
+      const std::string live_topic = topic.substr(prefix_.size());
+      const auto live_it = live_running_.find(live_topic);
+      for (auto& [sensor, r] : by_sensor) {
+        SeriesComparison& c = r.c;
+        if (live_it != live_running_.end()) {
+          const auto l = live_it->second.find(sensor);
+          if (l != live_it->second.end()) {
+            c.live = l->second.live;
+            c.truth_matched_live = l->second.truth_matched;
+            c.live_truth_rmse = l->second.truth_matched > 0
+                                    ? std::sqrt(l->second.truth_sq / static_cast<double>(l->second.truth_matched))
+                                    : 0.0;
+          }
+        }
+        c.rmse = c.matched > 0 ? std::sqrt(r.sum_sq / static_cast<double>(c.matched)) : 0.0;
+        c.processed_truth_rmse =
+            c.truth_matched > 0 ? std::sqrt(r.truth_sq / static_cast<double>(c.truth_matched)) : 0.0;
+        out.push_back(c);
+      }
+    }
+    return out;
+  }
+
+ private:
+  [[nodiscard]] bool is_processed(const std::string& topic) const { return topic.rfind(prefix_, 0) == 0; }
+  static bool is_truth(const std::string& topic) { return topic.rfind("truth/", 0) == 0; }
 
   // Compares (and drops) the estimates stamped before `before` (every one with `all`, at the end:
   // a stamp may be INT64_MAX): processed first (they look up live and truth), then live (they
   // look up truth), then truth older than the horizon.
-  const auto finalize = [&](int64_t before, bool all) {
-    for (auto& [topic, processed] : series) {
-      if (!is_processed(topic)) {
-        continue;
-      }
-      const std::string live_topic = topic.substr(prefix.size());
-      const auto live_it = series.find(live_topic);
-      const std::string truth_topic = "truth/" + processed.kind;
-      const auto truth_it = truth.find(truth_topic);
-      for (auto it = processed.samples.begin(); it != processed.samples.end();) {
-        const auto& [key, s] = *it;
-        if (!all && s.stamp_ns >= before) {
-          ++it;
-          continue;
-        }
-        const std::string& sensor = std::get<0>(key);
-        Running& r = running[topic][sensor];
-        SeriesComparison& c = r.c;
-        if (c.processed == 0) {
-          c.kind = processed.kind;
-          c.topic = live_topic;
-          c.sensor_id = sensor;
-          c.unit = processed.kind == "attitude" ? "deg" : "m";
-          r.first_stamp = s.stamp_ns;
-        }
-        ++c.processed;
-        const double t_s = (static_cast<double>(s.stamp_ns) - static_cast<double>(r.first_stamp)) * 1e-9;
-        if (truth_it != truth.end()) {
-          const auto t = truth_it->second.find(std::get<2>(key));
-          if (t != truth_it->second.end()) {
-            c.truth_topic = truth_topic;
-            ++c.truth_matched;
-            const double e = difference(processed.kind, s, t->second);
-            r.truth_sq += e * e;
-          }
-        }
-        if (live_it != series.end()) {
-          const auto l = live_it->second.samples.find(key);
-          if (l != live_it->second.samples.end()) {
-            ++c.matched;
-            const double d = difference(processed.kind, s, l->second);
-            r.sum_sq += d * d;
-            if (d > c.largest) {
-              c.largest = d;
-              c.largest_at_s = t_s;
-            }
-            if (processed.kind == "attitude") {
-              add_flag(c.mag_trust, s.mag_trusted, l->second.mag_trusted, t_s, &r.mag_in);
-              add_flag(c.vision_fused, s.vision_fused, l->second.vision_fused, t_s, &r.vision_in);
-            }
-          }
-        }
-        it = processed.samples.erase(it);
+  void finalize(int64_t before, bool all) {
+    for (auto& [topic, processed] : series_) {
+      if (is_processed(topic)) {
+        compare_processed_series(topic, processed, before, all);
       }
     }
-    for (auto& [topic, live] : series) {
-      if (is_processed(topic) || is_truth(topic)) {
-        continue;
-      }
-      const auto truth_it = truth.find("truth/" + live.kind);
-      for (auto it = live.samples.begin(); it != live.samples.end();) {
-        const auto& [key, s] = *it;
-        if (!all && s.stamp_ns >= before) {
-          ++it;
-          continue;
-        }
-        LiveRunning& l = live_running[topic][std::get<0>(key)];
-        ++l.live;
-        if (truth_it != truth.end()) {
-          const auto t = truth_it->second.find(std::get<2>(key));
-          if (t != truth_it->second.end()) {
-            ++l.truth_matched;
-            const double e = difference(live.kind, s, t->second);
-            l.truth_sq += e * e;
-          }
-        }
-        it = live.samples.erase(it);
+    for (auto& [topic, live] : series_) {
+      if (!is_processed(topic) && !is_truth(topic)) {
+        compare_live_series(topic, live, before, all);
       }
     }
     // stamps come from the file: every difference below is kept inside int64_t
-    const int64_t truth_before =
-        before > std::numeric_limits<int64_t>::min() + kHorizonNs ? before - kHorizonNs : std::numeric_limits<int64_t>::min();
-    for (auto& [topic, by_seq] : truth) {
+    const int64_t truth_before = before > std::numeric_limits<int64_t>::min() + kHorizonNs
+                                     ? before - kHorizonNs
+                                     : std::numeric_limits<int64_t>::min();
+    for (auto& [topic, by_seq] : truth_) {
       for (auto it = by_seq.begin(); it != by_seq.end();) {
         it = it->second.stamp_ns < truth_before ? by_seq.erase(it) : std::next(it);
       }
     }
-  };
+  }
 
+  void compare_processed_series(const std::string& topic, Series& processed, int64_t before, bool all) {
+    const std::string live_topic = topic.substr(prefix_.size());
+    const auto live_it = series_.find(live_topic);
+    const std::string truth_topic = "truth/" + processed.kind;
+    const auto truth_it = truth_.find(truth_topic);
+    for (auto it = processed.samples.begin(); it != processed.samples.end();) {
+      const auto& [key, s] = *it;
+      if (!all && s.stamp_ns >= before) {
+        ++it;
+        continue;
+      }
+      const std::string& sensor = std::get<0>(key);
+      Running& r = running_[topic][sensor];
+      SeriesComparison& c = r.c;
+      if (c.processed == 0) {
+        c.kind = processed.kind;
+        c.topic = live_topic;
+        c.sensor_id = sensor;
+        c.unit = processed.kind == "attitude" ? "deg" : "m";
+        r.first_stamp = s.stamp_ns;
+      }
+      ++c.processed;
+      const double t_s = (static_cast<double>(s.stamp_ns) - static_cast<double>(r.first_stamp)) * 1e-9;
+      if (truth_it != truth_.end()) {
+        const auto t = truth_it->second.find(std::get<2>(key));
+        if (t != truth_it->second.end()) {
+          c.truth_topic = truth_topic;
+          ++c.truth_matched;
+          const double e = difference(processed.kind, s, t->second);
+          r.truth_sq += e * e;
+        }
+      }
+      if (live_it != series_.end()) {
+        const auto l = live_it->second.samples.find(key);
+        if (l != live_it->second.samples.end()) {
+          ++c.matched;
+          const double d = difference(processed.kind, s, l->second);
+          r.sum_sq += d * d;
+          if (d > c.largest) {
+            c.largest = d;
+            c.largest_at_s = t_s;
+          }
+          if (processed.kind == "attitude") {
+            add_flag(c.mag_trust, s.mag_trusted, l->second.mag_trusted, t_s, &r.mag_in);
+            add_flag(c.vision_fused, s.vision_fused, l->second.vision_fused, t_s, &r.vision_in);
+          }
+        }
+      }
+      it = processed.samples.erase(it);
+    }
+  }
+
+  void compare_live_series(const std::string& topic, Series& live, int64_t before, bool all) {
+    const auto truth_it = truth_.find("truth/" + live.kind);
+    for (auto it = live.samples.begin(); it != live.samples.end();) {
+      const auto& [key, s] = *it;
+      if (!all && s.stamp_ns >= before) {
+        ++it;
+        continue;
+      }
+      LiveRunning& l = live_running_[topic][std::get<0>(key)];
+      ++l.live;
+      if (truth_it != truth_.end()) {
+        const auto t = truth_it->second.find(std::get<2>(key));
+        if (t != truth_it->second.end()) {
+          ++l.truth_matched;
+          const double e = difference(live.kind, s, t->second);
+          l.truth_sq += e * e;
+        }
+      }
+      it = live.samples.erase(it);
+    }
+  }
+
+  const std::string prefix_;
+  std::map<std::string, Series> series_;  // by topic: the estimates not yet compared
+  std::map<std::string, std::map<std::string, Running>> running_;  // by processed topic, sensor
+  std::map<std::string, std::map<std::string, LiveRunning>> live_running_;  // by live topic, sensor
+  std::map<std::string, std::map<uint32_t, Sample>> truth_;  // by truth topic, seq
+  int64_t newest_ = std::numeric_limits<int64_t>::min();
+  int64_t finalized_at_ = std::numeric_limits<int64_t>::min();
+};
+
+}  // namespace
+
+std::vector<SeriesComparison> compare_processed(const std::string& file, const std::string& prefix) {
+  StreamComparison comparison(prefix);
   const McapReader reader = McapReader::open_file(file);
   MessageCursor cursor = reader.messages();
-  int64_t newest = std::numeric_limits<int64_t>::min();
-  int64_t finalized_at = std::numeric_limits<int64_t>::min();
   while (const MessageView* m = cursor.next()) {
     if (m->schema == nullptr) {
       continue;
@@ -275,54 +349,11 @@ std::vector<SeriesComparison> compare_processed(const std::string& file, const s
     std::string sensor;
     uint32_t seq = 0;
     std::string kind;
-    if (!decode_estimate(*m, kind, sensor, seq, s)) {
-      continue;
-    }
-    const std::string& topic = m->channel->topic;
-    Series& ser = series[topic];
-    ser.kind = kind;
-    if (is_truth(topic)) {
-      // truth by seq (the simulator numbers its samples as the IMU it feeds); the later one of a
-      // seq read twice, as the recording's order gives them
-      truth[topic][seq] = s;
-    } else {
-      ser.samples[Key{sensor, s.stamp_ns, seq}] = s;
-    }
-    if (s.stamp_ns > newest) {
-      newest = s.stamp_ns;
-      // finalized_at <= newest - kHorizonNs <= INT64_MAX - kHorizonNs: the sum cannot overflow
-      if (newest > std::numeric_limits<int64_t>::min() + kHorizonNs &&
-          (finalized_at == std::numeric_limits<int64_t>::min() ||
-           newest - kHorizonNs >= finalized_at + kFinalizeEveryNs)) {
-        finalized_at = newest - kHorizonNs;
-        finalize(finalized_at, false);
-      }
+    if (decode_estimate(*m, kind, sensor, seq, s)) {
+      comparison.add(m->channel->topic, kind, sensor, seq, s);
     }
   }
-  finalize(std::numeric_limits<int64_t>::max(), true);
-
-  std::vector<SeriesComparison> out;
-  for (auto& [topic, by_sensor] : running) {
-    const std::string live_topic = topic.substr(prefix.size());
-    const auto live_it = live_running.find(live_topic);
-    for (auto& [sensor, r] : by_sensor) {
-      SeriesComparison& c = r.c;
-      if (live_it != live_running.end()) {
-        const auto l = live_it->second.find(sensor);
-        if (l != live_it->second.end()) {
-          c.live = l->second.live;
-          c.truth_matched_live = l->second.truth_matched;
-          c.live_truth_rmse = l->second.truth_matched > 0
-                                  ? std::sqrt(l->second.truth_sq / static_cast<double>(l->second.truth_matched))
-                                  : 0.0;
-        }
-      }
-      c.rmse = c.matched > 0 ? std::sqrt(r.sum_sq / static_cast<double>(c.matched)) : 0.0;
-      c.processed_truth_rmse = c.truth_matched > 0 ? std::sqrt(r.truth_sq / static_cast<double>(c.truth_matched)) : 0.0;
-      out.push_back(c);
-    }
-  }
-  return out;
+  return comparison.finish();
 }
 
 std::string format_comparison(const std::vector<SeriesComparison>& series) {

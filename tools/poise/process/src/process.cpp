@@ -16,9 +16,12 @@
 #include <algorithm>
 #include <cstring>
 #include <deque>
+#include <functional>
+#include <map>
 #include <optional>
 #include <queue>
 #include <set>
+#include <tuple>
 #include <utility>
 #include <variant>
 
@@ -231,6 +234,226 @@ InputKind decode_input(const MessageView& m, const ProcessOptions& options, bool
 /// (stamp, ordinal): the processing order of kStamp (a stable sort by stamp).
 using OrderKey = std::pair<int64_t, uint64_t>;
 
+/// What the components take from the recording.
+struct Wants {
+  bool vision = false;
+  bool vehicle = false;
+};
+
+/// What pass 1 finds before anything is run.
+struct InputScan {
+  uint64_t malformed_imu = 0;
+  uint64_t malformed_vision = 0;
+  uint64_t malformed_vehicle = 0;
+  int64_t first_stamp_ns = 0;
+  /// The farthest any input sits after its place in the stamp order (0 in recorded order).
+  uint64_t window = 0;
+};
+
+using Progress = std::function<void(uint64_t phase, uint64_t done)>;
+
+/// The farthest any key sits after its place in the stamp order, and the first stamp in it.
+std::pair<uint64_t, int64_t> reorder_window(const std::vector<OrderKey>& keys) {
+  std::vector<uint64_t> file_index(keys.size());
+  for (uint64_t i = 0; i < file_index.size(); ++i) {
+    file_index[i] = i;
+  }
+  std::stable_sort(file_index.begin(), file_index.end(),
+                   [&keys](uint64_t a, uint64_t b) { return keys[a].first < keys[b].first; });
+  uint64_t window = 0;
+  for (uint64_t j = 0; j < file_index.size(); ++j) {
+    window = std::max(window, file_index[j] > j ? file_index[j] - j : 0);
+  }
+  return {window, keys[file_index.front()].first};
+}
+
+/// Pass 1, a scan: what is malformed (counted and named, never processed; the components'
+/// diagnostics carry the totals from their first message), the first stamp, and how far the stamp
+/// order strays from the file order. Only (stamp, ordinal) is kept per input, so the memory used
+/// does not grow with the recording's payloads.
+InputScan scan_inputs(const McapReader& reader, const ProcessOptions& options, Wants wants,
+                      const Progress& progress, ProcessStats& stats) {
+  InputScan scan;
+  std::vector<OrderKey> keys;  // valid inputs in file order
+  MessageCursor cursor = reader.messages();
+  uint64_t ordinal = 0;
+  while (const MessageView* m = cursor.next()) {
+    const uint64_t index = ordinal++;
+    ++stats.input_messages;
+    progress(0, stats.input_messages);
+    Input in;
+    std::optional<std::string> problem;
+    const InputKind kind = decode_input(*m, options, wants.vision, wants.vehicle, in, problem);
+    if (kind == InputKind::kNone) {
+      continue;
+    }
+    uint64_t* malformed = nullptr;
+    switch (kind) {
+      case InputKind::kImu: ++stats.imu_samples; malformed = &scan.malformed_imu; break;
+      case InputKind::kVision: ++stats.vision_samples; malformed = &scan.malformed_vision; break;
+      case InputKind::kVehicle: ++stats.vehicle_inputs; malformed = &scan.malformed_vehicle; break;
+      case InputKind::kNone: break;
+    }
+    if (problem) {
+      ++*malformed;
+      ++stats.undecodable;
+      if (stats.undecodable_details.size() < kMaxDescribedSkips) {
+        stats.undecodable_details.push_back(describe_position(*m) + " on '" + m->channel->topic + "', " +
+                                            std::to_string(m->size) + " bytes: " + *problem);
+      }
+      continue;
+    }
+    keys.emplace_back(in.stamp_ns, index);
+  }
+  stats.damaged_chunks = cursor.problems().size();
+  for (const std::string& p : cursor.problems()) {
+    stats.input_problems.push_back(p);
+  }
+  // The inputs are run in stamp order by a min-heap fed in file order: it sorts exactly when it
+  // may hold `window` + 1 inputs, where `window` is the farthest any input sits after its place
+  // in the stamp order (the vision latency in samples, typically; 0 in recorded order).
+  scan.first_stamp_ns = keys.empty() ? 0 : keys.front().first;
+  if (options.order == ProcessOrder::kStamp && !keys.empty()) {
+    std::tie(scan.window, scan.first_stamp_ns) = reorder_window(keys);
+  }
+  return scan;
+}
+
+/// Input channels copied through (ids remapped), in id order: deterministic. Returns the map
+/// from the recording's channel ids to the output's.
+std::map<uint16_t, uint16_t> copy_input_channels(const McapReader& reader, McapWriter& writer) {
+  std::map<uint16_t, uint16_t> schema_map;
+  std::map<uint16_t, uint16_t> channel_map;
+  for (const auto& [id, schema] : reader.schemas()) {
+    schema_map[id] = writer.add_schema(schema.name, schema.encoding, schema.data);
+  }
+  for (const auto& [id, channel] : reader.channels()) {
+    const uint16_t schema_id = channel.schema_id == 0 ? 0 : schema_map.at(channel.schema_id);
+    channel_map[id] = writer.add_channel(schema_id, channel.topic, channel.message_encoding, channel.metadata);
+  }
+  return channel_map;
+}
+
+/// Pass 2: runs the inputs in processing order and writes in one stream. Each input message is
+/// copied through, then the outputs its input caused; a message waits only while an input at or
+/// before it is not yet run.
+class OrderedRun {
+ public:
+  OrderedRun(const ProcessOptions& options, McapWriter& writer, McapOutputs& outputs,
+             std::vector<std::unique_ptr<nodes::StepRunner>>& runners, uint64_t window, int64_t& now_ns,
+             int64_t& log_clock, ProcessStats& stats)
+      : options_(options), writer_(writer), outputs_(outputs), runners_(runners), window_(window),
+        now_ns_(now_ns), log_clock_(log_clock), stats_(stats) {}
+
+  /// Message `m`, the `index`-th of the recording (its input `in` when it is a valid one).
+  void add(const MessageView& m, uint64_t index, const std::map<uint16_t, uint16_t>& channel_map,
+           std::optional<Input> in) {
+    Output p;
+    p.ordinal = index;
+    p.log_time_ns = m.log_time_ns;
+    if (options_.copy_input) {
+      p.channel = channel_map.at(m.channel->id);
+      p.sequence = m.sequence;
+      p.publish_time_ns = m.publish_time_ns;
+      p.data.assign(m.data, m.data + m.size);
+    }
+    to_write_.push_back(std::move(p));
+    if (in) {
+      in->ordinal = index;
+      in->log_time_ns = m.log_time_ns;
+      const OrderKey key = options_.order == ProcessOrder::kStamp ? OrderKey{in->stamp_ns, index} : OrderKey{0, index};
+      not_run_.insert(index);
+      to_run_.emplace(key, std::move(*in));
+      if (to_run_.size() > window_) {
+        run_next();
+      }
+    }
+    write_ready(false);
+  }
+
+  /// Runs what is left and writes everything.
+  void finish() {
+    while (!to_run_.empty()) {
+      run_next();
+    }
+    write_ready(true);
+  }
+
+ private:
+  using Queued = std::pair<OrderKey, Input>;
+  struct Later {
+    bool operator()(const Queued& a, const Queued& b) const { return a.first > b.first; }
+  };
+
+  void run_input(const Input& in) {
+    now_ns_ = in.stamp_ns;
+    outputs_.set_trigger(in.ordinal, in.log_time_ns);
+    if (const auto* imu = std::get_if<msg::ImuSample>(&in.sample)) {
+      // samples the recording lacks (lost before the recorder): said, since live had them
+      const uint32_t seq = imu->header().seq();
+      const auto [it, first] = last_seq_.try_emplace(imu->sensor_id().to_string(), seq);
+      if (!first && seq - it->second > 1U && seq - it->second < (1U << 31)) {
+        ++stats_.imu_gaps;
+        stats_.imu_missing += seq - it->second - 1U;
+      }
+      it->second = seq;
+      const ImuSample sample = dds::from_msg(*imu);
+      const std::string source = imu->sensor_id().to_string();
+      for (auto& r : runners_) {
+        r->imu(sample, source, kWriterId, outputs_);
+      }
+    } else if (const auto* vision = std::get_if<msg::VisionPose>(&in.sample)) {
+      for (auto& r : runners_) {
+        r->vision(*vision, kWriterId);
+      }
+    } else if (const auto* vehicle = std::get_if<msg::VehicleInput>(&in.sample)) {
+      for (auto& r : runners_) {
+        r->vehicle_input(*vehicle, kWriterId);
+      }
+    }
+  }
+
+  void run_next() {
+    const Queued& next = to_run_.top();
+    run_input(next.second);
+    not_run_.erase(next.second.ordinal);
+    to_run_.pop();
+  }
+
+  void write_ready(bool all) {
+    while (!to_write_.empty() && (all || not_run_.empty() || to_write_.front().ordinal < *not_run_.begin())) {
+      const Output& p = to_write_.front();
+      log_clock_ = static_cast<int64_t>(p.log_time_ns);
+      if (options_.copy_input) {
+        writer_.write(p.channel, p.sequence, p.log_time_ns, p.publish_time_ns, p.data.data(), p.data.size());
+      }
+      for (const Output& o : outputs_.take(p.ordinal)) {
+        log_clock_ = static_cast<int64_t>(o.log_time_ns);
+        writer_.write(o.channel, out_seq_[o.channel]++, o.log_time_ns, o.publish_time_ns, o.data.data(),
+                      o.data.size());
+        ++stats_.per_topic[outputs_.topic_of(o.channel)];
+      }
+      to_write_.pop_front();
+    }
+  }
+
+  static constexpr const char* kWriterId = "recording";  // one publisher per input: no restarts offline
+
+  const ProcessOptions& options_;
+  McapWriter& writer_;
+  McapOutputs& outputs_;
+  std::vector<std::unique_ptr<nodes::StepRunner>>& runners_;
+  const uint64_t window_;
+  int64_t& now_ns_;
+  int64_t& log_clock_;
+  ProcessStats& stats_;
+  std::map<std::string, uint32_t> last_seq_;  // IMU seq gaps per sensor, in processing order
+  std::priority_queue<Queued, std::vector<Queued>, Later> to_run_;
+  std::set<uint64_t> not_run_;    // ordinals of the inputs in to_run_
+  std::deque<Output> to_write_;   // input messages waiting to be written (with their outputs)
+  std::map<uint16_t, uint32_t> out_seq_;
+};
+
 }  // namespace
 
 ProcessStats process_recording(const ProcessOptions& options, std::vector<ProcessComponent>& components) {
@@ -240,84 +463,19 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
   stats.input_problems = reader.report().problems;
   stats.corrupt_in_file = reader.report().corrupt;
 
-  bool wants_vision = false;
-  bool wants_vehicle = false;
+  Wants wants;
   for (const ProcessComponent& c : components) {
-    wants_vision = wants_vision || c.step->uses_vision();
-    wants_vehicle = wants_vehicle || c.step->uses_vehicle_input();
+    wants.vision = wants.vision || c.step->uses_vision();
+    wants.vehicle = wants.vehicle || c.step->uses_vehicle_input();
   }
-
   const uint64_t total = std::max<uint64_t>(1, reader.report().messages);
-  const auto progress = [&options, total](uint64_t phase, uint64_t done) {
+  const Progress progress = [&options, total](uint64_t phase, uint64_t done) {
     if (options.progress) {
       options.progress(phase * total + done, 2 * total);  // scan, then run + write
     }
   };
-
-  // Pass 1, a scan: what is malformed (counted and named, never processed; the components'
-  // diagnostics carry the totals from their first message, as before), the first stamp, and how
-  // far the stamp order strays from the file order. Only (stamp, ordinal) is kept per input, so
-  // the memory used does not grow with the recording's payloads.
-  uint64_t malformed_imu = 0;
-  uint64_t malformed_vision = 0;
-  uint64_t malformed_vehicle = 0;
-  std::vector<OrderKey> keys;  // valid inputs in file order
-  {
-    MessageCursor cursor = reader.messages();
-    uint64_t ordinal = 0;
-    while (const MessageView* m = cursor.next()) {
-      const uint64_t index = ordinal++;
-      ++stats.input_messages;
-      progress(0, stats.input_messages);
-      Input in;
-      std::optional<std::string> problem;
-      const InputKind kind = decode_input(*m, options, wants_vision, wants_vehicle, in, problem);
-      if (kind == InputKind::kNone) {
-        continue;
-      }
-      uint64_t* malformed = nullptr;
-      switch (kind) {
-        case InputKind::kImu: ++stats.imu_samples; malformed = &malformed_imu; break;
-        case InputKind::kVision: ++stats.vision_samples; malformed = &malformed_vision; break;
-        case InputKind::kVehicle: ++stats.vehicle_inputs; malformed = &malformed_vehicle; break;
-        case InputKind::kNone: break;
-      }
-      if (problem) {
-        ++*malformed;
-        ++stats.undecodable;
-        if (stats.undecodable_details.size() < kMaxDescribedSkips) {
-          stats.undecodable_details.push_back(describe_position(*m) + " on '" + m->channel->topic + "', " +
-                                              std::to_string(m->size) + " bytes: " + *problem);
-        }
-        continue;
-      }
-      keys.emplace_back(in.stamp_ns, index);
-    }
-    stats.damaged_chunks = cursor.problems().size();
-    for (const std::string& p : cursor.problems()) {
-      stats.input_problems.push_back(p);
-    }
-  }
-  // The inputs are run in stamp order by a min-heap fed in file order: it sorts exactly when it
-  // may hold `window` + 1 inputs, where `window` is the farthest any input sits after its place
-  // in the stamp order (the vision latency in samples, typically; 0 in recorded order).
-  int64_t first_stamp_ns = keys.empty() ? 0 : keys.front().first;
-  uint64_t window = 0;
-  if (options.order == ProcessOrder::kStamp && !keys.empty()) {
-    std::vector<uint64_t> file_index(keys.size());
-    for (uint64_t i = 0; i < file_index.size(); ++i) {
-      file_index[i] = i;
-    }
-    std::stable_sort(file_index.begin(), file_index.end(),
-                     [&keys](uint64_t a, uint64_t b) { return keys[a].first < keys[b].first; });
-    first_stamp_ns = keys[file_index.front()].first;
-    for (uint64_t j = 0; j < file_index.size(); ++j) {
-      window = std::max(window, file_index[j] > j ? file_index[j] - j : 0);
-    }
-  }
-  keys.clear();
-  keys.shrink_to_fit();
-  stats.reorder_window = window;
+  const InputScan scan = scan_inputs(reader, options, wants, progress, stats);
+  stats.reorder_window = scan.window;
 
   int64_t log_clock = 0;  // the writer's chunk clock: recording time, never the wall clock
   WriterOptions wopt;
@@ -329,132 +487,37 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
     throw WriteError(e.what());
   }
   McapWriter writer(std::move(sink), wopt);
-
-  // Input channels copied through (ids remapped), in id order: deterministic.
-  std::map<uint16_t, uint16_t> schema_map;
-  std::map<uint16_t, uint16_t> channel_map;
-  if (options.copy_input) {
-    for (const auto& [id, schema] : reader.schemas()) {
-      schema_map[id] = writer.add_schema(schema.name, schema.encoding, schema.data);
-    }
-    for (const auto& [id, channel] : reader.channels()) {
-      const uint16_t schema_id = channel.schema_id == 0 ? 0 : schema_map.at(channel.schema_id);
-      channel_map[id] =
-          writer.add_channel(schema_id, channel.topic, channel.message_encoding, channel.metadata);
-    }
-  }
+  const std::map<uint16_t, uint16_t> channel_map =
+      options.copy_input ? copy_input_channels(reader, writer) : std::map<uint16_t, uint16_t>{};
 
   // The components, each in the node's shape; time = the stamp of the input being processed.
   McapOutputs outputs(writer, options);
-  int64_t now_ns = first_stamp_ns;
+  int64_t now_ns = scan.first_stamp_ns;
   std::vector<std::unique_ptr<nodes::StepRunner>> runners;
   for (ProcessComponent& c : components) {
     outputs.declare(*c.step, options.topics);
     auto runner = std::make_unique<nodes::StepRunner>(std::move(c.step), c.params, options.topics,
                                                       [&now_ns] { return now_ns; });
-    runner->imu_malformed().store(malformed_imu);
-    runner->vision_malformed().store(malformed_vision);
-    runner->vehicle_input_malformed().store(malformed_vehicle);
+    runner->imu_malformed().store(scan.malformed_imu);
+    runner->vision_malformed().store(scan.malformed_vision);
+    runner->vehicle_input_malformed().store(scan.malformed_vehicle);
     runners.push_back(std::move(runner));
   }
   components.clear();
 
-  // Pass 2: run and write in one stream. Each input message is copied through, then the outputs
-  // its input caused; a message waits only while an input at or before it is not yet run.
-  const std::string writer_id = "recording";  // one publisher per input: no restarts offline
-  std::map<std::string, uint32_t> last_seq;   // IMU seq gaps per sensor, in processing order
-  auto run_input = [&](const Input& in) {
-    now_ns = in.stamp_ns;
-    outputs.set_trigger(in.ordinal, in.log_time_ns);
-    if (const auto* imu = std::get_if<msg::ImuSample>(&in.sample)) {
-      // samples the recording lacks (lost before the recorder): said, since live had them
-      const uint32_t seq = imu->header().seq();
-      const auto [it, first] = last_seq.try_emplace(imu->sensor_id().to_string(), seq);
-      if (!first && seq - it->second > 1U && seq - it->second < (1U << 31)) {
-        ++stats.imu_gaps;
-        stats.imu_missing += seq - it->second - 1U;
-      }
-      it->second = seq;
-      const ImuSample sample = dds::from_msg(*imu);
-      const std::string source = imu->sensor_id().to_string();
-      for (auto& r : runners) {
-        r->imu(sample, source, writer_id, outputs);
-      }
-    } else if (const auto* vision = std::get_if<msg::VisionPose>(&in.sample)) {
-      for (auto& r : runners) {
-        r->vision(*vision, writer_id);
-      }
-    } else if (const auto* vehicle = std::get_if<msg::VehicleInput>(&in.sample)) {
-      for (auto& r : runners) {
-        r->vehicle_input(*vehicle, writer_id);
-      }
-    }
-  };
-  using Queued = std::pair<OrderKey, Input>;
-  auto later = [](const Queued& a, const Queued& b) { return a.first > b.first; };
-  std::priority_queue<Queued, std::vector<Queued>, decltype(later)> to_run(later);
-  std::set<uint64_t> not_run;  // ordinals of the inputs in to_run
-  std::deque<Output> to_write;  // input messages waiting to be written (with their outputs)
-  std::map<uint16_t, uint32_t> out_seq;
-  auto write_ready = [&](bool all) {
-    while (!to_write.empty() && (all || not_run.empty() || to_write.front().ordinal < *not_run.begin())) {
-      const Output& p = to_write.front();
-      log_clock = static_cast<int64_t>(p.log_time_ns);
-      if (options.copy_input) {
-        writer.write(p.channel, p.sequence, p.log_time_ns, p.publish_time_ns, p.data.data(), p.data.size());
-      }
-      for (const Output& o : outputs.take(p.ordinal)) {
-        log_clock = static_cast<int64_t>(o.log_time_ns);
-        writer.write(o.channel, out_seq[o.channel]++, o.log_time_ns, o.publish_time_ns, o.data.data(),
-                     o.data.size());
-        ++stats.per_topic[outputs.topic_of(o.channel)];
-      }
-      to_write.pop_front();
-    }
-  };
-  auto run_next = [&] {
-    const Queued& next = to_run.top();
-    run_input(next.second);
-    not_run.erase(next.second.ordinal);
-    to_run.pop();
-  };
-  {
-    MessageCursor cursor = reader.messages();
-    uint64_t ordinal = 0;
-    while (const MessageView* m = cursor.next()) {
-      const uint64_t index = ordinal++;
-      progress(1, ordinal);
-      Output p;
-      p.ordinal = index;
-      if (options.copy_input) {
-        p.channel = channel_map.at(m->channel->id);
-        p.sequence = m->sequence;
-        p.log_time_ns = m->log_time_ns;
-        p.publish_time_ns = m->publish_time_ns;
-        p.data.assign(m->data, m->data + m->size);
-      } else {
-        p.log_time_ns = m->log_time_ns;
-      }
-      to_write.push_back(std::move(p));
-      Input in;
-      std::optional<std::string> problem;
-      if (decode_input(*m, options, wants_vision, wants_vehicle, in, problem) != InputKind::kNone && !problem) {
-        in.ordinal = index;
-        in.log_time_ns = m->log_time_ns;
-        const OrderKey key = options.order == ProcessOrder::kStamp ? OrderKey{in.stamp_ns, index} : OrderKey{0, index};
-        not_run.insert(index);
-        to_run.emplace(key, std::move(in));
-        if (to_run.size() > window) {
-          run_next();
-        }
-      }
-      write_ready(false);
-    }
-    while (!to_run.empty()) {
-      run_next();
-    }
-    write_ready(true);
+  OrderedRun run(options, writer, outputs, runners, scan.window, now_ns, log_clock, stats);
+  MessageCursor cursor = reader.messages();
+  uint64_t ordinal = 0;
+  while (const MessageView* m = cursor.next()) {
+    const uint64_t index = ordinal++;
+    progress(1, ordinal);
+    Input in;
+    std::optional<std::string> problem;
+    const bool valid_input =
+        decode_input(*m, options, wants.vision, wants.vehicle, in, problem) != InputKind::kNone && !problem;
+    run.add(*m, index, channel_map, valid_input ? std::optional<Input>(std::move(in)) : std::nullopt);
   }
+  run.finish();
   for (const auto& r : runners) {
     const std::string& name = r->step().sensor_id();
     stats.estimates[name] += r->published();

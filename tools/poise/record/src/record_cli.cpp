@@ -93,19 +93,23 @@ std::unique_ptr<AttitudeFilter> make_offline_filter(const std::string& name, con
   }
 }
 
-void run_process(const ProcessArgs& a) {
-  std::vector<record::ProcessComponent> components;
-  std::vector<std::string> labels;  // "name (type)" per component, for the summary
-  record::ProcessOptions o;
-  // --set: NAME.key=VALUE changes the host's component NAME; for a --filter NAME, and KEY=VALUE
-  // without NAME for every --filter filter, the north keys (eval::north_from_sets).
+/// --set for `poise process`: NAME.key=VALUE changes the host's component NAME; for a --filter
+/// NAME, and KEY=VALUE without NAME for every --filter filter, the north keys (eval::north_from_sets).
+struct ProcessSets {
+  std::vector<std::string> host;
+  std::vector<std::string> every_filter;
+  std::map<std::string, std::vector<std::string>> per_filter;
+};
+
+ProcessSets split_process_sets(const ProcessArgs& a) {
+  ProcessSets out;
+  std::vector<std::string>& host_sets = out.host;
+  std::vector<std::string>& every_filter_sets = out.every_filter;
+  std::map<std::string, std::vector<std::string>>& filter_sets = out.per_filter;
   std::vector<std::string> filter_names;
   for (const std::string& f : a.filters) {
     filter_names.push_back(f.substr(0, f.find('=')));
   }
-  std::vector<std::string> host_sets;
-  std::vector<std::string> every_filter_sets;
-  std::map<std::string, std::vector<std::string>> filter_sets;
   for (const std::string& set : a.sets) {
     const size_t eq = set.find('=');
     const size_t dot = set.find('.');
@@ -135,39 +139,51 @@ void run_process(const ProcessArgs& a) {
                     }()) + ")",
                 kUsageExitCode);
   }
-  if (!a.host.empty()) {
-    runtime::HostSpec host;
+  return out;
+}
+
+/// The estimator components of the host file (with its --set changes), labelled "name (type)".
+void add_host_components(const ProcessArgs& a, const std::vector<std::string>& host_sets,
+                         record::ProcessOptions& o, std::vector<record::ProcessComponent>& components,
+                         std::vector<std::string>& labels) {
+  runtime::HostSpec host;
+  try {
+    host = runtime::load_host_file(a.host);
+  } catch (const std::exception& e) {
+    throw Error(e.what());
+  }
+  try {
+    runtime::apply_component_sets(host_sets, host);
+  } catch (const std::invalid_argument& e) {
+    throw Error(e.what(), kUsageExitCode);
+  }
+  o.topics = host.topics;
+  for (const auto& c : host.components) {
+    std::unique_ptr<nodes::EstimatorStep> step;
+    nodes::NodeParams params;
     try {
-      host = runtime::load_host_file(a.host);
+      step = nodes::make_estimator_step(c);
+      if (step) {
+        params = nodes::node_params(c);
+      }
     } catch (const std::exception& e) {
       throw Error(e.what());
     }
-    try {
-      runtime::apply_component_sets(host_sets, host);
-    } catch (const std::invalid_argument& e) {
-      throw Error(e.what(), kUsageExitCode);
+    if (!step) {
+      std::cerr << "poise process: component '" << c.name << "' (" << c.type
+                << ") is not an estimator: skipped\n";
+      continue;
     }
-    o.topics = host.topics;
-    for (const auto& c : host.components) {
-      std::unique_ptr<nodes::EstimatorStep> step;
-      nodes::NodeParams params;
-      try {
-        step = nodes::make_estimator_step(c);
-        if (step) {
-          params = nodes::node_params(c);
-        }
-      } catch (const std::exception& e) {
-        throw Error(e.what());
-      }
-      if (!step) {
-        std::cerr << "poise process: component '" << c.name << "' (" << c.type
-                  << ") is not an estimator: skipped\n";
-        continue;
-      }
-      labels.push_back(c.name + " (" + c.type + ")");
-      components.push_back({std::move(step), params});
-    }
+    labels.push_back(c.name + " (" + c.type + ")");
+    components.push_back({std::move(step), params});
   }
+}
+
+/// The --filter NAME[=CONFIG] filters, each with its north from --set.
+void add_filter_components(const ProcessArgs& a, ProcessSets& sets_in,
+                           std::vector<record::ProcessComponent>& components, std::vector<std::string>& labels) {
+  const std::vector<std::string>& every_filter_sets = sets_in.every_filter;
+  std::map<std::string, std::vector<std::string>>& filter_sets = sets_in.per_filter;
   for (const std::string& f : a.filters) {
     const size_t eq = f.find('=');
     const std::string name = f.substr(0, eq);
@@ -183,36 +199,11 @@ void run_process(const ProcessArgs& a) {
     labels.push_back(name + " (--filter" + (north.true_north ? ", " + std::string(north.frame_id()) : "") + ")");
     components.push_back({record::filter_step({name, make_offline_filter(name, config), north}), {}});
   }
-  if (components.empty()) {
-    throw Error("nothing to run: give --host HOST.yaml with estimator components (" +
-                [] {
-                  std::string types;
-                  for (const auto& t : nodes::estimator_step_types()) {
-                    types += (types.empty() ? "" : ", ") + t;
-                  }
-                  return types;
-                }() +
-                "), or --filter NAME[=CONFIG.yaml] (known: " + known_filters() + ")");
-  }
-  if (!a.imu_topic.empty()) {
-    o.topics.imu = a.imu_topic;
-  }
-  o.input = a.file;
-  o.output = a.output;
-  o.order = a.order == "recorded" ? record::ProcessOrder::kRecorded : record::ProcessOrder::kStamp;
-  Progress::Options shown;
-  shown.counts = false;  // units of three passes: the percentage says it
-  Progress progress("poise process", 100, shown);
-  o.progress = [&progress](uint64_t done, uint64_t total) { progress.update(done * 100 / total); };
-  record::ProcessStats stats;
-  try {
-    stats = record::process_recording(o, components);
-    progress.finish();
-  } catch (const record::ReadError& e) {
-    throw Error(e.what());
-  } catch (const record::WriteError& e) {
-    throw Error(e.what());
-  }
+}
+
+/// What was read, run and written, on stderr.
+void print_process_summary(const ProcessArgs& a, const record::ProcessOptions& o, record::ProcessStats& stats,
+                           const std::vector<std::string>& labels) {
   if (!stats.input_problems.empty()) {
     std::cerr << "poise process: the input is "
               << (stats.input_damaged() ? "damaged (" + std::to_string(stats.corrupt_in_file +
@@ -251,6 +242,48 @@ void run_process(const ProcessArgs& a) {
   for (const auto& [topic, n] : stats.per_topic) {
     std::cerr << "  " << topic << ": " << n << " messages\n";
   }
+}
+
+void run_process(const ProcessArgs& a) {
+  std::vector<record::ProcessComponent> components;
+  std::vector<std::string> labels;  // "name (type)" per component, for the summary
+  record::ProcessOptions o;
+  ProcessSets sets = split_process_sets(a);
+  if (!a.host.empty()) {
+    add_host_components(a, sets.host, o, components, labels);
+  }
+  add_filter_components(a, sets, components, labels);
+  if (components.empty()) {
+    throw Error("nothing to run: give --host HOST.yaml with estimator components (" +
+                [] {
+                  std::string types;
+                  for (const auto& t : nodes::estimator_step_types()) {
+                    types += (types.empty() ? "" : ", ") + t;
+                  }
+                  return types;
+                }() +
+                "), or --filter NAME[=CONFIG.yaml] (known: " + known_filters() + ")");
+  }
+  if (!a.imu_topic.empty()) {
+    o.topics.imu = a.imu_topic;
+  }
+  o.input = a.file;
+  o.output = a.output;
+  o.order = a.order == "recorded" ? record::ProcessOrder::kRecorded : record::ProcessOrder::kStamp;
+  Progress::Options shown;
+  shown.counts = false;  // units of three passes: the percentage says it
+  Progress progress("poise process", 100, shown);
+  o.progress = [&progress](uint64_t done, uint64_t total) { progress.update(done * 100 / total); };
+  record::ProcessStats stats;
+  try {
+    stats = record::process_recording(o, components);
+    progress.finish();
+  } catch (const record::ReadError& e) {
+    throw Error(e.what());
+  } catch (const record::WriteError& e) {
+    throw Error(e.what());
+  }
+  print_process_summary(a, o, stats, labels);
   if (stats.imu_samples == 0) {
     throw Error("no ImuSample messages on topic '" + o.topics.imu +
                 "' in the recording (use --imu-topic; `poise info` lists the topics)");
@@ -386,6 +419,8 @@ void run_replay(const ReplayArgs& a) {
 
 }  // namespace
 
+// not split: the options and help of `info`, `record`, `replay` and `process` in the order --help
+// prints them.
 void add_record_commands(CLI::App& app) {
   auto info_args = std::make_shared<InfoArgs>();
   CLI::App* info = app.add_subcommand(

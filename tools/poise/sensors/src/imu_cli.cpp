@@ -243,6 +243,8 @@ void sleep_until_ns(int64_t t_ns) {
   }
 }
 
+// not split: one linear command (source, link, fault plan, paced write loop, summary) whose steps
+// share the pty link and the sample source.
 void run_sim_imu(const SimImuOptions& o) {
   if (o.format != "si" && o.format != "raw") {
     throw Error("--format must be si or raw", kUsageExitCode);

@@ -67,6 +67,8 @@ void print_progress(const imu::CalibrationSession& s, bool final_line) {
   std::fflush(stderr);
 }
 
+// not split: the guided calibration's script in the order the user follows it (still, rotate, fit,
+// write).
 void run_calibrate(const CalibrateOptions& o) {
   if (o.port.empty() == o.topic.empty()) {
     throw Error("give exactly one of --port PATH or --imu-topic NAME", kUsageExitCode);
@@ -241,6 +243,7 @@ void bench_parser(const BenchOptions& o) {
               static_cast<double>(stream.size() * reps) / dt / 1e6, samples, reps * kDistinct, dt);
 }
 
+// not split: one benchmark's fixed sequence (build the stream, time parse, time framing, print).
 void bench_latency(const BenchOptions& o) {
   // Device: a pty; driver: `poise imu` in a child process; subscriber: this process.
   const std::string link = "/tmp/poise-bench-imu-" + std::to_string(::getpid());

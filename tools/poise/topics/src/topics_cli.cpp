@@ -86,6 +86,8 @@ struct Received {
   std::uint64_t lost_before = 0;  // samples missing just before this one (header.seq gap)
 };
 
+// not split: one linear command (match the type, subscribe, print each sample, summarise) whose steps
+// share the reader and its sequence-gap state.
 void run_echo(const EchoOptions& o) {
   install_stop_handlers();
   const schema::TypeTable& table = type_table();
@@ -238,6 +240,8 @@ std::string fixed(double v, int decimals) {
   return buf;
 }
 
+// not split: one linear command (discover, sample for the window, tabulate, print) whose steps share
+// the observer and the per-topic readers it creates.
 void run_topics(const TopicsOptions& o) {
   install_stop_handlers();
   const schema::TypeTable& table = type_table();

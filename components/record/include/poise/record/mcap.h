@@ -293,7 +293,22 @@ class McapReader {
  private:
   friend class MessageCursor;
   bool read_summary();
+  /// The scan's running state over the data section (scan(), scan_record()).
+  struct ScanState {
+    uint64_t chunk_fail = 0;
+    bool saw_data_end = false;
+    bool crc_valid = true;
+    uint32_t data_crc = 0;
+  };
   void scan();
+  /// One whole record at byte POS (header included) into the report; true at the end of data.
+  bool scan_record(uint64_t pos, const std::vector<uint8_t>& record, ScanState& state);
+  /// The schemas, channels and messages of a Chunk record (decompressed), counted; a corrupt one
+  /// is counted and reported.
+  void scan_chunk(uint64_t pos, const std::vector<uint8_t>& record, ScanState& state);
+  void count_message(uint16_t channel_id, uint64_t log_time);
+  /// The next offset > FROM where a plausible Chunk record starts (resynchronisation).
+  [[nodiscard]] std::optional<uint64_t> find_chunk(uint64_t from) const;
   void add_schema(Schema schema);
   void add_channel(Channel channel);
   // A channel naming a schema id the file does not define: reported, counted corrupt, schemaless.
