@@ -11,10 +11,13 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <filesystem>
 #include <cmath>
 #include <fstream>
 #include <iterator>
 #include <limits>
+
+#include <sys/stat.h>
 
 namespace poise::record {
 namespace {
@@ -650,6 +653,72 @@ TEST(Replay, GivenACorruptChunkAndAMalformedPayloadWhenReplayedThenEveryReadable
   allowed.emplace_back("--allow-damaged");
   const auto ok = poise::testing::run(allowed, 60s, env);
   EXPECT_EQ(ok.exit_code, 0) << ok.output;
+}
+
+// Outputs never open an input (issue 33, "data destroyed"): `-o` naming the input itself, or a
+// symbolic link to it, is refused before anything is written; the input's bytes are the oracle.
+TEST(Process, GivenTheOutputIsTheInputOrALinkToItThenItIsRefusedAndTheInputIsUnchanged) {
+  const std::string dir = testing::cases_dir("process-over-input");
+  const std::string input = dir + "/input.mcap";
+  write_input(input);
+  const std::vector<uint8_t> before = read_bytes(input);
+  const std::string link = dir + "/link.mcap";
+  std::filesystem::remove(link);
+  std::filesystem::create_symlink(input, link);
+  for (const std::string& out : {input, link}) {
+    const auto r = poise::testing::run(
+        {std::string(POISE_RECORD_TOOL), "process", input, "-o", out, "--filter", "parallel_kf"}, 60s);
+    EXPECT_EQ(r.exit_code, 1) << r.output;
+    EXPECT_NE(r.output.find("is the input"), std::string::npos) << r.output;
+    EXPECT_EQ(read_bytes(input), before) << "-o " << out;
+  }
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    EXPECT_EQ(e.path().filename().string().find(".partial-"), std::string::npos) << e.path();
+  }
+}
+
+// The output is replaced whole or not at all: what a failed run leaves is what was there before.
+TEST(ReplacingFile, GivenNoCommitThenThePathKeepsItsBytesAndTheTemporaryIsRemoved) {
+  const std::string dir = testing::cases_dir("replacing-file");
+  const std::string path = dir + "/out.mcap";
+  std::ofstream(path) << "old";
+  std::string temporary;
+  {
+    ReplacingFile f(path);
+    temporary = f.temporary();
+    std::ofstream(temporary) << "new, unfinished";
+  }
+  EXPECT_EQ(read_bytes(path), (std::vector<uint8_t>{'o', 'l', 'd'}));
+  EXPECT_FALSE(std::filesystem::exists(temporary));
+  {
+    ReplacingFile f(path);
+    std::ofstream(f.temporary()) << "new";
+    f.commit();
+  }
+  EXPECT_EQ(read_bytes(path), (std::vector<uint8_t>{'n', 'e', 'w'}));
+}
+
+// A FIFO (or any file that is not a regular file) is refused at once by every command that reads
+// a recording, never waited on: each run is bounded by kFifoRefusalBound although no writer ever
+// opens the FIFO.
+TEST(Process, GivenAFifoAsTheRecordingThenInfoProcessAndReplayRefuseItAtOnce) {
+  constexpr auto kFifoRefusalBound = 20s;
+  const std::string dir = testing::cases_dir("fifo-input");
+  const std::string fifo = dir + "/input.mcap";
+  std::filesystem::remove(fifo);
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const std::string tool = POISE_RECORD_TOOL;
+  const std::vector<std::vector<std::string>> commands = {
+      {tool, "info", fifo},
+      {tool, "info", "--verify", fifo},
+      {tool, "process", fifo, "-o", dir + "/out.mcap", "--filter", "parallel_kf"},
+      {tool, "replay", fifo, "--domain", "0"}};
+  for (const auto& argv : commands) {
+    const auto r = poise::testing::run(argv, kFifoRefusalBound);
+    EXPECT_NE(r.exit_code, -1) << argv[1] << " waited on the FIFO";
+    EXPECT_NE(r.exit_code, 0) << r.output;
+    EXPECT_NE(r.output.find("is not a regular file (a FIFO)"), std::string::npos) << argv[1] << ": " << r.output;
+  }
 }
 
 }  // namespace

@@ -7,10 +7,31 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <utility>
+
 namespace poise::record {
 namespace {
 
 std::string errno_text(int err) { return std::string(std::strerror(err)); }
+
+std::string file_kind(mode_t mode) {
+  if (S_ISFIFO(mode)) {
+    return "a FIFO";
+  }
+  if (S_ISCHR(mode)) {
+    return "a character device";
+  }
+  if (S_ISBLK(mode)) {
+    return "a block device";
+  }
+  if (S_ISSOCK(mode)) {
+    return "a socket";
+  }
+  if (S_ISDIR(mode)) {
+    return "a directory";
+  }
+  return "not a regular file";
+}
 
 class FileSink : public Sink {
  public:
@@ -68,7 +89,9 @@ class FileSink : public Sink {
 class FileSource : public Source {
  public:
   explicit FileSource(const std::string& path) : path_(path) {
-    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer forever; a
+    // regular file ignores the flag, and anything else is refused below.
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
     if (fd_ < 0) {
       throw IoError("cannot open '" + path + "': " + errno_text(errno));
     }
@@ -80,7 +103,8 @@ class FileSource : public Source {
     }
     if (!S_ISREG(st.st_mode)) {
       ::close(fd_);
-      throw IoError("'" + path + "' is not a regular file");
+      throw IoError("'" + path + "' is not a regular file (" + file_kind(st.st_mode) +
+                    "): an MCAP recording is read from a file");
     }
     size_ = static_cast<uint64_t>(st.st_size);
   }
@@ -131,6 +155,39 @@ std::unique_ptr<Sink> open_file_sink(const std::string& path) {
 
 std::unique_ptr<Source> open_file_source(const std::string& path) {
   return std::make_unique<FileSource>(path);
+}
+
+void refuse_output_over_input(const std::string& output, const std::vector<std::string>& inputs) {
+  struct stat out {};
+  if (::stat(output.c_str(), &out) != 0) {
+    return;  // does not exist yet (or cannot be reached: creating it says why)
+  }
+  for (const std::string& input : inputs) {
+    struct stat in {};
+    if (::stat(input.c_str(), &in) == 0 && in.st_dev == out.st_dev && in.st_ino == out.st_ino) {
+      throw IoError("the output '" + output + "' is the input '" + input +
+                    "' (the same file): writing it would destroy the recording; choose another output");
+    }
+  }
+}
+
+ReplacingFile::ReplacingFile(std::string path)
+    : path_(std::move(path)), temporary_(path_ + ".partial-" + std::to_string(::getpid())) {}
+
+ReplacingFile::~ReplacingFile() {
+  if (!committed_) {
+    ::unlink(temporary_.c_str());
+  }
+}
+
+void ReplacingFile::commit() {
+  if (::rename(temporary_.c_str(), path_.c_str()) != 0) {
+    const int err = errno;
+    ::unlink(temporary_.c_str());
+    committed_ = true;
+    throw IoError("cannot move '" + temporary_ + "' to '" + path_ + "': " + errno_text(err));
+  }
+  committed_ = true;
 }
 
 void MemorySource::read(uint64_t offset, size_t size, uint8_t* out) const {

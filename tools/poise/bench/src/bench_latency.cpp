@@ -32,6 +32,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstdlib>
 #include <cstdint>
 #include <cstdio>
 #include <fstream>
@@ -156,6 +157,7 @@ std::string line_for(uint32_t seq, int64_t t_ns) {
 
 struct BenchOptions {
   int domain = 0;
+  std::string profile;  // DDS participant profile; given, it reaches the child processes by $POISE_DDS_PROFILE
   double seconds = 10.0;
   double window_s = 1.0;
   int diagnostics_every = 1;
@@ -527,6 +529,7 @@ void register_bench_latency(CLI::App& app) {
   CLI::App* cmd = bench->add_subcommand(
       "latency", "Pipeline latency (pty line -> estimate in another process) vs a bare DDS hop; CPU per component");
   add_domain_option(cmd, &o->domain);
+  add_dds_profile_option(cmd, &o->profile);
   cmd->add_option("--duration", o->seconds, "Measurement time per rate and path, s")->check(CLI::Range(1.0, 600.0))->capture_default_str();
   add_deprecated_alias(cmd, "--seconds", "--duration", &o->seconds)->check(CLI::Range(1.0, 600.0));
   cmd->add_option("--diagnostics-every", o->diagnostics_every,
@@ -548,7 +551,12 @@ void register_bench_latency(CLI::App& app) {
   cmd->add_flag("--hop-publisher", o->hop_publisher)->group("");  // internal: the bare-hop peer
   cmd->add_option("--hop-rate", o->hop_rate)->group("");
   cmd->add_option("--hop-seconds", o->hop_seconds)->group("");
-  cmd->callback([o] { run_bench(*o); });
+  cmd->callback([o] {
+    if (!o->profile.empty()) {  // this process's participants and every child's
+      ::setenv("POISE_DDS_PROFILE", o->profile.c_str(), 1);
+    }
+    run_bench(*o);
+  });
 }
 
 }  // namespace poise::cli

@@ -17,6 +17,7 @@ namespace {
 struct RunOptions {
   int domain = 0;
   CLI::Option* domain_option = nullptr;
+  std::string profile;  // "" = the host file's participant_profile, else $POISE_DDS_PROFILE
   double duration_s = 0.0;  // 0 = until SIGINT/SIGTERM
   double status_period_s = 2.0;
   bool quiet = false;
@@ -26,7 +27,11 @@ struct RunOptions {
 };
 
 /// Runs a host until a signal, the duration, or a failure; prints status periodically.
-void run_host(const runtime::HostSpec& spec, const RunOptions& options) {
+void run_host(const runtime::HostSpec& host_spec, const RunOptions& options) {
+  runtime::HostSpec spec = host_spec;
+  if (!options.profile.empty()) {
+    spec.participant_profile = options.profile;
+  }
   const int domain = (options.domain_option != nullptr && options.domain_option->count() > 0)
                          ? options.domain
                          : spec.domain.value_or(options.domain);
@@ -78,6 +83,7 @@ void run_host(const runtime::HostSpec& spec, const RunOptions& options) {
 
 void add_run_options(CLI::App* sub, RunOptions& options) {
   options.domain_option = add_domain_option(sub, &options.domain);
+  add_dds_profile_option(sub, &options.profile);
   sub->add_option("--duration", options.duration_s, "Stop after this many seconds (0: run until Ctrl-C)")
       ->check(CLI::NonNegativeNumber);
   sub->add_option("--status-period", options.status_period_s, "Seconds between status lines")
@@ -158,7 +164,6 @@ void register_run_commands(CLI::App& app) {
       RunOptions run;
       std::string name;
       std::string config;
-      std::string profile;
       std::vector<std::string> sets;
       std::vector<std::string> topics;
     };
@@ -174,14 +179,12 @@ void register_run_commands(CLI::App& app) {
         ->allow_extra_args(false)
         ->type_name("KEY=VALUE");
     sub->add_option("--topic", s->topics, "Topic name override key=name, e.g. imu=imu2 (repeatable)");
-    add_dds_profile_option(sub, &s->profile);
-    add_deprecated_alias(sub, "--profile", "--dds-profile", &s->profile);
-    add_run_options(sub, s->run);
+    add_run_options(sub, s->run);  // --domain, --dds-profile, ...
+    add_deprecated_alias(sub, "--profile", "--dds-profile", &s->run.profile);
     const std::string key = type_name;
     const std::string command = sub->get_name();
     sub->callback([s, key, command] {
-      runtime::HostSpec spec;
-      spec.participant_profile = s->profile;
+      runtime::HostSpec spec;  // the profile: --dds-profile, applied by run_host
       runtime::ComponentSpec c;
       c.type = key;
       c.name = s->name.empty() ? key : s->name;

@@ -27,6 +27,7 @@ namespace {
 
 struct DemoOptions {
   int domain = 0;
+  std::string profile;  // participant profile ("" = $POISE_DDS_PROFILE, else poise_default)
   double duration_s = 30.0;
   double rate_hz = 200.0;
   std::string scenario = "tour";
@@ -197,6 +198,7 @@ void run_demo(const DemoOptions& o) {
   const bool simulated_imu = o.port.empty();
   const std::string link = "/tmp/poise-demo-imu-" + std::to_string(::getpid());
   runtime::HostSpec spec;
+  spec.participant_profile = o.profile;
   std::string devices;
   if (simulated_imu) {
     spec.components.push_back(component(
@@ -341,6 +343,7 @@ void register_demo_commands(CLI::App& app) {
       "demo", "The main job: IMU (simulated on a pseudo-terminal, or --port) + camera (synthetic, or "
               "--camera) + every estimator, live dashboard, report");
   add_domain_option(demo, &o->domain);
+  add_dds_profile_option(demo, &o->profile);
   demo->add_option("--duration", o->duration_s, "Run time, s")->check(CLI::PositiveNumber)->capture_default_str();
   demo->add_option("--rate", o->rate_hz, "Simulated IMU rate, Hz")->check(CLI::Range(10.0, 2000.0))->capture_default_str();
   demo->add_option("--scenario", o->scenario, "Simulator scenario (tour, demo, static_magnet, fast_motion, random_motion)")

@@ -480,9 +480,14 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
   int64_t log_clock = 0;  // the writer's chunk clock: recording time, never the wall clock
   WriterOptions wopt;
   wopt.clock = [&log_clock] { return log_clock; };
+  // Never opened over the input; written beside the output's name and renamed at the end, so a
+  // failed run leaves the output as it was.
+  std::unique_ptr<ReplacingFile> output;
   std::unique_ptr<Sink> sink;
   try {
-    sink = open_file_sink(options.output);
+    refuse_output_over_input(options.output, {options.input});
+    output = std::make_unique<ReplacingFile>(options.output);
+    sink = open_file_sink(output->temporary());
   } catch (const IoError& e) {
     throw WriteError(e.what());
   }
@@ -525,6 +530,11 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
     stats.diagnostics[name] += r->diagnostics_published();
   }
   writer.close();
+  try {
+    output->commit();
+  } catch (const IoError& e) {
+    throw WriteError(e.what());
+  }
   return stats;
 }
 

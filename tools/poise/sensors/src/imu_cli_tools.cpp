@@ -45,6 +45,7 @@ struct CalibrateOptions {
   double field_ut = 0.0;
   bool skip_still = false;
   int domain = 0;
+  std::string profile;  // DDS participant profile ("" = $POISE_DDS_PROFILE, else poise_default)
 };
 
 std::string bar(double fraction, int width = 24) {
@@ -116,6 +117,7 @@ void run_calibrate(const CalibrateOptions& o) {
   } else {
     dds::ParticipantOptions po;
     po.domain = o.domain;
+    po.profile = o.profile;
     po.name = "poise calibrate imu";
     std::mutex mu;
     std::deque<ImuSample> queue;
@@ -188,6 +190,7 @@ struct BenchOptions {
   double rate_hz = 1000.0;
   double seconds = 10.0;
   int domain = 0;
+  std::string profile;  // DDS participant profile ("" = $POISE_DDS_PROFILE, else poise_default)
 };
 
 std::vector<std::string> bench_lines(std::size_t n) {
@@ -254,6 +257,10 @@ void bench_latency(const BenchOptions& o) {
   const std::string domain = std::to_string(o.domain);
   const pid_t child = ::fork();
   if (child == 0) {
+    if (!o.profile.empty()) {
+      ::execl(self, self, "imu", "--port", link.c_str(), "--domain", domain.c_str(), "--dds-profile",
+              o.profile.c_str(), "--quiet", static_cast<char*>(nullptr));
+    }
     ::execl(self, self, "imu", "--port", link.c_str(), "--domain", domain.c_str(), "--quiet",
             static_cast<char*>(nullptr));
     std::_Exit(127);
@@ -283,6 +290,7 @@ void bench_latency(const BenchOptions& o) {
   std::atomic<uint64_t> received{0};
   dds::ParticipantOptions po;
   po.domain = o.domain;
+  po.profile = o.profile;
   po.name = "poise bench imu";
   dds::Participant participant(po);
   dds::Reader<msg::ImuSamplePubSubType> reader(
@@ -393,6 +401,7 @@ void add_calibrate_imu(CLI::App& app) {
       ->check(CLI::NonNegativeNumber);
   cmd->add_flag("--skip-still", o->skip_still, "Keep the current gyro bias; only fit the magnetometer");
   add_domain_option(cmd, &o->domain);
+  add_dds_profile_option(cmd, &o->profile);
   cmd->callback([o] { run_calibrate(*o); });
 }
 
@@ -410,6 +419,7 @@ void add_bench_imu(CLI::App& app) {
       ->check(CLI::Range(0.5, 600.0));
   add_deprecated_alias(cmd, "--seconds", "--duration", &o->seconds)->check(CLI::Range(0.5, 600.0));
   add_domain_option(cmd, &o->domain);
+  add_dds_profile_option(cmd, &o->profile);
   cmd->callback([o] {
     bench_parser(*o);
     if (o->latency) bench_latency(*o);

@@ -61,9 +61,10 @@ const schema::TypeTable& type_table() {
   }
 }
 
-schema::ObserverOptions observer_options(int domain, const char* name) {
+schema::ObserverOptions observer_options(int domain, const std::string& profile, const char* name) {
   schema::ObserverOptions o;
   o.domain = domain;
+  o.profile = profile;
   o.name = name;
   return o;
 }
@@ -74,6 +75,7 @@ schema::ObserverOptions observer_options(int domain, const char* name) {
 struct EchoOptions {
   std::string topic;
   int domain = 0;
+  std::string profile;
   int count = 0;
   bool json = false;
   double timeout_s = 10.0;
@@ -91,7 +93,7 @@ struct Received {
 void run_echo(const EchoOptions& o) {
   install_stop_handlers();
   const schema::TypeTable& table = type_table();
-  TopicObserver observer(observer_options(o.domain, "poise-echo"));
+  TopicObserver observer(observer_options(o.domain, o.profile, "poise-echo"));
   std::fprintf(stderr, "poise echo: waiting up to %.1f s for a writer of '%s' on domain %d\n",
                o.timeout_s, o.topic.c_str(), o.domain);
   const auto writer = observer.wait_for_writer(
@@ -214,6 +216,7 @@ void run_echo(const EchoOptions& o) {
 
 struct TopicsOptions {
   int domain = 0;
+  std::string profile;
   double duration_s = 2.0;
   /// Discovery before the sampling window: Fast DDS announces a participant every 3 s after its
   /// first few announcements, and a writer was measured taking up to 2.4 s to be seen on an idle
@@ -245,7 +248,7 @@ std::string fixed(double v, int decimals) {
 void run_topics(const TopicsOptions& o) {
   install_stop_handlers();
   const schema::TypeTable& table = type_table();
-  TopicObserver observer(observer_options(o.domain, "poise-topics"));
+  TopicObserver observer(observer_options(o.domain, o.profile, "poise-topics"));
   std::fprintf(stderr, "poise topics: discovering domain %d for %.1f s, then sampling for %.1f s\n", o.domain,
                o.discovery_s, o.duration_s);
   std::map<std::string, std::shared_ptr<TopicStats>> stats;  // by topic
@@ -395,6 +398,7 @@ struct TestPubOptions {
   std::string topic;
   std::string sensor_id = "imu0";
   int domain = 0;
+  std::string profile;
   int count = 100;
   double rate_hz = 50.0;
   double wait_readers_s = 0.0;
@@ -405,6 +409,7 @@ template <class PubSubType, class Fill>
 void publish(const TestPubOptions& o, const std::string& default_topic, Fill fill) {
   poise::dds::ParticipantOptions popts;
   popts.domain = o.domain;
+  popts.profile = o.profile;
   popts.name = "poise-dds-test-pub";
   poise::dds::Participant participant(popts);
   const std::string topic = o.topic.empty() ? default_topic : o.topic;
@@ -525,6 +530,7 @@ void run_malformed_pub(const TestPubOptions& o) {
   const bool vision = o.type == "vision-malformed";
   poise::dds::ParticipantOptions popts;
   popts.domain = o.domain;
+  popts.profile = o.profile;
   popts.name = "poise-dds-test-pub-malformed";
   poise::dds::Participant participant(popts);
   const std::string topic_name = !o.topic.empty() ? o.topic : vision ? "vision_pose" : "imu";
@@ -659,6 +665,7 @@ void register_topic_commands(CLI::App& app) {
       "echo", "Print the samples of a DDS topic, decoded with the IDL types (--json: one object per line)");
   e->add_option("topic", echo->topic, "Topic name, e.g. imu, attitude/parallel_kf")->required();
   add_domain_option(e, &echo->domain);
+  add_dds_profile_option(e, &echo->profile);
   e->add_option("--count", echo->count, "Exit after this many samples (0: until Ctrl-C)")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
@@ -672,6 +679,7 @@ void register_topic_commands(CLI::App& app) {
   CLI::App* t = app.add_subcommand(
       "topics", "List the topics with writers on a domain, with type, writer count, rate and bandwidth");
   add_domain_option(t, &topics->domain);
+  add_dds_profile_option(t, &topics->profile);
   // bounded: the seconds become int64 nanoseconds (1e308 s would overflow)
   t->add_option("--duration", topics->duration_s, "Seconds to sample (after --discovery)")
       ->check(CLI::Range(1e-3, 86400.0))
@@ -694,6 +702,7 @@ void register_topic_commands(CLI::App& app) {
   p->add_option("--topic", pub->topic, "Topic name (default: imu, diagnostics, attitude/test, vision_pose)");
   p->add_option("--sensor-id", pub->sensor_id, "sensor_id of every sample")->capture_default_str();
   add_domain_option(p, &pub->domain);
+  add_dds_profile_option(p, &pub->profile);
   p->add_option("--count", pub->count, "Samples to publish")->check(CLI::PositiveNumber);
   p->add_option("--rate", pub->rate_hz, "Samples per second")->check(CLI::Range(0.1, 10000.0));
   p->add_option("--wait-readers", pub->wait_readers_s,

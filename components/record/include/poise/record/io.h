@@ -63,8 +63,33 @@ class Source {
   [[nodiscard]] virtual std::string name() const = 0;
 };
 
-/// A file read with pread(2). Throws IoError if it cannot be opened.
+/// A regular file read with pread(2). Throws IoError if it cannot be opened or is not a regular
+/// file (a FIFO, a device, a directory: refused at once, never waited on).
 std::unique_ptr<Source> open_file_source(const std::string& path);
+
+/// Throws IoError when OUTPUT names the same file as one of INPUTS (after symlinks and hard
+/// links: same device and inode), so an output can never be opened over an input.
+void refuse_output_over_input(const std::string& output, const std::vector<std::string>& inputs);
+
+/// An output written under a temporary name beside PATH (PATH.partial-PID) and renamed onto PATH
+/// by commit(): PATH is never truncated, and holds either what it held before or the whole new
+/// file. Destroyed without commit(), the temporary file is removed.
+class ReplacingFile {
+ public:
+  explicit ReplacingFile(std::string path);
+  ~ReplacingFile();
+  ReplacingFile(const ReplacingFile&) = delete;
+  ReplacingFile& operator=(const ReplacingFile&) = delete;
+  /// The name to write to.
+  [[nodiscard]] const std::string& temporary() const { return temporary_; }
+  /// Renames the temporary file onto the path. Throws IoError if it cannot.
+  void commit();
+
+ private:
+  std::string path_;
+  std::string temporary_;
+  bool committed_ = false;
+};
 
 /// Reads from a copy of BYTES.
 class MemorySource : public Source {
