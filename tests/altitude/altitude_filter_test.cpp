@@ -409,7 +409,7 @@ TEST(AltitudeSources, BaroDecisionsAndInnovation) {
   }
   SourceReports r = f.sources();
   ASSERT_EQ(r.size(), 4U);
-  EXPECT_STREQ(r[2].source, "baro");
+  EXPECT_EQ(r[2].source, Source::kBaro);
   EXPECT_EQ(r[2].decision, SourceDecision::kFused);
   ASSERT_EQ(r[2].innovation.size(), 1);
   EXPECT_NEAR(r[2].innovation[0], f.estimate().baro_height_m - f.estimate().height_m, 1e-12);
@@ -425,7 +425,7 @@ TEST(AltitudeSources, BaroDecisionsAndInnovation) {
   s.stamp_ns -= 5'000'000;  // back in time: the whole sample is rejected
   EXPECT_FALSE(f.update(s));
   for (const SourceReport& src : f.sources()) {
-    EXPECT_EQ(src.decision, SourceDecision::kRejected) << src.source;
+    EXPECT_EQ(src.decision, SourceDecision::kRejected) << to_string(src.source);
     EXPECT_STREQ(src.reason, "non_monotonic_stamp");
   }
 }

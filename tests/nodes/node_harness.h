@@ -128,10 +128,11 @@ inline uint64_t published_counter(const msg::FilterDiagnostics& d, const std::st
 
 /// The published status agrees with the core's report of the same step.
 inline void expect_same_decision(const msg::SourceStatus& published, const SourceReport& core) {
-  EXPECT_EQ(published.fresh(), core.decision != SourceDecision::kNotAvailable) << core.source;
-  EXPECT_EQ(published.fused(), core.fused()) << core.source;
+  EXPECT_EQ(published.source(), to_string(core.source));
+  EXPECT_EQ(published.fresh(), core.decision != SourceDecision::kNotAvailable) << to_string(core.source);
+  EXPECT_EQ(published.fused(), core.fused()) << to_string(core.source);
   if (*core.reason != '\0') {
-    EXPECT_EQ(published.reason(), core.reason) << core.source;
+    EXPECT_EQ(published.reason(), core.reason) << to_string(core.source);
   }
 }
 

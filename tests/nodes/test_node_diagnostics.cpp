@@ -24,15 +24,15 @@ constexpr uint32_t kSamples = 350;  // 1.5 s after it
 /// Diagnostics from this seq on are inside the event (allows for best-effort drops at the end).
 constexpr uint32_t kInsideEvent = kSettle + 50;
 
-/// The source of `name` in a core's report.
-SourceReport core_source(const SourceReports& reports, const std::string& name) {
+/// The report of `source` in a core's reports.
+SourceReport core_source(const SourceReports& reports, Source source) {
   for (const auto& r : reports) {
-    if (name == r.source) {
+    if (r.source == source) {
       return r;
     }
   }
-  ADD_FAILURE() << "the core reports no source '" << name << "'";
-  return {};
+  ADD_FAILURE() << "the core reports no source '" << to_string(source) << "'";
+  return SourceReport(source);
 }
 
 TEST(VehicleNode, GivenAMagnetNearWhenRunningThenMagIsReportedRejectedAsDisturbed) {
@@ -62,7 +62,7 @@ TEST(VehicleNode, GivenAMagnetNearWhenRunningThenMagIsReportedRejectedAsDisturbe
   EXPECT_FALSE(mag.fused()) << "the diagnostics must not say the magnetometer was used";
   EXPECT_EQ(mag.reason(), "disturbed_mag");
   EXPECT_GT(mag.test_ratio(), 1.0);
-  expect_same_decision(mag, core_source(core.sources(), "mag"));
+  expect_same_decision(mag, core_source(core.sources(), Source::kMag));
   const auto att = h.attitude(diag->header().seq());
   ASSERT_TRUE(att.has_value());
   EXPECT_FALSE(att->mag_trusted());
@@ -88,8 +88,8 @@ TEST(ParallelKfNode, GivenAMagnetNearWhenRunningThenMagIsReportedRejectedAsDistu
   EXPECT_FALSE(mag.fused());
   EXPECT_EQ(mag.reason(), "disturbed");
   EXPECT_GT(mag.test_ratio(), 1.0);
-  expect_same_decision(mag, core_source(core.sources(), "mag"));
-  expect_same_decision(published_source(*diag, "accel"), core_source(core.sources(), "accel"));
+  expect_same_decision(mag, core_source(core.sources(), Source::kMag));
+  expect_same_decision(published_source(*diag, "accel"), core_source(core.sources(), Source::kAccel));
   const auto att = h.attitude(diag->header().seq());
   ASSERT_TRUE(att.has_value());
   EXPECT_FALSE(att->mag_trusted());
@@ -140,18 +140,25 @@ TEST(SelectiveEkfNode, GivenAMagnetNearAndTheTagLostThenMagIsRejectedAndVisionNo
   EXPECT_FALSE(mag.fused());
   EXPECT_EQ(mag.reason(), "disturbance_angle");
   EXPECT_GT(mag.test_ratio(), 1.0);
-  expect_same_decision(mag, core_source(oracle, "mag"));
+  expect_same_decision(mag, core_source(oracle, Source::kMag));
   // > vision_anchor_s (1 s) after the last tag pose: not available, not "fused" from the past.
   const msg::SourceStatus va = published_source(*diag, "vision_attitude");
   EXPECT_FALSE(va.fresh());
   EXPECT_FALSE(va.fused());
   EXPECT_EQ(va.reason(), "no_recent_sample");
   EXPECT_GT(va.fused_count(), 0U) << "vision was fused before the tag was lost";
-  expect_same_decision(va, core_source(oracle, "vision_attitude"));
+  expect_same_decision(va, core_source(oracle, Source::kVisionAttitude));
+  // The heading row is still fused, at the inflated variance (action: inflate): SOURCE_MAG says
+  // a magnetometer row was fused, mag_trusted that it passed the selective test (it did not).
+  const msg::SourceStatus heading = published_source(*diag, "mag_heading");
+  EXPECT_TRUE(heading.fused());
+  EXPECT_EQ(heading.reason(), "inflated");
+  expect_same_decision(heading, core_source(oracle, Source::kMagHeading));
   const auto att = h.attitude(diag->header().seq());
   ASSERT_TRUE(att.has_value());
   EXPECT_FALSE(att->mag_trusted());
-  EXPECT_EQ(att->sources_fused() & (msg::SOURCE_VISION | msg::SOURCE_MAG), 0U);
+  EXPECT_EQ(att->sources_fused() & msg::SOURCE_VISION, 0U);
+  EXPECT_NE(att->sources_fused() & msg::SOURCE_MAG, 0U);
 }
 
 TEST(AltitudeNode, GivenABadBarometerWhenRunningThenBaroIsReportedRejected) {
@@ -171,11 +178,11 @@ TEST(AltitudeNode, GivenABadBarometerWhenRunningThenBaroIsReportedRejected) {
   EXPECT_TRUE(baro.fresh());
   EXPECT_FALSE(baro.fused());
   EXPECT_EQ(baro.reason(), "pressure_out_of_range");
-  expect_same_decision(baro, core_source(core.sources(), "baro"));
+  expect_same_decision(baro, core_source(core.sources(), Source::kBaro));
   // At rest for > zupt_window_s: the zero-velocity update is used.
   const msg::SourceStatus zupt = published_source(*diag, "zupt");
   EXPECT_TRUE(zupt.fused());
-  expect_same_decision(zupt, core_source(core.sources(), "zupt"));
+  expect_same_decision(zupt, core_source(core.sources(), Source::kZupt));
   EXPECT_GT(published_counter(*diag, "pressure_out_of_range"), 0U);
 }
 

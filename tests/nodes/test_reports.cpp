@@ -1,3 +1,5 @@
+#include "source_bits_oracle.h"
+
 #include "poise/core/attitude.h"
 #include "poise/nodes/reports.h"
 
@@ -35,7 +37,7 @@ TEST(DiagnosticsReport, OverlongListsAreTruncatedAndCounted) {
   DiagnosticsReport d;
   d.component = "x";
   for (int i = 0; i < 20; ++i) {
-    d.sources.push_back(SourceReport{});
+    d.sources.emplace_back(Source::kAccel);
   }
   d.counters["a"] = 1;
   const msg::FilterDiagnostics m = to_diagnostics_msg(d, "id");
@@ -48,23 +50,23 @@ TEST(DiagnosticsReport, OverlongListsAreTruncatedAndCounted) {
 // The core's decision maps 1:1: fused / rejected with the core's reason / not available.
 TEST(DiagnosticsReport, SourceDecisionsMapOneToOne) {
   DiagnosticsReport d;
-  SourceReport fused;
-  fused.source = "accel";
+  SourceReport fused(Source::kAccel);
   fused.decision = SourceDecision::kFused;
   fused.innovation = Eigen::Vector3d(0.1, -0.2, 0.3);
   fused.innovation_variance = Eigen::Vector3d(1, 2, 3);
   fused.test_ratio = 0.5;
   fused.last_fused_stamp_ns = 42;
-  SourceReport rejected;
-  rejected.source = "mag";
+  SourceReport rejected(Source::kMag);
   rejected.decision = SourceDecision::kRejected;
   rejected.reason = "disturbed_norm";
   rejected.rejected_count = 7;
-  SourceReport missing;
-  missing.source = "vision";  // never fused: last_fused_stamp_ns -1 -> 0 on the wire
+  SourceReport missing(Source::kVisionAttitude);  // never fused: last_fused_stamp_ns -1 -> 0 on the wire
   d.sources = {fused, rejected, missing};
   const msg::FilterDiagnostics m = to_diagnostics_msg(d, "id");
   ASSERT_EQ(m.sources().size(), 3U);
+  EXPECT_EQ(m.sources()[0].source(), "accel");
+  EXPECT_EQ(m.sources()[1].source(), "mag");
+  EXPECT_EQ(m.sources()[2].source(), "vision_attitude");
   EXPECT_TRUE(m.sources()[0].fresh());
   EXPECT_TRUE(m.sources()[0].fused());
   EXPECT_EQ(m.sources()[0].reason(), "");
@@ -80,6 +82,36 @@ TEST(DiagnosticsReport, SourceDecisionsMapOneToOne) {
   EXPECT_FALSE(m.sources()[2].fused());
   EXPECT_EQ(m.sources()[2].reason(), "not_available");
   EXPECT_EQ(m.sources()[2].last_fused_stamp_ns(), 0);
+}
+
+// The one mapping from a typed source to the IDL's bits covers every source (the switch has no
+// default: a new Source fails to compile until mapped) and agrees with the hand-written oracle.
+TEST(SourceBits, GivenEverySourceThenItsBitIsTheIdlBitOfItsSensor) {
+  for (std::size_t i = 0; i < static_cast<std::size_t>(Source::kCount); ++i) {
+    const auto s = static_cast<Source>(i);
+    const auto expected = testing::expected_source_bits().find(to_string(s));
+    ASSERT_NE(expected, testing::expected_source_bits().end()) << to_string(s) << " has no oracle bit";
+    EXPECT_EQ(source_bit(s), expected->second) << to_string(s);
+  }
+}
+
+// Only fused reports set bits, at full or reduced weight; two rows of one sensor set its bit once.
+TEST(SourceBits, GivenReportsOfOneStepThenTheFusedOnesSetTheirSensorsBits) {
+  SourceReport tilt(Source::kAccelTilt);
+  tilt.mark_fused(10);
+  SourceReport heading(Source::kMagHeading);
+  heading.mark_fused(10, "inflated");
+  SourceReport mag(Source::kMag);
+  mag.mark_rejected("disturbance_angle");
+  SourceReport vision(Source::kVisionAttitude);
+  vision.mark_not_available("no_sample");
+  SourceReport rest(Source::kZeroRate);
+  rest.mark_fused(10);
+  const SourceReports reports = {tilt, heading, mag, vision, rest};
+  EXPECT_EQ(sources_fused_bits(reports), msg::SOURCE_ACCEL | msg::SOURCE_MAG);
+  EXPECT_FALSE(source_fused(reports, Source::kMag)) << "the mag report itself was rejected";
+  EXPECT_TRUE(source_fused(reports, Source::kMagHeading));
+  EXPECT_FALSE(source_fused(reports, Source::kGyro)) << "absent from the reports";
 }
 
 }  // namespace

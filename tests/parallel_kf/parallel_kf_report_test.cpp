@@ -24,7 +24,7 @@ ImuSample rest(int i, double mag_scale) {
 SourceReport mag_of(const ParallelKf& kf) {
   const SourceReports r = kf.sources();
   EXPECT_EQ(r.size(), 3U);
-  EXPECT_STREQ(r[2].source, "mag");
+  EXPECT_EQ(r[2].source, Source::kMag);
   return r[2];
 }
 
@@ -72,8 +72,8 @@ TEST(ParallelKfReport, MissingAndRejectedSamplesSayWhy) {
   s.accel_mps2.x() = std::nan("");
   EXPECT_FALSE(kf.update(s));
   for (const SourceReport& r : kf.sources()) {
-    EXPECT_EQ(r.decision, SourceDecision::kRejected) << r.source;
-    EXPECT_STREQ(r.reason, "non_finite_accel") << r.source;
+    EXPECT_EQ(r.decision, SourceDecision::kRejected) << to_string(r.source);
+    EXPECT_STREQ(r.reason, "non_finite_accel") << to_string(r.source);
   }
   kf.reset();
   EXPECT_EQ(mag_of(kf).decision, SourceDecision::kNotAvailable);

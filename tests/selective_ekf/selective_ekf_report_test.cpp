@@ -67,7 +67,7 @@ TEST(SelectiveEkfReport, BeforeAnySampleEverySourceIsNotAvailable) {
   const SourceReports r = selective_ekf_sources(ekf);
   ASSERT_EQ(r.size(), 8U);  // gyro, imu_quat, mag, vision x2, accel_tilt, mag_heading, zero_rate
   for (const SourceReport& s : r) {
-    EXPECT_EQ(s.decision, SourceDecision::kNotAvailable) << s.source;
+    EXPECT_EQ(s.decision, SourceDecision::kNotAvailable) << to_string(s.source);
   }
 }
 

@@ -140,7 +140,7 @@ std::vector<Step> run(const sim::SimConfig& cfg, const RunOptions& o) {
     st.gn_err_deg = quat_angle_between(gn.result().q_world_body, s.truth.q_world_body) * kDegPerRad;
     st.mag_trusted = ekf.mag_status().trusted;
     st.angle_failed = ekf.mag_status().angle_test_failed || ekf.mag_status().norm_test_failed;
-    st.imu_quat = ekf.status(Source::kImuQuat).last;
+    st.imu_quat = ekf.status(SelectiveEkfAid::kImuQuat).last;
     st.rate_err_rps = (ekf.state().w_rps - s.truth.omega_body_rps).norm();
     st.sigma_deg = ekf.attitude_sigma_deg().maxCoeff();
     out.push_back(st);
@@ -507,7 +507,7 @@ TEST(SelectiveEkfVision, GivenFrameOlderThanHistoryWhenReceivedThenRejectedAsToo
   v.capture_stamp_ns = 1'000'000'000 + 70 * 10'000'000LL;  // 0.3 s old
   EXPECT_FALSE(f.update_vision(v));
   EXPECT_EQ(f.vision_counters().too_old, 1u);
-  EXPECT_EQ(f.status(Source::kVisionAttitude).last, Decision::kRejectedTooOld);
+  EXPECT_EQ(f.status(SelectiveEkfAid::kVisionAttitude).last, Decision::kRejectedTooOld);
   EXPECT_EQ(quat_angle_between(before, f.q_world_body()), 0.0);
 }
 
@@ -521,12 +521,12 @@ TEST(SelectiveEkfVision, GivenFutureFrameWhenImuCatchesUpThenAppliedAtItsStamp) 
   v.q_world_camera = quat_from_euler_zyx(0.0, 0.0, 0.05);
   ASSERT_TRUE(f.update_vision(v));
   EXPECT_EQ(f.vision_counters().future, 1u);
-  EXPECT_EQ(f.status(Source::kVisionAttitude).last, Decision::kNone);
+  EXPECT_EQ(f.status(SelectiveEkfAid::kVisionAttitude).last, Decision::kNone);
   for (int k = 101; k <= 106; ++k) {
     f.update_imu(level_sample(1'000'000'000 + k * 10'000'000LL));
   }
-  EXPECT_EQ(f.status(Source::kVisionAttitude).last, Decision::kReset);  // first frame aligns
-  EXPECT_EQ(f.status(Source::kVisionAttitude).last_fused_stamp_ns, v.capture_stamp_ns);
+  EXPECT_EQ(f.status(SelectiveEkfAid::kVisionAttitude).last, Decision::kReset);  // first frame aligns
+  EXPECT_EQ(f.status(SelectiveEkfAid::kVisionAttitude).last_fused_stamp_ns, v.capture_stamp_ns);
 }
 
 TEST(SelectiveEkfVision, GivenNegatedQuaternionWhenFusedThenSameAsPositive) {
@@ -549,7 +549,7 @@ TEST(SelectiveEkfVision, GivenNegatedQuaternionWhenFusedThenSameAsPositive) {
   vn.q_world_camera.coeffs() = -v.q_world_camera.coeffs();
   a.update_vision(v);
   b.update_vision(vn);
-  EXPECT_EQ(a.status(Source::kVisionAttitude).last, Decision::kFused);
+  EXPECT_EQ(a.status(SelectiveEkfAid::kVisionAttitude).last, Decision::kFused);
   EXPECT_LT(quat_angle_between(a.state_output(), b.state_output()) * kDegPerRad, kReplayExactDeg);
   EXPECT_GT(quat_angle_between(a.state_output(), Eigen::Quaterniond::Identity()), 0.0);
 }
@@ -585,8 +585,8 @@ TEST(SelectiveEkfInput, GivenBadImuSamplesWhenFedThenRejectedCountedAndStateUnto
     EXPECT_TRUE(f.update_imu(nan_mag));
   }
   EXPECT_EQ(f.imu_rejections().count(RejectReason::kNonFiniteMag), static_cast<uint64_t>(nan_samples));
-  EXPECT_EQ(f.status(Source::kHeading).last, Decision::kRejectedNoMag);
-  EXPECT_EQ(f.status(Source::kTilt).last, Decision::kFused);
+  EXPECT_EQ(f.status(SelectiveEkfAid::kMagHeading).last, Decision::kRejectedNoMag);
+  EXPECT_EQ(f.status(SelectiveEkfAid::kAccelTilt).last, Decision::kFused);
   // A huge gap re-anchors time without integrating across it, once a second sample agrees.
   t += 10'000'000;
   EXPECT_FALSE(f.update_imu(level_sample(t + 5'000'000'000LL)));
@@ -619,7 +619,7 @@ TEST(SelectiveEkfInput, GivenBadVisionWhenFedThenRejectedAndCounted) {
   EXPECT_FALSE(f.update_vision(zero_q));
   EXPECT_FALSE(f.update_vision(nan_p));
   EXPECT_EQ(f.vision_counters().bad_input, 3u);
-  EXPECT_EQ(f.status(Source::kVisionAttitude).by_decision[static_cast<size_t>(
+  EXPECT_EQ(f.status(SelectiveEkfAid::kVisionAttitude).by_decision[static_cast<size_t>(
                 Decision::kRejectedBadInput)],
             4u);
   EXPECT_TRUE(f.state().P.allFinite());
@@ -1032,7 +1032,7 @@ TEST(SelectiveEkfImuOnly, GivenGyroBiasWhenRestsAndMotionThenBiasEstimated) {
               cfg.noise.gyro_bias_rps.y() * kDegPerRad, cfg.noise.gyro_bias_rps.z() * kDegPerRad,
               err.norm() * kDegPerRad);
   EXPECT_LT(err.norm() * kDegPerRad, kBiasErrorMaxDps);
-  EXPECT_GT(ekf.status(Source::kZeroRate).fused, 0u);
+  EXPECT_GT(ekf.status(SelectiveEkfAid::kZeroRate).fused, 0u);
 }
 
 TEST(SelectiveEkfImuOnly, GivenVisionBlackoutWhenVisionReturnsThenNoStepBeyondTheDrift) {

@@ -390,7 +390,7 @@ TEST(VehicleSources, DisturbedMagAndBadSpeedAreReportedRejected) {
   ASSERT_TRUE(est.update(s));
   SourceReports r = est.sources();
   ASSERT_EQ(r.size(), 4U);
-  EXPECT_STREQ(r[2].source, "mag");
+  EXPECT_EQ(r[2].source, Source::kMag);
   EXPECT_EQ(r[2].decision, SourceDecision::kFused);
   EXPECT_EQ(r[3].decision, SourceDecision::kFused);
   s.stamp_ns += kStepNs;

@@ -37,8 +37,9 @@ class GaussNewtonStep : public AttitudeStep {
       return false;
     }
     report.q_world_body = gn_.result().q_world_body;
-    report.mag_trusted = true;  // the baseline always uses the magnetometer
-    report.sources_fused = msg::SOURCE_ACCEL | msg::SOURCE_MAG;
+    const SourceReports sources = gn_.sources();  // both fused for every estimate it gives
+    report.sources_fused = sources_fused_bits(sources);
+    report.mag_trusted = source_fused(sources, Source::kMag);
     return true;
   }
   void diagnostics(DiagnosticsReport& diag) const override {

@@ -47,8 +47,9 @@ class ParallelKfStep : public AttitudeStep {
     report.mag_disturbance_body_ut = out.mag_dist_body_ut;
     report.mag_disturbance_world_ut = out.mag_dist_world_ut;
     report.gyro_bias_rps = out.gyro_bias_rps;
-    report.sources_fused = sources_fused_bits(kf_.sources());
-    report.mag_trusted = (report.sources_fused & msg::SOURCE_MAG) != 0;
+    const SourceReports sources = kf_.sources();
+    report.sources_fused = sources_fused_bits(sources);
+    report.mag_trusted = source_fused(sources, Source::kMag);
     return true;
   }
   void diagnostics(DiagnosticsReport& diag) const override {

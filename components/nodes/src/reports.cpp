@@ -4,8 +4,6 @@
 #include "poise/dds/convert.h"
 
 #include <algorithm>
-#include <cstring>
-#include <utility>
 
 namespace poise::nodes {
 namespace {
@@ -15,25 +13,39 @@ constexpr std::size_t kMaxMetrics = 32;
 constexpr std::size_t kMaxInnovation = 6;
 }  // namespace
 
+uint32_t source_bit(Source s) {
+  switch (s) {  // no default: a new Source does not compile (-Werror=switch) until it has a bit
+    case Source::kGyro:
+    case Source::kYawRate: return msg::SOURCE_GYRO;
+    case Source::kAccel:
+    case Source::kAccelTilt: return msg::SOURCE_ACCEL;
+    case Source::kMag:
+    case Source::kMagHeading: return msg::SOURCE_MAG;
+    case Source::kImuQuat: return msg::SOURCE_IMU_QUAT;
+    case Source::kVisionAttitude:
+    case Source::kVisionPosition: return msg::SOURCE_VISION;
+    case Source::kBaro: return msg::SOURCE_BARO;
+    case Source::kSpeed: return msg::SOURCE_SPEED;
+    case Source::kZupt:      // pseudo-measurements of a rest detector: no sensor of their own
+    case Source::kZeroRate:
+    case Source::kCount: return 0;
+  }
+  return 0;
+}
+
 uint32_t sources_fused_bits(const SourceReports& sources) {
-  static const std::pair<const char*, uint32_t> kBits[] = {
-      {"gyro", msg::SOURCE_GYRO},         {"yaw_rate", msg::SOURCE_GYRO},
-      {"accel", msg::SOURCE_ACCEL},       {"mag", msg::SOURCE_MAG},
-      {"imu_quat", msg::SOURCE_IMU_QUAT}, {"vision_attitude", msg::SOURCE_VISION},
-      {"vision_position", msg::SOURCE_VISION}, {"baro", msg::SOURCE_BARO},
-      {"speed", msg::SOURCE_SPEED}};
   uint32_t bits = 0;
   for (const SourceReport& s : sources) {
-    if (!s.fused()) {
-      continue;
-    }
-    for (const auto& [name, bit] : kBits) {
-      if (std::strcmp(name, s.source) == 0) {
-        bits |= bit;
-      }
+    if (s.fused()) {
+      bits |= source_bit(s.source);
     }
   }
   return bits;
+}
+
+bool source_fused(const SourceReports& sources, Source source) {
+  return std::any_of(sources.begin(), sources.end(),
+                     [source](const SourceReport& s) { return s.source == source && s.fused(); });
 }
 
 msg::AttitudeEstimate to_attitude_msg(const AttitudeReport& r, const std::string& sensor_id,
@@ -73,7 +85,7 @@ msg::FilterDiagnostics to_diagnostics_msg(const DiagnosticsReport& r, const std:
       continue;
     }
     msg::SourceStatus status;
-    status.source(s.source);
+    status.source(to_string(s.source));
     status.fresh(s.decision != SourceDecision::kNotAvailable);
     status.fused(s.fused());
     status.reason(*s.reason == '\0' && !s.fused() ? to_string(s.decision) : s.reason);

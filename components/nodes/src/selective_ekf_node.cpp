@@ -77,8 +77,10 @@ class SelectiveEkfStep : public AttitudeStep {
     const MagStatus& mag = ekf_.mag_status();
     report.q_world_body = ekf_.q_world_body();
     report.covariance = attitude_covariance_world(ekf_);
-    report.sources_fused = sources_fused_bits(selective_ekf_sources(ekf_));
-    report.mag_trusted = (report.sources_fused & msg::SOURCE_MAG) != 0;
+    const SourceReports sources = selective_ekf_sources(ekf_);
+    report.sources_fused = sources_fused_bits(sources);
+    // its selective test (eqs. 8-10), not the bit: the heading row is fused inflated while untrusted
+    report.mag_trusted = source_fused(sources, Source::kMag);
     report.mag_disturbance_angle_rad = std::abs(mag.disturbance_angle_deg - mag.reference_angle_deg) * kRadPerDeg;
     report.gyro_bias_rps = ekf_.state().b_rps;
     return true;

@@ -50,7 +50,7 @@ class VehicleStep : public AttitudeStep {
     const SourceReports sources = estimator_.sources();
     report.q_world_body = e.q_world_body;
     report.sources_fused = sources_fused_bits(sources);
-    report.mag_trusted = (report.sources_fused & msg::SOURCE_MAG) != 0;
+    report.mag_trusted = source_fused(sources, Source::kMag);
     return true;
   }
   void diagnostics(DiagnosticsReport& diag) const override {

@@ -57,9 +57,9 @@ void ParallelKf::reset_unhealthy() {
 void ParallelKf::reset_report() {
   mag_use_ = MagUse::kNone;
   gate_norm_ut_ = std::nan("");
-  gyro_src_ = source_named("gyro");
-  accel_src_ = source_named("accel");
-  mag_src_ = source_named("mag");
+  gyro_src_ = SourceReport(Source::kGyro);
+  accel_src_ = SourceReport(Source::kAccel);
+  mag_src_ = SourceReport(Source::kMag);
 }
 
 void ParallelKf::report(const ImuSample& s, const SampleCheck& c, bool accepted, bool was_initialized) {

@@ -22,18 +22,18 @@ bool finite_quat(const Eigen::Quaterniond& q) {
 
 }  // namespace
 
-const char* to_string(Source s) {
-  switch (s) {
-    case Source::kGyro: return "gyro";
-    case Source::kImuQuat: return "imu_quat";
-    case Source::kVisionAttitude: return "vision_attitude";
-    case Source::kVisionPosition: return "vision_position";
-    case Source::kTilt: return "accel_tilt";
-    case Source::kHeading: return "mag_heading";
-    case Source::kZeroRate: return "zero_rate";
-    case Source::kCount: break;
+Source source_of(SelectiveEkfAid a) {
+  switch (a) {
+    case SelectiveEkfAid::kGyro: return Source::kGyro;
+    case SelectiveEkfAid::kImuQuat: return Source::kImuQuat;
+    case SelectiveEkfAid::kVisionAttitude: return Source::kVisionAttitude;
+    case SelectiveEkfAid::kVisionPosition: return Source::kVisionPosition;
+    case SelectiveEkfAid::kAccelTilt: return Source::kAccelTilt;
+    case SelectiveEkfAid::kMagHeading: return Source::kMagHeading;
+    case SelectiveEkfAid::kZeroRate: return Source::kZeroRate;
+    case SelectiveEkfAid::kCount: break;
   }
-  return "unknown";
+  return Source::kCount;
 }
 
 const char* to_string(Decision d) {
@@ -386,7 +386,7 @@ void SelectiveEkf::process_imu(const ImuInput& in_raw, bool first_pass) {
     h.middleCols<3>(kW).setIdentity();
     h.middleCols<3>(kB).setIdentity();
     const double r = p_.sigma_gyro_rps * p_.sigma_gyro_rps;
-    SourceStatus& sg = status_[static_cast<size_t>(Source::kGyro)];
+    SourceStatus& sg = status_[static_cast<size_t>(SelectiveEkfAid::kGyro)];
     fuse<3>(h, in.gyro - x_.w_rps - x_.b_rps, Eigen::Vector3d::Constant(r), kReportGateSigma, false, sg);
     record(sg, Decision::kFused, now, first_pass);
   }
@@ -395,7 +395,7 @@ void SelectiveEkf::process_imu(const ImuInput& in_raw, bool first_pass) {
     Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
     h.middleCols<3>(kW).setIdentity();
     const double r = p_.sigma_rest_rate_rps * p_.sigma_rest_rate_rps;
-    SourceStatus& sz = status_[static_cast<size_t>(Source::kZeroRate)];
+    SourceStatus& sz = status_[static_cast<size_t>(SelectiveEkfAid::kZeroRate)];
     fuse<3>(h, -x_.w_rps, Eigen::Vector3d::Constant(r), kReportGateSigma, false, sz);
     record(sz, Decision::kFused, now, first_pass);
   }
@@ -488,7 +488,7 @@ bool SelectiveEkf::mag_trusted(const ImuInput& in, const Eigen::Vector3d& up, do
 
 void SelectiveEkf::process_imu_quat(const ImuInput& in, bool first_pass, bool anchored) {
   const int64_t now = in.stamp_ns;
-  SourceStatus& sq = status_[static_cast<size_t>(Source::kImuQuat)];
+  SourceStatus& sq = status_[static_cast<size_t>(SelectiveEkfAid::kImuQuat)];
   if (!in.has_q_imu) {
     record(sq, Decision::kRejectedNoMag, now, first_pass);
     return;
@@ -525,7 +525,7 @@ void SelectiveEkf::process_imu_quat(const ImuInput& in, bool first_pass, bool an
 }
 
 void SelectiveEkf::process_tilt(const ImuInput& in, bool first_pass) {
-  SourceStatus& st = status_[static_cast<size_t>(Source::kTilt)];
+  SourceStatus& st = status_[static_cast<size_t>(SelectiveEkfAid::kAccelTilt)];
   if (!(in.dt_s > 0.0)) {
     return;
   }
@@ -547,7 +547,7 @@ void SelectiveEkf::process_tilt(const ImuInput& in, bool first_pass) {
 
 void SelectiveEkf::process_heading(const ImuInput& in, bool first_pass, bool anchored) {
   const int64_t now = in.stamp_ns;
-  SourceStatus& sh = status_[static_cast<size_t>(Source::kHeading)];
+  SourceStatus& sh = status_[static_cast<size_t>(SelectiveEkfAid::kMagHeading)];
   if (!in.has_mag || !(in.dt_s > 0.0)) {
     record(sh, Decision::kRejectedNoMag, now, first_pass);
     return;
@@ -594,8 +594,8 @@ void SelectiveEkf::process_vision(const VisionPose& v, bool first_pass) {
   const double sr = std::isfinite(v.sigma_rad) && v.sigma_rad > 0.0 ? v.sigma_rad
                                                                     : p_.sigma_vision_deg * kRadPerDeg;
   const double sm = std::isfinite(v.sigma_m) && v.sigma_m > 0.0 ? v.sigma_m : p_.sigma_vision_m;
-  SourceStatus& sa = status_[static_cast<size_t>(Source::kVisionAttitude)];
-  SourceStatus& sp = status_[static_cast<size_t>(Source::kVisionPosition)];
+  SourceStatus& sa = status_[static_cast<size_t>(SelectiveEkfAid::kVisionAttitude)];
+  SourceStatus& sp = status_[static_cast<size_t>(SelectiveEkfAid::kVisionPosition)];
 
   auto reset_attitude = [&]() {
     x_.q_world_body = q_meas;
@@ -821,7 +821,7 @@ void SelectiveEkf::blend_output(const Eigen::Vector3d& gyro_rps, double dt_s) {
 
 bool SelectiveEkf::update_vision(const VisionPose& v_in) {
   ++vc_.received;
-  SourceStatus& sa = status_[static_cast<size_t>(Source::kVisionAttitude)];
+  SourceStatus& sa = status_[static_cast<size_t>(SelectiveEkfAid::kVisionAttitude)];
   if (!finite_quat(v_in.q_world_camera) || v_in.capture_stamp_ns < 0 ||
       (v_in.has_position && !v_in.p_world_camera_m.allFinite()) ||
       (std::isfinite(v_in.sigma_rad) && v_in.sigma_rad <= 0.0) ||
@@ -933,13 +933,14 @@ std::map<std::string, uint64_t> SelectiveEkfFilter::rejections() const {
   put("vision_bad_input", vc.bad_input);
   put("vision_before_init", vc.before_init);
   put("state_reset", ekf_.state_resets());
-  for (size_t s = 0; s < static_cast<size_t>(Source::kCount); ++s) {
-    const SourceStatus& st = ekf_.status(static_cast<Source>(s));
+  for (size_t s = 0; s < static_cast<size_t>(SelectiveEkfAid::kCount); ++s) {
+    const auto aid = static_cast<SelectiveEkfAid>(s);
+    const SourceStatus& st = ekf_.status(aid);
     for (size_t d = 0; d < st.by_decision.size(); ++d) {
       const auto dec = static_cast<Decision>(d);
       if (dec != Decision::kFused && dec != Decision::kFusedInflated && dec != Decision::kNone &&
           dec != Decision::kReset) {
-        put(std::string(to_string(static_cast<Source>(s))) + "_" + to_string(dec),
+        put(std::string(to_string(source_of(aid))) + "_" + to_string(dec),
             st.by_decision[d]);
       }
     }

@@ -8,9 +8,10 @@
 namespace poise {
 namespace {
 
-/// The decision of one SourceStatus in the shared shape.
-SourceReport from_status(const char* name, const SourceStatus& st) {
-  SourceReport r = source_named(name);
+/// The decision of one aid's SourceStatus in the shared shape.
+SourceReport from_status(const SelectiveEkf& ekf, SelectiveEkfAid aid) {
+  const SourceStatus& st = ekf.status(aid);
+  SourceReport r(source_of(aid));
   r.fused_count = st.fused;
   r.rejected_count = st.rejected;
   r.last_fused_stamp_ns = st.last_fused_stamp_ns;
@@ -47,14 +48,14 @@ SourceReports selective_ekf_sources(const SelectiveEkf& ekf) {
   const auto recent_ns = static_cast<int64_t>(std::llround(p.vision_anchor_s * 1e9));
   SourceReports out;
   out.reserve(8);
-  out.push_back(from_status("gyro", ekf.status(Source::kGyro)));
-  out.push_back(from_status("imu_quat", ekf.status(Source::kImuQuat)));
+  out.push_back(from_status(ekf, SelectiveEkfAid::kGyro));
+  out.push_back(from_status(ekf, SelectiveEkfAid::kImuQuat));
   // The magnetometer's row: the heading (kSplit) or the IMU quaternion (kQuaternion).
   const bool split = p.imu_measurement == ImuMeasurement::kSplit;
-  const SourceStatus& quat = ekf.status(split ? Source::kHeading : Source::kImuQuat);
+  const SourceStatus& quat = ekf.status(split ? SelectiveEkfAid::kMagHeading : SelectiveEkfAid::kImuQuat);
 
   const MagStatus& m = ekf.mag_status();
-  SourceReport mag = source_named("mag");
+  SourceReport mag(Source::kMag);
   mag.fused_count = quat.by_decision[static_cast<size_t>(Decision::kFused)];
   mag.rejected_count = m.untrusted_samples;
   if (quat.last == Decision::kNone || quat.last == Decision::kRejectedNoMag) {
@@ -83,18 +84,17 @@ SourceReports selective_ekf_sources(const SelectiveEkf& ekf) {
   }
   out.push_back(mag);
 
-  for (const auto& [name, source] : {std::pair{"vision_attitude", Source::kVisionAttitude},
-                                     std::pair{"vision_position", Source::kVisionPosition}}) {
-    const SourceStatus& st = ekf.status(source);
-    SourceReport r = from_status(name, st);
+  for (const SelectiveEkfAid aid : {SelectiveEkfAid::kVisionAttitude, SelectiveEkfAid::kVisionPosition}) {
+    const SourceStatus& st = ekf.status(aid);
+    SourceReport r = from_status(ekf, aid);
     if (st.last != Decision::kNone && now - st.last_stamp_ns > recent_ns) {
       r.mark_not_available("no_recent_sample");
     }
     out.push_back(r);
   }
-  out.push_back(from_status("accel_tilt", ekf.status(Source::kTilt)));
-  out.push_back(from_status("mag_heading", ekf.status(Source::kHeading)));
-  out.push_back(from_status("zero_rate", ekf.status(Source::kZeroRate)));
+  out.push_back(from_status(ekf, SelectiveEkfAid::kAccelTilt));
+  out.push_back(from_status(ekf, SelectiveEkfAid::kMagHeading));
+  out.push_back(from_status(ekf, SelectiveEkfAid::kZeroRate));
   return out;
 }
 

@@ -2,6 +2,10 @@
 // shape (STYLE.md habit 6; PX4 EKF2's per-aid-source status). Nodes map it 1:1 onto
 // msg::SourceStatus; no adapter decides anything about a source.
 //
+//   source    which input (a typed Source, STYLE.md habit 16): to_string(Source) is its one wire
+//             name (msg::SourceStatus.source); the nodes map it to the msg::SOURCE_* bits in one
+//             switch (poise/nodes/reports.h source_bit), so a new Source does not compile until it
+//             has a bit.
 //   decision  kFused: the sample corrected the state; kRejected: a sample was there and the core
 //             refused it (`reason` says why: a gate, a disturbance test, bad data); kNotAvailable:
 //             no usable sample at this step (`reason`: no_sample, learning, not_used_by_method, ...).
@@ -21,6 +25,46 @@
 
 namespace poise {
 
+/// Every input a core reports on. The enumerators are the sources of all cores; a core reports
+/// the ones it has, in a fixed order (its sources() / *_sources() documents which).
+enum class Source : uint8_t {
+  kGyro = 0,        ///< gyroscope (drives the prediction, or the selective EKF's rate rows)
+  kYawRate,         ///< vehicle estimator: the gyro's yaw rate
+  kAccel,           ///< accelerometer
+  kAccelTilt,       ///< selective EKF (split): tilt from the low-passed accelerometer
+  kMag,             ///< magnetometer (the selective EKF: its trust test, eqs. 8-10)
+  kMagHeading,      ///< selective EKF (split): heading from the magnetometer
+  kImuQuat,         ///< selective EKF (quaternion): the Gauss-Newton IMU quaternion
+  kVisionAttitude,  ///< camera pose: attitude
+  kVisionPosition,  ///< camera pose: position
+  kBaro,            ///< barometer
+  kSpeed,           ///< vehicle speed
+  kZupt,            ///< altitude: zero-velocity pseudo-measurement at rest
+  kZeroRate,        ///< selective EKF: zero-rate pseudo-measurement at rest
+  kCount
+};
+
+/// The wire name (msg::SourceStatus.source); "unknown" only for kCount.
+inline const char* to_string(Source s) {
+  switch (s) {
+    case Source::kGyro: return "gyro";
+    case Source::kYawRate: return "yaw_rate";
+    case Source::kAccel: return "accel";
+    case Source::kAccelTilt: return "accel_tilt";
+    case Source::kMag: return "mag";
+    case Source::kMagHeading: return "mag_heading";
+    case Source::kImuQuat: return "imu_quat";
+    case Source::kVisionAttitude: return "vision_attitude";
+    case Source::kVisionPosition: return "vision_position";
+    case Source::kBaro: return "baro";
+    case Source::kSpeed: return "speed";
+    case Source::kZupt: return "zupt";
+    case Source::kZeroRate: return "zero_rate";
+    case Source::kCount: break;
+  }
+  return "unknown";
+}
+
 enum class SourceDecision : uint8_t { kNotAvailable = 0, kFused, kRejected };
 
 inline const char* to_string(SourceDecision d) {
@@ -36,7 +80,10 @@ inline const char* to_string(SourceDecision d) {
 using InnovationVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 6, 1>;
 
 struct SourceReport {
-  const char* source = "";  ///< "gyro", "accel", "mag", "imu_quat", "vision_attitude", "baro", ...
+  /// A report always names its source (never fused yet).
+  explicit SourceReport(Source s) : source(s) {}
+
+  Source source;
   SourceDecision decision = SourceDecision::kNotAvailable;
   /// Why it was rejected or not available (a static string); "" when fused normally, or a
   /// qualifier when fused in a reduced way (e.g. "inflated_disturbance").
@@ -82,13 +129,6 @@ struct SourceReport {
     }
   }
 };
-
-/// A fresh report for the source named `name` (never fused).
-inline SourceReport source_named(const char* name) {
-  SourceReport r;
-  r.source = name;
-  return r;
-}
 
 /// The reports of one step, one entry per input of the core (fixed order per core).
 using SourceReports = std::vector<SourceReport>;

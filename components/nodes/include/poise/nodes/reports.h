@@ -34,9 +34,18 @@ struct AttitudeReport {
   std::string frame_id = "enu_magnetic";  ///< the world frame: enu_magnetic or enu_true (poise/core/north.h)
 };
 
-/// msg::SOURCE_* bits of the sources a core fused at this step (by source name: gyro/yaw_rate,
-/// accel, mag, imu_quat, vision_*, baro, speed; other names carry no bit).
+/// The one mapping of a Source to its msg::SOURCE_* bit (estimates.idl): gyro and yaw_rate
+/// SOURCE_GYRO, accel and accel_tilt SOURCE_ACCEL, mag and mag_heading SOURCE_MAG, imu_quat
+/// SOURCE_IMU_QUAT, vision_attitude and vision_position SOURCE_VISION, baro, speed; the rest
+/// detectors' pseudo-measurements (zupt, zero_rate) carry no bit (0).
+uint32_t source_bit(Source source);
+/// msg::SOURCE_* bits of the sources a core fused at this step: the OR of source_bit() over the
+/// reports whose decision is fused (at full or reduced weight, e.g. the selective EKF's heading
+/// "inflated" while the magnetometer is untrusted: that is what mag_trusted tells apart).
 uint32_t sources_fused_bits(const SourceReports& sources);
+/// Whether the report of `source` is among `sources` and says fused (the nodes' mag_trusted:
+/// the report of Source::kMag).
+bool source_fused(const SourceReports& sources, Source source);
 
 /// Builds the message (roll/pitch/yaw ZYX from q, disturbance norm from the vector).
 msg::AttitudeEstimate to_attitude_msg(const AttitudeReport& report, const std::string& sensor_id,

@@ -180,10 +180,10 @@ struct AltitudeFilterState {
   bool prev_baro_ok = false;
   double still_time_s = 0.0;    ///< how long every sample has been "still", s
   // Per-source reports of the last sample.
-  SourceReport gyro = source_named("gyro");
-  SourceReport accel = source_named("accel");
-  SourceReport baro = source_named("baro");
-  SourceReport zupt = source_named("zupt");
+  SourceReport gyro{Source::kGyro};
+  SourceReport accel{Source::kAccel};
+  SourceReport baro{Source::kBaro};
+  SourceReport zupt{Source::kZupt};
   StateHealth health;  ///< resets after an unhealthy update (poise/core/state_health.h)
 };
 

@@ -68,8 +68,8 @@ struct GaussNewtonState {
   int64_t last_stamp_ns = -1;
   StampAnchor anchor;  ///< time restarts after a stamp jump only when two samples agree
   RejectCounters rejections;
-  SourceReport accel = source_named("accel");
-  SourceReport mag = source_named("mag");
+  SourceReport accel{Source::kAccel};
+  SourceReport mag{Source::kMag};
   StateHealth health;  ///< resets after a non-finite or non-unit solution (state_health.h)
 };
 

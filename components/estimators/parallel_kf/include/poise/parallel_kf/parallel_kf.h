@@ -362,9 +362,9 @@ class ParallelKf {
   MagUse mag_use_ = MagUse::kNone;
   double gate_norm_ut_ = std::nan("");  ///< |s_M| at the gate (NaN: not gated this sample)
   double gate_sin_dip_ = 0.0;           ///< sin(dip) at the gate
-  SourceReport gyro_src_ = source_named("gyro");
-  SourceReport accel_src_ = source_named("accel");
-  SourceReport mag_src_ = source_named("mag");
+  SourceReport gyro_src_{Source::kGyro};
+  SourceReport accel_src_{Source::kAccel};
+  SourceReport mag_src_{Source::kMag};
 };
 
 /// AttitudeFilter adapter.

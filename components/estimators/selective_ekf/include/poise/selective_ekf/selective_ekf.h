@@ -261,17 +261,19 @@ struct VisionPose {
   double sigma_m = std::nan("");       ///< per-axis position std; NaN: params' default
 };
 
-enum class Source : uint8_t {
+/// The filter's aid sources: one SourceStatus each (status()), the index of its status table.
+enum class SelectiveEkfAid : uint8_t {
   kGyro = 0,
   kImuQuat,          ///< ImuMeasurement::kQuaternion only
   kVisionAttitude,
   kVisionPosition,
-  kTilt,             ///< ImuMeasurement::kSplit: low-passed accelerometer
-  kHeading,          ///< ImuMeasurement::kSplit: magnetometer heading (gated)
+  kAccelTilt,        ///< ImuMeasurement::kSplit: low-passed accelerometer
+  kMagHeading,       ///< ImuMeasurement::kSplit: magnetometer heading (gated)
   kZeroRate,         ///< rest detected: w = 0
   kCount
 };
-const char* to_string(Source s);
+/// The aid's identity in reports and on the wire (to_string(Source) is its name).
+Source source_of(SelectiveEkfAid a);
 
 /// Why a source was or was not fused on its last sample.
 enum class Decision : uint8_t {
@@ -399,7 +401,7 @@ class SelectiveEkfFullState {
   int64_t last_imu_stamp_ns_ = -1;   ///< stamp of the last accepted IMU sample (sensor clock)
   StampAnchor anchor_;               ///< time restarts after a stamp jump only when two samples agree
   RejectCounters rejections_;
-  std::array<SourceStatus, static_cast<size_t>(Source::kCount)> status_{};
+  std::array<SourceStatus, static_cast<size_t>(SelectiveEkfAid::kCount)> status_{};
   MagStatus mag_;
   VisionCounters vc_;
   // start-up reference
@@ -448,8 +450,8 @@ class SelectiveEkf : private SelectiveEkfFullState {
   [[nodiscard]] Eigen::Quaterniond state_output() const;
   /// The position at the stamp of the last IMU sample (predicted like q_world_body()).
   [[nodiscard]] Eigen::Vector3d position_m() const;
-  [[nodiscard]] const SourceStatus& status(Source s) const {
-    return status_[static_cast<size_t>(s)];
+  [[nodiscard]] const SourceStatus& status(SelectiveEkfAid a) const {
+    return status_[static_cast<size_t>(a)];
   }
   [[nodiscard]] const MagStatus& mag_status() const { return mag_; }
   [[nodiscard]] const VisionCounters& vision_counters() const { return vc_; }

@@ -178,10 +178,10 @@ struct VehicleEstimatorState {
   double prev_ay = 0.0;
   double prev_r = 0.0;
   // Per-source reports of the last sample.
-  SourceReport yaw_rate = source_named("yaw_rate");
-  SourceReport accel = source_named("accel");
-  SourceReport mag = source_named("mag");
-  SourceReport speed = source_named("speed");
+  SourceReport yaw_rate{Source::kYawRate};
+  SourceReport accel{Source::kAccel};
+  SourceReport mag{Source::kMag};
+  SourceReport speed{Source::kSpeed};
   StateHealth health;  ///< resets after an unhealthy update (poise/core/state_health.h)
 };
 
