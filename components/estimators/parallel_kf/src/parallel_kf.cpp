@@ -85,49 +85,26 @@ void ParallelKfParams::validate() const {
 }
 
 ParallelKf::ParallelKf(const ParallelKfParams& params) : p_(params) {
-  s_.kf1 = TiltKf(params.tilt);
   p_.validate();
   gp_ = p_.field_gate();
-  DirectionKfParams d;
-  d.sigma_gyro_rps = p_.sigma_gyro_heading_rps > 0.0 ? p_.sigma_gyro_heading_rps : p_.tilt.sigma_gyro_rps;
-  d.sigma_meas = p_.sigma_mag_ut;
-  d.c = p_.c_d;
-  d.c_rate_hz = p_.c_d_rate_hz;
-  d.exact_rotation = p_.tilt.exact_rotation;
-  d.renormalize = p_.tilt.renormalize;
-  d.sigma_gyro_extra_rps = p_.sigma_gyro_extra_heading_rps;
-  s_.kf2.set_params(d);
+  kf2_params_.sigma_gyro_rps = p_.sigma_gyro_heading_rps > 0.0 ? p_.sigma_gyro_heading_rps : p_.tilt.sigma_gyro_rps;
+  kf2_params_.sigma_meas = p_.sigma_mag_ut;
+  kf2_params_.c = p_.c_d;
+  kf2_params_.c_rate_hz = p_.c_d_rate_hz;
+  kf2_params_.exact_rotation = p_.tilt.exact_rotation;
+  kf2_params_.renormalize = p_.tilt.renormalize;
+  kf2_params_.sigma_gyro_extra_rps = p_.sigma_gyro_extra_heading_rps;
   reset();
 }
 
 void ParallelKf::reset() {
+  s_ = ParallelKfState();
   s_.kf1 = TiltKf(p_.tilt);
+  s_.kf2.set_params(kf2_params_);
   s_.kf2.reset(Eigen::Vector3d::UnitX(), kInitVarDirection, kInitVarDisturbanceUt2);
-  s_.initialized = false;
-  s_.heading_initialized = false;
-  s_.heading_from_gyro = false;
-  s_.last_stamp_ns = -1;
-  s_.prev_gyro.setZero();
-  s_.rejections = RejectCounters{};
-  s_.out = ParallelKfOutput{};
-  last_q_ = Eigen::Quaterniond::Identity();
   s_.gate.reset(gp_);
-  s_.mag_extra_var = 0.0;
-  s_.bias.setZero();
   s_.bias_cov = Eigen::Matrix3d::Identity() * (p_.bias_sigma_init_rps * p_.bias_sigma_init_rps);
-  s_.bias_lp_i.setZero();
-  s_.rate2_lp = 0.0;
-  s_.mb_rate2 = 0.0;
-  s_.mb_corr.setZero();
-  s_.mb_head = 0.0;
-  s_.mb_time = 0.0;
-  s_.mb_head_used = false;
-  s_.mb_head_trusted = true;
   s_.c2_dip_for = std::nan("");
-  s_.rest_det = RestDetector{};
-  s_.anchor = StampAnchor{};
-  s_.health = StateHealth{};
-  reset_report();
 }
 
 bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
@@ -348,7 +325,7 @@ FieldGateParams ParallelKfParams::field_gate() const {
 
 void ParallelKf::heading_step(const Eigen::Matrix3d& a,
                               const Eigen::Vector3d& mag, bool mag_ok, double dt) {
-  s_.out.mag_used = false;
+  s_.mag_used = false;
   if (s_.heading_initialized) {
     s_.kf2.predict_with_transition(a, dt);  // (9a), (9b), (11a)-(11e)
   }
@@ -362,13 +339,15 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a,
   }
   const FieldVerdict verdict = s_.gate.step(gp_, mag, s_.kf1.up_body(), dt);
   if (std::isfinite(s_.gate.last_norm_ut)) {
-    record_mag_gate(s_.gate.last_norm_ut, s_.gate.last_sin_dip);
+    s_.gate_norm_ut = s_.gate.last_norm_ut;
+    s_.gate_sin_dip = s_.gate.last_sin_dip;
   }
+  using MagUse = ParallelKfState::MagUse;
   switch (verdict) {
-    case FieldVerdict::kLearning: mag_use_ = MagUse::kLearning; break;
-    case FieldVerdict::kForced: mag_use_ = MagUse::kForced; break;
+    case FieldVerdict::kLearning: s_.mag_use = MagUse::kLearning; break;
+    case FieldVerdict::kForced: s_.mag_use = MagUse::kForced; break;
     case FieldVerdict::kGated:
-      mag_use_ = MagUse::kGated;
+      s_.mag_use = MagUse::kGated;
       s_.mb_head_trusted = false;
       // the disturbance seen through the propagated heading: sd = s_M - m sX'
       s_.kf2.set_e(mag - s_.gate.m_ut * s_.kf2.u());
@@ -384,9 +363,9 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a,
   const Eigen::Vector3d x_prior = s_.kf2.u();
   s_.kf2.correct(mag, s_.gate.m_ut, s_.mag_extra_var);  // (10b), (11f)-(11h)
   s_.mag_extra_var = 0.0;
-  s_.out.mag_used = true;
+  s_.mag_used = true;
   if (p_.bias_estimation && p_.motion_bias_sigma_rps > 0.0 && p_.motion_bias_heading && s_.gate.learnt) {
-    if (mag_use_ == MagUse::kForced) {
+    if (s_.mag_use == MagUse::kForced) {
       s_.mb_head_trusted = false;  // used although gated: not a measurement of the bias
       return;
     }
@@ -404,14 +383,14 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a,
   }
 }
 
-Eigen::Quaterniond ParallelKf::q_world_body() const {
+void ParallelKf::update_attitude() {
   // sR = [sX sY sZ] (2), world = NWU: sZ = up, sY = sZ x forward (normalised), sX = sY x sZ
   if (!s_.initialized) {
-    return last_q_;
+    return;
   }
   Eigen::Vector3d z = s_.kf1.up_body();
   if (!(p_.tilt.renormalize && p_.tilt.exact_rotation) && !safe_normalize(s_.kf1.up_body(), z)) {
-    return last_q_;  // (renormalised and exactly rotated, sZ is unit already)
+    return;  // (renormalised and exactly rotated, sZ is unit already)
   }
   // KF2 always holds a direction once initialised (the field, or 6-axis the gyro-propagated
   // yaw-0 north); a restored state without one takes north at ZYX yaw 0 (quat_tilt_yaw0).
@@ -420,7 +399,7 @@ Eigen::Quaterniond ParallelKf::q_world_body() const {
                                   : Eigen::Vector3d(quat_tilt_yaw0(z).conjugate() * Eigen::Vector3d::UnitY());
   Eigen::Vector3d y;
   if (!safe_normalize(z.cross(fwd), y, 1e-9)) {
-    return last_q_;
+    return;
   }
   // R_ENU_body = R_ENU_NWU sR^T: rows -sY^T, sX^T, sZ^T (x_ENU = -y_NWU, y_ENU = x_NWU)
   Eigen::Matrix3d r_enu_body;
@@ -440,13 +419,12 @@ Eigen::Quaterniond ParallelKf::q_world_body() const {
   if (q.w() < 0.0) {
     q.coeffs() = -q.coeffs();
   }
-  last_q_ = q;
-  return q;
+  s_.q_world_body = q;
 }
 
 ParallelKfOutput ParallelKf::output() const {
   ParallelKfOutput o;
-  o.q_world_body = q_world_body();
+  o.q_world_body = s_.q_world_body;
   o.rpy_rad = euler_zyx_from_quat(o.q_world_body);
   // With the inertial low-pass, KF1's sa is the residual of the filtered vector: report the
   // instantaneous external acceleration s_A - g sZ instead (4).
@@ -460,7 +438,7 @@ ParallelKfOutput ParallelKf::output() const {
   o.gyro_bias_rps = s_.bias;
   o.gyro_bias_sigma_rps = std::sqrt(s_.bias_cov.diagonal().maxCoeff());
   o.rest = s_.rest_det.rest;
-  o.mag_used = s_.out.mag_used;
+  o.mag_used = s_.mag_used;
   o.field_learnt = s_.gate.learnt;
   o.field_magnitude_ut = s_.gate.m_ut;
   o.dip_rad = s_.gate.dip_rad;

@@ -10,13 +10,16 @@ namespace poise {
 
 bool ParallelKf::update(const ImuSample& s) {
   const bool was_initialized = s_.initialized;
-  mag_use_ = MagUse::kNone;
-  gate_norm_ut_ = std::nan("");
+  s_.mag_use = ParallelKfState::MagUse::kNone;
+  s_.gate_norm_ut = std::nan("");
   SampleCheck c;
   const bool accepted = step(s, c);
   if (accepted && !healthy()) {
     reset_unhealthy();
     return false;
+  }
+  if (accepted) {
+    update_attitude();  // a refused sample leaves sZ, sX' and the gyro as they were
   }
   report(s, c, accepted, was_initialized);
   return accepted;
@@ -37,71 +40,58 @@ bool ParallelKf::healthy() {
 }
 
 void ParallelKf::reset_unhealthy() {
-  const SourceReport gyro = gyro_src_;  // reports are the filter's, not its state's
-  const SourceReport accel = accel_src_;
-  const SourceReport mag = mag_src_;
   using S = ParallelKfState;
   const FieldGate gate = s_.gate;  // its counters are kept, its reference is learnt again
-  reset_keeping(s_, [this] { reset(); }, &S::rejections);
+  reset_keeping(s_, [this] { reset(); }, &S::rejections, &S::gyro_src, &S::accel_src, &S::mag_src);
   s_.gate.gated = gate.gated;
   s_.gate.forced = gate.forced;
   s_.gate.reacquired = gate.reacquired;
-  gyro_src_ = gyro;
-  accel_src_ = accel;
-  mag_src_ = mag;
-  for (SourceReport* r : {&gyro_src_, &accel_src_, &mag_src_}) {
+  for (SourceReport* r : {&s_.gyro_src, &s_.accel_src, &s_.mag_src}) {
     r->mark_rejected(kStateResetReason);
   }
-}
-
-void ParallelKf::reset_report() {
-  mag_use_ = MagUse::kNone;
-  gate_norm_ut_ = std::nan("");
-  gyro_src_ = SourceReport(Source::kGyro);
-  accel_src_ = SourceReport(Source::kAccel);
-  mag_src_ = SourceReport(Source::kMag);
 }
 
 void ParallelKf::report(const ImuSample& s, const SampleCheck& c, bool accepted, bool was_initialized) {
   if (!accepted) {
     const char* why = to_string(c.reject);
-    gyro_src_.mark_rejected(why);
-    accel_src_.mark_rejected(why);
-    mag_src_.mark_rejected(why);
+    s_.gyro_src.mark_rejected(why);
+    s_.accel_src.mark_rejected(why);
+    s_.mag_src.mark_rejected(why);
     return;
   }
   if (was_initialized) {
-    gyro_src_.mark_fused(s.stamp_ns);
+    s_.gyro_src.mark_fused(s.stamp_ns);
   } else {
-    gyro_src_.mark_not_available("initialising");
+    s_.gyro_src.mark_not_available("initialising");
   }
 
-  accel_src_.mark_fused(s.stamp_ns);
+  s_.accel_src.mark_fused(s.stamp_ns);
 
   // KF2's magnetometer
   if (!c.mag_ok) {
     if (c.mag_reject != RejectReason::kCount) {
-      mag_src_.mark_rejected(to_string(c.mag_reject));
+      s_.mag_src.mark_rejected(to_string(c.mag_reject));
     } else {
-      mag_src_.mark_not_available(c.mag_absent);  // none in the sample, or use_magnetometer: false
+      s_.mag_src.mark_not_available(c.mag_absent);  // none in the sample, or use_magnetometer: false
     }
     return;
   }
-  switch (mag_use_) {
-    case MagUse::kGated: mag_src_.mark_rejected("disturbed"); return;
-    case MagUse::kForced: mag_src_.mark_fused(s.stamp_ns, "forced_after_max_reject"); return;
-    case MagUse::kLearning: mag_src_.mark_not_available("learning_field"); return;
+  using MagUse = ParallelKfState::MagUse;
+  switch (s_.mag_use) {
+    case MagUse::kGated: s_.mag_src.mark_rejected("disturbed"); return;
+    case MagUse::kForced: s_.mag_src.mark_fused(s.stamp_ns, "forced_after_max_reject"); return;
+    case MagUse::kLearning: s_.mag_src.mark_not_available("learning_field"); return;
     case MagUse::kNone: break;
   }
-  if (s_.out.mag_used) {
-    mag_src_.mark_fused(s.stamp_ns);
+  if (s_.mag_used) {
+    s_.mag_src.mark_fused(s.stamp_ns);
   } else {
-    mag_src_.mark_not_available(was_initialized ? "not_used" : "initialising");
+    s_.mag_src.mark_not_available(was_initialized ? "not_used" : "initialising");
   }
 }
 
 SourceReports ParallelKf::sources() const {
-  SourceReports out{gyro_src_, accel_src_, mag_src_};
+  SourceReports out{s_.gyro_src, s_.accel_src, s_.mag_src};
   SourceReport& accel = out[1];
   if (accel.fused()) {
     // KF1: H1 = [g I | I], M1 = sigma_A^2 I (7f), (7h)
@@ -115,13 +105,13 @@ SourceReports ParallelKf::sources() const {
     accel.set_innovation(s_.kf1.last_innovation(), var_a);
   }
   SourceReport& mag = out[2];
-  if (mag.decision != SourceDecision::kNotAvailable && std::isfinite(gate_norm_ut_)) {
+  if (mag.decision != SourceDecision::kNotAvailable && std::isfinite(s_.gate_norm_ut)) {
     // The gate as a measurement: [|s_M| - m, dip - alpha] against the tolerances.
-    const double dip = std::asin(std::clamp(gate_sin_dip_, -1.0, 1.0));
+    const double dip = std::asin(std::clamp(s_.gate_sin_dip, -1.0, 1.0));
     const double tol_norm_ut = p_.mag_norm_tol * s_.gate.m_ut;
     const double tol_dip_rad = p_.mag_dip_tol_deg * kRadPerDeg;
     InnovationVector innov(2);
-    innov << gate_norm_ut_ - s_.gate.m_ut, dip - s_.gate.dip_rad;
+    innov << s_.gate_norm_ut - s_.gate.m_ut, dip - s_.gate.dip_rad;
     InnovationVector var(2);
     var << tol_norm_ut * tol_norm_ut, tol_dip_rad * tol_dip_rad;
     mag.set_innovation(innov, var);

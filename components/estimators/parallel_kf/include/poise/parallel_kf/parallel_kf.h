@@ -233,8 +233,13 @@ struct ParallelKfOutput {
 };
 
 /// Everything the parallel KF carries from one sample to the next (besides its parameters):
-/// inspect it, save it, restore it into a filter with the same parameters (`set_state`).
+/// inspect it, save it, restore it into a filter with the same parameters (`set_state`). Nothing
+/// that evolves with the samples lives outside it: the output attitude and the per-source reports
+/// are here too, so a restored state gives the same outputs and reports bit for bit.
 struct ParallelKfState {
+  /// What the last sample's heading step did with s_M (for the mag report).
+  enum class MagUse : uint8_t { kNone, kLearning, kGated, kForced };
+
   TiltKf kf1;
   DirectionKf kf2;
   bool initialized = false;
@@ -244,7 +249,10 @@ struct ParallelKfState {
   int64_t last_stamp_ns = -1;
   Eigen::Vector3d prev_gyro{0, 0, 0};  ///< bias-corrected s_G at k-1
   RejectCounters rejections;
-  ParallelKfOutput out;  ///< only mag_used is kept here (the rest is derived in output())
+  bool mag_used = false;  ///< the last magnetometer sample corrected the heading
+  /// q_world_body (ENU) from sZ and sX' (2) after the last accepted sample: computed once per
+  /// update; the last valid one while they are (anti)parallel, identity before the first sample.
+  Eigen::Quaterniond q_world_body = Eigen::Quaterniond::Identity();
 
   FieldGate gate;  ///< magnetic field reference, gate, re-acquisition (poise/core/field_gate.h)
   double mag_extra_var = 0.0;  ///< soft-gating inflation of M2 for the current sample, uT^2
@@ -273,6 +281,14 @@ struct ParallelKfState {
   RestDetector rest_det;
   StampAnchor anchor;  ///< time restarts after a stamp jump only when two samples agree
   StateHealth health;  ///< resets after an unhealthy update (poise/core/state_health.h)
+
+  // What the last sample did with each input (parallel_kf_report.cpp turns it into sources()).
+  MagUse mag_use = MagUse::kNone;
+  double gate_norm_ut = std::nan("");  ///< |s_M| at the gate (NaN: not gated this sample)
+  double gate_sin_dip = 0.0;           ///< sin(dip) at the gate
+  SourceReport gyro_src = SourceReport(Source::kGyro);
+  SourceReport accel_src = SourceReport(Source::kAccel);
+  SourceReport mag_src = SourceReport(Source::kMag);
 };
 
 class ParallelKf {
@@ -290,10 +306,7 @@ class ParallelKf {
   /// same state give the same outputs for the same samples.
   [[nodiscard]] const ParallelKfState& state() const { return s_; }
   /// Restores a state taken from state() of a filter with the same parameters (setState).
-  void set_state(const ParallelKfState& state) {
-    s_ = state;
-    last_q_ = Eigen::Quaterniond::Identity();
-  }
+  void set_state(const ParallelKfState& state) { s_ = state; }
 
   [[nodiscard]] bool initialized() const { return s_.initialized; }
   /// Everything reported (computed on demand from the state).
@@ -303,8 +316,9 @@ class ParallelKf {
   /// heading error from the horizontal part of the field direction's (divided by cos(dip)^2, dip
   /// clamped to cos >= 0.1). Not coupled between the two KFs (they are independent by design).
   [[nodiscard]] Eigen::Matrix3d attitude_covariance(const ParallelKfOutput& out) const;
-  /// q_world_body (ENU) from sZ and sX' (2); the last valid one if they are (anti)parallel.
-  [[nodiscard]] Eigen::Quaterniond q_world_body() const;
+  /// q_world_body (ENU) from sZ and sX' (2) after the last accepted sample (the state's); the
+  /// last valid one if they are (anti)parallel.
+  [[nodiscard]] Eigen::Quaterniond q_world_body() const { return s_.q_world_body; }
   [[nodiscard]] const Eigen::Matrix<double, 6, 6>& tilt_covariance() const { return s_.kf1.covariance(); }
   [[nodiscard]] const Eigen::Matrix<double, 6, 6>& heading_covariance() const { return s_.kf2.covariance(); }
   [[nodiscard]] const TiltKf& tilt_kf() const { return s_.kf1; }
@@ -343,28 +357,19 @@ class ParallelKf {
   void heading_step(const Eigen::Matrix3d& a,
                     const Eigen::Vector3d& mag, bool mag_ok, double dt);
 
-  ParallelKfParams p_;
-  FieldGateParams gp_;  ///< p_.field_gate(), built once
-  ParallelKfState s_;
-  /// the last valid q_world_body (returned while sZ and sX' are parallel); a cache, not state
-  mutable Eigen::Quaterniond last_q_ = Eigen::Quaterniond::Identity();
+  /// s_.q_world_body from sZ and sX' (2), predicted over imu_delay_s; kept when they are
+  /// (anti)parallel or sZ is not a direction.
+  void update_attitude();
 
-  // Reporting (parallel_kf_report.cpp): what the last sample's heading step did with s_M.
-  enum class MagUse : uint8_t { kNone, kLearning, kGated, kForced };
-  void record_mag_gate(double norm_ut, double sin_dip) {
-    gate_norm_ut_ = norm_ut;
-    gate_sin_dip_ = sin_dip;
-  }
+  ParallelKfParams p_;
+  FieldGateParams gp_;          ///< p_.field_gate(), built once
+  DirectionKfParams kf2_params_;  ///< KF2's, from p_, built once
+  ParallelKfState s_;
+
+  // Reporting (parallel_kf_report.cpp): the state's per-source reports of the last sample.
   void report(const ImuSample& s, const SampleCheck& c, bool accepted, bool was_initialized);
-  void reset_report();
   [[nodiscard]] bool healthy();  ///< the state health check (state_health.h)
-  void reset_unhealthy();        ///< reset() keeping the counters, one reset counted
-  MagUse mag_use_ = MagUse::kNone;
-  double gate_norm_ut_ = std::nan("");  ///< |s_M| at the gate (NaN: not gated this sample)
-  double gate_sin_dip_ = 0.0;           ///< sin(dip) at the gate
-  SourceReport gyro_src_{Source::kGyro};
-  SourceReport accel_src_{Source::kAccel};
-  SourceReport mag_src_{Source::kMag};
+  void reset_unhealthy();        ///< reset() keeping the counters and reports, one reset counted
 };
 
 /// AttitudeFilter adapter.
