@@ -40,7 +40,9 @@ done
 # server, docs/FOXGLOVE.md). Tests: GoogleTest, Cyclone DDS (interop), iproute2
 # (network namespaces), openssl (DDS Security), clang (fuzzing), Node.js + npm (MCAP validators,
 # Foxglove clients),
-# dpkg-dev (dpkg-shlibdeps for the Debian packages) and systemd (systemd-analyze verify).
+# dpkg-dev (dpkg-shlibdeps for the Debian packages), systemd (systemd-analyze verify), and the
+# GY-87 firmware's toolchain and emulator (tests/firmware, docs/FIRMWARE.md): arduino-mk with
+# Debian's AVR core, gcc-avr, avr-libc, simavr + libsimavr-dev + libelf-dev.
 packages=(build-essential cmake ninja-build pkg-config libeigen3-dev libyaml-cpp-dev)
 if [ "$cores_only" = OFF ]; then
   packages+=(libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools
@@ -52,7 +54,8 @@ if [ "$cores_only" = OFF ]; then
 fi
 if [ "$tests" = ON ]; then
   packages+=(libgtest-dev libgmock-dev cyclonedds-dev cyclonedds-tools iproute2 iputils-ping openssl clang
-             dpkg-dev systemd)
+             dpkg-dev systemd arduino-mk arduino-core-avr gcc-avr binutils-avr avr-libc simavr
+             libsimavr-dev libelf-dev)
 fi
 
 missing=()

@@ -1,4 +1,4 @@
-// gy87_poise: GY-87 (MPU6050 + HMC5883L + BMP180) -> poise serial IMU protocol.
+// gy87_poise: GY-87 (MPU6050 + HMC5883L or QMC5883L + BMP180) -> poise serial IMU protocol.
 // Reference firmware for `poise imu` (protocol: docs/SERIAL_PROTOCOL.md in the poise repository).
 // Arduino core only (Wire, Serial); no external libraries. Tested layout: GY-87 on the I2C pins
 // (Uno/Nano: A4 = SDA, A5 = SCL), VCC 5 V (the board has its own regulator), GND.
@@ -9,7 +9,10 @@
 //   $RAW,<seq>,<t_us>,<ax>,<ay>,<az>,<gx>,<gy>,<gz>,<mx>,<my>,<mz>,<p_pa>,<mpu_temp_counts>*<CS>\r\n
 // CS = XOR of every character between '$' and '*', two uppercase hex digits.
 // Messages for humans start with '#' (the driver logs them and never counts them as errors).
-// The three magnetometer fields are left empty when there is no magnetometer or it saturated.
+// The three magnetometer fields are left empty when there is no magnetometer, it saturated or it
+// stopped answering; the pressure field is empty while the BMP180 does not answer.
+// Build and flash with Debian's arduino-mk: `make upload` here (Makefile; docs/FIRMWARE.md). The
+// AVR binary is tested on simavr with models of the sensors (tests/firmware).
 
 #include <Wire.h>
 
@@ -38,12 +41,17 @@
 // ------------------------------------------------------------------ constants
 static const uint8_t MPU_ADDR = 0x68;
 static const uint8_t HMC_ADDR = 0x1E;
+static const uint8_t QMC_ADDR = 0x0D;    // the QMC5883L of GY-87 clones
 static const uint8_t BMP_ADDR = 0x77;
 static const float G_MPS2 = 9.80665f;
 static const float DEG2RAD = 0.017453292519943295f;
 static const float ACCEL_LSB_PER_G = 16384.0f / (1 << ACCEL_FS_SEL);
 static const float GYRO_LSB_PER_DPS = 131.0f / (1 << GYRO_FS_SEL);
 static const float MAG_LSB_PER_GAUSS = 1090.0f;  // HMC5883L gain setting 1 (+-1.3 Ga)
+static const float QMC_LSB_PER_GAUSS = 12000.0f; // QMC5883L range 2 G
+// Time from waking the MPU6050 to the first sample: its gyro start-up time (30 ms, product
+// specification 6.1) and the magnetometers' first measurement (HMC5883L 6 ms, QMC5883L 10 ms).
+static const uint32_t STARTUP_WAIT_US = 35000UL;
 
 // ------------------------------------------------------------------ I2C helpers
 static bool writeReg(uint8_t addr, uint8_t reg, uint8_t value) {
@@ -63,6 +71,7 @@ static bool readRegs(uint8_t addr, uint8_t reg, uint8_t* buf, uint8_t n) {
 }
 
 static int16_t be16(const uint8_t* p) { return (int16_t)(((uint16_t)p[0] << 8) | p[1]); }
+static int16_t le16(const uint8_t* p) { return (int16_t)(((uint16_t)p[1] << 8) | p[0]); }
 
 // ------------------------------------------------------------------ line building
 static char line[160];
@@ -74,14 +83,13 @@ static void put(char c) {
 static void putStr(const char* s) {
   while (*s) put(*s++);
 }
+// Digits come from ultoa() (avr-libc converts with a fast divide-by-ten; also in the SAMD and
+// ESP32 cores). A generic 32-bit division per digit cost about 7 ms per line on the 16 MHz AVR,
+// which with the I2C reads and the serial buffer left less than the 10 ms sample period (the
+// emulated board measured 97.6 Hz instead of 100; tests/firmware, docs/FIRMWARE.md).
 static void putUnsigned(uint32_t v) {
   char tmp[11];
-  uint8_t n = 0;
-  do {
-    tmp[n++] = (char)('0' + v % 10);
-    v /= 10;
-  } while (v != 0);
-  while (n > 0) put(tmp[--n]);
+  putStr(ultoa(v, tmp, 10));
 }
 static void putSigned(int32_t v) {
   if (v < 0) {
@@ -104,14 +112,20 @@ static void putFloat(float v, uint8_t decimals) {
     v = -v;
   }
   if (v > 2.0e9f / scale) v = 2.0e9f / scale;  // keep within uint32 (out-of-range for the driver)
-  uint32_t fixed = (uint32_t)(v * scale + 0.5f);
-  putUnsigned(fixed / scale);
+  char digits[11];
+  ultoa((uint32_t)(v * scale + 0.5f), digits, 10);
+  const uint8_t n = (uint8_t)strlen(digits);
+  if (n <= decimals) {  // below 1: "0." and the leading zeros of the fraction
+    put('0');
+    put('.');
+    for (uint8_t i = n; i < decimals; ++i) put('0');
+    putStr(digits);
+    return;
+  }
+  for (uint8_t i = 0; i < n - decimals; ++i) put(digits[i]);
   if (decimals > 0) {
     put('.');
-    uint32_t frac = fixed % scale;
-    for (uint32_t d = scale / 10; d > 0; d /= 10) {
-      put((char)('0' + (frac / d) % 10));
-    }
+    putStr(digits + n - decimals);
   }
 }
 static void finishAndSend() {
@@ -185,37 +199,104 @@ static void bmpCompute(int32_t ut, int32_t up) {
   havePressure = true;
 }
 
+// A failed transfer empties the pressure field until a whole new cycle succeeds (a stale
+// pressure must not look fresh) and says so once.
+static bool bmpFailed(bool ok) {
+  if (ok) return false;
+  if (havePressure) Serial.print(F("# error: BMP180 not answering: pressure empty until it does\r\n"));
+  havePressure = false;
+  bmpState = 0;
+  return true;
+}
+
 static void bmpStep(uint32_t nowUs) {
   if (!haveBmp) return;
   if (bmpState != 0 && (int32_t)(nowUs - bmpReadyAtUs) < 0) return;
   uint8_t b[3];
   switch (bmpState) {
     case 0:
-      writeReg(BMP_ADDR, 0xF4, 0x2E);  // temperature
+      if (bmpFailed(writeReg(BMP_ADDR, 0xF4, 0x2E))) return;  // temperature
       bmpReadyAtUs = nowUs + 5000;
       bmpState = 1;
       break;
     case 1:
-      if (readRegs(BMP_ADDR, 0xF6, b, 2)) bmpUT = ((int32_t)b[0] << 8) | b[1];
-      writeReg(BMP_ADDR, 0xF4, (uint8_t)(0x34 + (BARO_OSS << 6)));  // pressure
+      if (bmpFailed(readRegs(BMP_ADDR, 0xF6, b, 2))) return;
+      bmpUT = ((int32_t)b[0] << 8) | b[1];
+      if (bmpFailed(writeReg(BMP_ADDR, 0xF4, (uint8_t)(0x34 + (BARO_OSS << 6))))) return;  // pressure
       bmpReadyAtUs = nowUs + 2000UL + 3000UL * (1UL << BARO_OSS) + 500UL;
       bmpState = 2;
       break;
     default:
-      if (readRegs(BMP_ADDR, 0xF6, b, 3)) {
-        int32_t up = (((int32_t)b[0] << 16) | ((int32_t)b[1] << 8) | b[2]) >> (8 - BARO_OSS);
-        bmpCompute(bmpUT, up);
-      }
+      if (bmpFailed(readRegs(BMP_ADDR, 0xF6, b, 3))) return;
+      bmpCompute(bmpUT, (((int32_t)b[0] << 16) | ((int32_t)b[1] << 8) | b[2]) >> (8 - BARO_OSS));
       bmpState = 0;
       break;
   }
 }
 
+// ------------------------------------------------------------------ magnetometer
+enum MagChip : uint8_t { MAG_NONE, MAG_HMC, MAG_QMC };
+static MagChip mag = MAG_NONE;
+static int16_t lastMag[3] = {0, 0, 0};  // X, Y, Z counts of the last measurement read
+static bool magValid = false;           // lastMag holds a measurement read since the last failure
+static bool magOverflow = false;        // the chip flagged that measurement as out of range
+
+static void magInit() {
+  uint8_t id[3];
+  if (readRegs(HMC_ADDR, 0x0A, id, 3) && id[0] == 'H' && id[1] == '4' && id[2] == '3') {
+    mag = MAG_HMC;
+    writeReg(HMC_ADDR, 0x00, 0x18);  // 1 average, 75 Hz, normal measurement
+    writeReg(HMC_ADDR, 0x01, 0x20);  // gain 1090 LSB/Ga (+-1.3 Ga)
+    writeReg(HMC_ADDR, 0x02, 0x00);  // continuous mode
+  } else if (readRegs(QMC_ADDR, 0x0D, id, 1) && id[0] == 0xFF) {
+    mag = MAG_QMC;
+    writeReg(QMC_ADDR, 0x0A, 0x80);  // soft reset
+    writeReg(QMC_ADDR, 0x0B, 0x01);  // SET/RESET period (datasheet: 0x01)
+    writeReg(QMC_ADDR, 0x09, 0x09);  // OSR 512, 2 G, 100 Hz, continuous
+    Serial.print(F("# QMC5883L magnetometer at 0x0D\r\n"));
+  } else {
+    Serial.print(F("# warning: no magnetometer (HMC5883L at 0x1E, QMC5883L at 0x0D): mag fields stay empty\r\n"));
+  }
+}
+
+// Reads the magnetometer once per sample; lastMag keeps the latest measurement (the HMC5883L
+// measures at 75 Hz, the QMC5883L at 100 Hz). A failed transfer empties the fields until a new
+// measurement is read, and says so once.
+static void magStep() {
+  uint8_t m[6];
+  bool ok;
+  if (mag == MAG_HMC) {
+    ok = readRegs(HMC_ADDR, 0x03, m, 6);  // all six: a partial read locks the data registers
+    if (ok) {
+      lastMag[0] = be16(m + 0);  // register order X, Z, Y
+      lastMag[2] = be16(m + 2);
+      lastMag[1] = be16(m + 4);
+      magOverflow = lastMag[0] == -4096 || lastMag[1] == -4096 || lastMag[2] == -4096;  // its marker
+    }
+  } else {
+    uint8_t status = 0;
+    ok = readRegs(QMC_ADDR, 0x06, &status, 1);
+    if (ok && (status & 0x01)) {  // DRDY: a new measurement (reading the data clears it)
+      ok = readRegs(QMC_ADDR, 0x00, m, 6);
+      if (ok) {
+        lastMag[0] = le16(m + 0);
+        lastMag[1] = le16(m + 2);
+        lastMag[2] = le16(m + 4);
+        // OVL. Not the HMC5883L's -4096 marker: at 12000 LSB/G -4096 is a valid reading
+        // (-34.13 uT; the emulated board crossed it and the sample lost its magnetometer).
+        magOverflow = (status & 0x02) != 0;
+      }
+    } else if (ok && !magValid) {
+      return;  // answering again, but no new measurement yet
+    }
+  }
+  if (!ok && magValid) Serial.print(F("# error: magnetometer not answering: mag empty until it does\r\n"));
+  magValid = ok;
+}
+
 // ------------------------------------------------------------------ setup / loop
-static bool haveMag = false;
 static uint32_t seq = 0;
 static uint32_t nextUs = 0;
-static int16_t lastMag[3] = {0, 0, 0};
 
 void setup() {
   Serial.begin(BAUD);
@@ -228,24 +309,18 @@ void setup() {
     Serial.print(F("# error: MPU6050 not found at 0x68 (check wiring: SDA, SCL, VCC, GND)\r\n"));
   }
   writeReg(MPU_ADDR, 0x6B, 0x01);                       // wake up, clock = PLL with X gyro
+  const uint32_t wokeUs = micros();
   writeReg(MPU_ADDR, 0x19, 0x00);                       // sample rate divider: 1 kHz
   writeReg(MPU_ADDR, 0x1A, 0x03);                       // DLPF 44 Hz
   writeReg(MPU_ADDR, 0x1B, (uint8_t)(GYRO_FS_SEL << 3));
   writeReg(MPU_ADDR, 0x1C, (uint8_t)(ACCEL_FS_SEL << 3));
   writeReg(MPU_ADDR, 0x6A, 0x00);                       // I2C master off
   writeReg(MPU_ADDR, 0x37, 0x02);                       // bypass: HMC5883L on the main bus
-  delay(10);
-  uint8_t id[3];
-  haveMag = readRegs(HMC_ADDR, 0x0A, id, 3) && id[0] == 'H' && id[1] == '4' && id[2] == '3';
-  if (haveMag) {
-    writeReg(HMC_ADDR, 0x00, 0x18);  // 1 average, 75 Hz, normal measurement
-    writeReg(HMC_ADDR, 0x01, 0x20);  // gain 1090 LSB/Ga (+-1.3 Ga)
-    writeReg(HMC_ADDR, 0x02, 0x00);  // continuous mode
-  } else {
-    Serial.print(F("# warning: HMC5883L not found (a QMC5883L clone needs other registers)\r\n"));
-  }
+  magInit();
   haveBmp = bmpInit();
   if (!haveBmp) Serial.print(F("# warning: BMP180 not found: pressure fields stay empty\r\n"));
+  while ((uint32_t)(micros() - wokeUs) < STARTUP_WAIT_US) {
+  }
   Serial.print(F("# gy87_poise v1 ready\r\n"));
   nextUs = micros();
 }
@@ -267,14 +342,7 @@ void loop() {
   int16_t ax = be16(b + 0), ay = be16(b + 2), az = be16(b + 4);
   int16_t tc = be16(b + 6);
   int16_t gx = be16(b + 8), gy = be16(b + 10), gz = be16(b + 12);
-  if (haveMag) {
-    uint8_t m[6];
-    if (readRegs(HMC_ADDR, 0x03, m, 6)) {  // register order X, Z, Y
-      lastMag[0] = be16(m + 0);
-      lastMag[2] = be16(m + 2);
-      lastMag[1] = be16(m + 4);
-    }
-  }
+  if (mag != MAG_NONE) magStep();
 
   len = 0;
 #if OUTPUT_RAW
@@ -283,8 +351,13 @@ void loop() {
   putUnsigned(tUs); put(',');
   putSigned(ax); put(','); putSigned(ay); put(','); putSigned(az); put(',');
   putSigned(gx); put(','); putSigned(gy); put(','); putSigned(gz); put(',');
-  if (haveMag) {  // -4096 (overflow) is passed through: the driver flags the sample's mag invalid
-    putSigned(lastMag[0]); put(','); putSigned(lastMag[1]); put(','); putSigned(lastMag[2]); put(',');
+  if (magValid && magOverflow) {
+    putStr("-4096,-4096,-4096,");  // the overflow marker: the driver flags the sample's mag invalid
+  } else if (magValid) {  // a QMC5883L reading of -4096 would read as the marker: sent as -4095
+    for (uint8_t i = 0; i < 3; ++i) {
+      putSigned(lastMag[i] == -4096 ? -4095 : lastMag[i]);
+      put(',');
+    }
   } else {
     putStr(",,,");
   }
@@ -294,17 +367,17 @@ void loop() {
 #else
   const float ka = G_MPS2 / ACCEL_LSB_PER_G;
   const float kg = DEG2RAD / GYRO_LSB_PER_DPS;
-  const float km = 100.0f / MAG_LSB_PER_GAUSS;  // uT per count
+  const float km = 100.0f / (mag == MAG_QMC ? QMC_LSB_PER_GAUSS : MAG_LSB_PER_GAUSS);  // uT/count
   putStr("$IMU,");
   putUnsigned(seq++); put(',');
   putUnsigned(tUs); put(',');
   putFloat(ax * ka, 3); put(','); putFloat(ay * ka, 3); put(','); putFloat(az * ka, 3); put(',');
   putFloat(gx * kg, 4); put(','); putFloat(gy * kg, 4); put(','); putFloat(gz * kg, 4); put(',');
-  if (haveMag && lastMag[0] != -4096 && lastMag[1] != -4096 && lastMag[2] != -4096) {
+  if (magValid && !magOverflow) {
     putFloat(lastMag[0] * km, 2); put(','); putFloat(lastMag[1] * km, 2); put(',');
     putFloat(lastMag[2] * km, 2); put(',');
   } else {
-    putStr(",,,");  // no magnetometer / overflow: empty fields, the driver flags has_mag = false
+    putStr(",,,");  // no magnetometer / overflow / not answering: the driver flags has_mag = false
   }
   if (havePressure) putSigned(pressurePa);
   put(',');
