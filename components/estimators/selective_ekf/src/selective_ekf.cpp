@@ -1,24 +1,19 @@
-#include "poise/selective_ekf/selective_ekf.h"
-
-#include "poise/core/params_check.h"
+// The selective EKF: state, prediction, the schedule of its aid sources, the history of late
+// vision measurements, the output. The aid sources are in src/aid_*.cpp (shape: src/aid.h), the
+// parameters' checks in params.cpp, the reports in selective_ekf_report.cpp.
+#include "aid.h"
 
 #include <algorithm>
-#include <stdexcept>
 
 namespace poise {
+namespace aids = selective_ekf_aids;
+using aids::kNsToS;
+using aids::seconds_to_ns;
+
 namespace {
 
-constexpr double kNsToS = 1e-9;
 /// Output limit: a state-output difference above 30 deg is a reset, taken at once (sin(15 deg)).
 constexpr double kOutputSnapHalfSin = 0.25881904510252074;
-/// Gate used only to report a test ratio for sources that are never gated (gyro, q_imu), sigma.
-constexpr double kReportGateSigma = 5.0;
-
-int64_t seconds_to_ns(double s) { return static_cast<int64_t>(std::llround(s * 1e9)); }
-
-bool finite_quat(const Eigen::Quaterniond& q) {
-  return q.coeffs().allFinite() && q.coeffs().norm() > 0.5 && q.coeffs().norm() < 1.5;
-}
 
 }  // namespace
 
@@ -52,76 +47,6 @@ const char* to_string(Decision d) {
     case Decision::kCount: break;
   }
   return "unknown";
-}
-
-void validate(const SelectiveEkfParams& p) {
-  const ParamCheck check("selective_ekf");
-  check.positive(p.sigma_angular_accel, "sigma_angular_accel", "rad/s^2/sqrt(Hz)");
-  check.positive(p.sigma_linear_accel, "sigma_linear_accel", "m/s^2/sqrt(Hz)");
-  check.non_negative(p.sigma_attitude_walk, "sigma_attitude_walk", "rad/sqrt(s)");
-  check.positive(p.sigma_gyro_rps, "sigma_gyro_rps", "rad/s");
-  check.non_negative(p.sigma_bias_walk, "sigma_bias_walk", "rad/s/sqrt(s)");
-  check.non_negative(p.accel_lowpass_tau_s, "accel_lowpass_tau_s", "s, 0 = raw accelerometer");
-  check.require(std::isnan(p.sigma_tilt_rad_sqrt_s) || p.sigma_tilt_rad_sqrt_s > 0.0, "sigma_tilt_rad_sqrt_s",
-                "> 0 (rad sqrt(s)) or null (derived from accel_lowpass_tau_s)");
-  check.require(!std::isnan(p.sigma_tilt_rad_sqrt_s) || p.accel_lowpass_tau_s > 0.0, "accel_lowpass_tau_s",
-                "> 0 (s) while sigma_tilt_rad_sqrt_s is null (it sets the tilt time constant)");
-  check.non_negative(p.tilt_accel_ref_mps2, "tilt_accel_ref_mps2", "m/s^2, 0 = off");
-  check.require(p.gravity_mps2 > 5.0 && p.gravity_mps2 < 15.0, "gravity_mps2", "in (5, 15) (m/s^2)");
-  check.non_negative(p.output_max_correction_dps, "output_max_correction_dps", "deg/s, 0 = off");
-  check.require(p.aiding_period_s >= 0.0 && p.aiding_period_s <= 1.0, "aiding_period_s", "in [0, 1] (s)");
-  check.positive(p.sigma_heading_rad_sqrt_s, "sigma_heading_rad_sqrt_s", "rad sqrt(s)");
-  check.require(p.heading_disturbance_weight >= 0.0 && p.heading_disturbance_weight <= 1.0e6, "heading_disturbance_weight",
-                "in [0, 1e6] (0 = off; larger would make the heading variance overflow)");
-  check.positive(p.rest_gyro_max_rps, "rest_gyro_max_rps", "rad/s");
-  check.positive(p.rest_accel_max_mps2, "rest_accel_max_mps2", "m/s^2");
-  check.non_negative(p.rest_min_s, "rest_min_s", "s");
-  check.positive(p.rest_filter_tau_s, "rest_filter_tau_s", "s");
-  check.positive(p.sigma_rest_rate_rps, "sigma_rest_rate_rps", "rad/s");
-  check.positive(p.init_sigma_bias_rps, "init_sigma_bias_rps", "rad/s");
-  check.positive(p.sigma_imu_quat_deg, "sigma_imu_quat_deg", "deg");
-  check.positive(p.sigma_vision_deg, "sigma_vision_deg", "deg");
-  check.positive(p.sigma_vision_m, "sigma_vision_m", "m");
-  check.require(p.startup_samples >= 1, "startup_samples", ">= 1 (samples)");
-  check.positive(p.disturbance_angle_threshold_deg, "disturbance_angle_threshold_deg", "deg");
-  check.positive(p.mag_norm_threshold, "mag_norm_threshold", "relative");
-  heading_field_gate(p).validate(check, {"field_magnitude_ut", "dip_deg", "field_startup_s", "heading_norm_tolerance",
-                                          "heading_dip_tolerance_deg", "field_reference_tau_s", "field_reacquire_s",
-                                          "field_reacquire_tol", "field_max_reject_s"});
-  check.require(p.quat_error_threshold_deg > 0.0 && p.quat_error_threshold_deg <= 180.0,
-                "quat_error_threshold_deg", "in (0, 180] (deg)");
-  check.require(std::isfinite(p.inflate_factor) && p.inflate_factor >= 1.0, "inflate_factor", "finite and >= 1");
-  check.non_negative(p.untrusted_hold_s, "untrusted_hold_s", "s");
-  check.positive(p.q_error_lockout_s, "q_error_lockout_s", "s");
-  check.positive(p.vision_anchor_s, "vision_anchor_s", "s");
-  check.positive(p.vision_gate_sigma, "vision_gate_sigma", "standard deviations");
-  check.require(p.vision_reset_after_rejections >= 1, "vision_reset_after_rejections", ">= 1 (samples)");
-  check.require(p.history_s > 0.0 && p.history_s <= 5.0, "history_s", "in (0, 5] (s)");
-  check.require(std::abs(p.vision_time_offset_s) <= 0.2, "vision_time_offset_s", "in [-0.2, 0.2] (s)");
-  check.require(p.imu_delay_s >= 0.0 && p.imu_delay_s <= 0.05, "imu_delay_s", "in [0, 0.05] (s)");
-  check.require(finite_quat(p.q_body_camera), "q_body_camera", "a finite unit quaternion [w, x, y, z]");
-  check.require(p.p_body_camera_m.allFinite(), "p_body_camera_m", "finite (m)");
-  check.positive(p.init_sigma_attitude_deg, "init_sigma_attitude_deg", "deg");
-  check.positive(p.init_sigma_rate_rps, "init_sigma_rate_rps", "rad/s");
-  check.positive(p.init_sigma_position_m, "init_sigma_position_m", "m");
-  check.positive(p.init_sigma_velocity_mps, "init_sigma_velocity_mps", "m/s");
-  validate(p.limits, check);
-  p.gauss_newton.validate("selective_ekf.gauss_newton");
-}
-
-FieldGateParams heading_field_gate(const SelectiveEkfParams& p) {
-  FieldGateParams g;
-  g.enabled = p.gating_enabled;
-  g.field_magnitude_ut = p.field_magnitude_ut;
-  g.dip_deg = p.dip_deg;
-  g.startup_s = p.field_startup_s;
-  g.norm_tol = p.heading_norm_tolerance;
-  g.dip_tol_deg = p.heading_dip_tolerance_deg;
-  g.reference_tau_s = p.field_reference_tau_s;
-  g.reacquire_s = p.field_reacquire_s;
-  g.reacquire_tol = p.field_reacquire_tol;
-  g.max_reject_s = p.field_max_reject_s;
-  return g;
 }
 
 SelectiveEkf::SelectiveEkf(const SelectiveEkfParams& params) : p_(params) {
@@ -262,150 +187,25 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
   x_.stamp_ns = stamp_ns;
 }
 
-// ------------------------------------------------------------------------------------ update
-namespace {
-
-/// Update with M rows of a dense H (M x N) and diagonal R, processed one row at a time (exact for
-/// a diagonal R: the same result as the batch update, at O(M N^2) instead of O(M N^3)):
-///   v_i = P h_i^T (prior), u_i = v_i - sum_{j<i} u_j (h_i . u_j) / s_j (= P_{i-1} h_i^T),
-///   s_i = h_i . u_i + r_i, dx += u_i (y_i - h_i . dx) / s_i, P -= u_i u_i^T / s_i.
-/// P - K S K^T equals the Joseph form for this (optimal) gain; each rank-one term is symmetric.
-/// The status gets the innovation, the prior innovation variance diag(H P H^T + R) and the test
-/// ratio; the gate tests the prior variance. Leaves `p` and `dx` untouched when the gate rejects
-/// or `report_only`. Returns whether the rows were applied.
-template <int N, int M, typename PMat>
-bool sequential_update(PMat&& p, const Eigen::Matrix<double, M, N>& h,
-                       const Eigen::Matrix<double, M, 1>& innov,
-                       const Eigen::Matrix<double, M, 1>& r_diag, double gate_sigma, bool gate,
-                       bool report_only, SourceStatus& st, Eigen::Matrix<double, N, 1>& dx) {
-  Eigen::Matrix<double, N, M> u = p.lazyProduct(h.transpose());  // prior P H^T
-  double ratio = 0.0;
-  st.innovation.setZero();
-  st.innovation_variance.setZero();
-  for (int i = 0; i < M; ++i) {
-    const double s_prior = h.row(i).dot(u.col(i)) + r_diag[i];
-    st.innovation[i] = innov[i];
-    st.innovation_variance[i] = s_prior;
-    ratio = std::max(ratio, innov[i] * innov[i] / (gate_sigma * gate_sigma * s_prior));
-  }
-  st.test_ratio = ratio;
-  if (report_only || (gate && !(ratio <= 1.0))) {
-    return false;
-  }
-  dx.setZero();
-  Eigen::Matrix<double, M, 1> s;
-  for (int i = 0; i < M; ++i) {
-    for (int j = 0; j < i; ++j) {
-      u.col(i) -= u.col(j) * (h.row(i).dot(u.col(j)) / s[j]);
-    }
-    s[i] = h.row(i).dot(u.col(i)) + r_diag[i];
-    dx += u.col(i) * ((innov[i] - h.row(i).dot(dx)) / s[i]);  // (5), (6)
-  }
-  for (int i = 0; i < M; ++i) {
-    const Eigen::Matrix<double, N, 1> w = u.col(i) / std::sqrt(s[i]);
-    p.noalias() -= w * w.transpose();  // (7), exactly symmetric
-  }
-  return true;
-}
-
-/// sequential_update on the diagonal block [Off, Off + NB) of P alone (the caller knows that H
-/// and P's cross terms outside it are zero); dx gets the block's correction.
-template <int Off, int NB, int N, int M>
-bool update_block(Eigen::Matrix<double, N, N>& p, const Eigen::Matrix<double, M, N>& h,
-                  const Eigen::Matrix<double, M, 1>& innov, const Eigen::Matrix<double, M, 1>& r_diag,
-                  double gate_sigma, bool gate, bool report_only, SourceStatus& st,
-                  Eigen::Matrix<double, N, 1>& dx) {
-  Eigen::Matrix<double, NB, 1> d;
-  const Eigen::Matrix<double, M, NB> hb = h.template middleCols<NB>(Off);
-  const bool ok = sequential_update<NB, M>(p.template block<NB, NB>(Off, Off), hb, innov, r_diag,
-                                           gate_sigma, gate, report_only, st, d);
-  if (ok) {
-    dx.template segment<NB>(Off) = d;
-  }
-  return ok;
-}
-
-}  // namespace
-
-template <int M>
-bool SelectiveEkf::fuse(const Eigen::Matrix<double, M, kN>& h, const Eigen::Matrix<double, M, 1>& innov,
-                        const Eigen::Matrix<double, M, 1>& r_diag, double gate_sigma, bool gate,
-                        SourceStatus& st, bool report_only) {
-  const bool att = (h.template leftCols<kAttN>().array() != 0.0).any();
-  const bool trans = (h.template rightCols<kN - kAttN>().array() != 0.0).any();
-  Vec dx = Vec::Zero();
-  bool ok = false;
-  if (!x_.coupled && !(att && trans)) {
-    // No cross-covariance between [w, th, b] and [t, v]: rows touching one block update it alone
-    // (the rest of K is exactly zero), with the same result as the full covariance.
-    ok = att ? update_block<0, kAttN>(x_.P, h, innov, r_diag, gate_sigma, gate, report_only, st, dx)
-             : update_block<kAttN, kN - kAttN>(x_.P, h, innov, r_diag, gate_sigma, gate, report_only,
-                                               st, dx);
-  } else {
-    x_.coupled = x_.coupled || !report_only;  // a lever-arm fix correlates attitude and position
-    ok = sequential_update<kN, M>(x_.P, h, innov, r_diag, gate_sigma, gate, report_only, st, dx);
-  }
-  if (ok) {
-    inject(dx);
-  }
-  return ok;
-}
-
-void SelectiveEkf::inject(const Vec& dx) {
-  x_.w_rps += dx.segment<3>(kW);
-  x_.q_world_body = (x_.q_world_body * quat_exp(dx.segment<3>(kTh))).normalized();
-  x_.b_rps += dx.segment<3>(kB);
-  x_.t_m += dx.segment<3>(kT);
-  x_.v_mps += dx.segment<3>(kV);
-}
-
-void SelectiveEkf::record(SourceStatus& st, Decision d, int64_t stamp_ns, bool first_pass) const {
-  st.last = d;
-  st.last_stamp_ns = stamp_ns;
-  const bool fused = d == Decision::kFused || d == Decision::kFusedInflated || d == Decision::kReset;
-  if (fused) {
-    st.last_fused_stamp_ns = stamp_ns;
-  }
-  if (first_pass) {
-    ++st.by_decision[static_cast<size_t>(d)];
-    if (fused) {
-      ++st.fused;
-    } else {
-      ++st.rejected;
-    }
-  }
-}
+// ------------------------------------------------------------------------------------ aiding
+// The schedule of the aid sources (one file each, src/aid.h): which run at a step, in which order.
+SourceStatus& SelectiveEkf::status_of(SelectiveEkfAid a) { return status_[static_cast<size_t>(a)]; }
 
 void SelectiveEkf::process_imu(const ImuInput& in_raw, bool first_pass) {
   ImuInput in = in_raw;
   preprocess(in);
   const int64_t now = in.stamp_ns;
-  // Gyro rows: y = w + b.
-  {
-    Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
-    h.middleCols<3>(kW).setIdentity();
-    h.middleCols<3>(kB).setIdentity();
-    const double r = p_.sigma_gyro_rps * p_.sigma_gyro_rps;
-    SourceStatus& sg = status_[static_cast<size_t>(SelectiveEkfAid::kGyro)];
-    fuse<3>(h, in.gyro - x_.w_rps - x_.b_rps, Eigen::Vector3d::Constant(r), kReportGateSigma, false, sg);
-    record(sg, Decision::kFused, now, first_pass);
-  }
-  // Zero-rate rows at rest: y = 0 = w (with the gyro row, observes b).
-  if (in.rest) {
-    Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
-    h.middleCols<3>(kW).setIdentity();
-    const double r = p_.sigma_rest_rate_rps * p_.sigma_rest_rate_rps;
-    SourceStatus& sz = status_[static_cast<size_t>(SelectiveEkfAid::kZeroRate)];
-    fuse<3>(h, -x_.w_rps, Eigen::Vector3d::Constant(r), kReportGateSigma, false, sz);
-    record(sz, Decision::kFused, now, first_pass);
-  }
+  const aids::AidContext c{x_, p_, first_pass};
+  aids::aid_gyro(c, in, status_of(SelectiveEkfAid::kGyro));
+  aids::aid_zero_rate(c, in, status_of(SelectiveEkfAid::kZeroRate));
   // The predicted up axis is only as good as the tilt: in the paper's quaternion mode without a
   // recent vision fix the tilt is carried by the gyro alone (q_imu gated), and a drifting tilt
   // would keep the test failing (self-locking), so the raw accelerometer is used there.
   const bool anchored = x_.last_vision_fused_ns >= 0 &&
                         now - x_.last_vision_fused_ns <= seconds_to_ns(p_.vision_anchor_s);
+  aids::MagTrust mag{mag_, gp_, ref_angle_rad_, ref_norm_ut_};
   if (p_.imu_measurement == ImuMeasurement::kQuaternion) {
-    process_imu_quat(in, first_pass, anchored);
+    aids::aid_imu_quat(c, in, anchored, mag, status_of(SelectiveEkfAid::kImuQuat));
   } else if (x_.last_aiding_ns < 0 || now - x_.last_aiding_ns >= seconds_to_ns(p_.aiding_period_s)) {
     // Tilt and heading are spectral densities: fusing them every aiding_period_s with the variance
     // of the elapsed interval carries the same information as every sample (their bandwidth is
@@ -422,239 +222,16 @@ void SelectiveEkf::process_imu(const ImuInput& in_raw, bool first_pass) {
                          p_.aiding_period_s + in.dt_s);
     }
     x_.last_aiding_ns = now;
-    process_tilt(in, first_pass);
-    process_heading(in, first_pass, anchored);
+    aids::aid_accel_tilt(c, in, status_of(SelectiveEkfAid::kAccelTilt));
+    aids::aid_mag_heading(c, in, anchored, mag, status_of(SelectiveEkfAid::kMagHeading));
   }
-}
-
-bool SelectiveEkf::mag_trusted(const ImuInput& in, const Eigen::Vector3d& up, double theta_q,
-                               bool anchored, bool first_pass) {
-  const int64_t now = in.stamp_ns;
-  const double theta_m = angle_between_vectors(in.mag, up);  // (8)
-  mag_.disturbance_angle_deg = theta_m * kDegPerRad;
-  mag_.quat_error_deg = theta_q * kDegPerRad;
-  // kSplit measures the dip against the filtered tilt (accurate without vision) and |m| with the
-  // parallel KF's field gate (learnt, following, re-acquired reference); its quaternion-error test
-  // compares with a heading that only vision anchors (see the notation).
-  const bool split = p_.imu_measurement == ImuMeasurement::kSplit;
-  bool field_disturbed = false;
-  if (split) {
-    FieldGate& g = x_.field_gate;
-    const FieldVerdict v = g.step(gp_, in.mag, up, in.dt_s);
-    g.tick(gp_, in.dt_s);
-    field_disturbed = v == FieldVerdict::kGated;
-    mag_.reference_ready = g.learnt;
-    mag_.dip_deg = g.dip_rad * kDegPerRad;
-    mag_.reference_angle_deg = 90.0 + mag_.dip_deg;
-    mag_.norm_ratio = g.m_ut > 0.0 ? in.mag.norm() / g.m_ut : 1.0;
-    mag_.norm_test_failed = field_disturbed && std::abs(g.norm_ratio(gp_)) > 1.0;
-    mag_.angle_test_failed = field_disturbed && (g.last_sin_dip < g.sin_lo || g.last_sin_dip > g.sin_hi);
-  } else {
-    mag_.angle_test_failed = mag_.reference_ready &&
-                             std::abs(theta_m - ref_angle_rad_) > p_.disturbance_angle_threshold_deg * kRadPerDeg;
-    mag_.norm_test_failed = false;
-    if (p_.mag_norm_test && ref_norm_ut_ > 0.0) {
-      mag_.norm_ratio = in.mag.norm() / ref_norm_ut_;
-      mag_.norm_test_failed = std::abs(mag_.norm_ratio - 1.0) > p_.mag_norm_threshold;
-    }
-    field_disturbed = mag_.angle_test_failed || mag_.norm_test_failed;
-  }
-  bool q_fail = p_.quat_error_test && (!split || anchored) &&
-                theta_q > p_.quat_error_threshold_deg * kRadPerDeg;
-  if (q_fail) {
-    if (x_.q_error_fail_since_ns < 0) {
-      x_.q_error_fail_since_ns = now;
-    }
-    if (!anchored && now - x_.q_error_fail_since_ns > seconds_to_ns(p_.q_error_lockout_s)) {
-      q_fail = false;  // lock-out release: the prediction, not the measurement, may have drifted
-    }
-  } else {
-    x_.q_error_fail_since_ns = -1;
-  }
-  mag_.quat_error_test_failed = q_fail;
-  const bool disturbed = field_disturbed || q_fail;
-  if (p_.gating_enabled && disturbed) {
-    x_.untrusted_until_ns = now + seconds_to_ns(p_.untrusted_hold_s);
-  }
-  // untrusted while a test fails, and for untrusted_hold_s after the last failure
-  const bool trusted = !p_.gating_enabled ||
-                       (!disturbed && (x_.untrusted_until_ns < 0 || now >= x_.untrusted_until_ns));
-  mag_.trusted = trusted;
-  if (!trusted && first_pass) {
-    ++mag_.untrusted_samples;
-  }
-  return trusted;
-}
-
-void SelectiveEkf::process_imu_quat(const ImuInput& in, bool first_pass, bool anchored) {
-  const int64_t now = in.stamp_ns;
-  SourceStatus& sq = status_[static_cast<size_t>(SelectiveEkfAid::kImuQuat)];
-  if (!in.has_q_imu) {
-    record(sq, Decision::kRejectedNoMag, now, first_pass);
-    return;
-  }
-  // Disturbance angle (8) and quaternion error (9)-(10).
-  Eigen::Vector3d up = in.accel;
-  if (p_.up_source == UpSource::kFiltered && anchored) {
-    up = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
-  }
-  const double theta_q = quat_angle_between(x_.q_world_body, in.q_imu);  // (9)-(10)
-  const bool trusted = mag_trusted(in, up, theta_q, anchored, first_pass);
-  const bool q_fail = mag_.quat_error_test_failed;
-  const Decision reject_reason = (mag_.angle_test_failed || mag_.norm_test_failed || !q_fail)
-                                     ? Decision::kRejectedDisturbance
-                                     : Decision::kRejectedQuatError;
-
-  const Eigen::Quaterniond qm = quat_align_sign(in.q_imu, x_.q_world_body);
-  const Eigen::Vector3d innov = quat_log(x_.q_world_body.conjugate() * qm);
-  const double sig = p_.sigma_imu_quat_deg * kRadPerDeg;
-  double r = sig * sig;
-  Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
-  h.middleCols<3>(kTh).setIdentity();
-  if (!trusted && p_.action == ImuQuatAction::kDrop) {
-    // Report the innovation the rows would have had, then leave them out.
-    fuse<3>(h, innov, Eigen::Vector3d::Constant(r), kReportGateSigma, false, sq, true);
-    record(sq, reject_reason, now, first_pass);
-    return;
-  }
-  if (!trusted) {
-    r *= p_.inflate_factor;
-  }
-  fuse<3>(h, innov, Eigen::Vector3d::Constant(r), kReportGateSigma, false, sq);
-  record(sq, trusted ? Decision::kFused : Decision::kFusedInflated, now, first_pass);
-}
-
-void SelectiveEkf::process_tilt(const ImuInput& in, bool first_pass) {
-  SourceStatus& st = status_[static_cast<size_t>(SelectiveEkfAid::kAccelTilt)];
-  if (!(in.dt_s > 0.0)) {
-    return;
-  }
-  const Eigen::Vector3d u = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();  // R^T e_z
-  // e1, e2: orthonormal, perpendicular to u. z_up x u = dth_perp (small angles), so the rows are
-  // e_i . (z_up x u) = e_i . dth.
-  const Eigen::Vector3d a = std::abs(u.x()) < 0.6 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
-  const Eigen::Vector3d e1 = u.cross(a).normalized();
-  const Eigen::Vector3d e2 = u.cross(e1);
-  const Eigen::Vector3d c = in.up_meas.cross(u);
-  Eigen::Matrix<double, 2, kN> h = Eigen::Matrix<double, 2, kN>::Zero();
-  h.block<1, 3>(0, kTh) = e1.transpose();
-  h.block<1, 3>(1, kTh) = e2.transpose();
-  const Eigen::Vector2d innov(e1.dot(c), e2.dot(c));
-  const double r = in.tilt_sigma * in.tilt_sigma / in.dt_s * in.tilt_var_scale;
-  fuse<2>(h, innov, Eigen::Vector2d::Constant(r), kReportGateSigma, false, st);
-  record(st, Decision::kFused, in.stamp_ns, first_pass);
-}
-
-void SelectiveEkf::process_heading(const ImuInput& in, bool first_pass, bool anchored) {
-  const int64_t now = in.stamp_ns;
-  SourceStatus& sh = status_[static_cast<size_t>(SelectiveEkfAid::kMagHeading)];
-  if (!in.has_mag || !(in.dt_s > 0.0)) {
-    record(sh, Decision::kRejectedNoMag, now, first_pass);
-    return;
-  }
-  // dpsi: the rotation about world up taking the horizontal part of R(q) m onto magnetic north
-  // (+y ENU); a world-frame rotation dpsi e_z is the body-frame rotation dpsi u.
-  const Eigen::Vector3d mw = x_.q_world_body * in.mag;
-  const double horiz = std::hypot(mw.x(), mw.y());
-  if (!(horiz > 1e-3 * in.mag.norm())) {
-    record(sh, Decision::kRejectedBadInput, now, first_pass);  // field vertical: no heading
-    return;
-  }
-  const double dpsi = wrap_angle(0.5 * kPi - std::atan2(mw.y(), mw.x()));
-  const Eigen::Vector3d u = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
-  const bool trusted = mag_trusted(in, u, std::abs(dpsi), anchored, first_pass);
-  Eigen::Matrix<double, 1, kN> h = Eigen::Matrix<double, 1, kN>::Zero();
-  h.block<1, 3>(0, kTh) = u.transpose();
-  double r = p_.sigma_heading_rad_sqrt_s * p_.sigma_heading_rad_sqrt_s / in.dt_s;
-  if (p_.heading_disturbance_weight > 0.0 && std::isfinite(x_.field_gate.last_norm_ut)) {
-    const double rn = x_.field_gate.norm_ratio(gp_);
-    const double rd = x_.field_gate.dip_ratio();
-    r *= 1.0 + p_.heading_disturbance_weight * (rn * rn + rd * rd);
-  }
-  const Eigen::Matrix<double, 1, 1> innov(dpsi);
-  if (!trusted && p_.action == ImuQuatAction::kDrop) {
-    fuse<1>(h, innov, Eigen::Matrix<double, 1, 1>(r), kReportGateSigma, false, sh, true);
-    record(sh, mag_.quat_error_test_failed && !mag_.angle_test_failed && !mag_.norm_test_failed
-                   ? Decision::kRejectedQuatError
-                   : Decision::kRejectedDisturbance,
-           now, first_pass);
-    return;
-  }
-  if (!trusted) {
-    r *= p_.inflate_factor;
-  }
-  fuse<1>(h, innov, Eigen::Matrix<double, 1, 1>(r), kReportGateSigma, false, sh);
-  record(sh, trusted ? Decision::kFused : Decision::kFusedInflated, now, first_pass);
 }
 
 void SelectiveEkf::process_vision(const VisionPose& v, bool first_pass) {
-  const int64_t now = v.capture_stamp_ns;
-  const Eigen::Quaterniond q_meas =
-      (v.q_world_camera.normalized() * p_.q_body_camera.conjugate()).normalized();
-  const double sr = std::isfinite(v.sigma_rad) && v.sigma_rad > 0.0 ? v.sigma_rad
-                                                                    : p_.sigma_vision_deg * kRadPerDeg;
-  const double sm = std::isfinite(v.sigma_m) && v.sigma_m > 0.0 ? v.sigma_m : p_.sigma_vision_m;
-  SourceStatus& sa = status_[static_cast<size_t>(SelectiveEkfAid::kVisionAttitude)];
-  SourceStatus& sp = status_[static_cast<size_t>(SelectiveEkfAid::kVisionPosition)];
-
-  auto reset_attitude = [&]() {
-    x_.q_world_body = q_meas;
-    x_.P.middleRows<3>(kTh).setZero();
-    x_.P.middleCols<3>(kTh).setZero();
-    x_.P.block<3, 3>(kTh, kTh) = Eigen::Matrix3d::Identity() * sr * sr;
-    x_.vision_aligned = true;
-    x_.vision_consecutive_rejects = 0;
-    x_.last_vision_fused_ns = now;
-    x_.q_error_fail_since_ns = -1;
-    record(sa, Decision::kReset, now, first_pass);
-  };
-  if (!x_.vision_aligned) {
-    reset_attitude();
-  } else {
-    const Eigen::Quaterniond qa = quat_align_sign(q_meas, x_.q_world_body);
-    const Eigen::Vector3d innov = quat_log(x_.q_world_body.conjugate() * qa);
-    Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
-    h.middleCols<3>(kTh).setIdentity();
-    if (fuse<3>(h, innov, Eigen::Vector3d::Constant(sr * sr), p_.vision_gate_sigma, true, sa)) {
-      x_.vision_consecutive_rejects = 0;
-      x_.last_vision_fused_ns = now;
-      record(sa, Decision::kFused, now, first_pass);
-    } else if (++x_.vision_consecutive_rejects >= p_.vision_reset_after_rejections) {
-      reset_attitude();
-    } else {
-      record(sa, Decision::kRejectedGate, now, first_pass);
-    }
-  }
-
-  if (!v.has_position) {
-    return;
-  }
-  const Eigen::Matrix3d rot = x_.q_world_body.toRotationMatrix();
-  if (!x_.position_aligned) {
-    x_.t_m = v.p_world_camera_m - rot * p_.p_body_camera_m;
-    x_.v_mps.setZero();
-    x_.P.middleRows<3>(kT).setZero();
-    x_.P.middleCols<3>(kT).setZero();
-    x_.P.block<3, 3>(kT, kT) = Eigen::Matrix3d::Identity() * sm * sm;
-    x_.position_aligned = true;
-    record(sp, Decision::kReset, now, first_pass);
-    return;
-  }
-  // H = [0  -R [p_body_cam x]  0  I  0] (the attitude block is zero without a lever arm)
-  Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
-  h.middleCols<3>(kTh) = J_rotate_right_perturbation(x_.q_world_body, p_.p_body_camera_m);
-  h.middleCols<3>(kT).setIdentity();
-  const Eigen::Vector3d innov = v.p_world_camera_m - (x_.t_m + rot * p_.p_body_camera_m);
-  if (fuse<3>(h, innov, Eigen::Vector3d::Constant(sm * sm), p_.vision_gate_sigma, true, sp)) {
-    x_.vision_pos_consecutive_rejects = 0;
-    record(sp, Decision::kFused, now, first_pass);
-  } else if (++x_.vision_pos_consecutive_rejects >= p_.vision_reset_after_rejections) {
-    x_.position_aligned = false;  // re-anchored on the next measurement
-    x_.vision_pos_consecutive_rejects = 0;
-    record(sp, Decision::kRejectedGate, now, first_pass);
-  } else {
-    record(sp, Decision::kRejectedGate, now, first_pass);
-  }
+  const aids::AidContext c{x_, p_, first_pass};
+  const aids::VisionMeasurement m = aids::vision_measurement(p_, v);
+  aids::aid_vision_attitude(c, m, status_of(SelectiveEkfAid::kVisionAttitude));
+  aids::aid_vision_position(c, m, status_of(SelectiveEkfAid::kVisionPosition));  // after: uses the new attitude
 }
 
 // ------------------------------------------------------------------------------------ inputs
@@ -821,23 +398,23 @@ void SelectiveEkf::blend_output(const Eigen::Vector3d& gyro_rps, double dt_s) {
 
 bool SelectiveEkf::update_vision(const VisionPose& v_in) {
   ++vc_.received;
-  SourceStatus& sa = status_[static_cast<size_t>(SelectiveEkfAid::kVisionAttitude)];
-  if (!finite_quat(v_in.q_world_camera) || v_in.capture_stamp_ns < 0 ||
+  SourceStatus& sa = status_of(SelectiveEkfAid::kVisionAttitude);
+  if (!aids::finite_quat(v_in.q_world_camera) || v_in.capture_stamp_ns < 0 ||
       (v_in.has_position && !v_in.p_world_camera_m.allFinite()) ||
       (std::isfinite(v_in.sigma_rad) && v_in.sigma_rad <= 0.0) ||
       (std::isfinite(v_in.sigma_m) && v_in.sigma_m <= 0.0)) {
     ++vc_.bad_input;
-    record(sa, Decision::kRejectedBadInput, v_in.capture_stamp_ns, true);
+    aids::record(sa, Decision::kRejectedBadInput, v_in.capture_stamp_ns, true);
     return false;
   }
   if (!initialized_ || history_.empty()) {
     ++vc_.before_init;
-    record(sa, Decision::kRejectedBadInput, v_in.capture_stamp_ns, true);
+    aids::record(sa, Decision::kRejectedBadInput, v_in.capture_stamp_ns, true);
     return false;
   }
   if (v_in.capture_stamp_ns < history_.front().input.stamp_ns) {
     ++vc_.too_old;
-    record(sa, Decision::kRejectedTooOld, v_in.capture_stamp_ns, true);
+    aids::record(sa, Decision::kRejectedTooOld, v_in.capture_stamp_ns, true);
     return false;
   }
   VisionPose v = v_in;
@@ -845,7 +422,7 @@ bool SelectiveEkf::update_vision(const VisionPose& v_in) {
   v.capture_stamp_ns += seconds_to_ns(p_.vision_time_offset_s);  // onto the IMU clock
   if (v.capture_stamp_ns < history_.front().input.stamp_ns) {
     ++vc_.too_old;
-    record(sa, Decision::kRejectedTooOld, v.capture_stamp_ns, true);
+    aids::record(sa, Decision::kRejectedTooOld, v.capture_stamp_ns, true);
     return false;
   }
   if (v.capture_stamp_ns < newest_vision_capture_ns_) {
@@ -916,7 +493,7 @@ void SelectiveEkf::reset_unhealthy(int64_t stamp_ns) {
   health_ = health;
   for (SourceStatus& st : status_) {
     if (st.last != Decision::kNone) {
-      record(st, Decision::kRejectedStateReset, stamp_ns, true);
+      aids::record(st, Decision::kRejectedStateReset, stamp_ns, true);
     }
   }
 }

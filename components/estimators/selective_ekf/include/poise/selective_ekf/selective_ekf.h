@@ -370,9 +370,9 @@ struct SelectiveEkfState {
 /// measurements. Opaque (read it through the filter's accessors): take it with full_state(),
 /// restore it with set_full_state() into a filter with the same parameters.
 class SelectiveEkfFullState {
-  friend class SelectiveEkf;
-  friend struct SelectiveEkfTestAccess;  ///< defined by tests only (e.g. to spoil the state)
-
+ public:
+  /// One accepted IMU sample as the filter processes (and replays) it: the input of the aid
+  /// sources (src/aid.h).
   struct ImuInput {
     int64_t stamp_ns = 0;
     Eigen::Vector3d gyro{0, 0, 0};
@@ -388,6 +388,11 @@ class SelectiveEkfFullState {
     double tilt_sigma = 0.0;            ///< kSplit: sigma_tilt_rad_sqrt_s (configured or derived)
     bool rest = false;
   };
+
+ private:
+  friend class SelectiveEkf;
+  friend struct SelectiveEkfTestAccess;  ///< defined by tests only (e.g. to spoil the state)
+
   struct HistoryEntry {
     ImuInput input;
     SelectiveEkfState post;  ///< state right after processing `input` (before same-stamp vision)
@@ -479,21 +484,10 @@ class SelectiveEkf : private SelectiveEkfFullState {
   void learn_reference(const ImuSample& s);
   void replay_from(size_t snapshot_index);
   void blend_output(const Eigen::Vector3d& gyro_rps, double dt_s);
-  // Update of M rows with a dense H (M x kN) and diagonal R, one row at a time; runs on the
-  // [w, th, b] or [t, v] block alone while they are uncorrelated. False when the gate rejects.
-  template <int M>
-  bool fuse(const Eigen::Matrix<double, M, kN>& h, const Eigen::Matrix<double, M, 1>& innov,
-            const Eigen::Matrix<double, M, 1>& r_diag, double gate_sigma, bool gate,
-            SourceStatus& st, bool report_only = false);
   void preprocess(ImuInput& in);
-  void process_imu_quat(const ImuInput& in, bool first_pass, bool anchored);
-  void process_tilt(const ImuInput& in, bool first_pass);
-  void process_heading(const ImuInput& in, bool first_pass, bool anchored);
-  // Selective tests (8)-(10) for the sample; returns whether the magnetometer is trusted.
-  bool mag_trusted(const ImuInput& in, const Eigen::Vector3d& up, double theta_q, bool anchored,
-                   bool first_pass);
-  void inject(const Vec& dx);
-  void record(SourceStatus& st, Decision d, int64_t stamp_ns, bool first_pass) const;
+  // process_imu / process_vision run the aid sources (one file each: src/aid_*.cpp, shape and
+  // declarations in the private header src/aid.h) on the state.
+  SourceStatus& status_of(SelectiveEkfAid a);
   [[nodiscard]] bool healthy();
   void reset_unhealthy(int64_t stamp_ns);  ///< reset() keeping the counters, one reset counted
 

@@ -1,0 +1,58 @@
+// Aid source: the heading from the magnetometer (ImuMeasurement::kSplit). dpsi is the rotation
+// about world up taking the horizontal part of R(q) m onto magnetic north (+y ENU); a world-frame
+// rotation dpsi e_z is the body-frame rotation dpsi u, so one row dpsi = u . dth. Variance: the
+// spectral density sigma_heading^2 / dt, raised as the field nears the gate's tolerances. Gated
+// by the magnetometer's selective test (mag_trust.cpp): inflated or dropped while untrusted.
+#include "aid.h"
+
+#include <cmath>
+
+namespace poise::selective_ekf_aids {
+
+void aid_mag_heading(const AidContext& c, const ImuInput& in, bool anchored, MagTrust& mag, SourceStatus& st) {
+  const int64_t now = in.stamp_ns;
+  // validate: a magnetometer sample, an interval for the density, a field that is not vertical
+  if (!in.has_mag || !(in.dt_s > 0.0)) {
+    record(st, Decision::kRejectedNoMag, now, c.first_pass);
+    return;
+  }
+  const Eigen::Vector3d mw = c.x.q_world_body * in.mag;
+  const double horiz = std::hypot(mw.x(), mw.y());
+  if (!(horiz > 1e-3 * in.mag.norm())) {
+    record(st, Decision::kRejectedBadInput, now, c.first_pass);  // field vertical: no heading
+    return;
+  }
+  // innovation
+  const double dpsi = wrap_angle(0.5 * kPi - std::atan2(mw.y(), mw.x()));
+  const Eigen::Vector3d u = c.x.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
+  // gate: the selective test, against the filter's up axis and |dpsi| as the quaternion error
+  const bool trusted = mag_trusted(c, mag, in, u, std::abs(dpsi), anchored);
+  Eigen::Matrix<double, 1, SelectiveEkf::kN> h = Eigen::Matrix<double, 1, SelectiveEkf::kN>::Zero();
+  h.block<1, 3>(0, SelectiveEkf::kTh) = u.transpose();
+  double r = c.p.sigma_heading_rad_sqrt_s * c.p.sigma_heading_rad_sqrt_s / in.dt_s;
+  if (c.p.heading_disturbance_weight > 0.0 && std::isfinite(c.x.field_gate.last_norm_ut)) {
+    const double rn = c.x.field_gate.norm_ratio(mag.gate);
+    const double rd = c.x.field_gate.dip_ratio();
+    r *= 1.0 + c.p.heading_disturbance_weight * (rn * rn + rd * rd);
+  }
+  const Eigen::Matrix<double, 1, 1> innov(dpsi);
+  // reject (drop): report the innovation the row would have had, then leave it out
+  if (!trusted && c.p.action == ImuQuatAction::kDrop) {
+    fuse<1>(c.x, h, innov, Eigen::Matrix<double, 1, 1>(r), kReportGateSigma, false, st, true);
+    const MagStatus& m = mag.status;
+    record(st, m.quat_error_test_failed && !m.angle_test_failed && !m.norm_test_failed
+                   ? Decision::kRejectedQuatError
+                   : Decision::kRejectedDisturbance,
+           now, c.first_pass);
+    return;
+  }
+  // fuse (inflated while untrusted)
+  if (!trusted) {
+    r *= c.p.inflate_factor;
+  }
+  fuse<1>(c.x, h, innov, Eigen::Matrix<double, 1, 1>(r), kReportGateSigma, false, st);
+  // status
+  record(st, trusted ? Decision::kFused : Decision::kFusedInflated, now, c.first_pass);
+}
+
+}  // namespace poise::selective_ekf_aids

@@ -1,0 +1,142 @@
+// Private to the selective EKF (src/): the measurement update every aid source uses, and the
+// status bookkeeping of a decision. Notation: selective_ekf.h.
+#pragma once
+
+#include "poise/selective_ekf/selective_ekf.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+
+namespace poise::selective_ekf_aids {
+
+constexpr double kNsToS = 1e-9;
+/// Gate used only to report a test ratio for sources that are never gated (gyro, q_imu), sigma.
+constexpr double kReportGateSigma = 5.0;
+
+inline int64_t seconds_to_ns(double s) { return static_cast<int64_t>(std::llround(s * 1e9)); }
+
+/// A quaternion the filter can normalise: finite, norm within [0.5, 1.5].
+inline bool finite_quat(const Eigen::Quaterniond& q) {
+  return q.coeffs().allFinite() && q.coeffs().norm() > 0.5 && q.coeffs().norm() < 1.5;
+}
+
+/// Update with M rows of a dense H (M x N) and diagonal R, processed one row at a time (exact for
+/// a diagonal R: the same result as the batch update, at O(M N^2) instead of O(M N^3)):
+///   v_i = P h_i^T (prior), u_i = v_i - sum_{j<i} u_j (h_i . u_j) / s_j (= P_{i-1} h_i^T),
+///   s_i = h_i . u_i + r_i, dx += u_i (y_i - h_i . dx) / s_i, P -= u_i u_i^T / s_i.
+/// P - K S K^T equals the Joseph form for this (optimal) gain; each rank-one term is symmetric.
+/// The status gets the innovation, the prior innovation variance diag(H P H^T + R) and the test
+/// ratio; the gate tests the prior variance. Leaves `p` and `dx` untouched when the gate rejects
+/// or `report_only`. Returns whether the rows were applied.
+template <int N, int M, typename PMat>
+bool sequential_update(PMat&& p, const Eigen::Matrix<double, M, N>& h,
+                       const Eigen::Matrix<double, M, 1>& innov,
+                       const Eigen::Matrix<double, M, 1>& r_diag, double gate_sigma, bool gate,
+                       bool report_only, SourceStatus& st, Eigen::Matrix<double, N, 1>& dx) {
+  Eigen::Matrix<double, N, M> u = p.lazyProduct(h.transpose());  // prior P H^T
+  double ratio = 0.0;
+  st.innovation.setZero();
+  st.innovation_variance.setZero();
+  for (int i = 0; i < M; ++i) {
+    const double s_prior = h.row(i).dot(u.col(i)) + r_diag[i];
+    st.innovation[i] = innov[i];
+    st.innovation_variance[i] = s_prior;
+    ratio = std::max(ratio, innov[i] * innov[i] / (gate_sigma * gate_sigma * s_prior));
+  }
+  st.test_ratio = ratio;
+  if (report_only || (gate && !(ratio <= 1.0))) {
+    return false;
+  }
+  dx.setZero();
+  Eigen::Matrix<double, M, 1> s;
+  for (int i = 0; i < M; ++i) {
+    for (int j = 0; j < i; ++j) {
+      u.col(i) -= u.col(j) * (h.row(i).dot(u.col(j)) / s[j]);
+    }
+    s[i] = h.row(i).dot(u.col(i)) + r_diag[i];
+    dx += u.col(i) * ((innov[i] - h.row(i).dot(dx)) / s[i]);  // (5), (6)
+  }
+  for (int i = 0; i < M; ++i) {
+    const Eigen::Matrix<double, N, 1> w = u.col(i) / std::sqrt(s[i]);
+    p.noalias() -= w * w.transpose();  // (7), exactly symmetric
+  }
+  return true;
+}
+
+/// sequential_update on the diagonal block [Off, Off + NB) of P alone (the caller knows that H
+/// and P's cross terms outside it are zero); dx gets the block's correction.
+template <int Off, int NB, int N, int M>
+bool update_block(Eigen::Matrix<double, N, N>& p, const Eigen::Matrix<double, M, N>& h,
+                  const Eigen::Matrix<double, M, 1>& innov, const Eigen::Matrix<double, M, 1>& r_diag,
+                  double gate_sigma, bool gate, bool report_only, SourceStatus& st,
+                  Eigen::Matrix<double, N, 1>& dx) {
+  Eigen::Matrix<double, NB, 1> d;
+  const Eigen::Matrix<double, M, NB> hb = h.template middleCols<NB>(Off);
+  const bool ok = sequential_update<NB, M>(p.template block<NB, NB>(Off, Off), hb, innov, r_diag,
+                                           gate_sigma, gate, report_only, st, d);
+  if (ok) {
+    dx.template segment<NB>(Off) = d;
+  }
+  return ok;
+}
+
+/// Adds an error-state correction to the nominal state (attitude on the right: q <- q exp(dth)).
+inline void inject(SelectiveEkfState& x, const SelectiveEkf::Vec& dx) {
+  x.w_rps += dx.segment<3>(SelectiveEkf::kW);
+  x.q_world_body = (x.q_world_body * quat_exp(dx.segment<3>(SelectiveEkf::kTh))).normalized();
+  x.b_rps += dx.segment<3>(SelectiveEkf::kB);
+  x.t_m += dx.segment<3>(SelectiveEkf::kT);
+  x.v_mps += dx.segment<3>(SelectiveEkf::kV);
+}
+
+/// The fuse step of every aid: M rows with a dense H (M x kN) and diagonal R, one row at a time;
+/// runs on the [w, th, b] or [t, v] block alone while they are uncorrelated (x.coupled false).
+/// Fills the status's innovation, variance and test ratio; false when the gate rejects (or
+/// `report_only`: the innovation of rows left out).
+template <int M>
+bool fuse(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>& h,
+          const Eigen::Matrix<double, M, 1>& innov, const Eigen::Matrix<double, M, 1>& r_diag,
+          double gate_sigma, bool gate, SourceStatus& st, bool report_only = false) {
+  constexpr int kN = SelectiveEkf::kN;
+  constexpr int kAttN = SelectiveEkf::kAttN;
+  const bool att = (h.template leftCols<kAttN>().array() != 0.0).any();
+  const bool trans = (h.template rightCols<kN - kAttN>().array() != 0.0).any();
+  SelectiveEkf::Vec dx = SelectiveEkf::Vec::Zero();
+  bool ok = false;
+  if (!x.coupled && !(att && trans)) {
+    // No cross-covariance between [w, th, b] and [t, v]: rows touching one block update it alone
+    // (the rest of K is exactly zero), with the same result as the full covariance.
+    ok = att ? update_block<0, kAttN>(x.P, h, innov, r_diag, gate_sigma, gate, report_only, st, dx)
+             : update_block<kAttN, kN - kAttN>(x.P, h, innov, r_diag, gate_sigma, gate, report_only,
+                                               st, dx);
+  } else {
+    x.coupled = x.coupled || !report_only;  // a lever-arm fix correlates attitude and position
+    ok = sequential_update<kN, M>(x.P, h, innov, r_diag, gate_sigma, gate, report_only, st, dx);
+  }
+  if (ok) {
+    inject(x, dx);
+  }
+  return ok;
+}
+
+/// The status step of every aid: the decision on a measurement stamped `stamp_ns`. Counters count
+/// first passes only (not the replays after a late vision measurement).
+inline void record(SourceStatus& st, Decision d, int64_t stamp_ns, bool first_pass) {
+  st.last = d;
+  st.last_stamp_ns = stamp_ns;
+  const bool fused = d == Decision::kFused || d == Decision::kFusedInflated || d == Decision::kReset;
+  if (fused) {
+    st.last_fused_stamp_ns = stamp_ns;
+  }
+  if (first_pass) {
+    ++st.by_decision[static_cast<size_t>(d)];
+    if (fused) {
+      ++st.fused;
+    } else {
+      ++st.rejected;
+    }
+  }
+}
+
+}  // namespace poise::selective_ekf_aids
