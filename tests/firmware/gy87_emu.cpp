@@ -37,7 +37,7 @@ int main(int argc, char** argv) {
   app.add_option("--crystal-ppm", o.crystal_ppm, "board clock error against the host, ppm");
   app.add_option("--nack", nacks, "DEVICE:FROM_S:TO_S (MPU6050, HMC5883L, QMC5883L, BMP180)");
   app.add_flag("--no-reset-on-open", no_reset, "the board does not reset when the port is opened");
-  app.add_option("--lines-csv", dump, "write boot,seq,t_us,read_ns,sent_ns,delivered,has_mag,has_pressure,text per line");
+  app.add_option("--lines-csv", dump, "write boot,seq,t_us,read_ns,sent_ns,delivered,has_mag,has_pressure,host_ns,text per line");
   CLI11_PARSE(app, argc, argv);
   o.reset_on_open = !no_reset;
   if (mag == "hmc5883l") o.mag = MagVariant::kHmc5883l;
@@ -74,11 +74,12 @@ int main(int argc, char** argv) {
     if (!dump.empty()) {
       std::FILE* f = std::fopen(dump.c_str(), "w");
       if (f == nullptr) throw std::runtime_error("cannot write " + dump);
-      std::fprintf(f, "boot,seq,t_us,read_ns,sent_ns,delivered,has_mag,has_pressure,text\n");
+      std::fprintf(f, "boot,seq,t_us,read_ns,sent_ns,delivered,has_mag,has_pressure,host_ns,text\n");
       for (const auto& r : board.lines()) {
-        std::fprintf(f, "%d,%u,%u,%lld,%lld,%d,%d,%d,\"%s\"\n", r.boot, r.seq, r.t_us,
+        std::fprintf(f, "%d,%u,%u,%lld,%lld,%d,%d,%d,%lld,\"%s\"\n", r.boot, r.seq, r.t_us,
                      static_cast<long long>(r.imu.t_ns), static_cast<long long>(r.sent_ns), r.delivered ? 1 : 0,
-                     r.has_mag ? 1 : 0, r.has_pressure ? 1 : 0, r.text.c_str());
+                     r.has_mag ? 1 : 0, r.has_pressure ? 1 : 0,
+                     static_cast<long long>(r.written_host_ns), r.text.c_str());
       }
       std::fclose(f);
     }

@@ -140,6 +140,7 @@ void Gy87Emulator::reset_board() {
   boot_cycle0_ = sim_->avr->cycle;
   paint_stack();
   std::lock_guard<std::mutex> lock(mu_);
+  boot_start_ns_ = now_ns();
   ++boot_;
   in_line_ = false;
 }
@@ -160,12 +161,26 @@ void Gy87Emulator::run_for(double seconds) {
 double Gy87Emulator::host_seconds() const { return host_seconds_; }
 
 void Gy87Emulator::step_chunk() {
+  // Run up to 1 ms of emulated time, or less when a line ends: its bytes then reach the pty at
+  // the host time of its last byte (after the pacing sleep), so the arrival times the driver's
+  // clock model sees are the board's, not the chunking's.
   avr_t* avr = sim_->avr;
   const uint64_t target = avr->cycle + kChunkCycles;
-  while (avr->cycle < target) {
+  line_ended_ = false;
+  while (avr->cycle < target && !line_ended_) {
     const int state = avr_run(avr);
     if (state == cpu_Done || state == cpu_Crashed) {
       throw std::runtime_error("the emulated ATmega328P stopped (simavr state " + std::to_string(state) + ")");
+    }
+  }
+  if (opt_.speed > 0.0) {
+    const double rate = opt_.speed * (1.0 + opt_.crystal_ppm * 1e-6);
+    const int64_t host_target =
+        host_start_ns_ + static_cast<int64_t>(static_cast<double>(now_ns() - emu_start_ns_) / rate);
+    timespec ts{};
+    ts.tv_sec = host_target / 1'000'000'000;
+    ts.tv_nsec = host_target % 1'000'000'000;
+    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
     }
   }
   if (sim_->pty) {
@@ -187,16 +202,10 @@ void Gy87Emulator::step_chunk() {
       for (const std::size_t i : done) lines_[i].lost = true;
       if (in_line_) lines_.back().lost = true;  // its first bytes were in this chunk
     }
-    for (const std::size_t i : done) lines_[i].delivered = !lines_[i].lost;
-  }
-  if (opt_.speed > 0.0) {
-    const double rate = opt_.speed * (1.0 + opt_.crystal_ppm * 1e-6);
-    const int64_t host_target =
-        host_start_ns_ + static_cast<int64_t>(static_cast<double>(now_ns() - emu_start_ns_) / rate);
-    timespec ts{};
-    ts.tv_sec = host_target / 1'000'000'000;
-    ts.tv_nsec = host_target % 1'000'000'000;
-    while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+    const int64_t host_ns = monotonic_ns();
+    for (const std::size_t i : done) {
+      lines_[i].delivered = !lines_[i].lost;
+      lines_[i].written_host_ns = host_ns;
     }
   }
 }
@@ -217,12 +226,17 @@ void Gy87Emulator::on_uart_byte(uint8_t byte) {
     r.boot = boot_;
     r.sent_ns = now_ns();
     r.imu = mpu_.last_read();
+    // The firmware knows only what it read since it booted (a reset leaves the sensors as they
+    // were), and drops a reading when its sensor stops answering.
+    const auto stands = [&](const DataRead& d, const I2cDevice& dev) {
+      return d.valid && d.t_ns >= boot_start_ns_ && d.t_ns > dev.last_nack_ns();
+    };
     if (const auto* mag = dynamic_cast<const AuxMagnetometer*>(mag_.get())) {
       r.mag = mag->last_read();
-      r.has_mag = r.mag.valid && r.mag.t_ns > mag->last_nack_ns() && !r.mag.overflow;
+      r.has_mag = stands(r.mag, *mag) && !r.mag.overflow;
     }
     r.pressure = bmp_.last_pressure_read();
-    r.has_pressure = r.pressure.valid && r.pressure.t_ns > bmp_.last_nack_ns();
+    r.has_pressure = stands(r.pressure, bmp_);
     lines_.push_back(r);
     in_line_ = true;
   } else if (in_line_ && c == '\n') {
@@ -233,7 +247,9 @@ void Gy87Emulator::on_uart_byte(uint8_t byte) {
       r.seq = static_cast<uint32_t>(seq);
       r.t_us = static_cast<uint32_t>(t_us);
     }
+    r.complete = true;
     pending_lines_.push_back(lines_.size() - 1);
+    line_ended_ = true;
     in_line_ = false;
   }
   if (in_line_) lines_.back().text.push_back(c);

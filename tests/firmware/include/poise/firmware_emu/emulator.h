@@ -48,14 +48,17 @@ struct LineRecord {
   int boot = 0;               ///< 0 at power-on, +1 per reset
   bool delivered = false;     ///< every byte reached a reader of the pty
   bool lost = false;          ///< some byte was dropped (no reader, or the reader fell behind)
+  bool complete = false;      ///< its \n was sent (seq and t_us are parsed)
   std::string text;           ///< the line without \r\n
   uint32_t seq = 0;           ///< parsed from the line
   uint32_t t_us = 0;          ///< parsed from the line (the firmware's micros())
   int64_t sent_ns = 0;        ///< emulated time of its first byte on the UART
+  int64_t written_host_ns = 0;  ///< CLOCK_MONOTONIC when its last bytes went to the pty
   DataRead imu;               ///< the MPU6050 burst read before it (accel, gyro, temperature)
-  bool has_mag = false;       ///< a valid magnetometer reading stands (none after a NACK)
+  bool has_mag = false;       ///< a magnetometer reading stands: read since the boot and since the
+                              ///< last NACK, not an overflow
   DataRead mag;
-  bool has_pressure = false;  ///< a valid pressure result stands (none after a NACK)
+  bool has_pressure = false;  ///< a pressure result read since the boot and the last NACK
   DataRead pressure;
 };
 
@@ -111,11 +114,13 @@ class Gy87Emulator {
   int stack_peak_ = 0;
   int64_t host_start_ns_ = -1;
   int64_t emu_start_ns_ = 0;
+  int64_t boot_start_ns_ = 0;  ///< emulated time of the last reset (0: power-on)
   double host_seconds_ = 0.0;
   bool had_reader_ = false;
   std::string pending_;        ///< UART bytes not yet written to the pty
   std::vector<std::size_t> pending_lines_;  ///< indices of lines whose '\n' is in pending_
   bool in_line_ = false;
+  bool line_ended_ = false;    ///< a line's \n was sent in this step
   mutable std::mutex mu_;
   std::string uart_;
   std::vector<LineRecord> lines_;
