@@ -23,6 +23,12 @@ if(POISE_WITH_SYSTEMD)
 endif()
 
 function(poise_package)
+  # The build tree laid out as an installed one for the shipped configuration: build/share/poise is
+  # a link to the source tree's config/, so build/bin/poise finds it where an installed poise finds
+  # <prefix>/share/poise (poise/runtime/shipped.h: host files copied elsewhere, messages that name
+  # shipped files by their real paths).
+  file(MAKE_DIRECTORY ${PROJECT_BINARY_DIR}/share)
+  file(CREATE_LINK ${PROJECT_SOURCE_DIR}/config ${PROJECT_BINARY_DIR}/share/poise SYMBOLIC)
   if(POISE_HAVE_SYSTEMD)
     set(POISE_UNIT_TYPE notify)
     set(POISE_UNIT_TYPE_NOTE "poise run tells systemd READY=1 once every component has started")

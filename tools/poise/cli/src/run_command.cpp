@@ -4,6 +4,7 @@
 #include "poise/core/yaml_params.h"
 #include "poise/runtime/realtime.h"
 #include "poise/runtime/service.h"
+#include "poise/runtime/shipped.h"
 
 #include <chrono>
 #include <cstdio>
@@ -126,7 +127,8 @@ void register_run_commands(CLI::App& app) {
   auto host_path = std::make_shared<std::string>();
   auto list = std::make_shared<bool>(false);
   CLI::App* run = app.add_subcommand(
-      "run", "Run drivers and components in one process from a host file (see config/hosts/)");
+      "run", "Run drivers and components in one process from a host file (examples: " +
+                 runtime::shipped_file_hint("hosts") + ")");
   run->add_option("host", *host_path, "Host file (YAML)");
   run->add_flag("--list", *list, "List the component types and exit");
   auto run_sets = std::make_shared<std::vector<std::string>>();
@@ -144,7 +146,8 @@ void register_run_commands(CLI::App& app) {
       return;
     }
     if (host_path->empty()) {
-      throw Error("poise run needs a host file (e.g. config/hosts/robot.yaml)", kUsageExitCode);
+      throw Error("poise run needs a host file (e.g. " + runtime::shipped_file_hint("hosts/robot.yaml") + ")",
+                  kUsageExitCode);
     }
     runtime::HostSpec host = runtime::load_host_file(*host_path);
     try {
