@@ -32,9 +32,13 @@ function(poise_package)
   if(POISE_HAVE_SYSTEMD)
     set(POISE_UNIT_TYPE notify)
     set(POISE_UNIT_TYPE_NOTE "poise run tells systemd READY=1 once every component has started")
+    # poise run sends WATCHDOG=1 every WatchdogSec/2 while every component keeps producing
+    # (runtime::ServiceWatchdog); a host where one stops is killed and restarted (Restart=).
+    set(POISE_UNIT_WATCHDOG "# fed only while every component produces (a health check, not a timer)\nWatchdogSec=10")
   else()
     set(POISE_UNIT_TYPE exec)
     set(POISE_UNIT_TYPE_NOTE "built without libsystemd: no readiness notification, so Type=exec")
+    set(POISE_UNIT_WATCHDOG "# no WatchdogSec=: built without libsystemd, poise run cannot feed a watchdog")
   endif()
   # The unit names the installed executable: its path is filled in at install time, when the
   # prefix is known (/usr in the package, PREFIX with cmake --install --prefix PREFIX).

@@ -283,6 +283,15 @@ std::vector<std::string> Host::status() const {
   return lines;
 }
 
+std::vector<ComponentOutput> Host::produced() const {
+  std::vector<ComponentOutput> out;
+  out.reserve(components_.size());
+  for (std::size_t i = 0; i < components_.size(); ++i) {
+    out.push_back({names_[i], components_[i]->produced()});
+  }
+  return out;
+}
+
 void apply_component_sets(const std::vector<std::string>& sets, HostSpec& host) {
   for (const std::string& set : sets) {
     const size_t eq = set.find('=');

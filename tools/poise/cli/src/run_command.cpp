@@ -61,10 +61,17 @@ void run_host(const runtime::HostSpec& host_spec, const RunOptions& options) {
                  spec.components.size(), domain);
   }
   const auto start = std::chrono::steady_clock::now();
+  const auto ns_of = [](std::chrono::steady_clock::time_point t) {
+    return static_cast<int64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(t.time_since_epoch()).count());
+  };
+  // fed only while every component produces (systemd's WatchdogSec=; off otherwise)
+  runtime::ServiceWatchdog watchdog([&host] { return host.produced(); },
+                                    runtime::ServiceWatchdog::interval_from_environment(), ns_of(start));
   auto next_status = start + std::chrono::duration<double>(options.status_period_s);
   while (!stop_requested()) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
     const auto now = std::chrono::steady_clock::now();
+    watchdog.poll(ns_of(now));
     if (options.duration_s > 0.0 &&
         std::chrono::duration<double>(now - start).count() >= options.duration_s) {
       break;

@@ -60,6 +60,12 @@ void apply_component_sets(const std::vector<std::string>& sets, HostSpec& host);
 /// Loads a YAML parameter file as a map (ConfigError if missing or not a map).
 YAML::Node load_param_file(const std::string& path);
 
+/// What one component has produced so far (Component::produced()), by instance name.
+struct ComponentOutput {
+  std::string name;
+  std::optional<uint64_t> produced;
+};
+
 /// Runs components in one process until `stop` becomes true (or a component fails).
 class Host {
  public:
@@ -72,6 +78,8 @@ class Host {
   void stop();
   /// One status line per component.
   [[nodiscard]] std::vector<std::string> status() const;
+  /// Component::produced() of every component, in host-file order.
+  [[nodiscard]] std::vector<ComponentOutput> produced() const;
   /// Number of components.
   [[nodiscard]] std::size_t size() const { return components_.size(); }
   [[nodiscard]] dds::Participant& participant() { return *participant_; }
