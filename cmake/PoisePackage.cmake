@@ -23,12 +23,22 @@ if(POISE_WITH_SYSTEMD)
 endif()
 
 function(poise_package)
+  # The build tree laid out as an installed one for the shipped configuration: build/share/poise is
+  # a link to the source tree's config/, so build/bin/poise finds it where an installed poise finds
+  # <prefix>/share/poise (poise/runtime/shipped.h: host files copied elsewhere, messages that name
+  # shipped files by their real paths).
+  file(MAKE_DIRECTORY ${PROJECT_BINARY_DIR}/share)
+  file(CREATE_LINK ${PROJECT_SOURCE_DIR}/config ${PROJECT_BINARY_DIR}/share/poise SYMBOLIC)
   if(POISE_HAVE_SYSTEMD)
     set(POISE_UNIT_TYPE notify)
     set(POISE_UNIT_TYPE_NOTE "poise run tells systemd READY=1 once every component has started")
+    # poise run sends WATCHDOG=1 every WatchdogSec/2 while every component keeps producing
+    # (runtime::ServiceWatchdog); a host where one stops is killed and restarted (Restart=).
+    set(POISE_UNIT_WATCHDOG "# fed only while every component produces (a health check, not a timer)\nWatchdogSec=10")
   else()
     set(POISE_UNIT_TYPE exec)
     set(POISE_UNIT_TYPE_NOTE "built without libsystemd: no readiness notification, so Type=exec")
+    set(POISE_UNIT_WATCHDOG "# no WatchdogSec=: built without libsystemd, poise run cannot feed a watchdog")
   endif()
   # The unit names the installed executable: its path is filled in at install time, when the
   # prefix is known (/usr in the package, PREFIX with cmake --install --prefix PREFIX).

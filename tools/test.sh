@@ -2,7 +2,8 @@
 # The whole test suite: installs what is missing, builds (Release), checks that the estimator
 # cores build alone (tools/check_cores.sh), installs them and builds examples/embed against the
 # installed prefix (tools/test_install.sh), builds, installs, checks and purges the Debian packages
-# (tools/test_deb.sh; needs root), configures poise without OpenCV/AprilTag
+# (tools/test_deb.sh; needs root; with the installed unit run under a private systemd,
+# tools/test_service.sh), configures poise without OpenCV/AprilTag
 # (tools/check_no_camera.sh --configure-only; without that flag the script builds it, ~5 min uncached),
 # cross-builds the cores and their tests for arm64 and runs them
 # under qemu (tools/cross_arm64.sh), runs ctest.

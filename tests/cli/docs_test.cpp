@@ -29,19 +29,12 @@ std::vector<fs::path> doc_files() {
   return out;
 }
 
-std::string read(const fs::path& p) {
-  std::ifstream in(p);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 TEST(Docs, EveryRelativeLinkResolvesInsideTheRepository) {
   const fs::path root = fs::canonical(source_path("."));
   const std::regex link(R"(\]\(([^)\s]+)\))");
   int checked = 0;
   for (const fs::path& doc : doc_files()) {
-    const std::string text = read(doc);
+    const std::string text = read_file(doc);
     for (auto it = std::sregex_iterator(text.begin(), text.end(), link); it != std::sregex_iterator(); ++it) {
       std::string target = (*it)[1];
       if (target.rfind("http://", 0) == 0 || target.rfind("https://", 0) == 0 || target.rfind("mailto:", 0) == 0 ||
@@ -65,7 +58,7 @@ TEST(Docs, EveryPoiseCommandInACodeBlockExists) {
   const std::regex cmd(R"((?:^|[\s/$`(])poise((?:\s+[a-z][a-z0-9-]*(?=\s|$)){1,2}))");
   std::set<std::string> commands;
   for (const fs::path& doc : doc_files()) {
-    std::istringstream in(read(doc));
+    std::istringstream in(read_file(doc));
     std::string line;
     bool in_block = false;
     while (std::getline(in, line)) {

@@ -42,13 +42,6 @@ struct LayerCheck {
   int includes_checked = 0;
 };
 
-std::string read(const fs::path& p) {
-  std::ifstream in(p);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
-
 /// The rows `| N | `folder`, `folder` | what |` of the markdown table under "## Layers".
 std::vector<Layer> read_layer_table(const std::string& markdown) {
   std::vector<Layer> out;
@@ -157,7 +150,7 @@ LayerCheck check_layers(const fs::path& root, const std::vector<Layer>& table) {
       if (!e.is_regular_file() || (ext != ".cpp" && ext != ".h" && ext != ".hpp")) {
         continue;
       }
-      std::istringstream text(read(e.path()));
+      std::istringstream text(read_file(e.path()));
       std::string line;
       int number = 0;
       while (std::getline(text, line)) {
@@ -194,7 +187,7 @@ std::string describe(const LayerCheck& c) {
 
 TEST(Layers, TheTableInDevelopingMdNamesEveryCodeFolderOfTheTree) {
   const fs::path root = source_path(".");
-  const std::vector<Layer> table = read_layer_table(read(root / "docs" / "DEVELOPING.md"));
+  const std::vector<Layer> table = read_layer_table(read_file(root / "docs" / "DEVELOPING.md"));
   ASSERT_GE(table.size(), 8u) << "docs/DEVELOPING.md has no \"## Layers\" table";
   const LayerCheck c = check_layers(root, table);
   EXPECT_TRUE(c.unlayered.empty()) << describe(c);
@@ -209,7 +202,7 @@ TEST(Layers, TheTableInDevelopingMdNamesEveryCodeFolderOfTheTree) {
 
 TEST(Layers, EveryIncludeInComponentsDriversAndToolsPointsToItsOwnLayerOrBelow) {
   const fs::path root = source_path(".");
-  const std::vector<Layer> table = read_layer_table(read(root / "docs" / "DEVELOPING.md"));
+  const std::vector<Layer> table = read_layer_table(read_file(root / "docs" / "DEVELOPING.md"));
   ASSERT_GE(table.size(), 8u) << "docs/DEVELOPING.md has no \"## Layers\" table";
   const LayerCheck c = check_layers(root, table);
   EXPECT_TRUE(c.violations.empty()) << c.violations.size() << " include(s) point up the layers:\n" << describe(c);

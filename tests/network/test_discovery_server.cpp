@@ -22,13 +22,6 @@ constexpr auto kDiscoveryBound = 15s;
 constexpr auto kNoDiscoveryWindow = 4s;
 constexpr const char* kServerPort = "11811";
 
-std::string read_file(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 std::string server_binary() { return discovery_server_binary(); }
 
 /// The source's time from "both processes started" to "the reader matched": discovery time.
@@ -44,8 +37,8 @@ double discovery_ms(const testing::Child& publisher, const testing::Child& reade
 
 // The built-in endpoint profiles are copied into the discovery server file: they must not drift.
 TEST(DiscoveryServerConfig, EndpointProfilesMatchTheBuiltInProfiles) {
-  const std::string builtin = read_file(testing::source_path("config/qos/poise_profiles.xml"));
-  const std::string ds = read_file(testing::source_path("config/qos/discovery_server_client.xml"));
+  const std::string builtin = testing::read_file(testing::source_path("config/qos/poise_profiles.xml"));
+  const std::string ds = testing::read_file(testing::source_path("config/qos/discovery_server_client.xml"));
   const auto endpoints = [](const std::string& xml) {
     const size_t begin = xml.find("<data_writer");
     const size_t end = xml.find("</profiles>");

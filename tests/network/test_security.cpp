@@ -60,13 +60,6 @@ class SecurityTest : public ::testing::Test {
   }
 };
 
-std::string read_file(const std::string& path) {
-  std::ifstream in(path);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 /// Sets an environment variable for the scope of a test.
 class ScopedEnv {
  public:
@@ -96,12 +89,12 @@ TEST_F(SecurityTest, ScriptWritesSignedGovernanceAndPerTopicPermissions) {
   for (const char* f : {"ca.pem", "governance.xml", "governance.p7s"}) {
     EXPECT_TRUE(fs::exists(dir("good") + "/" + f)) << f;
   }
-  const std::string p7s = read_file(dir("good") + "/imu/permissions.p7s");
+  const std::string p7s = testing::read_file(dir("good") + "/imu/permissions.p7s");
   EXPECT_NE(p7s.find("application/x-pkcs7-signature"), std::string::npos) << "S/MIME signed";
   EXPECT_NE(p7s.find("<subject_name>CN=imu,O=poise,C=XX</subject_name>"), std::string::npos)
       << "RFC 2253 order, as Fast DDS 2.9 requires";
   EXPECT_NE(p7s.find("<topic>imu</topic>"), std::string::npos);
-  const std::string camera = read_file(dir("good") + "/camera/permissions.xml");
+  const std::string camera = testing::read_file(dir("good") + "/camera/permissions.xml");
   EXPECT_EQ(camera.find("<topic>imu</topic>"), std::string::npos) << "camera may not publish imu";
 }
 
@@ -153,7 +146,7 @@ TEST_F(SecurityTest, SecureParticipantFromEnvironmentAndTamperedPermissionsRejec
   for (const char* f : {"ca.pem", "governance.p7s", "fusion/cert.pem", "fusion/key.pem"}) {
     fs::copy_file(dir("good") + "/" + f, tampered + "/" + f, fs::copy_options::overwrite_existing);
   }
-  std::string p7s = read_file(dir("good") + "/fusion/permissions.p7s");
+  std::string p7s = testing::read_file(dir("good") + "/fusion/permissions.p7s");
   const size_t at = p7s.find("<topic>imu</topic>");
   ASSERT_NE(at, std::string::npos);
   p7s.replace(at, 18, "<topic>*</topic>  ");  // grant everything: the signature no longer matches

@@ -11,7 +11,30 @@
 namespace poise::runtime {
 namespace {
 
-HostSpec parse(const std::string& yaml) { return parse_host(YAML::Load(yaml), "test.yaml", "/cfg"); }
+HostSpec parse(const std::string& yaml) { return parse_host(YAML::Load(yaml), "test.yaml", "/cfg", ""); }
+
+/// A temporary directory with files, removed at the end of the test.
+class TempTree {
+ public:
+  TempTree() : root_(std::filesystem::temp_directory_path() / ("poise_host_tree_" + std::to_string(::getpid()))) {
+    std::filesystem::remove_all(root_);
+    std::filesystem::create_directories(root_);
+  }
+  ~TempTree() { std::filesystem::remove_all(root_); }
+  TempTree(const TempTree&) = delete;
+  TempTree& operator=(const TempTree&) = delete;
+  /// Writes `text` to `relative` (directories created); returns its path.
+  std::string write(const std::string& relative, const std::string& text) const {
+    const auto p = root_ / relative;
+    std::filesystem::create_directories(p.parent_path());
+    std::ofstream(p) << text;
+    return p.string();
+  }
+  [[nodiscard]] std::string path(const std::string& relative) const { return (root_ / relative).string(); }
+
+ private:
+  std::filesystem::path root_;
+};
 
 std::string error_of(const std::string& yaml) {
   try {
@@ -90,9 +113,68 @@ TEST(HostFile, GivenSetsWhenAppliedThenTheNamedComponentsParamsChangeAndBadOnesA
 }
 
 TEST(HostFile, FileParametersResolveAgainstTheHostFile) {
-  const HostSpec spec = parse("components: [{type: a, params: {filter_file: f/x.yaml, other: f/y}}]");
-  EXPECT_EQ(spec.components[0].params["filter_file"].as<std::string>(), "/cfg/f/x.yaml");
+  TempTree t;
+  t.write("cfg/f/x.yaml", "a: 1\n");
+  const HostSpec spec = parse_host(YAML::Load("components: [{type: a, params: {filter_file: f/x.yaml, other: f/y}}]"),
+                                   "test.yaml", t.path("cfg"), "");
+  EXPECT_EQ(spec.components[0].params["filter_file"].as<std::string>(), t.path("cfg/f/x.yaml"));
   EXPECT_EQ(spec.components[0].params["other"].as<std::string>(), "f/y") << "only *_file keys are paths";
+  const HostSpec absolute = parse("components: [{type: a, params: {filter_file: /nowhere/x.yaml}}]");
+  EXPECT_EQ(absolute.components[0].params["filter_file"].as<std::string>(), "/nowhere/x.yaml")
+      << "an absolute path is taken as it is (its loader reports it missing)";
+}
+
+// A shipped host file copied to /etc/poise names `../filters/...` and `../drivers/...`: relative
+// to the copy they do not exist, relative to the shipped host files they do.
+TEST(HostFile, GivenAShippedHostFileCopiedElsewhereWhenItsFilesAreNotBesideItThenTheShippedOnesAreUsed) {
+  TempTree t;
+  const std::string shipped_alt = t.write("share/poise/filters/altitude.yaml", "a: 1\n");
+  const std::string shipped_imu = t.write("share/poise/drivers/imu.yaml", "serial: {}\n");
+  const std::string shipped_qos = t.write("share/poise/qos/poise_profiles.xml", "<dds/>\n");
+  const std::string shipped_cfg = t.write("share/poise/filters/p.yaml", "b: 2\n");
+  const std::string own_imu = t.write("etc/drivers/imu.yaml", "serial: {}\n");  // beside the copy
+  const std::string host = R"(
+qos_file: ../qos/poise_profiles.xml
+components:
+  - {type: imu_driver, params: {config_file: ../drivers/imu.yaml}}
+  - {type: altitude, config: ../filters/p.yaml, params: {filter_file: ../filters/altitude.yaml}}
+)";
+  const HostSpec spec = parse_host(YAML::Load(host), "/etc/poise/robot.yaml", t.path("etc/poise"),
+                                   t.path("share/poise/hosts"));
+  EXPECT_EQ(spec.qos_file, shipped_qos);
+  EXPECT_EQ(spec.components[0].params["config_file"].as<std::string>(), own_imu)
+      << "a file beside the host file comes first";
+  EXPECT_EQ(spec.components[1].params["filter_file"].as<std::string>(), shipped_alt);
+  EXPECT_EQ(spec.components[1].params["b"].as<int>(), 2) << "the config file came from " << shipped_cfg;
+  std::filesystem::remove(own_imu);
+  const HostSpec shipped = parse_host(YAML::Load(host), "/etc/poise/robot.yaml", t.path("etc/poise"),
+                                      t.path("share/poise/hosts"));
+  EXPECT_EQ(shipped.components[0].params["config_file"].as<std::string>(), shipped_imu);
+}
+
+TEST(HostFile, GivenARelativePathFoundNowhereWhenParsedThenTheErrorNamesEveryPathTried) {
+  TempTree t;
+  t.write("share/poise/hosts/robot.yaml", "components: []\n");
+  const auto error = [&](const std::string& yaml, const std::string& shipped) {
+    try {
+      (void)parse_host(YAML::Load(yaml), "/etc/poise/robot.yaml", "/etc/poise", shipped);
+    } catch (const ConfigError& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  const std::string e = error("components: [{type: imu_driver, name: imu0, params: {config_file: ../drivers/none.yaml}}]",
+                              t.path("share/poise/hosts"));
+  EXPECT_NE(e.find("/etc/poise/robot.yaml: components[0] (imu0): params.config_file '../drivers/none.yaml' not found"),
+            std::string::npos) << e;
+  EXPECT_NE(e.find("not found at /etc/drivers/none.yaml (beside the host file) nor at " +
+                   t.path("share/poise/drivers/none.yaml") + " (beside the shipped host files)"),
+            std::string::npos) << e;
+  EXPECT_EQ(e.find("config/drivers"), std::string::npos) << "no source-tree path: " << e;
+  const std::string q = error("qos_file: q.xml\ncomponents: [{type: a}]", "");
+  EXPECT_NE(q.find("qos_file 'q.xml' not found at /etc/poise/q.xml (beside the host file; no shipped "
+                   "configuration was found beside this executable)"),
+            std::string::npos) << q;
 }
 
 TEST(HostFile, ErrorsNameTheProblem) {

@@ -16,7 +16,9 @@
 #include <cstring>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <stdexcept>
+#include <vector>
 
 namespace poise::runtime {
 namespace {
@@ -110,7 +112,7 @@ void register_probes() {
   }
 }
 
-HostSpec spec_of(const std::string& yaml) { return parse_host(YAML::Load(yaml), "test.yaml", "/cfg"); }
+HostSpec spec_of(const std::string& yaml) { return parse_host(YAML::Load(yaml), "test.yaml", "/cfg", ""); }
 
 class ServiceNotify : public ::testing::Test {
  protected:
@@ -160,6 +162,91 @@ TEST_F(ServiceNotify, WithoutNotifySocketNothingIsSent) {
   ::unsetenv("NOTIFY_SOCKET");
   EXPECT_FALSE(notify_service("READY=1")) << "not started by a service manager: a no-op";
   EXPECT_EQ(socket_->receive(kReceiveTimeoutMs / 4), "");
+}
+
+// The watchdog is a health check: WATCHDOG=1 only when every watched component has produced since
+// the previous check; a component without a count (on demand only) is not watched.
+TEST_F(ServiceNotify, GivenComponentCountsWhenEachCheckComesThenWatchdogIsSentOnlyWhileEveryWatchedOneProduced) {
+  constexpr int64_t kIntervalNs = 5'000'000'000;
+  std::vector<ComponentOutput> counts{{"imu0", 0U}, {"pkf", 0U}, {"foxglove", std::nullopt}};
+  ServiceWatchdog watchdog([&counts] { return counts; }, kIntervalNs, 0);
+  ASSERT_TRUE(watchdog.enabled());
+  EXPECT_FALSE(watchdog.poll(kIntervalNs - 1)) << "no check before the first interval ends";
+  EXPECT_EQ(socket_->receive(0), "");
+
+  counts[0].produced = 500U;
+  counts[1].produced = 480U;
+  EXPECT_TRUE(watchdog.poll(kIntervalNs));
+  EXPECT_EQ(socket_->receive(kReceiveTimeoutMs), "WATCHDOG=1");
+  EXPECT_TRUE(watchdog.stalled().empty());
+
+  counts[0].produced = 1000U;  // pkf stops producing; the foxglove bridge never counts
+  EXPECT_FALSE(watchdog.poll(2 * kIntervalNs));
+  EXPECT_EQ(socket_->receive(kReceiveTimeoutMs), "STATUS=not producing: pkf");
+  EXPECT_EQ(socket_->receive(0), "") << "no WATCHDOG=1 while a component produces nothing";
+  EXPECT_EQ(watchdog.stalled(), std::vector<std::string>{"pkf"});
+
+  counts[0].produced = 1500U;
+  EXPECT_FALSE(watchdog.poll(3 * kIntervalNs - 1)) << "the next check is one interval after the last";
+  EXPECT_FALSE(watchdog.poll(3 * kIntervalNs)) << "pkf still at 480";
+  EXPECT_EQ(socket_->receive(0), "") << "the STATUS line is sent once per change";
+
+  counts[0].produced = 2000U;
+  counts[1].produced = 481U;
+  EXPECT_TRUE(watchdog.poll(4 * kIntervalNs));
+  EXPECT_EQ(socket_->receive(kReceiveTimeoutMs), "STATUS=2 component(s) producing");
+  EXPECT_EQ(socket_->receive(kReceiveTimeoutMs), "WATCHDOG=1");
+}
+
+TEST_F(ServiceNotify, GivenNoWatchdogIntervalThenTheCheckNeverRunsAndNothingIsSent) {
+  int reads = 0;
+  ServiceWatchdog watchdog([&reads] { ++reads; return std::vector<ComponentOutput>{{"a", 0U}}; }, 0, 0);
+  EXPECT_FALSE(watchdog.enabled());
+  EXPECT_FALSE(watchdog.poll(3'600'000'000'000));
+  EXPECT_EQ(reads, 0) << "the counts are not even read";
+  EXPECT_EQ(socket_->receive(kReceiveTimeoutMs / 4), "");
+}
+
+// systemd gives the watchdog as WATCHDOG_USEC for the process WATCHDOG_PID; the check runs at half
+// of it, so one missed check is not yet a restart.
+TEST_F(ServiceNotify, GivenWatchdogUsecForThisProcessThenTheCheckIntervalIsHalfOfIt) {
+  ::setenv("WATCHDOG_USEC", "10000000", 1);
+  ::setenv("WATCHDOG_PID", std::to_string(::getpid()).c_str(), 1);
+  EXPECT_EQ(ServiceWatchdog::interval_from_environment(), 5'000'000'000);
+  ::setenv("WATCHDOG_PID", std::to_string(::getpid() + 1).c_str(), 1);
+  EXPECT_EQ(ServiceWatchdog::interval_from_environment(), 0) << "another process's watchdog";
+  ::unsetenv("WATCHDOG_PID");
+  ::unsetenv("WATCHDOG_USEC");
+  EXPECT_EQ(ServiceWatchdog::interval_from_environment(), 0);
+}
+
+class CountingProbe : public Component {
+ public:
+  explicit CountingProbe(std::optional<uint64_t> n) : n_(n) {}
+  [[nodiscard]] std::optional<uint64_t> produced() const override { return n_; }
+
+ private:
+  std::optional<uint64_t> n_;
+};
+
+TEST(HostProduced, GivenComponentsWhenAskedThenEachCountComesWithItsInstanceNameInHostFileOrder) {
+  auto& registry = ComponentRegistry::instance();
+  if (registry.find("test_counting_probe") == nullptr) {
+    registry.add({"test_counting_probe", "counting probe", [](const ComponentSpec& spec, HostContext&) {
+                    return std::make_unique<CountingProbe>(spec.params["n"] ? std::optional<uint64_t>(spec.params["n"].as<uint64_t>())
+                                                                            : std::nullopt);
+                  }});
+  }
+  testing::DomainLease domain;
+  const Host host(spec_of("components: [{type: test_counting_probe, name: b, params: {n: 7}},"
+                          " {type: test_counting_probe, name: a}]"),
+                  domain.id());
+  const auto p = host.produced();
+  ASSERT_EQ(p.size(), 2U);
+  EXPECT_EQ(p[0].name, "b");
+  EXPECT_EQ(p[0].produced, std::optional<uint64_t>(7U));
+  EXPECT_EQ(p[1].name, "a");
+  EXPECT_FALSE(p[1].produced.has_value());
 }
 
 }  // namespace

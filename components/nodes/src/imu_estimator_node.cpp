@@ -130,6 +130,11 @@ std::string ImuEstimatorNode::status() const {
   return runner_.status();
 }
 
+std::optional<uint64_t> ImuEstimatorNode::produced() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return runner_.published();
+}
+
 runtime::ComponentType estimator_component(const std::string& type, const std::string& description,
                                            StepFactory make) {
   return {type, description,

@@ -1,6 +1,7 @@
 #include "poise/runtime/host.h"
 
 #include "poise/core/yaml_params.h"
+#include "poise/runtime/shipped.h"
 
 #include <filesystem>
 #include <set>
@@ -10,11 +11,41 @@ namespace poise::runtime {
 namespace fs = std::filesystem;
 
 namespace {
-std::string resolve(const std::string& base_dir, const std::string& path) {
+/// Where the relative paths of a host file are looked up.
+struct PathBases {
+  std::string host_dir;           ///< the host file's directory
+  std::string shipped_hosts_dir;  ///< the shipped host files' directory ("" when none)
+};
+
+/// A path named in a host file (`key` of `where`): an absolute one as it is; a relative one beside
+/// the host file, else beside the shipped host files, the first that exists (a shipped host file
+/// copied to /etc/poise still finds the shipped filter and driver files its `../filters/...`
+/// name); found in neither place, a ConfigError naming every path tried.
+std::string resolve(const PathBases& bases, const std::string& path, const std::string& where,
+                    const std::string& key) {
   if (path.empty() || fs::path(path).is_absolute()) {
     return path;
   }
-  return (fs::path(base_dir) / path).lexically_normal().string();
+  const std::string beside = (fs::path(bases.host_dir) / path).lexically_normal().string();
+  std::error_code ec;
+  if (fs::exists(beside, ec)) {
+    return beside;
+  }
+  std::string tried = " at " + beside + " (beside the host file";
+  const std::string shipped = bases.shipped_hosts_dir.empty()
+                                  ? std::string()
+                                  : (fs::path(bases.shipped_hosts_dir) / path).lexically_normal().string();
+  if (shipped.empty()) {
+    tried += "; no shipped configuration was found beside this executable)";
+  } else if (shipped == beside) {
+    tried += ", one of the shipped host files)";
+  } else if (fs::exists(shipped, ec)) {
+    return shipped;
+  } else {
+    tried += ") nor at " + shipped + " (beside the shipped host files)";
+  }
+  throw ConfigError(where + ": " + key + " '" + path + "' not found" + tried +
+                    "; give an absolute path or one relative to the host file");
 }
 
 void check_keys(const YAML::Node& map, const std::set<std::string>& known, const std::string& where) {
@@ -96,7 +127,7 @@ void apply_topic_overrides(const YAML::Node& map, const std::string& origin, dds
 
 namespace {
 /// One entry of a host file's `components` list (YAML type errors propagate to the caller).
-ComponentSpec parse_component(const YAML::Node& entry, const std::string& where, const std::string& base_dir) {
+ComponentSpec parse_component(const YAML::Node& entry, const std::string& where, const PathBases& bases) {
   if (!entry.IsMap() || !entry["type"]) {
     throw ConfigError(where + ": each component needs a 'type'");
   }
@@ -107,24 +138,26 @@ ComponentSpec parse_component(const YAML::Node& entry, const std::string& where,
   c.origin = where + " (" + c.name + ")";
   YAML::Node from_file;
   if (entry["config"]) {
-    from_file = load_param_file(resolve(base_dir, entry["config"].as<std::string>()));
+    from_file = load_param_file(resolve(bases, entry["config"].as<std::string>(), where, "config"));
   }
   if (entry["params"] && !entry["params"].IsMap()) {
     throw ConfigError(where + ": 'params' must be a map");
   }
   c.params = merge(from_file, entry["params"]);
-  // Parameters named *_file are paths: relative ones resolve against the host file's directory.
+  // Parameters named *_file are paths, resolved as `config` is.
   for (auto param : c.params) {
     const auto key = param.first.as<std::string>();
     if (key.size() > 5 && key.compare(key.size() - 5, 5, "_file") == 0 && param.second.IsScalar()) {
-      c.params[key] = resolve(base_dir, param.second.as<std::string>());
+      c.params[key] = resolve(bases, param.second.as<std::string>(), c.origin, "params." + key);
     }
   }
   return c;
 }
 }  // namespace
 
-HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std::string& base_dir) {
+HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std::string& base_dir,
+                    const std::string& shipped_hosts) {
+  const PathBases bases{base_dir, shipped_hosts};
   if (!root || !root.IsMap()) {
     throw ConfigError(origin + ": a host file is a YAML map with a 'components' list");
   }
@@ -143,7 +176,7 @@ HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std
       spec.participant_profile = root["participant_profile"].as<std::string>();
     }
     if (root["qos_file"]) {
-      spec.qos_file = resolve(base_dir, root["qos_file"].as<std::string>());
+      spec.qos_file = resolve(bases, root["qos_file"].as<std::string>(), origin, "qos_file");
     }
   } catch (const YAML::Exception& e) {
     throw ConfigError(origin + ": " + e.what());
@@ -159,7 +192,7 @@ HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std
   for (std::size_t i = 0; i < list.size(); ++i) {
     const std::string where = origin + ": components[" + std::to_string(i) + "]";
     try {
-      spec.components.push_back(parse_component(list[i], where, base_dir));
+      spec.components.push_back(parse_component(list[i], where, bases));
     } catch (const YAML::Exception& e) {
       throw ConfigError(where + ": " + e.msg + " (type, name and config are strings, params a map)");
     }
@@ -169,6 +202,11 @@ HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std
     }
   }
   return spec;
+}
+
+std::string shipped_hosts_dir() {
+  const std::string dir = shipped_config_dir();
+  return dir.empty() ? dir : (fs::path(dir) / "hosts").string();
 }
 
 HostSpec load_host_file(const std::string& path) {
@@ -243,6 +281,15 @@ std::vector<std::string> Host::status() const {
     }
   }
   return lines;
+}
+
+std::vector<ComponentOutput> Host::produced() const {
+  std::vector<ComponentOutput> out;
+  out.reserve(components_.size());
+  for (std::size_t i = 0; i < components_.size(); ++i) {
+    out.push_back({names_[i], components_[i]->produced()});
+  }
+  return out;
 }
 
 void apply_component_sets(const std::vector<std::string>& sets, HostSpec& host) {

@@ -239,7 +239,7 @@ DriverConfig load_driver_config(const std::string& path) {
   std::ifstream in(path);
   if (!in) {
     throw ConfigError(path + ": cannot read the IMU driver configuration (does the file exist? "
-                             "start from config/drivers/imu.yaml or run `poise calibrate imu`)");
+                             "`poise calibrate imu` writes one)");
   }
   std::stringstream ss;
   ss << in.rdbuf();

@@ -2,9 +2,11 @@
 
 #include <cinttypes>
 #include <cstdio>
+#include <filesystem>
 #include <set>
 
 #include "poise/dds/convert.h"
+#include "poise/runtime/shipped.h"
 
 namespace poise::imu {
 namespace {
@@ -44,6 +46,13 @@ ImuNodeOptions imu_node_options(const runtime::ComponentSpec& spec) {
       if (has_inline) {
         throw runtime::ConfigError(spec.origin + ": give either config_file or inline driver "
                                                  "sections, not both");
+      }
+      std::error_code ec;
+      if (!std::filesystem::exists(config_file, ec)) {
+        throw runtime::ConfigError(spec.origin + ": config_file " + config_file +
+                                   " does not exist (start from " +
+                                   runtime::shipped_file_hint("drivers/imu.yaml") +
+                                   ", or run `poise calibrate imu`)");
       }
       o.config = load_driver_config(config_file);
     } else if (has_inline) {

@@ -120,6 +120,8 @@ class SimCamera : public runtime::Component {
       thread_.join();
     }
   }
+  /// Frames rendered or blacked out (the service watchdog's health check).
+  [[nodiscard]] std::optional<uint64_t> produced() const override { return frames_.load() + blacked_out_.load(); }
   [[nodiscard]] std::string status() const override {
     std::ostringstream os;
     os << "frames " << frames_.load() << ", vision poses " << poses_.load() << ", blacked out "

@@ -76,6 +76,9 @@ class SimImu : public runtime::Component {
     }
   }
 
+  /// Lines sent, read or not (the service watchdog's health check): stops when the scenario ends.
+  [[nodiscard]] std::optional<uint64_t> produced() const override { return written_.load() + no_reader_.load(); }
+
   [[nodiscard]] std::string status() const override {
     std::ostringstream os;
     os << "lines written " << written_.load() << " (" << params_.rate_hz << " Hz, scenario "

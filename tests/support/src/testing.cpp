@@ -89,6 +89,13 @@ std::string source_path(const std::string& relative) {
   return std::string(POISE_SOURCE_DIR) + "/" + relative;
 }
 
+std::string read_file(const std::string& path) {
+  std::ifstream in(path);
+  std::stringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
 Child::Child(const std::vector<std::string>& argv, const std::vector<std::string>& env) {
   static int counter = 0;
   log_path_ = temp_dir() + "/poise-test-child-" + std::to_string(::getpid()) + "-" +

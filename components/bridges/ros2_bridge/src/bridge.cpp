@@ -339,6 +339,12 @@ class Bridge : public runtime::Component {
     }
   }
 
+  /// Messages sent to ROS 2 and IMU samples from it (the service watchdog's health check).
+  [[nodiscard]] std::optional<uint64_t> produced() const override {
+    const Counts c = counts();
+    return c.ros_out + c.imu_out;
+  }
+
   [[nodiscard]] std::string status() const override {
     const Counts c = counts();
     std::ostringstream os;

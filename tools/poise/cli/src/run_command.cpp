@@ -4,6 +4,7 @@
 #include "poise/core/yaml_params.h"
 #include "poise/runtime/realtime.h"
 #include "poise/runtime/service.h"
+#include "poise/runtime/shipped.h"
 
 #include <chrono>
 #include <cstdio>
@@ -60,10 +61,17 @@ void run_host(const runtime::HostSpec& host_spec, const RunOptions& options) {
                  spec.components.size(), domain);
   }
   const auto start = std::chrono::steady_clock::now();
+  const auto ns_of = [](std::chrono::steady_clock::time_point t) {
+    return static_cast<int64_t>(std::chrono::duration_cast<std::chrono::nanoseconds>(t.time_since_epoch()).count());
+  };
+  // fed only while every component produces (systemd's WatchdogSec=; off otherwise)
+  runtime::ServiceWatchdog watchdog([&host] { return host.produced(); },
+                                    runtime::ServiceWatchdog::interval_from_environment(), ns_of(start));
   auto next_status = start + std::chrono::duration<double>(options.status_period_s);
   while (!stop_requested()) {
     std::this_thread::sleep_for(std::chrono::milliseconds(20));
     const auto now = std::chrono::steady_clock::now();
+    watchdog.poll(ns_of(now));
     if (options.duration_s > 0.0 &&
         std::chrono::duration<double>(now - start).count() >= options.duration_s) {
       break;
@@ -126,7 +134,8 @@ void register_run_commands(CLI::App& app) {
   auto host_path = std::make_shared<std::string>();
   auto list = std::make_shared<bool>(false);
   CLI::App* run = app.add_subcommand(
-      "run", "Run drivers and components in one process from a host file (see config/hosts/)");
+      "run", "Run drivers and components in one process from a host file (examples: " +
+                 runtime::shipped_file_hint("hosts") + ")");
   run->add_option("host", *host_path, "Host file (YAML)");
   run->add_flag("--list", *list, "List the component types and exit");
   auto run_sets = std::make_shared<std::vector<std::string>>();
@@ -144,7 +153,8 @@ void register_run_commands(CLI::App& app) {
       return;
     }
     if (host_path->empty()) {
-      throw Error("poise run needs a host file (e.g. config/hosts/robot.yaml)", kUsageExitCode);
+      throw Error("poise run needs a host file (e.g. " + runtime::shipped_file_hint("hosts/robot.yaml") + ")",
+                  kUsageExitCode);
     }
     runtime::HostSpec host = runtime::load_host_file(*host_path);
     try {

@@ -9,6 +9,7 @@
 #include "poise/demo/monitor.h"
 #include "poise/demo/report.h"
 #include "poise/runtime/host.h"
+#include "poise/runtime/shipped.h"
 #include "poise/sim/sensor_simulator.h"
 
 #include <unistd.h>
@@ -293,8 +294,9 @@ void run_demo(const DemoOptions& o) {
   host.start();
   if (!foxglove_url.empty()) {
     std::printf("Foxglove: open %s (or ws://localhost:%s on this host) in Foxglove or Lichtblick; layout "
-                "config/foxglove/poise.json\n",
-                foxglove_url.c_str(), foxglove_url.substr(foxglove_url.rfind(':') + 1).c_str());
+                "%s\n",
+                foxglove_url.c_str(), foxglove_url.substr(foxglove_url.rfind(':') + 1).c_str(),
+                runtime::shipped_file_hint("foxglove/poise.json").c_str());
     std::fflush(stdout);
   }
   const bool redraw = !o.plain && ::isatty(STDOUT_FILENO) != 0;

@@ -2,6 +2,7 @@
 // vision_pose until Ctrl-C, --duration, or the end of a file/list/synthetic source.
 #include "poise/camera/camera_node.h"
 #include "poise/cli/common.h"
+#include "poise/runtime/shipped.h"
 
 #include <CLI/CLI.hpp>
 
@@ -110,10 +111,10 @@ void register_camera_node_cli(CLI::App& app) {
   cmd->add_option("--intrinsics", o->intrinsics, "OpenCV calibration or ROS camera_info YAML")
       ->required()
       ->check(CLI::ExistingFile);
-  cmd->add_option("--tags", o->tags, "Tag map YAML (see config/camera/tags_example.yaml)")
+  cmd->add_option("--tags", o->tags, "Tag map YAML (see " + runtime::shipped_file_hint("camera/tags_example.yaml") + ")")
       ->required()
       ->check(CLI::ExistingFile);
-  cmd->add_option("--config", o->config, "Camera config YAML (see config/camera/camera.yaml)")
+  cmd->add_option("--config", o->config, "Camera config YAML (see " + runtime::shipped_file_hint("camera/camera.yaml") + ")")
       ->check(CLI::ExistingFile);
   cmd->add_option("--name", o->name, "sensor_id of the published samples (default: the config's)");
   add_dds_profile_option(cmd, &o->profile);

@@ -21,6 +21,7 @@
 #include "poise/imu/pty_link.h"
 #include "poise/imu/serial_port.h"
 #include "poise/runtime/host.h"
+#include "poise/runtime/shipped.h"
 #include "poise/sim/sensor_simulator.h"
 
 namespace poise::cli {
@@ -376,8 +377,8 @@ void register_imu_cli(CLI::App& app) {
   imu_cmd->add_option("--port", io->port, "Serial device or sim-imu link (e.g. /dev/ttyACM0)")->required();
   imu_cmd->add_option("--baud", io->baud, "Baud rate 9600..1000000 (default: config file, else 115200)")
       ->check(CLI::IsMember(imu::supported_bauds()));
-  imu_cmd->add_option("--config", io->config, "Driver YAML (limits, raw scales, calibration; see "
-                                               "config/drivers/imu.yaml)")
+  imu_cmd->add_option("--config", io->config, "Driver YAML (limits, raw scales, calibration; see " +
+                                               runtime::shipped_file_hint("drivers/imu.yaml") + ")")
       ->check(CLI::ExistingFile);
   imu_cmd->add_option("--name", io->name, "sensor_id of the published samples")->capture_default_str();
   add_dds_profile_option(imu_cmd, &io->profile);

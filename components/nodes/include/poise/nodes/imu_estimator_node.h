@@ -35,6 +35,8 @@ class ImuEstimatorNode : public runtime::Component {
   void start() override;
   void stop() override;
   [[nodiscard]] std::string status() const override;
+  /// Estimates published (the service watchdog's health check).
+  [[nodiscard]] std::optional<uint64_t> produced() const override;
 
  private:
   /// The DDS writers of what the step declares (StepOutputs).

@@ -13,6 +13,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -51,6 +52,11 @@ class Component {
   virtual void stop() {}
   /// One line of live status (rates, counts) for the host's periodic print; empty for none.
   [[nodiscard]] virtual std::string status() const { return {}; }
+  /// How much the component has produced so far (samples, estimates, frames, forwarded messages):
+  /// a count that only grows. The service watchdog (service.h) is fed only while every component
+  /// that has one keeps producing. nullopt: the component produces on demand only (a server
+  /// waiting for clients) and is not watched.
+  [[nodiscard]] virtual std::optional<uint64_t> produced() const { return std::nullopt; }
 };
 
 using ComponentFactory =

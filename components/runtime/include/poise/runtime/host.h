@@ -11,7 +11,11 @@
 //       name: pkf                  # optional instance name (default: type)
 //       config: ../filters/parallel_kf.yaml   # optional parameter file (YAML map)
 //       params: {preset: default}  # optional inline parameters, override the config file
-//   Parameters whose name ends in `_file` are paths; relative ones resolve against this file.
+//   Parameters whose name ends in `_file` are paths. A relative path (`config`, `qos_file`,
+//   `*_file`) is looked up beside this file, else beside the shipped host files
+//   (<prefix>/share/poise/hosts, poise/runtime/shipped.h), so a shipped host file copied to
+//   /etc/poise still finds the shipped filter and driver files; found nowhere, an error names
+//   every path tried.
 #pragma once
 
 #include "poise/runtime/component.h"
@@ -36,8 +40,13 @@ struct HostSpec {
 
 /// Parses and validates a host file; throws ConfigError with the file, the key and what to do.
 HostSpec load_host_file(const std::string& path);
-/// The same from YAML text (`base_dir` resolves relative paths).
-HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std::string& base_dir);
+/// The shipped host files' directory (<shipped_config_dir()>/hosts), "" when there is none.
+std::string shipped_hosts_dir();
+
+/// The same from YAML text: relative paths are looked up in `base_dir` (the host file's
+/// directory), then in `shipped_hosts` ("" for nowhere else).
+HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std::string& base_dir,
+                    const std::string& shipped_hosts = shipped_hosts_dir());
 
 /// Applies a `topics:` map onto names; throws ConfigError on unknown keys.
 void apply_topic_overrides(const YAML::Node& map, const std::string& origin, dds::TopicNames& names);
@@ -51,6 +60,12 @@ void apply_component_sets(const std::vector<std::string>& sets, HostSpec& host);
 /// Loads a YAML parameter file as a map (ConfigError if missing or not a map).
 YAML::Node load_param_file(const std::string& path);
 
+/// What one component has produced so far (Component::produced()), by instance name.
+struct ComponentOutput {
+  std::string name;
+  std::optional<uint64_t> produced;
+};
+
 /// Runs components in one process until `stop` becomes true (or a component fails).
 class Host {
  public:
@@ -63,6 +78,8 @@ class Host {
   void stop();
   /// One status line per component.
   [[nodiscard]] std::vector<std::string> status() const;
+  /// Component::produced() of every component, in host-file order.
+  [[nodiscard]] std::vector<ComponentOutput> produced() const;
   /// Number of components.
   [[nodiscard]] std::size_t size() const { return components_.size(); }
   [[nodiscard]] dds::Participant& participant() { return *participant_; }

@@ -53,6 +53,8 @@ class CameraNode : public runtime::Component {
   void start() override;
   void stop() override;
   [[nodiscard]] std::string status() const override;
+  /// Frames processed (the service watchdog's health check).
+  [[nodiscard]] std::optional<uint64_t> produced() const override { return frames_.load(); }
 
   /// True once the source has ended (file/list/synthetic done) or failed; error() says why.
   [[nodiscard]] bool finished() const { return finished_.load(); }

@@ -63,6 +63,8 @@ class ImuDriverNode : public runtime::Component {
   void start() override;
   void stop() override;
   [[nodiscard]] std::string status() const override;
+  /// Samples written to DDS (the service watchdog's health check).
+  [[nodiscard]] std::optional<uint64_t> produced() const override { return imu_queue_.stats().written; }
 
  private:
   void on_sample(const ImuSample& sample, const SampleInfo& info);

@@ -32,6 +32,9 @@ std::string bin(const std::string& name);
 /// Path inside the source tree.
 std::string source_path(const std::string& relative);
 
+/// The whole content of a file ("" when it cannot be read).
+std::string read_file(const std::string& path);
+
 /// A child process with stdout+stderr captured to a file; killed (SIGKILL) on destruction.
 class Child {
  public:
