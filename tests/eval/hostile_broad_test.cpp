@@ -167,6 +167,28 @@ TEST(HostileBroad, GivenTrialsWithoutScorableSamplesWhenEvaluatedThenTheyAreExcl
   EXPECT_NE(rate.output.find(bad + ": attribute 'sampling_rate' = 1e+300 Hz"), std::string::npos) << rate.output;
 }
 
+// Issue 33: a write the device refuses (/dev/full: every write fails with ENOSPC) is an error
+// exit naming the file, never "wrote" and exit 0 over a 0-byte file.
+TEST(HostileBroad, GivenAFullDeviceAsOutputWhenTuneAndEvalWriteThenTheyFailNamingTheFile) {
+  SmallTrial ok;
+  const std::string a = write_trial("01_full_a", ok);
+  const std::string b = write_trial("02_full_b", ok);
+  const std::string dir = ::testing::TempDir() + "/hostile_full";
+  const auto tune = testing::run({testing::bin("poise"), "tune", "--grid", "mag_norm_tol=0.05,0.1", "--out-dir", dir,
+                                  "-o", "/dev/full", a, b},
+                                 std::chrono::seconds(120));
+  EXPECT_NE(tune.exit_code, 0) << tune.output;
+  EXPECT_EQ(tune.output.find("wrote /dev/full"), std::string::npos) << tune.output;
+  EXPECT_NE(tune.output.find("error while writing '/dev/full'"), std::string::npos) << tune.output;
+  // The direct check of the writer: the same refusal as an exception naming the file.
+  try {
+    write_quaternion_csv("/dev/full", {Eigen::Quaterniond::Identity()}, 100.0);
+    ADD_FAILURE() << "no error writing /dev/full";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("'/dev/full'"), std::string::npos) << e.what();
+  }
+}
+
 // GIVEN only undisturbed trials WHEN the table is printed THEN the disturbed mean over 0 trials is
 // "-", never 0.000 or nan, and the scored-samples column says what it counts.
 TEST(EvalTable, GivenNoDisturbedTrialWhenPrintedThenItsMeanIsADashNeverZeroOrNan) {

@@ -179,7 +179,11 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
   const std::vector<eval::BroadTrial> trials = load_trials(files);
   const std::string cand_dir = (std::filesystem::path(out_dir) / "candidates").string();
   make_dir(cand_dir);
-  std::ofstream table((std::filesystem::path(out_dir) / "grid_results.csv").string());
+  const std::string table_path = (std::filesystem::path(out_dir) / "grid_results.csv").string();
+  std::ofstream table(table_path);
+  if (!table) {
+    throw Error("cannot write '" + table_path + "'");
+  }
   table << "candidate,overrides,trial,total_deg,heading_deg,inclination_deg\n";
   std::vector<std::vector<eval::TrialResult>> by_candidate;
   Progress progress("poise eval broad --grid", candidates.size() * trials.size());
@@ -213,6 +217,10 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
     by_candidate.push_back(std::move(rs));
   }
   progress.finish();
+  table.close();  // flushes: a full disk shows here
+  if (!table) {
+    throw Error("error while writing '" + table_path + "' (disk full or device refused the data)");
+  }
   if (eval::group_means(by_candidate.front()).unscored.size() == trials.size()) {
     throw Error("no trial has scorable samples (samples with movement and a valid reference quaternion)");
   }
@@ -254,7 +262,7 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
   row("in-sample", in);
   row("cross-validated", out);
   std::cout << "\nin-sample choice: " << eval::describe(candidates[cv.in_sample_choice]) << "\n"
-            << "per-candidate, per-trial figures: " << (std::filesystem::path(out_dir) / "grid_results.csv").string()
+            << "per-candidate, per-trial figures: " << table_path
             << "\n";
   return {cv, candidates};
 }

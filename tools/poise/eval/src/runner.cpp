@@ -34,7 +34,8 @@ void write_quaternion_csv(const std::string& path, const std::vector<Eigen::Quat
     std::fprintf(f, "%.6f,%.9f,%.9f,%.9f,%.9f\n", static_cast<double>(k) / rate_hz, q[k].w(), q[k].x(),
                  q[k].y(), q[k].z());
   }
-  if (std::fclose(f) != 0) {
+  const bool failed = std::ferror(f) != 0;  // a write that failed before the last one
+  if (std::fclose(f) != 0 || failed) {
     throw std::runtime_error("error while writing '" + path + "'");
   }
 }
