@@ -10,16 +10,22 @@
 
 namespace poise::eval {
 
-std::vector<Eigen::Quaterniond> run_filter(AttitudeFilter& filter, const BroadTrial& trial) {
+std::vector<Eigen::Quaterniond> run_filter(AttitudeFilter& filter, const BroadTrial& trial, size_t* estimated) {
   filter.reset();
   if (auto* inputs = dynamic_cast<TrialInputs*>(&filter)) {
     inputs->begin_trial(trial);
   }
   std::vector<Eigen::Quaterniond> out;
   out.reserve(trial.size());
+  size_t n_estimated = 0;
   for (size_t k = 0; k < trial.size(); ++k) {
     filter.update(trial.sample(k));
-    out.push_back(filter.initialized() ? filter.q_world_body() : Eigen::Quaterniond::Identity());
+    const bool ready = filter.initialized();
+    n_estimated += ready ? 1 : 0;
+    out.push_back(ready ? filter.q_world_body() : Eigen::Quaterniond::Identity());
+  }
+  if (estimated != nullptr) {
+    *estimated = n_estimated;
   }
   return out;
 }
