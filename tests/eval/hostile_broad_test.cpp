@@ -23,6 +23,7 @@ struct SmallTrial {
   size_t n = 200;
   std::vector<Eigen::Vector4d> quat;  // default: identity rows
   std::vector<uint8_t> movement;      // default: all 1
+  bool nan_imu = false;               // every IMU sample NaN: a filter rejects them all
 };
 
 void write_dataset(hid_t file, const char* name, hid_t type, size_t rows, size_t cols, const void* data) {
@@ -45,6 +46,13 @@ std::string write_trial(const std::string& stem, const SmallTrial& t) {
     acc[3 * k + 2] = 9.81;
     mag[3 * k + 1] = 20.0;
     mag[3 * k + 2] = -40.0;
+    if (t.nan_imu) {
+      for (int c = 0; c < 3; ++c) {
+        gyr[3 * k + static_cast<size_t>(c)] = std::nan("");
+        acc[3 * k + static_cast<size_t>(c)] = std::nan("");
+        mag[3 * k + static_cast<size_t>(c)] = std::nan("");
+      }
+    }
     const Eigen::Vector4d q = k < t.quat.size() ? t.quat[k] : Eigen::Vector4d(1, 0, 0, 0);
     for (int c = 0; c < 4; ++c) {
       quat[4 * k + static_cast<size_t>(c)] = q[c];
@@ -158,6 +166,35 @@ TEST(HostileBroad, GivenTrialsWithoutScorableSamplesWhenEvaluatedThenTheyAreExcl
                                  std::chrono::seconds(60));
   EXPECT_NE(none.exit_code, 0) << none.output;
   EXPECT_NE(none.output.find("no trial has scorable samples"), std::string::npos) << none.output;
+  // Issue 33: every sample rejected by the filter (NaN IMU): the identities it leaves are no
+  // estimate; the trial is excluded and named, never scored as the initial quaternion's error.
+  SmallTrial rejected;
+  rejected.nan_imu = true;
+  const std::string nan = write_trial("04_all_rejected", rejected);
+  const auto rej = testing::run({testing::bin("poise"), "eval", "broad", "--out-dir", dir, good, nan},
+                                std::chrono::seconds(60));
+  EXPECT_EQ(rej.exit_code, 0) << rej.output;
+  EXPECT_NE(rej.output.find("04_all_rejected: the filter rejected every sample (no estimate): excluded"),
+            std::string::npos)
+      << rej.output;
+  EXPECT_NE(rej.output.find("mean all (1 trials)"), std::string::npos) << rej.output;
+  EXPECT_NE(rej.output.find("excluded from the means: 1 trial(s) without scorable samples: 04_all_rejected"),
+            std::string::npos)
+      << rej.output;
+  // tune leaves it out of its choice too, and with nothing else to choose from refuses.
+  const auto tune = testing::run({testing::bin("poise"), "tune", "--grid", "mag_norm_tol=0.05,0.1", "--out-dir",
+                                  dir + "/tune", "-o", dir + "/chosen.yaml", good, nan},
+                                 std::chrono::seconds(120));
+  EXPECT_EQ(tune.exit_code, 0) << tune.output;
+  EXPECT_NE(tune.output.find("04_all_rejected: the filter rejected every sample (no estimate): excluded"),
+            std::string::npos)
+      << tune.output;
+  EXPECT_NE(tune.output.find("1 without scorable samples excluded"), std::string::npos) << tune.output;
+  const auto tune_none = testing::run({testing::bin("poise"), "tune", "--grid", "mag_norm_tol=0.05,0.1",
+                                       "--out-dir", dir + "/tune", "-o", dir + "/chosen.yaml", nan},
+                                      std::chrono::seconds(120));
+  EXPECT_NE(tune_none.exit_code, 0) << tune_none.output;
+  EXPECT_NE(tune_none.output.find("no trial has scorable samples"), std::string::npos) << tune_none.output;
   SmallTrial fast;
   fast.rate_hz = 1e300;
   const std::string bad = write_trial("03_bad_rate", fast);
@@ -165,6 +202,28 @@ TEST(HostileBroad, GivenTrialsWithoutScorableSamplesWhenEvaluatedThenTheyAreExcl
                                  std::chrono::seconds(60));
   EXPECT_NE(rate.exit_code, 0) << rate.output;
   EXPECT_NE(rate.output.find(bad + ": attribute 'sampling_rate' = 1e+300 Hz"), std::string::npos) << rate.output;
+}
+
+// Issue 33: a write the device refuses (/dev/full: every write fails with ENOSPC) is an error
+// exit naming the file, never "wrote" and exit 0 over a 0-byte file.
+TEST(HostileBroad, GivenAFullDeviceAsOutputWhenTuneAndEvalWriteThenTheyFailNamingTheFile) {
+  SmallTrial ok;
+  const std::string a = write_trial("01_full_a", ok);
+  const std::string b = write_trial("02_full_b", ok);
+  const std::string dir = ::testing::TempDir() + "/hostile_full";
+  const auto tune = testing::run({testing::bin("poise"), "tune", "--grid", "mag_norm_tol=0.05,0.1", "--out-dir", dir,
+                                  "-o", "/dev/full", a, b},
+                                 std::chrono::seconds(120));
+  EXPECT_NE(tune.exit_code, 0) << tune.output;
+  EXPECT_EQ(tune.output.find("wrote /dev/full"), std::string::npos) << tune.output;
+  EXPECT_NE(tune.output.find("error while writing '/dev/full'"), std::string::npos) << tune.output;
+  // The direct check of the writer: the same refusal as an exception naming the file.
+  try {
+    write_quaternion_csv("/dev/full", {Eigen::Quaterniond::Identity()}, 100.0);
+    ADD_FAILURE() << "no error writing /dev/full";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("'/dev/full'"), std::string::npos) << e.what();
+  }
 }
 
 // GIVEN only undisturbed trials WHEN the table is printed THEN the disturbed mean over 0 trials is

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "poise/imu/driver.h"
+#include "poise/imu/faults.h"
 #include "poise/imu/framer.h"
 #include "poise/imu/timing.h"
 
@@ -356,6 +357,37 @@ TEST(ImuRateLatencyMeter, ReportsRateAndPercentiles) {
   EXPECT_NEAR(s.rate_hz, 1000.0, 1.0);
   EXPECT_NEAR(s.latency_p50_ms, 2.0, 1e-9);
   EXPECT_NEAR(s.latency_max_ms, 20.0, 1e-9);
+}
+
+// Issue 33: `sim-imu --faults flip=nan` was accepted (a NaN probability passes every range
+// comparison). Non-finite and out-of-range values are refused with a message naming the key.
+TEST(FaultSpecParse, GivenNonFiniteOrOutOfRangeValuesWhenParsedThenRefusedNamingTheKey) {
+  struct Case {
+    const char* spec;
+    const char* expected;  // part of the message
+  };
+  const Case cases[] = {
+      {"flip=nan", "'flip=nan': flip must be a finite number, not 'nan'"},
+      {"drop=inf", "'drop=inf': drop must be a finite number, not 'inf'"},
+      {"garbage=-nan", "garbage must be a finite number"},
+      {"disconnect=inf:1", "disconnect must be a finite number"},
+      {"seed=nan", "seed must be a finite number"},
+      {"seed=-1", "'seed=-1': seed must be an integer in [0, 4294967295]"},
+      {"seed=1e20", "seed must be an integer"},
+      {"seed=1.5", "seed must be an integer"},
+      {"flip=1.5", "'flip=1.5': probability must be in [0, 1]"},
+  };
+  for (const Case& c : cases) {
+    try {
+      (void)FaultSpec::parse(c.spec);
+      ADD_FAILURE() << c.spec << " accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(c.expected), std::string::npos) << c.spec << ": " << e.what();
+    }
+  }
+  const FaultSpec ok = FaultSpec::parse("flip=0.25,seed=4294967295");
+  EXPECT_EQ(ok.seed, 4294967295u);
+  EXPECT_DOUBLE_EQ(ok.probability[static_cast<size_t>(Fault::kFlip)], 0.25);
 }
 
 }  // namespace

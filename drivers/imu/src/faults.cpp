@@ -1,5 +1,6 @@
 #include "poise/imu/faults.h"
 
+#include <cmath>
 #include <sstream>
 #include <stdexcept>
 
@@ -22,6 +23,8 @@ const char* to_string(Fault f) {
 }
 
 namespace {
+/// A finite number (nan, inf and out-of-range values refused, naming the key: a NaN probability
+/// would pass every range comparison).
 double parse_number(const std::string& item, const std::string& text) {
   std::size_t used = 0;
   double v = 0;
@@ -32,6 +35,11 @@ double parse_number(const std::string& item, const std::string& text) {
   }
   if (used != text.size() || text.empty()) {
     throw std::invalid_argument("fault spec item '" + item + "': '" + text + "' is not a number");
+  }
+  if (!std::isfinite(v)) {
+    const std::string key = item.substr(0, item.find('='));
+    throw std::invalid_argument("fault spec item '" + item + "': " + key + " must be a finite number, not '" +
+                                text + "'");
   }
   return v;
 }
@@ -53,7 +61,11 @@ FaultSpec FaultSpec::parse(const std::string& spec) {
     const std::string key = item.substr(0, eq);
     const std::string value = item.substr(eq + 1);
     if (key == "seed") {
-      out.seed = static_cast<uint32_t>(parse_number(item, value));
+      const double seed = parse_number(item, value);
+      if (seed < 0 || seed > 4294967295.0 || seed != std::floor(seed)) {
+        throw std::invalid_argument("fault spec item '" + item + "': seed must be an integer in [0, 4294967295]");
+      }
+      out.seed = static_cast<uint32_t>(seed);
       continue;
     }
     if (key == "disconnect") {

@@ -127,8 +127,9 @@ void write_config_with_overrides(const std::string& base_yaml_path, const Overri
     }
   }
   f << root << "\n";
+  f.close();  // flushes: a full disk shows here, not in a destructor that cannot report it
   if (!f) {
-    throw std::runtime_error("error while writing '" + out_path + "'");
+    throw std::runtime_error("error while writing '" + out_path + "' (disk full or device refused the data)");
   }
 }
 

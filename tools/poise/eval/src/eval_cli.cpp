@@ -88,13 +88,22 @@ std::vector<eval::BroadTrial> load_trials(const std::vector<std::string>& files)
   return trials;
 }
 
-eval::TrialResult score(const eval::BroadTrial& trial, const std::vector<Eigen::Quaterniond>& q) {
+/// ESTIMATED: samples after which the filter was initialised. With none (the filter rejected every
+/// sample) the identities in Q are no estimate: the trial gets no figure, so every mean and the
+/// choice of `tune` leave it out (never the initial quaternion's error averaged in).
+eval::TrialResult score(const eval::BroadTrial& trial, const std::vector<Eigen::Quaterniond>& q, size_t estimated) {
   eval::TrialResult r;
   r.stem = trial.stem;
   r.number = trial.number;
   r.disturbed = trial.disturbed();
-  r.errors = eval::broad_errors(q, trial);
+  if (estimated > 0) {
+    r.errors = eval::broad_errors(q, trial);
+  }
   return r;
+}
+
+std::string no_estimate_note(const std::string& stem) {
+  return stem + ": the filter rejected every sample (no estimate): excluded from the means";
 }
 
 void make_dir(const std::string& dir) {
@@ -116,16 +125,19 @@ void run_eval(const std::string& filter_name, const std::string& config, const s
   for (size_t i = 0; i < files.size(); ++i) {
     progress.update(i, files[i]);
     const eval::BroadTrial trial = load_trials({files[i]}).front();
-    const auto q = eval::run_filter(*filter, trial);
+    size_t estimated = 0;
+    const auto q = eval::run_filter(*filter, trial, &estimated);
     const std::string csv = (std::filesystem::path(out_dir) / (trial.stem + ".csv")).string();
     eval::write_quaternion_csv(csv, q, trial.rate_hz);
-    results.push_back(score(trial, q));
+    results.push_back(score(trial, q, estimated));
     std::ostringstream note;  // only what needs saying: the figures are in the table
     if (trial.invalid_reference_rows > 0) {
       note << trial.stem << ": " << trial.invalid_reference_rows
            << " reference rows are not unit quaternions: not scored";
     }
-    if (!results.back().errors.scored()) {
+    if (estimated == 0) {
+      note << (note.tellp() > 0 ? "; " : "") << no_estimate_note(trial.stem);
+    } else if (!results.back().errors.scored()) {
       note << (note.tellp() > 0 ? "; " : trial.stem + ": ") << "no scorable samples (movement with a valid reference)";
     }
     if (note.tellp() > 0) {
@@ -179,7 +191,11 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
   const std::vector<eval::BroadTrial> trials = load_trials(files);
   const std::string cand_dir = (std::filesystem::path(out_dir) / "candidates").string();
   make_dir(cand_dir);
-  std::ofstream table((std::filesystem::path(out_dir) / "grid_results.csv").string());
+  const std::string table_path = (std::filesystem::path(out_dir) / "grid_results.csv").string();
+  std::ofstream table(table_path);
+  if (!table) {
+    throw Error("cannot write '" + table_path + "'");
+  }
   table << "candidate,overrides,trial,total_deg,heading_deg,inclination_deg\n";
   std::vector<std::vector<eval::TrialResult>> by_candidate;
   Progress progress("poise eval broad --grid", candidates.size() * trials.size());
@@ -200,7 +216,12 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
     std::vector<eval::TrialResult> rs;
     for (const auto& trial : trials) {
       progress.update(c * trials.size() + rs.size(), "candidate " + std::to_string(c + 1) + ", " + trial.stem);
-      rs.push_back(score(trial, eval::run_filter(*filter, trial)));
+      size_t estimated = 0;
+      const auto q = eval::run_filter(*filter, trial, &estimated);
+      rs.push_back(score(trial, q, estimated));
+      if (estimated == 0) {
+        progress.note("[candidate " + std::to_string(c + 1) + "] " + no_estimate_note(trial.stem));
+      }
       table << c << ",\"" << eval::describe(candidates[c]) << "\"," << rs.back().stem << std::fixed
             << std::setprecision(4) << "," << rs.back().errors.total_deg << "," << rs.back().errors.heading_deg
             << "," << rs.back().errors.inclination_deg << "\n";
@@ -213,6 +234,10 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
     by_candidate.push_back(std::move(rs));
   }
   progress.finish();
+  table.close();  // flushes: a full disk shows here
+  if (!table) {
+    throw Error("error while writing '" + table_path + "' (disk full or device refused the data)");
+  }
   if (eval::group_means(by_candidate.front()).unscored.size() == trials.size()) {
     throw Error("no trial has scorable samples (samples with movement and a valid reference quaternion)");
   }
@@ -254,7 +279,7 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
   row("in-sample", in);
   row("cross-validated", out);
   std::cout << "\nin-sample choice: " << eval::describe(candidates[cv.in_sample_choice]) << "\n"
-            << "per-candidate, per-trial figures: " << (std::filesystem::path(out_dir) / "grid_results.csv").string()
+            << "per-candidate, per-trial figures: " << table_path
             << "\n";
   return {cv, candidates};
 }

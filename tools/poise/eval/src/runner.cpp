@@ -10,16 +10,22 @@
 
 namespace poise::eval {
 
-std::vector<Eigen::Quaterniond> run_filter(AttitudeFilter& filter, const BroadTrial& trial) {
+std::vector<Eigen::Quaterniond> run_filter(AttitudeFilter& filter, const BroadTrial& trial, size_t* estimated) {
   filter.reset();
   if (auto* inputs = dynamic_cast<TrialInputs*>(&filter)) {
     inputs->begin_trial(trial);
   }
   std::vector<Eigen::Quaterniond> out;
   out.reserve(trial.size());
+  size_t n_estimated = 0;
   for (size_t k = 0; k < trial.size(); ++k) {
     filter.update(trial.sample(k));
-    out.push_back(filter.initialized() ? filter.q_world_body() : Eigen::Quaterniond::Identity());
+    const bool ready = filter.initialized();
+    n_estimated += ready ? 1 : 0;
+    out.push_back(ready ? filter.q_world_body() : Eigen::Quaterniond::Identity());
+  }
+  if (estimated != nullptr) {
+    *estimated = n_estimated;
   }
   return out;
 }
@@ -34,7 +40,8 @@ void write_quaternion_csv(const std::string& path, const std::vector<Eigen::Quat
     std::fprintf(f, "%.6f,%.9f,%.9f,%.9f,%.9f\n", static_cast<double>(k) / rate_hz, q[k].w(), q[k].x(),
                  q[k].y(), q[k].z());
   }
-  if (std::fclose(f) != 0) {
+  const bool failed = std::ferror(f) != 0;  // a write that failed before the last one
+  if (std::fclose(f) != 0 || failed) {
     throw std::runtime_error("error while writing '" + path + "'");
   }
 }

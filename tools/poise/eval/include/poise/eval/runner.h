@@ -20,8 +20,11 @@ class TrialInputs {
 };
 
 /// Runs `filter` (reset first) over every sample of `trial`, first to last; returns one
-/// q_world_body per input sample (identity before the filter is initialised).
-std::vector<Eigen::Quaterniond> run_filter(AttitudeFilter& filter, const BroadTrial& trial);
+/// q_world_body per input sample (identity before the filter is initialised). ESTIMATED, when
+/// given, receives the number of samples after which the filter was initialised (0: it rejected
+/// every sample, and the identities are no estimate to score).
+std::vector<Eigen::Quaterniond> run_filter(AttitudeFilter& filter, const BroadTrial& trial,
+                                           size_t* estimated = nullptr);
 
 /// Writes `t_s,qw,qx,qy,qz`, one row per sample.
 void write_quaternion_csv(const std::string& path, const std::vector<Eigen::Quaterniond>& q, double rate_hz);
