@@ -109,7 +109,7 @@ extrinsic: {position_m: [0.05, 0, 0.02], q_body_camera: [1, 0, 0, 0]}
 
 TEST(CameraConfig, MistakesAreClearErrors) {
   expect_config_error([] { (void)parse_camera_config("detector: {decimat: 2}\n", "c.yaml"); },
-                      "unknown key 'decimat'");
+                      "c.yaml: unknown key 'detector.decimat' (known: family, decimate,");
   expect_config_error([] { (void)parse_camera_config("detector: {threads: 0}\n", "c.yaml"); },
                       "threads must be in [1, 64]");
   expect_config_error([] { (void)parse_camera_config("detector: {family: tagXX}\n", "c.yaml"); },

@@ -1,21 +1,34 @@
 // Hostile configuration files and command lines (issue 19, item 9). Oracle: the documented
 // contract of each loader: refuse, and name the file, the key (and line) or the option.
+#include "poise/altitude/altitude_filter.h"
+#include "poise/camera/camera_node.h"
 #include "poise/camera/intrinsics.h"
+#include "poise/camera/pipeline.h"
 #include "poise/camera/tag_map.h"
+#include "poise/core/north_yaml.h"
 #include "poise/core/yaml_params.h"
 #include "poise/dds/topics.h"
+#include "poise/gauss_newton/gauss_newton.h"
 #include "poise/imu/config.h"
+#include "poise/imu/faults.h"
+#include "poise/imu/imu_driver_node.h"
 #include "poise/imu/serial_port.h"
 #include "poise/parallel_kf/parallel_kf.h"
+#include "poise/ros2_bridge/bridge.h"
 #include "poise/runtime/host.h"
+#include "poise/selective_ekf/selective_ekf.h"
+#include "poise/testing/param_errors.h"
 #include "poise/testing/testing.h"
+#include "poise/vehicle/vehicle_estimator.h"
 
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <cstdio>
 #include <fstream>
 #include <functional>
 #include <string>
+#include <vector>
 
 namespace poise {
 namespace {
@@ -89,6 +102,79 @@ TEST(HostileYaml, GivenEveryLoaderWhenAKeyIsDuplicatedOrNonFiniteThenItRefusesNa
                    "map.yaml");
              }),
              "map.yaml:2: key 'tags[0].position_m' is given twice");
+}
+
+// Issue 30: one helper for unknown keys. Every loader, given a key it does not read (a typo),
+// refuses it with the one message "<file or component>: unknown key '<key as spelled from the
+// document>' (known: <what is allowed there>)". Oracle: the documented shape and the keys each
+// loader documents.
+TEST(HostileConfig, GivenAnUnknownKeyInAnyLoaderWhenLoadedThenTheOneMessageNamesTheFileTheKeyAndWhatIsAllowed) {
+  struct Case {
+    const char* loader;
+    std::function<std::string()> error;  // the loader's message for a file with one unknown key
+    std::string where;
+    std::string key;
+    std::vector<std::string> allowed;  // some of the keys the message must list
+  };
+  const std::string kf = write_file("kf_unknown.yaml", "parallel_kf:\n  mag_norm_toll: 0.1\n");
+  const std::string kf_tilt = write_file("kf_tilt.yaml", "parallel_kf:\n  tilt:\n    c_aa: 0.1\n");
+  const std::string kf_dotted = write_file("kf_dotted.yaml", "tilt.c_aa: 0.1\n");
+  const std::string gn = write_file("gn_unknown.yaml", "gauss_newton:\n  max_iteration: 3\n");
+  const std::string ekf = write_file("ekf_unknown.yaml", "selective_ekf:\n  gauss_newton: {tolerance: 1}\n");
+  const std::string alt = write_file("alt_unknown.yaml", "cf:\n  sigma_bar_m: 1\n");
+  const std::string veh = write_file("veh_unknown.yaml", "ekf:\n  r_mag: [1, 1, 1]\n");
+  const std::string host_top = write_file("host_unknown.yaml", "domian: 3\ncomponents: [{type: parallel_kf}]\n");
+  const std::string host_entry = write_file("host_entry.yaml", "components:\n  - {type: parallel_kf, parms: {}}\n");
+  const std::string host_topics = write_file("host_topic.yaml", "topics: {imus: x}\ncomponents: [{type: parallel_kf}]\n");
+  const std::string host_rt = write_file("host_rt.yaml", "realtime: {prio: 5}\ncomponents: [{type: parallel_kf}]\n");
+  const auto spec = [](const std::string& type, const std::string& params) {
+    runtime::ComponentSpec c;
+    c.type = type;
+    c.name = type + "0";
+    c.params = parse_yaml(params, "params");
+    c.origin = "host.yaml: components[0] (" + c.name + ")";
+    return c;
+  };
+  const auto msg = [](auto f) { return [f] { return testing::error_message(f); }; };
+  const std::vector<Case> cases = {
+      {"parallel_kf", msg([&] { (void)load_parallel_kf_params(kf); }), kf, "parallel_kf.mag_norm_toll",
+       {"preset", "tilt", "mag_norm_tol", "limits", "use_magnetometer"}},
+      {"parallel_kf tilt", msg([&] { (void)load_parallel_kf_params(kf_tilt); }), kf_tilt, "parallel_kf.tilt.c_aa",
+       {"sigma_gyro_rps", "c_a", "gravity_mps2"}},
+      {"parallel_kf dotted", msg([&] { (void)load_parallel_kf_params(kf_dotted); }), kf_dotted, "tilt.c_aa", {"c_a"}},
+      {"gauss_newton", msg([&] { (void)load_gauss_newton_params(gn); }), gn, "gauss_newton.max_iteration",
+       {"max_iterations", "dip_deg", "use_magnetometer"}},
+      {"selective_ekf", msg([&] { (void)load_selective_ekf_params(ekf); }), ekf,
+       "selective_ekf.gauss_newton.tolerance", {"max_iterations", "tolerance_rad"}},
+      {"altitude", msg([&] { (void)load_altitude_params(alt); }), alt, "cf.sigma_bar_m", {"gains", "sigma_baro_m"}},
+      {"vehicle", msg([&] { (void)load_vehicle_params(veh); }), veh, "ekf.r_mag", {"r_mag_ut2"}},
+      {"imu driver", msg([] { (void)imu::parse_driver_config("clock:\n  blocks: 1\n", "drv.yaml"); }), "drv.yaml",
+       "clock.blocks", {"block_s", "window_blocks"}},
+      {"camera", msg([] { (void)camera::parse_camera_config("detector: {decimat: 2}\n", "cam.yaml"); }), "cam.yaml",
+       "detector.decimat", {"decimate", "threads"}},
+      {"host file", msg([&] { (void)runtime::load_host_file(host_top); }), host_top, "domian", {"domain", "components"}},
+      {"host component", msg([&] { (void)runtime::load_host_file(host_entry); }), host_entry, "components[0].parms",
+       {"type", "params"}},
+      {"host topics", msg([&] { (void)runtime::load_host_file(host_topics); }), host_topics, "topics.imus",
+       {"imu", "diagnostics"}},
+      {"host realtime", msg([&] { (void)runtime::load_host_file(host_rt); }), host_rt, "realtime.prio",
+       {"priority", "cpus", "lock_memory"}},
+      {"imu_driver component", msg([&] { (void)imu::imu_node_options(spec("imu_driver", "{port: /dev/x, bogus: 1}")); }),
+       "host.yaml: components[0] (imu_driver0): imu_driver", "bogus", {"port", "config_file", "serial", "calibration"}},
+      {"camera component", msg([&] { (void)camera::camera_node_options(spec("camera", "{sorce: x}")); }),
+       "host.yaml: components[0] (camera0): camera", "sorce", {"source", "intrinsics_file", "pace"}},
+      {"ros2_bridge component", msg([] { (void)ros2::parse_bridge_config(parse_yaml("out: {attitud: [a]}", "p"), "o"); }),
+       "o: ros2_bridge", "out.attitud", {"attitude", "tf"}},
+      {"north keys", msg([] { (void)read_north_params(parse_yaml("location: {lat: 1, lon_deg: 2}", "p")); }), "north",
+       "location.lat", {"lat_deg", "lon_deg", "alt_m"}},
+      {"fault spec", msg([] { (void)imu::FaultSpec::parse("bogus=1"); }), "fault spec", "bogus", {"drop", "seed"}},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.loader);
+    const std::string message = c.error();
+    std::printf("%-22s %s\n", c.loader, message.c_str());
+    testing::expect_unknown_key_message(message, c.where, c.key, c.allowed);
+  }
 }
 
 TEST(HostileConfig, GivenAHostFileWithATopicThatIsNotAStringWhenLoadedThenTheFileAndTopicAreNamed) {

@@ -61,7 +61,7 @@ TEST(HostFile, GivenARealtimeSectionWhenParsedThenEachKeyIsReadAndBadValuesNameT
   EXPECT_NE(realtime_error("{cpus: []}").find("realtime.cpus"), std::string::npos);
   EXPECT_NE(realtime_error("{cpus: [-1]}").find("cpu -1 is out of range"), std::string::npos);
   EXPECT_NE(realtime_error("{cpus: [1, 1]}").find("twice"), std::string::npos);
-  EXPECT_NE(realtime_error("{prio: 5}").find("unknown key 'prio'"), std::string::npos);
+  EXPECT_NE(realtime_error("{prio: 5}").find("test.yaml: unknown key 'realtime.prio' (known: priority, cpus, lock_memory)"), std::string::npos);
   EXPECT_NE(realtime_error("[1]").find("must be a map"), std::string::npos);
   EXPECT_NE(realtime_error("{priority: high}").find("test.yaml: realtime"), std::string::npos);
 }
@@ -184,7 +184,7 @@ TEST(HostFile, ErrorsNameTheProblem) {
   EXPECT_NE(error_of("domain: 300\ncomponents: [{type: a}]").find("0-232"), std::string::npos);
   EXPECT_NE(error_of("components: [{type: a}, {type: a}]").find("named 'a'"), std::string::npos);
   EXPECT_NE(error_of("components: [{name: x}]").find("'type'"), std::string::npos);
-  EXPECT_NE(error_of("topics: {imus: x}\ncomponents: [{type: a}]").find("unknown topic 'imus'"),
+  EXPECT_NE(error_of("topics: {imus: x}\ncomponents: [{type: a}]").find("unknown key 'topics.imus' (known: imu, "),
             std::string::npos);
   EXPECT_NE(error_of("components: [{type: a, config: missing.yaml}]").find("/cfg/missing.yaml"),
             std::string::npos)

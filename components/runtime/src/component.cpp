@@ -1,5 +1,7 @@
 #include "poise/runtime/component.h"
 
+#include "poise/core/yaml_params.h"
+
 #include <algorithm>
 
 namespace poise::runtime {
@@ -32,20 +34,7 @@ std::vector<std::string> ComponentRegistry::names() const {
 }
 
 void check_known_params(const ComponentSpec& spec, const std::vector<std::string>& known) {
-  if (!spec.params || !spec.params.IsMap()) {
-    return;
-  }
-  for (const auto& entry : spec.params) {
-    const auto key = entry.first.as<std::string>();
-    if (std::find(known.begin(), known.end(), key) == known.end()) {
-      std::string list;
-      for (const auto& k : known) {
-        list += (list.empty() ? "" : ", ") + k;
-      }
-      throw ConfigError(spec.origin + ": unknown parameter '" + key + "' for component '" +
-                        spec.name + "' (type " + spec.type + "; known: " + list + ")");
-    }
-  }
+  check_known_keys<ConfigError>(spec.params, known, spec.origin + ": " + spec.type);
 }
 
 }  // namespace poise::runtime

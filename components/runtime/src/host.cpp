@@ -3,8 +3,11 @@
 #include "poise/core/yaml_params.h"
 #include "poise/runtime/shipped.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <set>
+#include <utility>
+#include <vector>
 #include <stdexcept>
 
 namespace poise::runtime {
@@ -48,19 +51,6 @@ std::string resolve(const PathBases& bases, const std::string& path, const std::
                     "; give an absolute path or one relative to the host file");
 }
 
-void check_keys(const YAML::Node& map, const std::set<std::string>& known, const std::string& where) {
-  for (const auto& entry : map) {
-    const auto key = entry.first.as<std::string>();
-    if (known.count(key) == 0) {
-      std::string list;
-      for (const auto& k : known) {
-        list += (list.empty() ? "" : ", ") + k;
-      }
-      throw ConfigError(where + ": unknown key '" + key + "' (known: " + list + ")");
-    }
-  }
-}
-
 /// Copies `overlay`'s entries onto `base` (a fresh map), key by key.
 YAML::Node merge(const YAML::Node& base, const YAML::Node& overlay) {
   YAML::Node out(YAML::NodeType::Map);
@@ -96,7 +86,7 @@ void apply_topic_overrides(const YAML::Node& map, const std::string& origin, dds
   if (!map.IsMap()) {
     throw ConfigError(origin + ": 'topics' must be a map of name overrides");
   }
-  std::map<std::string, std::string*> fields{
+  const std::vector<std::pair<std::string, std::string*>> fields{
       {"imu", &names.imu},
       {"tag_detections", &names.tag_detections},
       {"vision_pose", &names.vision_pose},
@@ -106,14 +96,14 @@ void apply_topic_overrides(const YAML::Node& map, const std::string& origin, dds
       {"vehicle_input", &names.vehicle_input},
       {"diagnostics", &names.diagnostics},
   };
+  std::vector<std::string> known;
+  for (const auto& f : fields) {
+    known.push_back(f.first);
+  }
+  check_known_keys<ConfigError>(map, known, origin, "topics.");
   for (const auto& entry : map) {
-    const auto key = entry.first.IsScalar() ? entry.first.Scalar() : YAML::Dump(entry.first);
-    const auto it = fields.find(key);
-    if (it == fields.end()) {
-      throw ConfigError(origin + ": unknown topic '" + key +
-                        "' (known: imu, tag_detections, vision_pose, attitude_prefix, "
-                        "pose_prefix, altitude, vehicle_input, diagnostics)");
-    }
+    const auto key = yaml_key_text(entry.first);
+    const auto it = std::find_if(fields.begin(), fields.end(), [&key](const auto& f) { return f.first == key; });
     if (!entry.second.IsScalar()) {
       throw ConfigError(origin + ": topics." + key + " must be a topic name (a string)");
     }
@@ -127,11 +117,13 @@ void apply_topic_overrides(const YAML::Node& map, const std::string& origin, dds
 
 namespace {
 /// One entry of a host file's `components` list (YAML type errors propagate to the caller).
-ComponentSpec parse_component(const YAML::Node& entry, const std::string& where, const PathBases& bases) {
+ComponentSpec parse_component(const YAML::Node& entry, const std::string& origin, const std::string& at,
+                              const PathBases& bases) {
+  const std::string where = origin + ": " + at;
   if (!entry.IsMap() || !entry["type"]) {
     throw ConfigError(where + ": each component needs a 'type'");
   }
-  check_keys(entry, {"type", "name", "config", "params"}, where);
+  check_known_keys<ConfigError>(entry, {"type", "name", "config", "params"}, origin, at + ".");
   ComponentSpec c;
   c.type = entry["type"].as<std::string>();
   c.name = entry["name"] ? entry["name"].as<std::string>() : c.type;
@@ -161,7 +153,8 @@ HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std
   if (!root || !root.IsMap()) {
     throw ConfigError(origin + ": a host file is a YAML map with a 'components' list");
   }
-  check_keys(root, {"domain", "participant_profile", "qos_file", "topics", "realtime", "components"}, origin);
+  check_known_keys<ConfigError>(root, {"domain", "participant_profile", "qos_file", "topics", "realtime", "components"},
+                                origin);
   HostSpec spec;
   spec.path = origin;
   try {
@@ -190,9 +183,10 @@ HostSpec parse_host(const YAML::Node& root, const std::string& origin, const std
   }
   std::set<std::string> names;
   for (std::size_t i = 0; i < list.size(); ++i) {
-    const std::string where = origin + ": components[" + std::to_string(i) + "]";
+    const std::string at = "components[" + std::to_string(i) + "]";
+    const std::string where = origin + ": " + at;
     try {
-      spec.components.push_back(parse_component(list[i], where, bases));
+      spec.components.push_back(parse_component(list[i], origin, at, bases));
     } catch (const YAML::Exception& e) {
       throw ConfigError(where + ": " + e.msg + " (type, name and config are strings, params a map)");
     }

@@ -2,6 +2,8 @@
 
 #include "poise/runtime/component.h"
 
+#include "poise/core/yaml_params.h"
+
 #include <sched.h>
 #include <sys/mman.h>
 #include <unistd.h>
@@ -42,12 +44,7 @@ RealtimeSettings parse_realtime(const YAML::Node& node, const std::string& origi
   if (!node.IsMap()) {
     throw ConfigError(where + " must be a map (priority, cpus, lock_memory)");
   }
-  for (const auto& kv : node) {
-    const auto key = kv.first.as<std::string>();
-    if (key != "priority" && key != "cpus" && key != "lock_memory") {
-      throw ConfigError(where + ": unknown key '" + key + "' (known: priority, cpus, lock_memory)");
-    }
-  }
+  check_known_keys<ConfigError>(node, {"priority", "cpus", "lock_memory"}, origin, "realtime.");
   try {
     if (node["priority"]) {
       r.priority = node["priority"].as<int>();

@@ -6,13 +6,10 @@
 #include <chrono>
 #include <cinttypes>
 #include <cstdio>
-#include <set>
 
 namespace poise::camera {
 namespace {
 
-const std::set<std::string> kKnownParams{"source",      "intrinsics_file",      "tags_file",
-                                         "config_file", "diagnostics_period_s", "pace"};
 constexpr uint64_t kLogEverySkip = 100;  // after the first, log every Nth unreadable frame
 
 std::string required(const runtime::ComponentSpec& spec, const char* key, const char* what) {
@@ -26,16 +23,7 @@ std::string required(const runtime::ComponentSpec& spec, const char* key, const 
 }  // namespace
 
 CameraNodeOptions camera_node_options(const runtime::ComponentSpec& spec) {
-  if (spec.params && spec.params.IsMap()) {
-    for (const auto& kv : spec.params) {
-      const auto key = kv.first.as<std::string>();
-      if (kKnownParams.count(key) == 0) {
-        throw runtime::ConfigError(spec.origin + ": unknown parameter '" + key +
-                                   "' of camera (known: source, intrinsics_file, tags_file, "
-                                   "config_file, diagnostics_period_s, pace)");
-      }
-    }
-  }
+  runtime::check_known_params(spec, {"source", "intrinsics_file", "tags_file", "config_file", "diagnostics_period_s", "pace"});
   CameraNodeOptions o;
   o.source = required(spec, "source", "/dev/videoN, a video, images or synthetic");
   o.intrinsics_file = required(spec, "intrinsics_file", "OpenCV or ROS camera_info YAML");

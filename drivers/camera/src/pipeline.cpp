@@ -17,30 +17,6 @@ namespace {
 
 constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
 
-void check_keys(const YAML::Node& node, const std::set<std::string>& allowed,
-                const std::string& where) {
-  if (!node.IsMap()) {
-    throw ConfigError(where + " must be a map");
-  }
-  for (const auto& kv : node) {
-    const auto key = kv.first.as<std::string>();
-    if (allowed.count(key) == 0) {
-      std::string list;
-      for (const auto& a : allowed) {
-        list += (list.empty() ? "" : ", ") + a;
-      }
-      throw ConfigError(where + ": unknown key '" + key + "' (known: " + list + ")");
-    }
-  }
-}
-
-template <typename T>
-void read(const YAML::Node& node, const char* key, T* value) {
-  if (node[key]) {
-    *value = node[key].as<T>();
-  }
-}
-
 double elapsed_ms(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - since).count();
 }
@@ -48,81 +24,65 @@ double elapsed_ms(std::chrono::steady_clock::time_point since) {
 }  // namespace
 
 CameraConfig parse_camera_config(const std::string& yaml_text, const std::string& source) {
-  const YAML::Node root = parse_yaml<ConfigError>(yaml_text, source);
+  using Reader = BasicYamlParamReader<ConfigError>;
   CameraConfig c;
-  if (root.IsNull()) {
-    return c;
+  Reader r(parse_yaml<ConfigError>(yaml_text, source), source);
+  r.get("sensor_id", c.sensor_id);
+  r.get("frame_id", c.frame_id);
+
+  Reader cap = r.child("capture");
+  cap.get_scaled("delay_ms", c.capture_delay_s, 1e-3);
+  cap.get("width_px", c.width_px);
+  cap.get("height_px", c.height_px);
+  cap.get("fps", c.fps);
+  cap.get("max_image_pixels", c.max_image_pixels);
+  cap.finish();
+
+  Reader det = r.child("detector");
+  det.get("family", c.detector.family);
+  det.get("decimate", c.detector.decimate);
+  det.get("blur_sigma_px", c.detector.blur_sigma);
+  det.get("threads", c.detector.threads);
+  det.get("refine_edges", c.detector.refine_edges);
+  det.get("decode_sharpening", c.detector.decode_sharpening);
+  det.get("max_hamming", c.detector.max_hamming);
+  det.get("min_decision_margin", c.detector.min_decision_margin);
+  det.finish();
+
+  Reader pose = r.child("pose");
+  pose.get("ambiguity_ratio_max", c.tag_pose.ambiguity_ratio_max);
+  pose.get_scaled("ambiguity_min_angle_deg", c.tag_pose.ambiguity_min_angle_rad, kDegToRad);
+  pose.get("max_tag_reprojection_px", c.tag_pose.max_reprojection_rms_px);
+  pose.get("max_world_reprojection_px", c.world_pose.max_reprojection_rms_px);
+  pose.get("pixel_sigma_px", c.world_pose.pixel_sigma_px);
+  pose.get("max_iterations", c.world_pose.max_iterations);
+  pose.get("unknown_tag_size_m", c.unknown_tag_size_m);
+  pose.finish();
+
+  if (r.has("extrinsic")) {
+    Reader ext = r.child("extrinsic");
+    if (!ext.given("position_m") || !ext.given("q_body_camera")) {
+      throw ConfigError(source + ": extrinsic needs position_m [x, y, z] (camera origin in the "
+                                 "body frame, m) and q_body_camera [w, x, y, z]");
+    }
+    Eigen::Vector3d p(0.0, 0.0, 0.0);
+    ext.get("position_m", p);
+    Eigen::Vector4d q(1.0, 0.0, 0.0, 0.0);
+    ext.get("q_body_camera", q);
+    ext.finish();
+    const Eigen::Quaterniond quat(q[0], q[1], q[2], q[3]);
+    if (!std::isfinite(quat.norm()) || std::abs(quat.norm() - 1.0) > 1e-3) {
+      throw ConfigError(source + ": extrinsic q_body_camera is not a unit quaternion");
+    }
+    Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
+    t.linear() = quat.normalized().toRotationMatrix();
+    t.translation() = p;
+    if (!t.translation().allFinite()) {
+      throw ConfigError(source + ": extrinsic position_m is not finite");
+    }
+    c.T_body_camera = t;
   }
-  try {
-    check_keys(root, {"sensor_id", "frame_id", "capture", "detector", "pose", "extrinsic"}, source);
-    read(root, "sensor_id", &c.sensor_id);
-    read(root, "frame_id", &c.frame_id);
-    if (const auto cap = root["capture"]) {
-      check_keys(cap, {"delay_ms", "width_px", "height_px", "fps", "max_image_pixels"}, source + ": capture");
-      double delay_ms = c.capture_delay_s * 1e3;
-      read(cap, "delay_ms", &delay_ms);
-      c.capture_delay_s = delay_ms * 1e-3;
-      read(cap, "width_px", &c.width_px);
-      read(cap, "height_px", &c.height_px);
-      read(cap, "fps", &c.fps);
-      read(cap, "max_image_pixels", &c.max_image_pixels);
-    }
-    if (const auto det = root["detector"]) {
-      check_keys(det,
-                 {"family", "decimate", "blur_sigma_px", "threads", "refine_edges",
-                  "decode_sharpening", "max_hamming", "min_decision_margin"},
-                 source + ": detector");
-      read(det, "family", &c.detector.family);
-      read(det, "decimate", &c.detector.decimate);
-      read(det, "blur_sigma_px", &c.detector.blur_sigma);
-      read(det, "threads", &c.detector.threads);
-      read(det, "refine_edges", &c.detector.refine_edges);
-      read(det, "decode_sharpening", &c.detector.decode_sharpening);
-      read(det, "max_hamming", &c.detector.max_hamming);
-      read(det, "min_decision_margin", &c.detector.min_decision_margin);
-    }
-    if (const auto pose = root["pose"]) {
-      check_keys(pose,
-                 {"ambiguity_ratio_max", "ambiguity_min_angle_deg", "max_tag_reprojection_px",
-                  "max_world_reprojection_px", "pixel_sigma_px", "max_iterations",
-                  "unknown_tag_size_m"},
-                 source + ": pose");
-      read(pose, "ambiguity_ratio_max", &c.tag_pose.ambiguity_ratio_max);
-      double angle_deg = c.tag_pose.ambiguity_min_angle_rad / kDegToRad;
-      read(pose, "ambiguity_min_angle_deg", &angle_deg);
-      c.tag_pose.ambiguity_min_angle_rad = angle_deg * kDegToRad;
-      read(pose, "max_tag_reprojection_px", &c.tag_pose.max_reprojection_rms_px);
-      read(pose, "max_world_reprojection_px", &c.world_pose.max_reprojection_rms_px);
-      read(pose, "pixel_sigma_px", &c.world_pose.pixel_sigma_px);
-      read(pose, "max_iterations", &c.world_pose.max_iterations);
-      read(pose, "unknown_tag_size_m", &c.unknown_tag_size_m);
-    }
-    if (const auto ext = root["extrinsic"]) {
-      check_keys(ext, {"position_m", "q_body_camera"}, source + ": extrinsic");
-      if (!ext["position_m"] || !ext["q_body_camera"]) {
-        throw ConfigError(source + ": extrinsic needs position_m [x, y, z] (camera origin in the "
-                                   "body frame, m) and q_body_camera [w, x, y, z]");
-      }
-      const auto p = ext["position_m"].as<std::vector<double>>();
-      const auto q = ext["q_body_camera"].as<std::vector<double>>();
-      if (p.size() != 3 || q.size() != 4) {
-        throw ConfigError(source + ": extrinsic position_m needs 3 values, q_body_camera 4");
-      }
-      const Eigen::Quaterniond quat(q[0], q[1], q[2], q[3]);
-      if (!std::isfinite(quat.norm()) || std::abs(quat.norm() - 1.0) > 1e-3) {
-        throw ConfigError(source + ": extrinsic q_body_camera is not a unit quaternion");
-      }
-      Eigen::Isometry3d t = Eigen::Isometry3d::Identity();
-      t.linear() = quat.normalized().toRotationMatrix();
-      t.translation() = Eigen::Vector3d(p[0], p[1], p[2]);
-      if (!t.translation().allFinite()) {
-        throw ConfigError(source + ": extrinsic position_m is not finite");
-      }
-      c.T_body_camera = t;
-    }
-  } catch (const YAML::Exception& e) {
-    throw ConfigError(source + ": malformed value: " + e.what());
-  }
+  r.finish();
   c.world_pose.ambiguity_ratio_max = c.tag_pose.ambiguity_ratio_max;
   c.world_pose.ambiguity_min_angle_rad = c.tag_pose.ambiguity_min_angle_rad;
   if (!(c.capture_delay_s >= 0.0 && c.capture_delay_s < 1.0)) {

@@ -1,4 +1,5 @@
 #include "poise/imu/config.h"
+
 #include "poise/core/yaml_params.h"
 
 #include <yaml-cpp/yaml.h>
@@ -7,106 +8,11 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
-#include <set>
 #include <sstream>
+#include <type_traits>
+#include <utility>
 
 namespace poise::imu {
-namespace {
-
-class Reader {
- public:
-  explicit Reader(std::string origin) : origin_(std::move(origin)) {}
-
-  [[noreturn]] void fail(const std::string& key, const std::string& what) const {
-    throw ConfigError(origin_ + ": " + key + ": " + what);
-  }
-
-  /// Rejects keys of `node` not in `allowed` (typos must not pass silently).
-  void only(const YAML::Node& node, const std::string& path, std::set<std::string> allowed) const {
-    if (!node) return;
-    if (!node.IsMap()) fail(path, "must be a mapping");
-    for (const auto& kv : node) {
-      const auto key = kv.first.as<std::string>();
-      if (allowed.count(key) == 0) {
-        std::string list;
-        for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
-        fail(path.empty() ? key : path + "." + key, "unknown key (expected one of: " + list + ")");
-      }
-    }
-  }
-
-  void number(const YAML::Node& node, const std::string& path, double lo, double hi,
-              double* out) const {
-    if (!node) return;
-    double v = 0;
-    try {
-      v = node.as<double>();
-    } catch (const YAML::Exception&) {
-      fail(path, "must be a number");
-    }
-    if (!std::isfinite(v) || v < lo || v > hi) {
-      std::ostringstream os;
-      os << "must be in [" << lo << ", " << hi << "], got " << v;
-      fail(path, os.str());
-    }
-    *out = v;
-  }
-
-  void integer(const YAML::Node& node, const std::string& path, long lo, long hi, long* out) const {
-    if (!node) return;
-    long v = 0;
-    try {
-      v = node.as<long>();
-    } catch (const YAML::Exception&) {
-      fail(path, "must be an integer");
-    }
-    if (v < lo || v > hi) {
-      fail(path, "must be in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got " +
-                     std::to_string(v));
-    }
-    *out = v;
-  }
-
-  void vec3(const YAML::Node& node, const std::string& path, Eigen::Vector3d* out) const {
-    if (!node) return;
-    if (!node.IsSequence() || node.size() != 3) fail(path, "must be a list of 3 numbers");
-    for (std::size_t i = 0; i < 3; ++i) {
-      double v = 0;
-      number(node[i], path + "[" + std::to_string(i) + "]", -1e9, 1e9, &v);
-      (*out)(static_cast<Eigen::Index>(i)) = v;
-    }
-  }
-
-  void mat3(const YAML::Node& node, const std::string& path, Eigen::Matrix3d* out) const {
-    if (!node) return;
-    if (!node.IsSequence() || node.size() != 3) fail(path, "must be 3 rows of 3 numbers");
-    for (std::size_t r = 0; r < 3; ++r) {
-      Eigen::Vector3d row;
-      vec3(node[r], path + "[" + std::to_string(r) + "]", &row);
-      out->row(static_cast<Eigen::Index>(r)) = row.transpose();
-    }
-  }
-
-  void text(const YAML::Node& node, const std::string& path, std::string* out) const {
-    if (!node) return;
-    if (!node.IsScalar()) fail(path, "must be a string");
-    *out = node.as<std::string>();
-  }
-
-  void axes(const YAML::Node& node, const std::string& path, AxisMap* out) const {
-    if (!node) return;
-    std::string t;
-    text(node, path, &t);
-    std::string err;
-    if (!AxisMap::parse(t, out, &err)) fail(path, err);
-  }
-
- private:
-  std::string origin_;
-};
-
-}  // namespace
-
 const std::vector<int>& supported_bauds() {
   static const std::vector<int> bauds{9600,   19200,  38400,  57600,  115200, 230400,
                                       460800, 500000, 576000, 921600, 1000000};
@@ -120,118 +26,100 @@ bool is_supported_baud(int baud) {
 
 // not split: one table of keys read in the file's documented order, each line a key and its unit.
 DriverConfig parse_driver_config(const std::string& yaml_text, const std::string& origin) {
-  Reader rd(origin);
-  const YAML::Node root = parse_yaml<ConfigError>(yaml_text, origin);
+  using Reader = BasicYamlParamReader<ConfigError>;
   DriverConfig c;
-  if (!root || root.IsNull()) return c;
-  rd.only(root, "", {"serial", "protocol", "limits", "raw", "clock", "calibration"});
+  Reader root(parse_yaml<ConfigError>(yaml_text, origin), origin);
+  // Integers are read as long and range-checked before they are narrowed.
+  const auto integer = [](Reader& r, const char* key, auto& field, long lo, long hi) {
+    long v = static_cast<long>(field);
+    r.get_in(key, v, lo, hi);
+    field = static_cast<std::remove_reference_t<decltype(field)>>(v);
+  };
 
-  const YAML::Node serial = root["serial"];
-  rd.only(serial, "serial", {"baud", "reconnect_initial_s", "reconnect_max_s", "tx_correction"});
-  if (serial) {
-    long baud = c.serial.baud;
-    rd.integer(serial["baud"], "serial.baud", 0, 10000000, &baud);
-    if (!is_supported_baud(static_cast<int>(baud))) {
-      std::string list;
-      for (const int b : supported_bauds()) list += (list.empty() ? "" : ", ") + std::to_string(b);
-      rd.fail("serial.baud", std::to_string(baud) + " is not supported (use one of " + list + ")");
-    }
-    c.serial.baud = static_cast<int>(baud);
-    rd.number(serial["reconnect_initial_s"], "serial.reconnect_initial_s", 0.01, 60,
-              &c.serial.reconnect_initial_s);
-    rd.number(serial["reconnect_max_s"], "serial.reconnect_max_s", 0.01, 600,
-              &c.serial.reconnect_max_s);
-    if (c.serial.reconnect_max_s < c.serial.reconnect_initial_s) {
-      rd.fail("serial.reconnect_max_s", "must be >= serial.reconnect_initial_s");
-    }
-    rd.text(serial["tx_correction"], "serial.tx_correction", &c.serial.tx_correction);
-    if (c.serial.tx_correction != "auto" && c.serial.tx_correction != "on" &&
-        c.serial.tx_correction != "off") {
-      rd.fail("serial.tx_correction", "must be auto, on or off");
-    }
+  Reader serial = root.child("serial");
+  integer(serial, "baud", c.serial.baud, 0, 10000000);
+  if (!is_supported_baud(c.serial.baud)) {
+    std::string list;
+    for (const int b : supported_bauds()) list += (list.empty() ? "" : ", ") + std::to_string(b);
+    serial.fail("baud", std::to_string(c.serial.baud) + " is not supported (use one of " + list + ")");
   }
+  serial.get_in("reconnect_initial_s", c.serial.reconnect_initial_s, 0.01, 60.0);
+  serial.get_in("reconnect_max_s", c.serial.reconnect_max_s, 0.01, 600.0);
+  if (c.serial.reconnect_max_s < c.serial.reconnect_initial_s) {
+    serial.fail("reconnect_max_s", "must be >= serial.reconnect_initial_s");
+  }
+  serial.get("tx_correction", c.serial.tx_correction);
+  if (c.serial.tx_correction != "auto" && c.serial.tx_correction != "on" && c.serial.tx_correction != "off") {
+    serial.fail("tx_correction", "must be auto, on or off");
+  }
+  serial.finish();
 
-  const YAML::Node protocol = root["protocol"];
-  rd.only(protocol, "protocol", {"reorder_window", "max_forward_gap", "sensor_latency_s"});
-  if (protocol) {
-    long v = c.params.sequence.reorder_window;
-    rd.integer(protocol["reorder_window"], "protocol.reorder_window", 0, 100000, &v);
-    c.params.sequence.reorder_window = static_cast<uint32_t>(v);
-    v = c.params.sequence.max_forward_gap;
-    rd.integer(protocol["max_forward_gap"], "protocol.max_forward_gap", 1, 1000000000, &v);
-    c.params.sequence.max_forward_gap = static_cast<uint32_t>(v);
-    rd.number(protocol["sensor_latency_s"], "protocol.sensor_latency_s", 0, 1,
-              &c.params.sensor_latency_s);
-  }
+  Reader protocol = root.child("protocol");
+  integer(protocol, "reorder_window", c.params.sequence.reorder_window, 0, 100000);
+  integer(protocol, "max_forward_gap", c.params.sequence.max_forward_gap, 1, 1000000000);
+  protocol.get_in("sensor_latency_s", c.params.sensor_latency_s, 0.0, 1.0);
+  protocol.finish();
 
-  const YAML::Node limits = root["limits"];
-  rd.only(limits, "limits", {"accel_max_mps2", "gyro_max_rps", "mag_max_ut", "pressure_min_pa",
-                             "pressure_max_pa", "temperature_min_c", "temperature_max_c"});
-  if (limits) {
-    Limits& l = c.params.limits;
-    rd.number(limits["accel_max_mps2"], "limits.accel_max_mps2", 1, 10000, &l.accel_max_mps2);
-    rd.number(limits["gyro_max_rps"], "limits.gyro_max_rps", 0.1, 1000, &l.gyro_max_rps);
-    rd.number(limits["mag_max_ut"], "limits.mag_max_ut", 1, 100000, &l.mag_max_ut);
-    rd.number(limits["pressure_min_pa"], "limits.pressure_min_pa", 0, 1e7, &l.pressure_min_pa);
-    rd.number(limits["pressure_max_pa"], "limits.pressure_max_pa", 0, 1e7, &l.pressure_max_pa);
-    rd.number(limits["temperature_min_c"], "limits.temperature_min_c", -273.15, 1000,
-              &l.temperature_min_c);
-    rd.number(limits["temperature_max_c"], "limits.temperature_max_c", -273.15, 1000,
-              &l.temperature_max_c);
-    if (l.pressure_min_pa >= l.pressure_max_pa) {
-      rd.fail("limits.pressure_min_pa", "must be < limits.pressure_max_pa");
-    }
-    if (l.temperature_min_c >= l.temperature_max_c) {
-      rd.fail("limits.temperature_min_c", "must be < limits.temperature_max_c");
-    }
+  Reader limits = root.child("limits");
+  Limits& l = c.params.limits;
+  limits.get_in("accel_max_mps2", l.accel_max_mps2, 1.0, 10000.0);
+  limits.get_in("gyro_max_rps", l.gyro_max_rps, 0.1, 1000.0);
+  limits.get_in("mag_max_ut", l.mag_max_ut, 1.0, 100000.0);
+  limits.get_in("pressure_min_pa", l.pressure_min_pa, 0.0, 1e7);
+  limits.get_in("pressure_max_pa", l.pressure_max_pa, 0.0, 1e7);
+  limits.get_in("temperature_min_c", l.temperature_min_c, -273.15, 1000.0);
+  limits.get_in("temperature_max_c", l.temperature_max_c, -273.15, 1000.0);
+  if (l.pressure_min_pa >= l.pressure_max_pa) {
+    limits.fail("pressure_min_pa", "must be < limits.pressure_max_pa");
   }
+  if (l.temperature_min_c >= l.temperature_max_c) {
+    limits.fail("temperature_min_c", "must be < limits.temperature_max_c");
+  }
+  limits.finish();
 
-  const YAML::Node raw = root["raw"];
-  rd.only(raw, "raw", {"accel_lsb_per_g", "gyro_lsb_per_dps", "mag_lsb_per_gauss",
-                       "temp_lsb_per_c", "temp_offset_c", "g_mps2"});
-  if (raw) {
-    RawScale& r = c.params.raw;
-    rd.number(raw["accel_lsb_per_g"], "raw.accel_lsb_per_g", 1, 1e6, &r.accel_lsb_per_g);
-    rd.number(raw["gyro_lsb_per_dps"], "raw.gyro_lsb_per_dps", 0.01, 1e6, &r.gyro_lsb_per_dps);
-    rd.number(raw["mag_lsb_per_gauss"], "raw.mag_lsb_per_gauss", 1, 1e6, &r.mag_lsb_per_gauss);
-    rd.number(raw["temp_lsb_per_c"], "raw.temp_lsb_per_c", 0.01, 1e6, &r.temp_lsb_per_c);
-    rd.number(raw["temp_offset_c"], "raw.temp_offset_c", -100, 200, &r.temp_offset_c);
-    rd.number(raw["g_mps2"], "raw.g_mps2", 9.7, 9.9, &r.g_mps2);
-  }
+  Reader raw = root.child("raw");
+  RawScale& rs = c.params.raw;
+  raw.get_in("accel_lsb_per_g", rs.accel_lsb_per_g, 1.0, 1e6);
+  raw.get_in("gyro_lsb_per_dps", rs.gyro_lsb_per_dps, 0.01, 1e6);
+  raw.get_in("mag_lsb_per_gauss", rs.mag_lsb_per_gauss, 1.0, 1e6);
+  raw.get_in("temp_lsb_per_c", rs.temp_lsb_per_c, 0.01, 1e6);
+  raw.get_in("temp_offset_c", rs.temp_offset_c, -100.0, 200.0);
+  raw.get_in("g_mps2", rs.g_mps2, 9.7, 9.9);
+  raw.finish();
 
-  const YAML::Node clock = root["clock"];
-  rd.only(clock, "clock", {"block_s", "window_blocks", "max_drift_ppm", "reset_threshold_s", "reanchor_samples"});
-  if (clock) {
-    ClockSyncParams& k = c.params.clock;
-    rd.number(clock["block_s"], "clock.block_s", 0.01, 60, &k.block_s);
-    long wb = k.window_blocks;
-    rd.integer(clock["window_blocks"], "clock.window_blocks", 2, 10000, &wb);
-    k.window_blocks = static_cast<int>(wb);
-    rd.number(clock["max_drift_ppm"], "clock.max_drift_ppm", 0, 100000, &k.max_drift_ppm);
-    rd.number(clock["reset_threshold_s"], "clock.reset_threshold_s", 0.01, 3600,
-              &k.reset_threshold_s);
-    long ra = k.reanchor_samples;
-    rd.integer(clock["reanchor_samples"], "clock.reanchor_samples", 2, 1000, &ra);
-    k.reanchor_samples = static_cast<int>(ra);
-  }
+  Reader clock = root.child("clock");
+  ClockSyncParams& k = c.params.clock;
+  clock.get_in("block_s", k.block_s, 0.01, 60.0);
+  integer(clock, "window_blocks", k.window_blocks, 2, 10000);
+  clock.get_in("max_drift_ppm", k.max_drift_ppm, 0.0, 100000.0);
+  clock.get_in("reset_threshold_s", k.reset_threshold_s, 0.01, 3600.0);
+  integer(clock, "reanchor_samples", k.reanchor_samples, 2, 1000);
+  clock.finish();
 
-  const YAML::Node cal = root["calibration"];
-  rd.only(cal, "calibration", {"imu_axes", "mag_axes", "gyro_bias_rps", "gyro_scale",
-                               "accel_bias_mps2", "accel_scale", "mag_hard_iron_ut",
-                               "mag_soft_iron"});
-  if (cal) {
-    Calibration& k = c.calibration;
-    rd.axes(cal["imu_axes"], "calibration.imu_axes", &k.imu_axes);
-    rd.axes(cal["mag_axes"], "calibration.mag_axes", &k.mag_axes);
-    rd.vec3(cal["gyro_bias_rps"], "calibration.gyro_bias_rps", &k.gyro_bias_rps);
-    rd.vec3(cal["gyro_scale"], "calibration.gyro_scale", &k.gyro_scale);
-    rd.vec3(cal["accel_bias_mps2"], "calibration.accel_bias_mps2", &k.accel_bias_mps2);
-    rd.vec3(cal["accel_scale"], "calibration.accel_scale", &k.accel_scale);
-    rd.vec3(cal["mag_hard_iron_ut"], "calibration.mag_hard_iron_ut", &k.mag_hard_iron_ut);
-    rd.mat3(cal["mag_soft_iron"], "calibration.mag_soft_iron", &k.mag_soft_iron);
-    const std::string err = k.validate();
-    if (!err.empty()) rd.fail("calibration", err);
+  Reader cal = root.child("calibration");
+  Calibration& m = c.calibration;
+  for (auto [key, axes] : {std::pair<const char*, AxisMap*>{"imu_axes", &m.imu_axes}, {"mag_axes", &m.mag_axes}}) {
+    cal.get_with(key, [axes = axes](const YAML::Node& n) {
+      std::string err;
+      if (!n.IsScalar() || !AxisMap::parse(n.Scalar(), axes, &err)) {
+        throw std::invalid_argument(err.empty() ? "must be a string such as \"+x,+y,+z\"" : err);
+      }
+    });
   }
+  constexpr double kVectorBound = 1e9;  // any calibration number, however wrong, stays finite
+  cal.get_in("gyro_bias_rps", m.gyro_bias_rps, -kVectorBound, kVectorBound);
+  cal.get_in("gyro_scale", m.gyro_scale, -kVectorBound, kVectorBound);
+  cal.get_in("accel_bias_mps2", m.accel_bias_mps2, -kVectorBound, kVectorBound);
+  cal.get_in("accel_scale", m.accel_scale, -kVectorBound, kVectorBound);
+  cal.get_in("mag_hard_iron_ut", m.mag_hard_iron_ut, -kVectorBound, kVectorBound);
+  cal.get_in("mag_soft_iron", m.mag_soft_iron, -kVectorBound, kVectorBound);
+  const bool calibration_given = root.has("calibration");
+  cal.finish();
+  if (calibration_given) {
+    const std::string err = m.validate();
+    if (!err.empty()) root.fail("calibration", err);
+  }
+  root.finish();
   return c;
 }
 

@@ -1,8 +1,12 @@
 #include "poise/imu/faults.h"
 
+#include "poise/core/yaml_params.h"
+
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
+#include <string>
+#include <vector>
 
 #include "poise/imu/protocol.h"
 
@@ -95,9 +99,12 @@ FaultSpec FaultSpec::parse(const std::string& spec) {
       }
     }
     if (!found) {
-      throw std::invalid_argument("fault spec: unknown key '" + key +
-                                  "' (keys: garbage, drop, flip, truncate, dup, swap, nan, "
-                                  "disconnect, seed)");
+      std::vector<std::string> known;
+      for (std::size_t f = 0; f < kFaultCount; ++f) {
+        known.emplace_back(to_string(static_cast<Fault>(f)));
+      }
+      known.insert(known.end(), {"disconnect", "seed"});
+      throw std::invalid_argument(unknown_key_message("fault spec", key, known));
     }
   }
   if (total > 1.0) {

@@ -4,35 +4,31 @@
 #include <cstdio>
 #include <filesystem>
 #include <set>
+#include <string>
+#include <vector>
 
 #include "poise/dds/convert.h"
 #include "poise/runtime/shipped.h"
 
 namespace poise::imu {
 namespace {
-const std::set<std::string> kDriverSections{"serial", "protocol", "limits", "raw", "clock",
-                                            "calibration"};
-const std::set<std::string> kNodeKeys{"port",     "baud",          "config_file",
-                                      "diagnostics_period_s", "reliable", "publish_queue",
-                                      "max_age_s"};
+// The driver configuration's sections (given inline instead of config_file) and the node's own keys.
+const std::vector<std::string> kDriverSections{"serial", "protocol", "limits", "raw", "clock", "calibration"};
+const std::vector<std::string> kNodeKeys{"port",     "baud",          "config_file", "diagnostics_period_s",
+                                         "reliable", "publish_queue", "max_age_s"};
 }  // namespace
 
 ImuNodeOptions imu_node_options(const runtime::ComponentSpec& spec) {
+  std::vector<std::string> known = kNodeKeys;
+  known.insert(known.end(), kDriverSections.begin(), kDriverSections.end());
+  runtime::check_known_params(spec, known);
   ImuNodeOptions o;
   YAML::Node inline_driver(YAML::NodeType::Map);
   bool has_inline = false;
-  if (spec.params && spec.params.IsMap()) {
-    for (const auto& kv : spec.params) {
-      const auto key = kv.first.as<std::string>();
-      if (kDriverSections.count(key) != 0) {
-        inline_driver[key] = kv.second;
-        has_inline = true;
-      } else if (kNodeKeys.count(key) == 0) {
-        throw runtime::ConfigError(spec.origin + ": unknown parameter '" + key +
-                                   "' of imu_driver (known: port, baud, config_file, "
-                                   "diagnostics_period_s, reliable, publish_queue, max_age_s, "
-                                   "serial, protocol, limits, raw, clock, calibration)");
-      }
+  for (const auto& section : kDriverSections) {
+    if (spec.params && spec.params.IsMap() && spec.params[section]) {
+      inline_driver[section] = spec.params[section];
+      has_inline = true;
     }
   }
   o.port = runtime::param<std::string>(spec, "port", "");

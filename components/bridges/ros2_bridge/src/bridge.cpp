@@ -1,5 +1,7 @@
 #include "poise/ros2_bridge/bridge.h"
 
+#include "poise/core/yaml_params.h"
+
 #include "poise/dds/convert.h"
 #include "poise/dds/participant.h"
 #include "poise/nodes/reports.h"
@@ -55,25 +57,6 @@ T read_value(const YAML::Node& map, const std::string& key, const T& fallback, c
   }
 }
 
-void check_keys(const YAML::Node& map, const std::vector<std::string>& known, const std::string& where) {
-  if (!map) {
-    return;
-  }
-  if (!map.IsMap()) {
-    throw ConfigError(where + " must be a map");
-  }
-  for (const auto& entry : map) {
-    const auto key = entry.first.as<std::string>();
-    if (std::find(known.begin(), known.end(), key) == known.end()) {
-      std::string list;
-      for (const auto& k : known) {
-        list += (list.empty() ? "" : ", ") + k;
-      }
-      throw ConfigError(where + ": unknown key '" + key + "' (known: " + list + ")");
-    }
-  }
-}
-
 /// A ROS name checked (the DDS topic is derived from it), normalised to start with '/'.
 std::string ros_name(const std::string& name, const std::string& where) {
   try {
@@ -110,7 +93,7 @@ BridgeConfig parse_bridge_config(const YAML::Node& params, const std::string& or
     return c;
   }
   const std::string where = origin + ": ros2_bridge";
-  check_keys(params, {"namespace", "world_frame", "body_frame", "stamps", "out", "in"}, where);
+  check_known_keys<ConfigError>(params, {"namespace", "world_frame", "body_frame", "stamps", "out", "in"}, where);
   c.ros_namespace = read_string(params, "namespace", c.ros_namespace, where);
   if (c.ros_namespace != "/" && !c.ros_namespace.empty()) {
     c.ros_namespace = ros_name(c.ros_namespace, where + " namespace");
@@ -126,7 +109,7 @@ BridgeConfig parse_bridge_config(const YAML::Node& params, const std::string& or
   c.realtime_stamps = stamps == "realtime";
   if (const YAML::Node out = params["out"]) {
     const std::string w = where + " out";
-    check_keys(out, {"attitude", "pose", "imu", "altitude", "tf"}, w);
+    check_known_keys<ConfigError>(out, {"attitude", "pose", "imu", "altitude", "tf"}, where, "out.");
     c.attitude = read_value<std::vector<std::string>>(out, "attitude", {}, w, "a list of filter ids");
     c.pose = read_value<std::vector<std::string>>(out, "pose", {}, w, "a list of filter ids");
     c.imu = read_value<bool>(out, "imu", false, w, "true or false");
@@ -144,7 +127,7 @@ BridgeConfig parse_bridge_config(const YAML::Node& params, const std::string& or
   }
   if (const YAML::Node in = params["in"]) {
     const std::string w = where + " in";
-    check_keys(in, {"imu", "mag", "pressure", "pair_tolerance_s", "stale_s"}, w);
+    check_known_keys<ConfigError>(in, {"imu", "mag", "pressure", "pair_tolerance_s", "stale_s"}, where, "in.");
     c.in_imu = read_string(in, "imu", "", w);
     if (c.in_imu.empty()) {
       throw ConfigError(w + ": 'imu' (the sensor_msgs/Imu topic) is required for input");

@@ -83,11 +83,7 @@ void AltitudeParams::validate() const {
   check.positive(max_dt_s, "max_dt_s", "s");
   check.positive(max_gyro_rps, "limits.max_gyro_rps", "rad/s");
   check.positive(max_accel_mps2, "limits.max_accel_mps2", "m/s^2");
-  check.positive(tilt.sigma_gyro_rps, "tilt.sigma_gyro_rps", "rad/s");
-  check.positive(tilt.sigma_accel_mps2, "tilt.sigma_accel_mps2", "m/s^2");
-  check.require(tilt.c_a >= 0.0 && tilt.c_a < 1.0, "tilt.c_a", "in [0, 1)");
-  check.non_negative(tilt.c_a_rate_hz, "tilt.c_a_rate_hz", "Hz");
-  check.non_negative(tilt.sigma_gyro_extra_rps, "tilt.sigma_gyro_extra_rps", "rad/s");
+  tilt.validate(check);
 }
 
 AltitudeFilter::AltitudeFilter(const AltitudeParams& params) : params_(params) {

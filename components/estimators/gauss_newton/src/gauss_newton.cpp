@@ -3,8 +3,6 @@
 
 #include "poise/core/params_check.h"
 
-#include <yaml-cpp/yaml.h>
-
 #include <stdexcept>
 
 namespace poise {
@@ -131,46 +129,11 @@ void GaussNewton::reset_unhealthy() {
 }
 
 GaussNewtonParams load_gauss_newton_params(const std::string& path) {
-  YAML::Node root;
-  try {
-    root = load_yaml_file(path, "Gauss-Newton config");
-  } catch (const std::exception& e) {
-    throw std::runtime_error("cannot read Gauss-Newton config '" + path + "': " + e.what());
-  }
-  GaussNewtonParams p;
-  if (root["gauss_newton"]) {
-    root = root["gauss_newton"];
-  }
-  for (const auto& kv : root) {
-    const std::string key = kv.first.as<std::string>();
-    try {
-      if (key == "max_iterations") {
-        p.max_iterations = kv.second.as<int>();
-      } else if (key == "tolerance_rad") {
-        p.tolerance_rad = kv.second.as<double>();
-      } else if (key == "mag_weight") {
-        p.mag_weight = kv.second.as<double>();
-      } else if (key == "dip_deg") {
-        p.dip_deg = kv.second.IsNull() ? std::nan("") : kv.second.as<double>();
-      } else if (key == "startup_samples") {
-        p.startup_samples = kv.second.as<int>();
-      } else if (key == "use_magnetometer") {
-        p.use_magnetometer = read_magnetometer_use(kv.second);
-      } else {
-        throw std::runtime_error("unknown key");
-      }
-    } catch (const std::exception& e) {
-      throw std::runtime_error(path + ": key '" + key + "': " + e.what() +
-                               " (keys: max_iterations, tolerance_rad, mag_weight, dip_deg, "
-                               "startup_samples, use_magnetometer)");
-    }
-  }
-  try {
-    p.validate();
-  } catch (const std::exception& e) {
-    throw std::runtime_error(path + ": " + e.what());
-  }
-  return p;
+  return load_params_file(path, "Gauss-Newton parameter file", "gauss_newton", GaussNewtonParams{},
+                          [](YamlParamReader& r, GaussNewtonParams& p) {
+                            p.read(r);
+                            read_magnetometer_use(r, p.use_magnetometer);
+                          });
 }
 
 }  // namespace poise

@@ -50,12 +50,8 @@ ParallelKfParams ParallelKfParams::named(const std::string& name) {
 
 void ParallelKfParams::validate() const {
   const ParamCheck check("parallel_kf");
-  check.positive(tilt.sigma_gyro_rps, "tilt.sigma_gyro_rps", "rad/s");
-  check.positive(tilt.sigma_accel_mps2, "tilt.sigma_accel_mps2", "m/s^2");
-  check.require(tilt.c_a >= 0.0 && tilt.c_a < 1.0, "tilt.c_a", "in [0, 1)");
-  check.non_negative(tilt.c_a_rate_hz, "tilt.c_a_rate_hz", "Hz");
+  tilt.validate(check);
   check.require(tilt.gravity_mps2 > 5.0 && tilt.gravity_mps2 < 15.0, "tilt.gravity_mps2", "in (5, 15) (m/s^2)");
-  check.non_negative(tilt.sigma_gyro_extra_rps, "tilt.sigma_gyro_extra_rps", "rad/s");
   check.non_negative(sigma_gyro_heading_rps, "sigma_gyro_heading_rps", "rad/s, 0 = tilt value");
   check.positive(sigma_mag_ut, "sigma_mag_ut", "uT");
   check.require(c_d >= 0.0 && c_d < 1.0, "c_d", "in [0, 1)");

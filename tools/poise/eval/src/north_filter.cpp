@@ -48,8 +48,8 @@ NorthReference north_from_sets(const std::vector<std::string>& sets, const std::
     }
     const std::string key = set.substr(0, eq);
     if (std::find(keys.begin(), keys.end(), key) == keys.end()) {
-      throw std::invalid_argument("--set " + set + ": '" + key + "' is not a north key (" + known +
-                                  "); filter parameters go in the filter's YAML (--config FILE)");
+      throw std::invalid_argument(unknown_key_message("--set " + set, key, keys) +
+                                  ": only the north keys; filter parameters go in the filter's YAML (--config FILE)");
     }
     if (params[key]) {
       throw std::invalid_argument("--set " + set + ": '" + key + "' is given twice");

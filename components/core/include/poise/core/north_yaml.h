@@ -9,6 +9,7 @@
 #pragma once
 
 #include "poise/core/north.h"
+#include "poise/core/yaml_params.h"
 
 #include <yaml-cpp/yaml.h>
 
@@ -53,12 +54,7 @@ inline NorthParams read_north_params(const YAML::Node& params) {
     if (!loc.IsMap()) {
       throw std::invalid_argument("location must be a mapping {lat_deg, lon_deg, alt_m}");
     }
-    for (const auto& kv : loc) {
-      const auto key = kv.first.as<std::string>();
-      if (key != "lat_deg" && key != "lon_deg" && key != "alt_m") {
-        throw std::invalid_argument("unknown key 'location." + key + "' (known: lat_deg, lon_deg, alt_m)");
-      }
-    }
+    check_known_keys<std::invalid_argument>(loc, {"lat_deg", "lon_deg", "alt_m"}, "north", "location.");
     if (!loc["lat_deg"] || !loc["lon_deg"]) {
       throw std::invalid_argument("location needs lat_deg and lon_deg (alt_m optional, default 0)");
     }

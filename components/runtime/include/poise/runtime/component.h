@@ -100,7 +100,9 @@ T param(const ComponentSpec& spec, const std::string& key, const T& fallback) {
   }
 }
 
-/// Rejects parameters a component does not know (catches typos instead of ignoring them).
+/// Rejects parameters a component does not know (catches typos instead of ignoring them): the one
+/// unknown-key message (poise/core/yaml_params.h), "<origin>: <type>: unknown key '<key>' (known:
+/// ...)", as ConfigError.
 void check_known_params(const ComponentSpec& spec, const std::vector<std::string>& known);
 
 }  // namespace poise::runtime

@@ -45,10 +45,22 @@ struct GaussNewtonParams {
   /// Throws std::invalid_argument naming the key and its range (ParamCheck); `filter` names the
   /// section in messages.
   void validate(const char* filter = "gauss_newton") const;
+  /// Reads the keys above but use_magnetometer and limits with a YamlParamReader
+  /// (poise/core/yaml_params.h; a template, so this header needs no yaml-cpp): the file's
+  /// `gauss_newton:` section, and the selective EKF's (which sets the other two itself).
+  template <typename Reader>
+  void read(Reader& r) {
+    r.get("max_iterations", max_iterations);
+    r.get("tolerance_rad", tolerance_rad);
+    r.get("mag_weight", mag_weight);
+    r.get_nullable("dip_deg", dip_deg);
+    r.get("startup_samples", startup_samples);
+  }
 };
 
-/// Loads GaussNewtonParams from a YAML file (keys as the fields; unknown keys are an error).
-/// Throws std::runtime_error with a message naming the file and the key.
+/// Loads GaussNewtonParams from a YAML file (keys as the fields, under `gauss_newton:` or at the
+/// top level, and use_magnetometer; unknown keys are an error). Throws std::runtime_error with a
+/// message naming the file and the key.
 GaussNewtonParams load_gauss_newton_params(const std::string& path);
 
 struct GaussNewtonResult {

@@ -14,6 +14,7 @@
 // The state's covariance is the 6x6 P of x1, order [sZ; sa].
 #pragma once
 
+#include "poise/core/params_check.h"
 #include "poise/parallel_kf/direction_kf.h"
 
 #include <Eigen/Core>
@@ -36,6 +37,29 @@ struct TiltKfParams {
   double sigma_gyro_extra_rps = 0.0;          ///< extra gyro error std in Q11 (e.g. residual bias), rad/s.
   double initial_var_tilt = 1e-2;             ///< P11 at reset (unit-vector components^2).
   double initial_var_accel = 1.0;             ///< P22 at reset, (m/s^2)^2.
+
+  /// The noise model's checks under the keys tilt.* (every filter built on KF1 runs them: the
+  /// parallel KF and the altitude filter); ParamCheck names the filter.
+  void validate(const ParamCheck& check) const {
+    check.positive(sigma_gyro_rps, "tilt.sigma_gyro_rps", "rad/s");
+    check.positive(sigma_accel_mps2, "tilt.sigma_accel_mps2", "m/s^2");
+    check.require(c_a >= 0.0 && c_a < 1.0, "tilt.c_a", "in [0, 1)");
+    check.non_negative(c_a_rate_hz, "tilt.c_a_rate_hz", "Hz");
+    check.non_negative(sigma_gyro_extra_rps, "tilt.sigma_gyro_extra_rps", "rad/s");
+  }
+  /// Reads the keys of a `tilt:` section with a YamlParamReader (poise/core/yaml_params.h; a
+  /// template, so this header needs no yaml-cpp). gravity_mps2 is not among them: a filter that
+  /// takes it from the file reads it itself (the altitude filter sets it from its own).
+  template <typename Reader>
+  void read(Reader& r) {
+    r.get("sigma_gyro_rps", sigma_gyro_rps);
+    r.get("sigma_accel_mps2", sigma_accel_mps2);
+    r.get("c_a", c_a);
+    r.get("c_a_rate_hz", c_a_rate_hz);
+    r.get("exact_rotation", exact_rotation);
+    r.get("renormalize", renormalize);
+    r.get("sigma_gyro_extra_rps", sigma_gyro_extra_rps);
+  }
 
   [[nodiscard]] DirectionKfParams direction_params() const {
     DirectionKfParams d;

@@ -240,11 +240,14 @@ struct SelectiveEkfParams {
     g.max_iterations = 2;
     return g;
   }();
+
+  /// Throws std::invalid_argument naming the key and its range (ParamCheck): validate(*this).
+  void validate() const;
 };
 
-/// Loads SelectiveEkfParams from YAML (top-level key `selective_ekf`, optional nested
-/// `gauss_newton`). Unknown keys and out-of-range values throw std::runtime_error naming the
-/// file and key.
+/// Loads SelectiveEkfParams from YAML (keys under `selective_ekf:` or at the top level, optional
+/// nested `gauss_newton:`). Unknown keys and out-of-range values throw std::runtime_error naming
+/// the file and key.
 SelectiveEkfParams load_selective_ekf_params(const std::string& path);
 /// Validates ranges; throws std::invalid_argument with a message naming the field.
 void validate(const SelectiveEkfParams& p);
