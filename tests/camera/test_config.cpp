@@ -90,6 +90,48 @@ TEST(CameraConfig, ExampleFilesLoad) {
   EXPECT_EQ(pipeline.config().sensor_id, c.sensor_id);
 }
 
+// Defaults in one place (issue 30): the shipped camera.yaml holds only what differs from
+// CameraConfig{} (the requested resolution and rate, two detector threads); every other field of
+// the loaded file is exactly the struct's default.
+TEST(CameraConfig, GivenTheShippedFileWhenLoadedThenOnlyItsOverridesDifferFromTheStructDefaults) {
+  const CameraConfig c = load_camera_config(poise::testing::source_path("config/camera/camera.yaml"));
+  const CameraConfig d;
+  // the overrides, each different from its default (a value equal to the default would restate it)
+  EXPECT_EQ(c.width_px, 640);
+  EXPECT_EQ(c.height_px, 480);
+  EXPECT_EQ(c.fps, 30.0);
+  EXPECT_EQ(c.detector.threads, 2);
+  EXPECT_NE(d.width_px, 640);
+  EXPECT_NE(d.height_px, 480);
+  EXPECT_NE(d.fps, 30.0);
+  EXPECT_NE(d.detector.threads, 2);
+  // everything else: the struct's defaults
+  EXPECT_EQ(c.sensor_id, d.sensor_id);
+  EXPECT_EQ(c.frame_id, d.frame_id);
+  EXPECT_EQ(c.capture_delay_s, d.capture_delay_s);
+  EXPECT_EQ(c.max_image_pixels, d.max_image_pixels);
+  EXPECT_EQ(c.detector.family, d.detector.family);
+  EXPECT_EQ(c.detector.decimate, d.detector.decimate);
+  EXPECT_EQ(c.detector.blur_sigma, d.detector.blur_sigma);
+  EXPECT_EQ(c.detector.refine_edges, d.detector.refine_edges);
+  EXPECT_EQ(c.detector.decode_sharpening, d.detector.decode_sharpening);
+  EXPECT_EQ(c.detector.max_hamming, d.detector.max_hamming);
+  EXPECT_EQ(c.detector.min_decision_margin, d.detector.min_decision_margin);
+  EXPECT_EQ(c.tag_pose.ambiguity_ratio_max, d.tag_pose.ambiguity_ratio_max);
+  EXPECT_EQ(c.tag_pose.ambiguity_min_angle_rad, d.tag_pose.ambiguity_min_angle_rad);
+  EXPECT_EQ(c.tag_pose.max_reprojection_rms_px, d.tag_pose.max_reprojection_rms_px);
+  EXPECT_EQ(c.world_pose.ambiguity_ratio_max, d.world_pose.ambiguity_ratio_max);
+  EXPECT_EQ(c.world_pose.ambiguity_min_angle_rad, d.world_pose.ambiguity_min_angle_rad);
+  EXPECT_EQ(c.world_pose.max_reprojection_rms_px, d.world_pose.max_reprojection_rms_px);
+  EXPECT_EQ(c.world_pose.pixel_sigma_px, d.world_pose.pixel_sigma_px);
+  EXPECT_EQ(c.world_pose.max_iterations, d.world_pose.max_iterations);
+  EXPECT_EQ(c.unknown_tag_size_m, d.unknown_tag_size_m);
+  EXPECT_FALSE(c.T_body_camera.has_value());
+  // the world pose's ambiguity thresholds are the tag pose's (one default, one pair of keys)
+  EXPECT_EQ(d.world_pose.ambiguity_ratio_max, d.tag_pose.ambiguity_ratio_max);
+  EXPECT_EQ(d.world_pose.ambiguity_min_angle_rad, d.tag_pose.ambiguity_min_angle_rad);
+}
+
 TEST(CameraConfig, ParsesSectionsAndExtrinsic) {
   const CameraConfig c = parse_camera_config(R"(
 capture: {delay_ms: 12.5}

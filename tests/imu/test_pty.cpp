@@ -55,7 +55,7 @@ class Harness {
           std::lock_guard<std::mutex> lock(mu_);
           samples_.push_back(s);
         }),
-        reader_(ReaderOptions{path, 115200, 0.02, 0.1, "auto", 20}, driver_,
+        reader_(ReaderOptions{path, SerialSettings{115200, 0.02, 0.1, "auto"}, 20}, driver_,
                 [this](const std::string& m) {
                   std::lock_guard<std::mutex> lock(mu_);
                   log_.push_back(m);

@@ -29,11 +29,11 @@ CameraNodeOptions camera_node_options(const runtime::ComponentSpec& spec) {
   o.intrinsics_file = required(spec, "intrinsics_file", "OpenCV or ROS camera_info YAML");
   o.tags_file = required(spec, "tags_file", "tag map YAML, see docs/CAMERA.md");
   o.config_file = runtime::param<std::string>(spec, "config_file", "");
-  o.diagnostics_period_s = runtime::param<double>(spec, "diagnostics_period_s", 1.0);
+  o.diagnostics_period_s = runtime::param<double>(spec, "diagnostics_period_s", o.diagnostics_period_s);
   if (!(o.diagnostics_period_s > 0.0 && o.diagnostics_period_s <= 3600.0)) {
     throw runtime::ConfigError(spec.origin + ": diagnostics_period_s must be in (0, 3600]");
   }
-  o.pace = runtime::param<bool>(spec, "pace", true);
+  o.pace = runtime::param<bool>(spec, "pace", o.pace);
   return o;
 }
 

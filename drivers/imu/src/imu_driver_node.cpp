@@ -64,11 +64,11 @@ ImuNodeOptions imu_node_options(const runtime::ComponentSpec& spec) {
                                "460800, 500000, 576000, 921600, 1000000)");
   }
   o.config.serial.baud = baud;
-  o.diagnostics_period_s = runtime::param<double>(spec, "diagnostics_period_s", 1.0);
+  o.diagnostics_period_s = runtime::param<double>(spec, "diagnostics_period_s", o.diagnostics_period_s);
   if (!(o.diagnostics_period_s > 0.0 && o.diagnostics_period_s <= 3600.0)) {
     throw runtime::ConfigError(spec.origin + ": diagnostics_period_s must be in (0, 3600]");
   }
-  o.reliable = runtime::param<bool>(spec, "reliable", false);
+  o.reliable = runtime::param<bool>(spec, "reliable", o.reliable);
   const int queue = runtime::param<int>(spec, "publish_queue", static_cast<int>(o.publish_queue));
   if (queue < 1 || queue > 100000) {
     throw runtime::ConfigError(spec.origin + ": publish_queue must be in [1, 100000] samples");
@@ -123,10 +123,7 @@ ImuDriverNode::ImuDriverNode(const ImuNodeOptions& options, const std::string& s
       diag_writer_(host.participant, host.topics.diagnostics),
       driver_(options.config.params, options.config.calibration,
               [this](const ImuSample& s, const SampleInfo& i) { on_sample(s, i); }),
-      reader_(ReaderOptions{options.port, options.config.serial.baud,
-                            options.config.serial.reconnect_initial_s,
-                            options.config.serial.reconnect_max_s,
-                            options.config.serial.tx_correction, 50},
+      reader_(ReaderOptions{options.port, options.config.serial},
               driver_, [this](const std::string& m) {
                 if (options_.log_to_stderr) {
                   std::fprintf(stderr, "imu_driver %s: %s\n", sensor_id_.c_str(), m.c_str());

@@ -195,7 +195,7 @@ PortReader::PortReader(ReaderOptions options, ImuDriver& driver, Log log)
 }
 
 void PortReader::run(const std::function<bool()>& stop, const std::function<void(int64_t)>& on_tick) {
-  double backoff_s = options_.reconnect_initial_s;
+  double backoff_s = options_.serial.reconnect_initial_s;
   std::string last_error;
   int64_t next_attempt_ns = 0;
   char buf[4096];
@@ -212,7 +212,7 @@ void PortReader::run(const std::function<bool()>& stop, const std::function<void
     }
     std::unique_ptr<SerialPort> port;
     try {
-      port = std::make_unique<SerialPort>(options_.path, options_.baud);
+      port = std::make_unique<SerialPort>(options_.path, options_.serial.baud);
     } catch (const SerialError& e) {
       try {
         check_serial_path(options_.path);
@@ -226,18 +226,18 @@ void PortReader::run(const std::function<bool()>& stop, const std::function<void
         last_error = e.what();
       }
       next_attempt_ns = monotonic_now_ns() + static_cast<int64_t>(backoff_s * 1e9);
-      backoff_s = std::min(backoff_s * 2.0, options_.reconnect_max_s);
+      backoff_s = std::min(backoff_s * 2.0, options_.serial.reconnect_max_s);
       tick(monotonic_now_ns());
       continue;
     }
-    const bool correct_tx = options_.tx_correction == "on" ||
-                            (options_.tx_correction == "auto" && !port->is_pty());
-    driver_.set_link_bytes_per_s(correct_tx ? options_.baud / 10.0 : 0.0);
+    const bool correct_tx = options_.serial.tx_correction == "on" ||
+                            (options_.serial.tx_correction == "auto" && !port->is_pty());
+    driver_.set_link_bytes_per_s(correct_tx ? options_.serial.baud / 10.0 : 0.0);
     connected_.store(true);
     connects_.fetch_add(1);
     last_error.clear();
-    backoff_s = options_.reconnect_initial_s;
-    log_(std::string("connected to ") + options_.path + " at " + std::to_string(options_.baud) +
+    backoff_s = options_.serial.reconnect_initial_s;
+    log_(std::string("connected to ") + options_.path + " at " + std::to_string(options_.serial.baud) +
          " baud" + (port->is_pty() ? " (pseudo-terminal)" : ""));
     while (!stop()) {
       std::size_t n = 0;

@@ -110,8 +110,7 @@ void run_calibrate(const CalibrateOptions& o) {
                             session.add(info.raw, info.sensor_ns);
                           });
     imu::PortReader reader(
-        imu::ReaderOptions{o.port, config.serial.baud, config.serial.reconnect_initial_s,
-                           config.serial.reconnect_max_s, config.serial.tx_correction, 50},
+        imu::ReaderOptions{o.port, config.serial},
         driver, [](const std::string& m) { std::fprintf(stderr, "\n%s\n", m.c_str()); });
     reader.run([&] { return session.done() || stop_requested() || timed_out(); }, tick);
   } else {

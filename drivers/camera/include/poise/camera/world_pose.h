@@ -29,8 +29,9 @@ struct WorldPoseParams {
   double pixel_sigma_px = 0.25;        ///< prior corner noise, px (lower bound on sigma)
   double max_reprojection_rms_px = 2.0;  ///< reject the world pose above this RMS, px
   int max_iterations = 20;             ///< Levenberg-Marquardt iterations
-  double ambiguity_ratio_max = 0.3;    ///< as TagPoseParams (set from the same config keys)
-  double ambiguity_min_angle_rad = 0.13962634015954636;
+  /// As TagPoseParams (its defaults; the camera configuration sets both from the same keys).
+  double ambiguity_ratio_max = TagPoseParams{}.ambiguity_ratio_max;
+  double ambiguity_min_angle_rad = TagPoseParams{}.ambiguity_min_angle_rad;
 };
 
 void validate_world_pose_params(const WorldPoseParams& params);

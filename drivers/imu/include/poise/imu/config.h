@@ -7,6 +7,7 @@
 
 #include "poise/imu/calibration.h"
 #include "poise/imu/driver.h"
+#include "poise/imu/serial_port.h"  // SerialSettings
 
 namespace poise::imu {
 
@@ -14,15 +15,6 @@ namespace poise::imu {
 class ConfigError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
-};
-
-struct SerialSettings {
-  int baud = 115200;                ///< one of supported_bauds()
-  double reconnect_initial_s = 0.1; ///< first retry delay after a lost/absent port, s
-  double reconnect_max_s = 2.0;     ///< retry delay cap (doubles each failure), s
-  /// Correct arrival times by each line's transmission time at `baud`: "auto" (yes for real UARTs,
-  /// no for pseudo-terminals), "on", "off".
-  std::string tx_correction = "auto";
 };
 
 struct DriverConfig {

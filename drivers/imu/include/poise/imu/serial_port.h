@@ -52,13 +52,21 @@ class SerialPort {
   bool is_pty_ = false;
 };
 
+/// The serial section of the driver configuration (config/drivers/imu.yaml `serial:`). The
+/// defaults live here only.
+struct SerialSettings {
+  int baud = 115200;                ///< one of supported_bauds()
+  double reconnect_initial_s = 0.1; ///< first retry delay after a lost/absent port, s
+  double reconnect_max_s = 2.0;     ///< retry delay cap (doubles each failure), s
+  /// Correct arrival times by each line's transmission time at `baud`: "auto" (yes for real UARTs,
+  /// no for pseudo-terminals), "on", "off".
+  std::string tx_correction = "auto";
+};
+
 struct ReaderOptions {
   std::string path;
-  int baud = 115200;
-  double reconnect_initial_s = 0.1;
-  double reconnect_max_s = 2.0;
-  std::string tx_correction = "auto";  ///< auto | on | off (see SerialSettings)
-  int poll_ms = 50;                    ///< longest wait between on_tick calls, ms
+  SerialSettings serial;  ///< baud, reconnect delays, transmission-time correction
+  int poll_ms = 50;       ///< longest wait between on_tick calls, ms
 };
 
 /// Throws SerialError when `path` exists and is not a character device (a regular file, a
