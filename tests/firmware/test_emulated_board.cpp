@@ -2,8 +2,8 @@
 // datasheet models of its sensors fed from a known motion; its UART is a pty that `poise imu`
 // (a separate process) reads; this test subscribes to what the driver publishes over DDS.
 // Oracle: for every published sample, the values the models held when the firmware read them
-// (SI, body frame: the GY-87's chips share the body axes, config/drivers/imu.yaml), within the
-// sensors' quantisation and the sketch's printed decimals.
+// (SI, body frame: the GY-87's chips share the body axes, the driver's default imu_axes and
+// mag_axes), within the sensors' quantisation and the sketch's printed decimals.
 #include <thread>
 
 #include "emulated_chain.h"

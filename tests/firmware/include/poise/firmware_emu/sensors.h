@@ -2,8 +2,8 @@
 // InvenSense MPU-6000/6050 (product specification rev 3.4 and register map rev 4.2), Honeywell
 // HMC5883L (3-axis digital compass IC), QST QMC5883L (datasheet 1.0), Bosch BMP180 (BST-BMP180-DS000).
 // Each is fed from a known motion (Motion: the project's sensor simulator at 1 kHz, body frame;
-// the GY-87's chips share the body axes, config/drivers/imu.yaml) and records what the firmware
-// last read, in SI units before quantisation: what a correct firmware must report.
+// the GY-87's chips share the body axes, the driver's default imu_axes and mag_axes) and records
+// what the firmware last read, in SI units before quantisation: what a correct firmware must report.
 #pragma once
 
 #include "poise/firmware_emu/i2c.h"
