@@ -124,6 +124,43 @@ TEST(BroadGolden, FiltersStayWithinTheirMeasuredAccuracy) {
   }
 }
 
+TEST(BroadCsv, GivenEstimatesWithCovariancesThenTheCsvHoldsThePublishedUpperTriangleNextToEachQuaternion) {
+  TrialEstimates e;
+  e.q = {Eigen::Quaterniond::Identity(), quat_from_euler_zyx(0.0, 0.0, 0.5)};
+  Eigen::Matrix3d p;
+  p << 1e-4, 2e-6, 3e-6, 2e-6, 4e-4, 5e-6, 3e-6, 5e-6, 9e-4;
+  e.cov = {p, Eigen::Matrix3d::Constant(std::nan(""))};  // the second: no covariance published
+  const std::string path = ::testing::TempDir() + "/estimates.csv";
+  write_estimate_csv(path, e, 100.0);
+  std::ifstream in(path);
+  std::string line;
+  ASSERT_TRUE(std::getline(in, line));
+  EXPECT_EQ(line, "t_s,qw,qx,qy,qz,cov_xx,cov_xy,cov_xz,cov_yy,cov_yz,cov_zz");
+  ASSERT_TRUE(std::getline(in, line));
+  EXPECT_EQ(line, "0.000000,1.000000000,0.000000000,0.000000000,0.000000000,1.000000e-04,2.000000e-06,"
+                  "3.000000e-06,4.000000e-04,5.000000e-06,9.000000e-04");
+  ASSERT_TRUE(std::getline(in, line));
+  EXPECT_NE(line.find(",nan,nan,nan,nan,nan,nan"), std::string::npos) << line;
+}
+
+TEST(BroadConsistency, GivenEstimatesOffByOneSigmaAboutEachAxisThenEachScoredSampleHasNeesThree) {
+  BroadTrial t;
+  t.rate_hz = 100.0;
+  const Eigen::Vector4d id(1, 0, 0, 0);
+  t.opt_quat_wxyz = {id, id, id};
+  t.movement = {0, 1, 1};  // the first is not scored
+  t.gyr_rps.assign(3, Eigen::Vector3d::Zero());
+  t.acc_mps2 = t.mag_ut = t.gyr_rps;
+  const Eigen::Matrix3d p = Eigen::Vector3d(1e-4, 4e-4, 9e-4).asDiagonal();  // sigma 0.01, 0.02, 0.03 rad
+  TrialEstimates e;
+  e.q.assign(3, quat_exp(Eigen::Vector3d(0.01, -0.02, 0.03)).conjugate());  // truth (x) est^-1 = that rotation
+  e.cov.assign(3, p);
+  const NeesSummary s = broad_consistency(e, t);
+  EXPECT_EQ(s.samples(), 2u);
+  EXPECT_NEAR(s.median(), 3.0, 1e-5);  // float storage
+  EXPECT_DOUBLE_EQ(s.fraction_inside(), 1.0);
+}
+
 TEST(BroadGolden, CsvHasOneRowPerSample) {
   POISE_REQUIRE_SHARED_DIR(shared);
   const BroadTrial t = load_broad(shared + "/broad/05_undisturbed_slow_rotation_with_breaks_B.hdf5");

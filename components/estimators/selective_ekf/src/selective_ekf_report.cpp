@@ -103,6 +103,13 @@ Eigen::Matrix3d attitude_covariance_world(const SelectiveEkf& ekf) {
   return r * ekf.state().P.block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh) * r.transpose();
 }
 
+std::optional<Eigen::Matrix3d> SelectiveEkfFilter::attitude_covariance() const {
+  if (!ekf_.initialized()) {
+    return std::nullopt;
+  }
+  return attitude_covariance_world(ekf_);
+}
+
 Eigen::Matrix<double, 9, 9> pose_covariance_world(const SelectiveEkfState& x,
                                                    const Eigen::Quaterniond& q_world_body) {
   // J maps the error state [w, th_body, b, t, v] to [p, v, th_world]: th_world = R th_body.

@@ -33,7 +33,11 @@ struct PipelineMonitor::Impl {
   std::map<std::string, std::vector<std::pair<double, double>>> errors;
   std::map<std::string, std::map<uint32_t, double>> errors_by_seq;
   std::map<uint32_t, Eigen::Quaterniond> truth_by_seq;  // recent truth, for matching
-  std::map<std::string, std::map<uint32_t, Eigen::Quaterniond>> pending;  // estimates before truth
+  struct Estimate {
+    Eigen::Quaterniond q;
+    Eigen::Matrix3d cov;  // published attitude_covariance, rad^2
+  };
+  std::map<std::string, std::map<uint32_t, Estimate>> pending;  // estimates before truth
   std::map<std::string, std::vector<AltitudePoint>> altitude;
   CameraStats camera;
   std::map<std::string, uint64_t> rejected;
@@ -46,14 +50,15 @@ struct PipelineMonitor::Impl {
 
   [[nodiscard]] double now_s() const { return static_cast<double>(nodes::monotonic_ns() - start_ns) * 1e-9; }
 
-  void compare(const std::string& filter, uint32_t seq, const Eigen::Quaterniond& q, double t_s) {
+  void compare(const std::string& filter, uint32_t seq, const Estimate& est, double t_s) {
     const auto it = truth_by_seq.find(seq);
     if (it == truth_by_seq.end()) {
-      pending[filter][seq] = q;
+      pending[filter][seq] = est;
       return;
     }
-    const double e = quat_angle_between(q, it->second) * 180.0 / M_PI;
+    const double e = quat_angle_between(est.q, it->second) * 180.0 / M_PI;
     FilterStats& s = stats[filter];
+    s.nees.add(attitude_nees(world_attitude_error(est.q, it->second), est.cov));
     s.error_deg = e;
     s.sum_sq_error += e * e;
     ++s.compared;
@@ -86,9 +91,9 @@ struct PipelineMonitor::Impl {
       for (auto& [name, waiting] : pending) {  // estimates that arrived before their truth
         const auto w = waiting.find(seq);
         if (w != waiting.end()) {
-          const Eigen::Quaterniond q = w->second;
+          const Estimate est = w->second;
           waiting.erase(w);
-          compare(name, seq, q, t);
+          compare(name, seq, est, t);
         }
         while (waiting.size() > 2000) {
           waiting.erase(waiting.begin());
@@ -99,7 +104,11 @@ struct PipelineMonitor::Impl {
     if (s.latencies_ms.size() < 200000) {
       s.latencies_ms.push_back(p.latency_ms);
     }
-    compare(filter, m.header().seq(), p.q, t);
+    Estimate est{p.q, Eigen::Matrix3d::Zero()};
+    for (int k = 0; k < 9; ++k) {
+      est.cov(k / 3, k % 3) = m.attitude_covariance()[static_cast<size_t>(k)];
+    }
+    compare(filter, m.header().seq(), est, t);
   }
 };
 

@@ -242,11 +242,11 @@ std::string write_index(const std::string& dir, const ReportInput& input, const 
   }
   html << "</ul>\n<h2>Filters</h2>\n<table><tr><th>filter</th><th>estimates</th><th>rate [Hz]</th>"
           "<th>attitude RMSE vs truth [deg]</th><th>latency p50 [ms]</th><th>latency p99 [ms]</th>"
-          "<th>latency max [ms]</th></tr>\n";
+          "<th>latency max [ms]</th><th>median NEES</th><th>inside 95 % [%]</th></tr>\n";
   for (const auto& filter : input.filters) {
     const auto it = stats.find(filter);
     if (it == stats.end()) {
-      html << "<tr><td>" << filter << "</td><td>0</td><td colspan=5>no estimate received</td></tr>\n";
+      html << "<tr><td>" << filter << "</td><td>0</td><td colspan=7>no estimate received</td></tr>\n";
       continue;
     }
     const FilterStats& s = it->second;
@@ -255,7 +255,8 @@ std::string write_index(const std::string& dir, const ReportInput& input, const 
     html << "<tr><td>" << filter << "</td><td>" << s.received << "</td><td>" << fmt(s.rate_hz, 1)
          << "</td><td>" << fmt(rmse, 2) << "</td><td>" << fmt(percentile(s.latencies_ms, 50), 3)
          << "</td><td>" << fmt(percentile(s.latencies_ms, 99), 3) << "</td><td>"
-         << fmt(percentile(s.latencies_ms, 100), 3) << "</td></tr>\n";
+         << fmt(percentile(s.latencies_ms, 100), 3) << "</td><td>" << fmt(s.nees.median(), 2) << "</td><td>"
+         << fmt(100.0 * s.nees.fraction_inside(kNees95Dof3), 1) << "</td></tr>\n";
   }
   html << "</table>\n<p>Camera: " << camera.frames << " frames, " << camera.poses
        << " vision poses.</p>\n";

@@ -126,10 +126,11 @@ void run_eval(const std::string& filter_name, const std::string& config, const s
     progress.update(i, files[i]);
     const eval::BroadTrial trial = load_trials({files[i]}).front();
     size_t estimated = 0;
-    const auto q = eval::run_filter(*filter, trial, &estimated);
+    const eval::TrialEstimates est = eval::run_filter_estimates(*filter, trial, &estimated);
     const std::string csv = (std::filesystem::path(out_dir) / (trial.stem + ".csv")).string();
-    eval::write_quaternion_csv(csv, q, trial.rate_hz);
-    results.push_back(score(trial, q, estimated));
+    eval::write_estimate_csv(csv, est, trial.rate_hz);
+    results.push_back(score(trial, est.q, estimated));
+    results.back().nees = eval::broad_consistency(est, trial);
     std::ostringstream note;  // only what needs saying: the figures are in the table
     if (trial.invalid_reference_rows > 0) {
       note << trial.stem << ": " << trial.invalid_reference_rows

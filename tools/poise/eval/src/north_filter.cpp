@@ -21,6 +21,11 @@ class NorthFilter : public AttitudeFilter, public TrialInputs {
   [[nodiscard]] bool initialized() const override { return inner_->initialized(); }
   void reset() override { inner_->reset(); }
   [[nodiscard]] std::map<std::string, uint64_t> rejections() const override { return inner_->rejections(); }
+  [[nodiscard]] std::optional<Eigen::Matrix3d> attitude_covariance() const override {
+    const std::optional<Eigen::Matrix3d> p = inner_->attitude_covariance();
+    return p ? std::optional<Eigen::Matrix3d>(north_.to_true(*p)) : std::nullopt;
+  }
+  [[nodiscard]] bool heading_unverified() const override { return inner_->heading_unverified(); }
   void begin_trial(const BroadTrial& trial) override {
     if (auto* inputs = dynamic_cast<TrialInputs*>(inner_.get())) {
       inputs->begin_trial(trial);

@@ -29,7 +29,19 @@ struct Sample {
   double height_m = 0.0;
   bool mag_trusted = false;
   bool vision_fused = false;
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();  ///< attitude: the published covariance, rad^2
 };
+
+/// Against truth: the error's heading part (deg) and NEES of the estimate's covariance.
+struct TruthError {
+  double heading_deg = 0.0;
+  double nees = 0.0;
+};
+TruthError truth_error(const Sample& estimate, const Sample& truth) {
+  const Eigen::Quaterniond e = estimate.q.normalized() * truth.q.normalized().conjugate();
+  return {heading_inclination_of_world_error(e).heading_rad * kDegPerRad,
+          attitude_nees(world_attitude_error(estimate.q, truth.q), estimate.cov)};
+}
 
 using Key = std::tuple<std::string, int64_t, uint32_t>;  // sensor_id, stamp, seq
 struct Series {
@@ -107,6 +119,9 @@ bool decode_estimate(const MessageView& m, std::string& kind, std::string& senso
     s.q = dds::from_msg(e.q_world_body());
     s.mag_trusted = e.mag_trusted();
     s.vision_fused = (e.sources_fused() & msg::SOURCE_VISION) != 0;
+    for (int k = 0; k < 9; ++k) {
+      s.cov(k / 3, k % 3) = e.attitude_covariance()[static_cast<size_t>(k)];
+    }
     return true;
   }
   if (type == dds::type_names::kPoseEstimate) {
@@ -145,6 +160,7 @@ struct Running {
   bool vision_in = false;
   double sum_sq = 0.0;
   double truth_sq = 0.0;
+  double truth_heading_sq = 0.0;
 };
 
 /// Per live topic and sensor: its estimates and their error against truth.
@@ -152,6 +168,8 @@ struct LiveRunning {
   uint64_t live = 0;
   uint64_t truth_matched = 0;
   double truth_sq = 0.0;
+  double truth_heading_sq = 0.0;
+  NeesSummary nees;
 };
 
 // Estimates are compared once the newest stamp read is this far past theirs: the processed
@@ -209,14 +227,16 @@ class StreamComparison {
           if (l != live_it->second.end()) {
             c.live = l->second.live;
             c.truth_matched_live = l->second.truth_matched;
-            c.live_truth_rmse = l->second.truth_matched > 0
-                                    ? std::sqrt(l->second.truth_sq / static_cast<double>(l->second.truth_matched))
-                                    : 0.0;
+            const double n_live = static_cast<double>(l->second.truth_matched);
+            c.live_truth_rmse = n_live > 0 ? std::sqrt(l->second.truth_sq / n_live) : 0.0;
+            c.live_truth_heading_rmse = n_live > 0 ? std::sqrt(l->second.truth_heading_sq / n_live) : 0.0;
+            c.live_nees = l->second.nees;
           }
         }
         c.rmse = c.matched > 0 ? std::sqrt(r.sum_sq / static_cast<double>(c.matched)) : 0.0;
-        c.processed_truth_rmse =
-            c.truth_matched > 0 ? std::sqrt(r.truth_sq / static_cast<double>(c.truth_matched)) : 0.0;
+        const double n_truth = static_cast<double>(c.truth_matched);
+        c.processed_truth_rmse = n_truth > 0 ? std::sqrt(r.truth_sq / n_truth) : 0.0;
+        c.processed_truth_heading_rmse = n_truth > 0 ? std::sqrt(r.truth_heading_sq / n_truth) : 0.0;
         out.push_back(c);
       }
     }
@@ -282,6 +302,11 @@ class StreamComparison {
           ++c.truth_matched;
           const double e = difference(processed.kind, s, t->second);
           r.truth_sq += e * e;
+          if (processed.kind == "attitude") {
+            const TruthError te = truth_error(s, t->second);
+            r.truth_heading_sq += te.heading_deg * te.heading_deg;
+            c.processed_nees.add(te.nees);
+          }
         }
       }
       if (live_it != series_.end()) {
@@ -320,6 +345,11 @@ class StreamComparison {
           ++l.truth_matched;
           const double e = difference(live.kind, s, t->second);
           l.truth_sq += e * e;
+          if (live.kind == "attitude") {
+            const TruthError te = truth_error(s, t->second);
+            l.truth_heading_sq += te.heading_deg * te.heading_deg;
+            l.nees.add(te.nees);
+          }
         }
       }
       it = live.samples.erase(it);
@@ -356,6 +386,20 @@ std::vector<SeriesComparison> compare_processed(const std::string& file, const s
   return comparison.finish();
 }
 
+std::string format_nees(const NeesSummary& nees) {
+  if (nees.samples() == 0) {
+    return "no usable covariance (none, all zero or not positive definite)";
+  }
+  char buf[160];
+  std::snprintf(buf, sizeof(buf), "median NEES %.3g, %.1f %% inside the 95 %% ellipsoid", nees.median(),
+                100.0 * nees.fraction_inside(kNees95Dof3));
+  std::string out = buf;
+  if (nees.without_covariance() > 0) {
+    out += " (" + std::to_string(nees.without_covariance()) + " samples without a usable one)";
+  }
+  return out;
+}
+
 std::string format_comparison(const std::vector<SeriesComparison>& series) {
   std::ostringstream os;
   os << "comparison: processed/<topic> vs the recorded live <topic> (same sensor_id, seq and stamp)"
@@ -386,6 +430,12 @@ std::string format_comparison(const std::vector<SeriesComparison>& series) {
                     static_cast<unsigned long long>(c.truth_matched), c.live_truth_rmse, c.unit.c_str(),
                     static_cast<unsigned long long>(c.truth_matched_live));
       os << buf;
+      if (c.kind == "attitude") {
+        std::snprintf(buf, sizeof(buf), "      heading RMSE %.4g deg processed, %.4g deg live\n",
+                      c.processed_truth_heading_rmse, c.live_truth_heading_rmse);
+        os << buf << "      covariance: processed " << format_nees(c.processed_nees) << "; live "
+           << format_nees(c.live_nees) << "\n";
+      }
     }
     if (c.kind == "attitude" && c.matched > 0) {
       os << format_flag("magnetometer trusted", c.mag_trust);

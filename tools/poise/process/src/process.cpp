@@ -14,6 +14,8 @@
 #include <fastdds/rtps/common/SerializedPayload.h>
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 #include <cstring>
 #include <deque>
 #include <functional>
@@ -31,7 +33,8 @@ namespace {
 
 std::vector<uint8_t> bytes_of(const std::string& s) { return std::vector<uint8_t>(s.begin(), s.end()); }
 
-/// An attitude filter alone, as a step: quaternion and Euler angles only.
+/// An attitude filter alone, as a step: quaternion, Euler angles and the covariance it publishes
+/// (REP 145's -1 in the first element when it has none).
 class FilterStep : public nodes::AttitudeStep {
  public:
   explicit FilterStep(ProcessFilter f)
@@ -44,6 +47,11 @@ class FilterStep : public nodes::AttitudeStep {
       return false;
     }
     report.q_world_body = filter_->q_world_body();
+    const std::optional<Eigen::Matrix3d> cov = filter_->attitude_covariance();
+    report.covariance = cov ? *cov : Eigen::Matrix3d::Zero();
+    if (!cov) {
+      report.covariance(0, 0) = -1.0;  // unknown (REP 145)
+    }
     return true;
   }
   void diagnostics(nodes::DiagnosticsReport& /*diag*/) const override {}
@@ -267,11 +275,34 @@ std::pair<uint64_t, int64_t> reorder_window(const std::vector<OrderKey>& keys) {
   return {window, keys[file_index.front()].first};
 }
 
+/// The part of the recording processed (ProcessOptions::start_s / end_s), in log time from the
+/// first message's.
+class LogCut {
+ public:
+  LogCut(const McapReader& reader, const ProcessOptions& options) {
+    const uint64_t first = reader.report().start_ns;
+    start_ns_ = at(first, options.start_s);
+    end_ns_ = std::isfinite(options.end_s) ? at(first, options.end_s) : std::numeric_limits<uint64_t>::max();
+  }
+  [[nodiscard]] bool outside(const MessageView& m) const { return m.log_time_ns < start_ns_ || m.log_time_ns >= end_ns_; }
+
+ private:
+  static uint64_t at(uint64_t first_ns, double s) {
+    if (!(s > 0.0)) {
+      return first_ns;
+    }
+    const double ns = static_cast<double>(first_ns) + s * 1e9;
+    return ns >= 1.8e19 ? std::numeric_limits<uint64_t>::max() : static_cast<uint64_t>(ns);
+  }
+  uint64_t start_ns_ = 0;
+  uint64_t end_ns_ = std::numeric_limits<uint64_t>::max();
+};
+
 /// Pass 1, a scan: what is malformed (counted and named, never processed; the components'
 /// diagnostics carry the totals from their first message), the first stamp, and how far the stamp
 /// order strays from the file order. Only (stamp, ordinal) is kept per input, so the memory used
 /// does not grow with the recording's payloads.
-InputScan scan_inputs(const McapReader& reader, const ProcessOptions& options, Wants wants,
+InputScan scan_inputs(const McapReader& reader, const ProcessOptions& options, const LogCut& cut, Wants wants,
                       const Progress& progress, ProcessStats& stats) {
   InputScan scan;
   std::vector<OrderKey> keys;  // valid inputs in file order
@@ -279,6 +310,9 @@ InputScan scan_inputs(const McapReader& reader, const ProcessOptions& options, W
   uint64_t ordinal = 0;
   while (const MessageView* m = cursor.next()) {
     const uint64_t index = ordinal++;
+    if (cut.outside(*m)) {
+      continue;
+    }
     ++stats.input_messages;
     progress(0, stats.input_messages);
     Input in;
@@ -474,7 +508,8 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
       options.progress(phase * total + done, 2 * total);  // scan, then run + write
     }
   };
-  const InputScan scan = scan_inputs(reader, options, wants, progress, stats);
+  const LogCut cut(reader, options);
+  const InputScan scan = scan_inputs(reader, options, cut, wants, progress, stats);
   stats.reorder_window = scan.window;
 
   int64_t log_clock = 0;  // the writer's chunk clock: recording time, never the wall clock
@@ -516,6 +551,9 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
   while (const MessageView* m = cursor.next()) {
     const uint64_t index = ordinal++;
     progress(1, ordinal);
+    if (cut.outside(*m)) {
+      continue;
+    }
     Input in;
     std::optional<std::string> problem;
     const bool valid_input =

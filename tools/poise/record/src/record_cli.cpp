@@ -17,6 +17,7 @@
 
 #include <algorithm>
 #include <iostream>
+#include <limits>
 #include <map>
 #include <memory>
 #include <stdexcept>
@@ -63,6 +64,8 @@ struct ProcessArgs {
   std::vector<std::string> sets;
   std::string imu_topic;
   std::string order = "stamp";
+  double start_s = 0.0;
+  double end_s = std::numeric_limits<double>::infinity();
   bool compare = true;
   bool allow_damaged = false;
 };
@@ -248,6 +251,11 @@ void run_process(const ProcessArgs& a) {
   std::vector<record::ProcessComponent> components;
   std::vector<std::string> labels;  // "name (type)" per component, for the summary
   record::ProcessOptions o;
+  if (!(a.end_s > a.start_s)) {
+    throw Error("--end must be later than --start", kUsageExitCode);
+  }
+  o.start_s = a.start_s;
+  o.end_s = a.end_s;
   ProcessSets sets = split_process_sets(a);
   if (!a.host.empty()) {
     add_host_components(a, sets.host, o, components, labels);
@@ -516,6 +524,13 @@ void add_record_commands(CLI::App& app) {
                           "recorded (the order the recorder received them)")
       ->check(CLI::IsMember({"stamp", "recorded"}))
       ->capture_default_str();
+  process_cmd->add_option("--start", proc->start_s,
+                          "process from S seconds into the recording (log time): what was logged "
+                          "before is neither run nor copied, as if the recording began there (a "
+                          "cold start mid-run)")
+      ->check(CLI::Range(0.0, 1e9));
+  process_cmd->add_option("--end", proc->end_s, "stop S seconds into the recording (log time)")
+      ->check(CLI::Range(0.0, 1e9));
   process_cmd->add_flag("!--no-compare", proc->compare, "do not print the comparison");
   process_cmd->add_flag("--allow-damaged", proc->allow_damaged,
                         "exit 0 although the input is incomplete or has unreadable chunks (the "

@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <string>
 
 namespace poise {
@@ -32,6 +33,14 @@ class AttitudeFilter {
   /// configured (NaN); a NaN argument changes nothing. Call before the first sample; the filter
   /// starts again. Filters without a field reference ignore it.
   virtual void seed_field(double /*field_ut*/, double /*dip_deg*/) {}
+  /// The covariance the filter publishes with q_world_body(): of the world-frame rotation vector
+  /// e of q_true (x) q_est^-1 (rad^2, about ENU x, y, z; the IDL's attitude_covariance). Empty
+  /// when the filter has none (or is not initialised): a consumer then reads "unknown", never 0.
+  [[nodiscard]] virtual std::optional<Eigen::Matrix3d> attitude_covariance() const { return std::nullopt; }
+  /// True while the heading is not verified by a field the filter trusts (a cold start in a
+  /// disturbed field, a long gated stretch): the heading part of attitude_covariance() says how
+  /// far it may be off. False for filters that do not estimate a heading from a field.
+  [[nodiscard]] virtual bool heading_unverified() const { return false; }
 };
 
 }  // namespace poise

@@ -289,6 +289,12 @@ struct ParallelKfState {
   SourceReport gyro_src = SourceReport(Source::kGyro);
   SourceReport accel_src = SourceReport(Source::kAccel);
   SourceReport mag_src = SourceReport(Source::kMag);
+
+  // What the two KFs do not model, for the published covariance (attitude_covariance)
+  double accel_dev2_lp = 0.0;  ///< (|low-passed s_A| - g)^2, low-passed over accel_lowpass_tau_s, (m/s^2)^2
+  double field_dev2_lp = 0.0;  ///< disturbance power per axis of the fields used for heading, uT^2
+  double since_mag_s = 0.0;    ///< time since a field last corrected the heading, s
+  double last_dt_s = 0.0;      ///< the last step, s
 };
 
 class ParallelKf {
@@ -311,10 +317,21 @@ class ParallelKf {
   [[nodiscard]] bool initialized() const { return s_.initialized; }
   /// Everything reported (computed on demand from the state).
   [[nodiscard]] ParallelKfOutput output() const;
-  /// First-order covariance of the world-frame attitude error (rad^2, rotation vector about ENU
-  /// x, y, z) of `out` (= output()): tilt errors about world x/y from the up vector's covariance,
-  /// heading error from the horizontal part of the field direction's (divided by cos(dip)^2, dip
-  /// clamped to cos >= 0.1). Not coupled between the two KFs (they are independent by design).
+  /// Covariance of the world-frame attitude error (rad^2, rotation vector about ENU x, y, z) of
+  /// `out` (= output()), the one the filter publishes: the two KFs' own covariances (tilt from the
+  /// up vector's, heading from the horizontal part of the field direction's over cos(dip)^2) plus
+  /// what they do not model (docs/ESTIMATORS.md "The published covariance"):
+  ///   tilt    + tau^2 P_b (world x, y): a bias error b is followed by the accelerometer low-pass
+  ///             with a lag of tau, a tilt error of tau b;
+  ///           + (|LP(s_A)| - g)^2 / g^2: the external acceleration (and accelerometer bias) left
+  ///             in the low-passed vector, its horizontal part taken as large as the vertical one
+  ///             that the magnitude shows;
+  ///   heading + P_b,z (t + tau_2)^2: the vertical bias error integrated since a field last
+  ///             corrected the heading (t) and over KF2's correction lag tau_2;
+  ///           + the disturbance power of the fields used, per axis (norm and dip deviations from
+  ///             the reference, less the sensor noise), over (m cos(dip))^2: the horizontal part
+  ///             that moves the heading is taken as large as the two the gate can see.
+  /// Not coupled between tilt and heading (the two KFs are independent by design).
   [[nodiscard]] Eigen::Matrix3d attitude_covariance(const ParallelKfOutput& out) const;
   /// q_world_body (ENU) from sZ and sX' (2) after the last accepted sample (the state's); the
   /// last valid one if they are (anti)parallel.
@@ -394,6 +411,12 @@ class ParallelKfFilter : public AttitudeFilter {
       m["state_reset"] = kf_.state_resets();
     }
     return m;
+  }
+  [[nodiscard]] std::optional<Eigen::Matrix3d> attitude_covariance() const override {
+    if (!kf_.initialized()) {
+      return std::nullopt;
+    }
+    return kf_.attitude_covariance(kf_.output());
   }
   [[nodiscard]] const ParallelKf& core() const { return kf_; }
 

@@ -545,6 +545,7 @@ class SelectiveEkfFilter : public AttitudeFilter {
     ekf_ = SelectiveEkf(p);
   }
   [[nodiscard]] std::map<std::string, uint64_t> rejections() const override;
+  [[nodiscard]] std::optional<Eigen::Matrix3d> attitude_covariance() const override;
   [[nodiscard]] SelectiveEkf& core() { return ekf_; }
   [[nodiscard]] const SelectiveEkf& core() const { return ekf_; }
 

@@ -4,6 +4,7 @@
 // they carry (header.seq), so comparisons are exact even though topics arrive independently.
 #pragma once
 
+#include "poise/core/consistency.h"
 #include "poise/dds/participant.h"
 #include "poise/dds/topics.h"
 
@@ -45,6 +46,7 @@ struct FilterStats {
   double error_deg = 0.0;       ///< latest total attitude error vs truth, deg (NaN: no truth)
   double sum_sq_error = 0.0;    ///< for the RMSE
   uint64_t compared = 0;
+  NeesSummary nees;             ///< the published attitude_covariance against truth
   std::vector<double> latencies_ms;
   AttitudePoint latest;
 };

@@ -1,10 +1,14 @@
 // The comparison `poise process` prints: each processed estimate (processed/<topic>) against the
 // live estimate recorded on <topic> with the same sensor_id, seq and stamp, and both against the
 // simulator's truth (truth/attitude, truth/pose, truth/altitude) with the same seq, when the
-// recording has it. Attitude: angle between the quaternions (RMSE, largest); when the
+// recording has it. Attitude: angle between the quaternions (RMSE, largest), its heading part and
+// the consistency of the published covariance against truth (median NEES, % inside the 95 %
+// ellipsoid, poise/core/consistency.h); when the
 // magnetometer was trusted (mag_trusted) or vision fused (SOURCE_VISION in sources_fused)
 // differently. Pose: distance between positions. Altitude: height difference.
 #pragma once
+
+#include "poise/core/consistency.h"
 
 #include <cstdint>
 #include <string>
@@ -43,6 +47,12 @@ struct SeriesComparison {
   uint64_t truth_matched_live = 0;      ///< live estimates with one
   double processed_truth_rmse = 0.0;    ///< in `unit`
   double live_truth_rmse = 0.0;
+  /// Attitude only: heading part of the error against truth (BROAD's heading), RMSE deg
+  double processed_truth_heading_rmse = 0.0;
+  double live_truth_heading_rmse = 0.0;
+  /// Attitude only: NEES of the published attitude_covariance against truth
+  NeesSummary processed_nees;
+  NeesSummary live_nees;
   FlagDifference mag_trust;     ///< attitude only
   FlagDifference vision_fused;  ///< attitude only
 };
@@ -50,6 +60,8 @@ struct SeriesComparison {
 /// Compares every processed/<topic> of `file` (what `poise process` wrote) with <topic> and truth.
 std::vector<SeriesComparison> compare_processed(const std::string& file,
                                                const std::string& prefix = "processed/");
+/// "median NEES x, y % inside the 95 % ellipsoid" (or that there was no usable covariance).
+std::string format_nees(const NeesSummary& nees);
 /// The printed summary (one block per series).
 std::string format_comparison(const std::vector<SeriesComparison>& series);
 

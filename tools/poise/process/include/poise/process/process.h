@@ -11,7 +11,8 @@
 // processed/pose/<filter>, processed/altitude, processed/diagnostics. Each output keeps the seq and
 // stamp of the IMU sample it was computed from; its log time is that sample's log time and its
 // publish time the stamp. An attitude filter given alone (ProcessFilter, `--filter`) runs as a
-// step that fills the quaternion and the Euler angles (the AttitudeFilter interface has no more).
+// step that fills the quaternion, the Euler angles and the covariance (what the AttitudeFilter
+// interface has; -1 in its first element, REP 145's unknown, for a filter without one).
 #pragma once
 
 #include "poise/core/attitude_filter.h"
@@ -20,6 +21,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <map>
 #include <memory>
 #include <ostream>
@@ -53,6 +55,11 @@ struct ProcessOptions {
   std::string output_prefix = "processed/";
   ProcessOrder order = ProcessOrder::kStamp;
   bool copy_input = true;
+  /// The part of the recording processed, s from its first log time (FileReport::start_ns):
+  /// messages logged before start_s or at or after end_s are neither run nor copied, as if the
+  /// recording had been cut there (e.g. a cold start in the middle of a run). 0 / infinity: all.
+  double start_s = 0.0;
+  double end_s = std::numeric_limits<double>::infinity();
   /// Called as the work advances: `done` of `total` units (decoding, running the components and
   /// writing each count one unit per input message). Unset: no progress.
   std::function<void(uint64_t done, uint64_t total)> progress;
