@@ -25,7 +25,7 @@ constexpr double kInitS = 5.0;                 // s allowed for start-up converg
 constexpr double kDisturbanceTolUt = 2.0;      // uT, disturbance estimate vs injected (hold phase)
 constexpr double kHeadingTolMagnetDeg = 3.0;   // deg, heading while the magnet is near (default)
 constexpr double kTiltVarianceStable = 2.0;     // the accelerometer keeps the tilt variance
-constexpr double kHeadingVarianceGrowth = 1.5;  // 20 s without magnetometer (1.9x measured)
+constexpr double kHeadingVarianceGrowth = 1.5;  // 20 s without magnetometer (1.25e-4 -> 2.61e-4 rad^2 measured)
 
 struct RunStats {
   double max_roll_pitch_err_deg = 0.0;
@@ -273,8 +273,10 @@ TEST(ParallelKf, GivenMagnetometerLostWhenRunningThenHeadingVarianceGrowsAndTilt
     }
     without_mag = cov;
   }
-  // AND without the magnetometer the heading variance grows (gyro noise integrated: 6.9e-7 ->
-  // 1.3e-6 rad^2 over 20 s measured) while the accelerometer keeps the tilt variances
+  // AND without the magnetometer the heading variance grows (gyro noise and the vertical bias
+  // uncertainty integrated since the last field, printed) while the accelerometer keeps the tilt
+  std::printf("heading variance %.3g -> %.3g rad^2 over 20 s without the magnetometer\n", with_mag(2, 2),
+              without_mag(2, 2));
   EXPECT_GT(without_mag(2, 2), kHeadingVarianceGrowth * with_mag(2, 2));
   EXPECT_LT(without_mag(0, 0), kTiltVarianceStable * with_mag(0, 0));
   EXPECT_LT(without_mag(1, 1), kTiltVarianceStable * with_mag(1, 1));

@@ -152,8 +152,26 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
       s_.lp_accel_i += (dt / (p_.accel_lowpass_tau_s + dt)) * (s_.r_ib * s.accel_mps2 - s_.lp_accel_i);
     }
     s_.kf1.correct(s_.r_ib.transpose() * s_.lp_accel_i);
+    const double dev = s_.lp_accel_i.norm() - p_.tilt.gravity_mps2;
+    s_.accel_dev2_lp += (dt / (p_.accel_lowpass_tau_s + dt)) * (dev * dev - s_.accel_dev2_lp);
   } else {
     s_.kf1.correct(s.accel_mps2);
+    const double dev = s.accel_mps2.norm() - p_.tilt.gravity_mps2;
+    s_.accel_dev2_lp += (dt / (p_.rest_filter_tau_s + dt)) * (dev * dev - s_.accel_dev2_lp);
+  }
+  s_.last_dt_s = dt;
+  s_.since_mag_s += dt;
+  if (p_.motion_gyro_scale_error > 0.0) {
+    // the attitude low-passed as the tilt (tau) and the heading (KF2's lag) follow it: a gyro
+    // scale error s turns the estimate by s times the rotation away from them
+    s_.q_ib = (s_.q_ib * quat_exp(dt * w)).normalized();
+    const double tau_tilt = p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : p_.rest_filter_tau_s;
+    const double tau_heading = heading_lag_s(dt);
+    s_.q_lp_tilt = (s_.q_lp_tilt * quat_exp((dt / (tau_tilt + dt)) * quat_log(s_.q_lp_tilt.conjugate() * s_.q_ib)))
+                       .normalized();
+    s_.q_lp_heading =
+        (s_.q_lp_heading * quat_exp((dt / (tau_heading + dt)) * quat_log(s_.q_lp_heading.conjugate() * s_.q_ib)))
+            .normalized();
   }
   const bool motion_bias = p_.bias_estimation && p_.motion_bias_sigma_rps > 0.0;
   if (motion_bias) {
@@ -360,6 +378,17 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a,
   s_.kf2.correct(mag, s_.gate.m_ut, s_.mag_extra_var);  // (10b), (11f)-(11h)
   s_.mag_extra_var = 0.0;
   s_.mag_used = true;
+  s_.since_mag_s = 0.0;
+  if (s_.gate.learnt && s_.gate.m_ut > 0.0) {
+    // The heading follows the field with KF2's lag, so what moves it is the disturbance averaged
+    // over that lag: its part along the reference (norm) and across it in the vertical plane
+    // (dip), each low-passed over the lag, are what the gate can see of it.
+    const double m = s_.gate.m_ut;
+    const double sin_dip = -s_.kf1.up_body().dot(mag) / mag.norm();
+    const double k = dt / (heading_lag_s(dt) + dt);
+    s_.field_dn_lp += k * (mag.norm() - m - s_.field_dn_lp);
+    s_.field_dv_lp += k * (m * (std::asin(std::clamp(sin_dip, -1.0, 1.0)) - s_.gate.dip_rad) - s_.field_dv_lp);
+  }
   if (p_.bias_estimation && p_.motion_bias_sigma_rps > 0.0 && p_.motion_bias_heading && s_.gate.learnt) {
     if (s_.mag_use == MagUse::kForced) {
       s_.mb_head_trusted = false;  // used although gated: not a measurement of the bias
@@ -441,6 +470,23 @@ ParallelKfOutput ParallelKf::output() const {
   return o;
 }
 
+double ParallelKf::heading_lag_s(double dt) const {
+  // With c_d = 0 an accepted sample is weighed against the direction noise 2 sigma_M^2 / m^2
+  // (sensor noise and the white disturbance), so KF2's gain per step about the vertical is about
+  // A_h m^2 / (2 sigma_M^2), A_h the variance of sX' in the horizontal direction across the field
+  // (direction units); the lag is dt over that gain.
+  const Eigen::Vector3d& up = s_.kf1.up_body();
+  Eigen::Vector3d across;
+  if (!safe_normalize(up.cross(s_.kf2.u()), across, 1e-9)) {
+    return 0.0;
+  }
+  const double a_h = across.dot(heading_covariance().topLeftCorner<3, 3>() * across);
+  const double m = s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0;
+  const double noise = 2.0 * p_.sigma_mag_ut * p_.sigma_mag_ut / (m * m);
+  const double gain = std::min(1.0, a_h / noise);
+  return gain > 0.0 ? dt / gain : 0.0;
+}
+
 Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) const {
   const Eigen::Matrix3d r = out.q_world_body.toRotationMatrix();
   const Eigen::Matrix3d p_up = r * tilt_covariance().topLeftCorner<3, 3>() * r.transpose();
@@ -453,6 +499,31 @@ Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) con
   cov(1, 1) = p_up(0, 0);
   cov(0, 1) = cov(1, 0) = -p_up(0, 1);
   cov(2, 2) = p_field(0, 0) / (c * c);
+  // what the KFs do not model (see the header)
+  const Eigen::Matrix3d p_bias = p_.bias_estimation ? Eigen::Matrix3d(r * s_.bias_cov * r.transpose())
+                                                    : Eigen::Matrix3d::Zero();
+  const double g = p_.tilt.gravity_mps2;
+  const double lag_tilt_s = p_.accel_lowpass_tau_s;
+  cov.topLeftCorner<2, 2>() += lag_tilt_s * lag_tilt_s * p_bias.topLeftCorner<2, 2>();
+  cov.topLeftCorner<2, 2>().diagonal().array() += s_.accel_dev2_lp / (g * g);
+  if (p_.motion_gyro_scale_error > 0.0) {
+    // scale errors of the three gyro axes, independent, each s: the error about body axis i is
+    // s times the rotation about it since the low-passed attitude
+    const double s2 = p_.motion_gyro_scale_error * p_.motion_gyro_scale_error;
+    const Eigen::Vector3d d_tilt = quat_log(s_.q_lp_tilt.conjugate() * s_.q_ib);
+    const Eigen::Vector3d d_heading = quat_log(s_.q_lp_heading.conjugate() * s_.q_ib);
+    const Eigen::Matrix3d p_tilt = r * (s2 * d_tilt.cwiseAbs2()).asDiagonal() * r.transpose();
+    const Eigen::Matrix3d p_heading = r * (s2 * d_heading.cwiseAbs2()).asDiagonal() * r.transpose();
+    cov.topLeftCorner<2, 2>() += p_tilt.topLeftCorner<2, 2>();
+    cov(2, 2) += p_heading(2, 2);
+  }
+  if (s_.heading_initialized) {
+    const double m = s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0;
+    const double t = s_.since_mag_s + heading_lag_s(s_.last_dt_s);
+    cov(2, 2) += p_bias(2, 2) * t * t;
+    const double power = 0.5 * (s_.field_dn_lp * s_.field_dn_lp + s_.field_dv_lp * s_.field_dv_lp);
+    cov(2, 2) += power / (m * m * c * c);
+  }
   return cov;
 }
 

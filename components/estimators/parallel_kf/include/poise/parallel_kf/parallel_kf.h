@@ -292,9 +292,15 @@ struct ParallelKfState {
 
   // What the two KFs do not model, for the published covariance (attitude_covariance)
   double accel_dev2_lp = 0.0;  ///< (|low-passed s_A| - g)^2, low-passed over accel_lowpass_tau_s, (m/s^2)^2
-  double field_dev2_lp = 0.0;  ///< disturbance power per axis of the fields used for heading, uT^2
+  double field_dn_lp = 0.0;    ///< |s_M| - m of the fields used for heading, low-passed over KF2's lag, uT
+  double field_dv_lp = 0.0;    ///< m (dip - alpha) of the same, low-passed the same way, uT
   double since_mag_s = 0.0;    ///< time since a field last corrected the heading, s
   double last_dt_s = 0.0;      ///< the last step, s
+  /// body -> an inertial frame by the gyro alone, and that attitude low-passed as the tilt
+  /// (accel_lowpass_tau_s) and the heading (KF2's lag) follow it (gyro scale error)
+  Eigen::Quaterniond q_ib = Eigen::Quaterniond::Identity();
+  Eigen::Quaterniond q_lp_tilt = Eigen::Quaterniond::Identity();
+  Eigen::Quaterniond q_lp_heading = Eigen::Quaterniond::Identity();
 };
 
 class ParallelKf {
@@ -326,11 +332,16 @@ class ParallelKf {
   ///           + (|LP(s_A)| - g)^2 / g^2: the external acceleration (and accelerometer bias) left
   ///             in the low-passed vector, its horizontal part taken as large as the vertical one
   ///             that the magnitude shows;
+  ///           + s^2 dtheta_i^2 about each body axis i (world x, y part): a gyro scale error s
+  ///             (motion_gyro_scale_error) turns the attitude by s times the rotation dtheta away
+  ///             from the attitude low-passed over tau, which the tilt has not caught up with;
   ///   heading + P_b,z (t + tau_2)^2: the vertical bias error integrated since a field last
   ///             corrected the heading (t) and over KF2's correction lag tau_2;
-  ///           + the disturbance power of the fields used, per axis (norm and dip deviations from
-  ///             the reference, less the sensor noise), over (m cos(dip))^2: the horizontal part
-  ///             that moves the heading is taken as large as the two the gate can see.
+  ///           + the scale error's part about the vertical, with the attitude low-passed over tau_2;
+  ///           + the disturbance of the fields used, averaged over KF2's lag (the norm and dip
+  ///             deviations from the reference, low-passed), over (m cos(dip))^2: its horizontal
+  ///             part across the field, which moves the heading, is taken as large as the two the
+  ///             gate can see (the mean of their squares).
   /// Not coupled between tilt and heading (the two KFs are independent by design).
   [[nodiscard]] Eigen::Matrix3d attitude_covariance(const ParallelKfOutput& out) const;
   /// q_world_body (ENU) from sZ and sX' (2) after the last accepted sample (the state's); the
@@ -371,6 +382,8 @@ class ParallelKf {
   void bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep);
   void motion_bias_measure();
   [[nodiscard]] double motion_bias_noise(double dt) const;
+  /// KF2's correction lag about the vertical for a step of dt, s (0 before a direction exists)
+  [[nodiscard]] double heading_lag_s(double dt) const;
   void heading_step(const Eigen::Matrix3d& a,
                     const Eigen::Vector3d& mag, bool mag_ok, double dt);
 
