@@ -37,6 +37,7 @@ class GaussNewtonStep : public AttitudeStep {
       return false;
     }
     report.q_world_body = gn_.result().q_world_body;
+    report.covariance = gn_.attitude_covariance();
     const SourceReports sources = gn_.sources();  // both fused for every estimate it gives
     report.sources_fused = sources_fused_bits(sources);
     report.mag_trusted = source_fused(sources, Source::kMag);

@@ -3,6 +3,7 @@
 
 #include "poise/core/params_check.h"
 
+#include <algorithm>
 #include <stdexcept>
 
 namespace poise {
@@ -66,6 +67,9 @@ GaussNewtonResult GaussNewton::solve(const Eigen::Vector3d& accel, const Eigen::
   e.tail<3>() = w * (m - rt * r);
   out.residual = e.norm();
   out.q_world_body = quat_canonical(q);
+  j.topRows<3>() = -skew(rt * u);
+  j.bottomRows<3>() = -w * skew(rt * r);
+  out.information_body = j.transpose() * j;
   return out;
 }
 
@@ -104,7 +108,14 @@ bool GaussNewton::update(const ImuSample& s) {
       start = quat_enu_nwu() * Eigen::Quaterniond(Eigen::Matrix3d(r_body_world.transpose()));
     }
   }
+  const double dt = s_.initialized && c.dt_s > 0.0 ? c.dt_s : 0.0;
   s_.result = solve(s.accel_mps2, s.mag_ut, start, s_.dip_rad);
+  // Residual variance per unit-vector component: two unit vectors give four constraints on three
+  // angles, so the residual has one degree of freedom (the angle between them against the dip):
+  // E|e|^2 = sigma^2. Averaged over kResidualTauS (one sample of one degree of freedom is often
+  // near zero by chance).
+  const double r2 = s_.result.residual * s_.result.residual;
+  s_.residual2_lp = s_.initialized ? s_.residual2_lp + (dt / (kResidualTauS + dt)) * (r2 - s_.residual2_lp) : r2;
   s_.initialized = true;
   if (!healthy()) {
     reset_unhealthy();
@@ -113,6 +124,16 @@ bool GaussNewton::update(const ImuSample& s) {
   s_.accel.mark_fused(s.stamp_ns);
   s_.mag.mark_fused(s.stamp_ns);
   return true;
+}
+
+Eigen::Matrix3d GaussNewton::attitude_covariance() const {
+  // least squares: P_body = sigma^2 (J^T J)^-1 at the solution; world = R P_body R^T (the error
+  // q_true q_est^-1 = exp(R delta) for q_true = q_est exp(delta)). sigma^2 never below the
+  // kMinResidualVar floor, so P is positive definite.
+  const double var = std::max(s_.residual2_lp, kMinResidualVar);
+  const Eigen::Matrix3d r = s_.result.q_world_body.toRotationMatrix();
+  const Eigen::Matrix3d p = r * (var * s_.result.information_body.inverse()) * r.transpose();
+  return 0.5 * (p + p.transpose());
 }
 
 bool GaussNewton::healthy() const {

@@ -67,7 +67,16 @@ struct GaussNewtonResult {
   Eigen::Quaterniond q_world_body = Eigen::Quaterniond::Identity();
   int iterations = 0;       ///< iterations run for the last sample
   double residual = 0.0;    ///< |e| after the last iteration (unit-vector units)
+  /// J^T J at the solution (J = d e / d delta, body-frame small rotation): the information of
+  /// one unit of residual variance, for the covariance
+  Eigen::Matrix3d information_body = Eigen::Matrix3d::Identity();
 };
+
+/// The residual variance is averaged over this long, s (GaussNewton::attitude_covariance()).
+inline constexpr double kResidualTauS = 0.5;
+/// Floor of that variance, unit-vector components^2 (1e-3 deg of a direction): keeps the published
+/// covariance positive definite on a noise-free sample.
+inline constexpr double kMinResidualVar = 3e-10;
 
 /// Everything the Gauss-Newton filter carries from one sample to the next besides its
 /// parameters: inspect it, save it, restore it into a filter with the same parameters.
@@ -77,6 +86,7 @@ struct GaussNewtonState {
   double dip_rad = 0.0;
   double dip_sum_rad = 0.0;  ///< start-up dip learning: sum and count of measured dips
   int dip_n = 0;
+  double residual2_lp = 0.0;  ///< |e|^2 low-passed over kResidualTauS (unit-vector units^2)
   int64_t last_stamp_ns = -1;
   StampAnchor anchor;  ///< time restarts after a stamp jump only when two samples agree
   RejectCounters rejections;
@@ -101,6 +111,13 @@ class GaussNewton {
   [[nodiscard]] uint64_t state_resets() const { return s_.health.resets; }
 
   [[nodiscard]] const GaussNewtonResult& result() const { return s_.result; }
+  /// Covariance of the world-frame attitude error (rad^2, about ENU x, y, z) of result(): the
+  /// least-squares one, sigma^2 (J^T J)^-1 rotated to the world, with sigma^2 the residual's
+  /// variance per unit-vector component low-passed over kResidualTauS. The residual has one degree
+  /// of freedom (the angle between the two vectors against the dip); the errors it cannot see
+  /// (an external acceleration or a disturbance that keeps that angle) are taken as large as the
+  /// one it sees.
+  [[nodiscard]] Eigen::Matrix3d attitude_covariance() const;
   [[nodiscard]] bool initialized() const { return s_.initialized; }
   [[nodiscard]] double dip_rad() const { return s_.dip_rad; }
   [[nodiscard]] const RejectCounters& rejections() const { return s_.rejections; }
@@ -143,6 +160,12 @@ class GaussNewtonFilter : public AttitudeFilter {
       m["state_reset"] = gn_.state_resets();
     }
     return m;
+  }
+  [[nodiscard]] std::optional<Eigen::Matrix3d> attitude_covariance() const override {
+    if (!gn_.initialized()) {
+      return std::nullopt;
+    }
+    return gn_.attitude_covariance();
   }
   [[nodiscard]] const GaussNewton& core() const { return gn_; }
 
