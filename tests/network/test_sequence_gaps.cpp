@@ -80,3 +80,20 @@ TEST(SequenceGaps, SourcesAreIndependent) {
 
 }  // namespace
 }  // namespace poise::dds
+
+namespace poise::dds {
+namespace {
+
+// A gap in header.seq is a lost message only where header.seq numbers the messages: not in an
+// estimator's FilterDiagnostics (the seq of the step reported, published at a rate), not in types
+// without a poise header.
+TEST(SequenceGaps, GivenATypeThenOnlyTypesNumberingTheirMessagesCountGaps) {
+  EXPECT_TRUE(header_seq_counts_messages("poise::msg::ImuSample"));
+  EXPECT_TRUE(header_seq_counts_messages("poise::msg::AttitudeEstimate"));
+  EXPECT_FALSE(header_seq_counts_messages("poise::msg::FilterDiagnostics"));
+  EXPECT_FALSE(header_seq_counts_messages("sensor_msgs::msg::dds_::Imu_"));
+  EXPECT_FALSE(header_seq_counts_messages(""));
+}
+
+}  // namespace
+}  // namespace poise::dds

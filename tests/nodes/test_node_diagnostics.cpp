@@ -1,7 +1,9 @@
 // GIVEN an estimator component running in a host WHEN a scenario is published on its inputs
 // (magnet brought near, tag lost, bad barometer, a sensor the core rejects) THEN the diagnostics it
 // publishes say what its core decided for each source: the same decision and reason as the core
-// run directly on the same samples (the oracle), and the reason the scenario implies.
+// run directly on the same samples (the oracle), and the reason the scenario implies. The step
+// compared is the last one, so the nodes publish per sample here (diagnostics_every: 1; the
+// default is diagnostics_rate_hz, test_diagnostics_rate.cpp).
 #include "node_harness.h"
 
 #include "poise/altitude/altitude_filter.h"
@@ -36,7 +38,7 @@ SourceReport core_source(const SourceReports& reports, Source source) {
 }
 
 TEST(VehicleNode, GivenAMagnetNearWhenRunningThenMagIsReportedRejectedAsDisturbed) {
-  NodeHarness h("{type: vehicle, name: veh}", "attitude/vehicle");
+  NodeHarness h("{type: vehicle, name: veh, params: {diagnostics_every: 1}}", "attitude/vehicle");
   dds::Writer<msg::VehicleInputPubSubType> speed(h.participant(), "vehicle_input", dds::QosKind::kEstimate);
   ASSERT_TRUE(h.connected());
   ASSERT_TRUE(speed.wait_for_readers(1, std::chrono::seconds(10)));
@@ -70,7 +72,7 @@ TEST(VehicleNode, GivenAMagnetNearWhenRunningThenMagIsReportedRejectedAsDisturbe
 }
 
 TEST(ParallelKfNode, GivenAMagnetNearWhenRunningThenMagIsReportedRejectedAsDisturbed) {
-  NodeHarness h("{type: parallel_kf, name: pkf}", "attitude/parallel_kf");
+  NodeHarness h("{type: parallel_kf, name: pkf, params: {diagnostics_every: 1}}", "attitude/parallel_kf");
   ASSERT_TRUE(h.connected());
   ParallelKf core;
   for (uint32_t seq = 0; seq < kSamples; ++seq) {
@@ -112,7 +114,7 @@ msg::VisionPose vision_at(int64_t stamp_ns, uint32_t seq) {
 }
 
 TEST(SelectiveEkfNode, GivenAMagnetNearAndTheTagLostThenMagIsRejectedAndVisionNotAvailable) {
-  NodeHarness h("{type: selective_ekf, name: sekf}", "attitude/selective_ekf");
+  NodeHarness h("{type: selective_ekf, name: sekf, params: {diagnostics_every: 1}}", "attitude/selective_ekf");
   dds::Writer<msg::VisionPosePubSubType> vision(h.participant(), "vision_pose", dds::QosKind::kEstimate);
   ASSERT_TRUE(h.connected());
   ASSERT_TRUE(vision.wait_for_readers(1, std::chrono::seconds(10)));
@@ -162,7 +164,7 @@ TEST(SelectiveEkfNode, GivenAMagnetNearAndTheTagLostThenMagIsRejectedAndVisionNo
 }
 
 TEST(AltitudeNode, GivenABadBarometerWhenRunningThenBaroIsReportedRejected) {
-  NodeHarness h("{type: altitude, name: alt}");
+  NodeHarness h("{type: altitude, name: alt, params: {diagnostics_every: 1}}");
   ASSERT_TRUE(h.connected());
   AltitudeFilter core;
   for (uint32_t seq = 0; seq < kSamples; ++seq) {

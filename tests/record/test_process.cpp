@@ -382,7 +382,7 @@ TEST(Process, SelectiveEkfComponentPublishesWhatItsLiveNodePublishes) {
   write_input(input);
   const std::string host = dir + "/host.yaml";
   std::ofstream(host) << "components:\n"
-                         "  - type: selective_ekf\n    name: sekf\n    params: {imu_delay_s: 0.004}\n";
+                         "  - type: selective_ekf\n    name: sekf\n    params: {imu_delay_s: 0.004, diagnostics_every: 1}\n";
   const std::string out = dir + "/out.mcap";
   const auto r = poise::testing::run({poise::testing::bin("poise"), "process", input, "-o", out, "--host", host}, 60s);
   ASSERT_EQ(r.exit_code, 0) << r.output;
@@ -395,7 +395,7 @@ TEST(Process, SelectiveEkfComponentPublishesWhatItsLiveNodePublishes) {
   }
   EXPECT_GT(per_topic["processed/attitude/selective_ekf"], 0u);
   EXPECT_EQ(per_topic["processed/pose/selective_ekf"], per_topic["processed/attitude/selective_ekf"]);
-  EXPECT_EQ(per_topic["processed/diagnostics"], static_cast<uint64_t>(kImu));  // one per valid sample
+  EXPECT_EQ(per_topic["processed/diagnostics"], static_cast<uint64_t>(kImu));  // diagnostics_every 1: one per valid sample
   const auto bad = poise::testing::run({poise::testing::bin("poise"), "process", input, "-o",
                                         dir + "/bad.mcap", "--host", host, "--set", "sekf.no_such_key=1"},
                                        60s);

@@ -47,7 +47,7 @@ constexpr uint32_t kSeed = 2323;
 constexpr const char* kHost =
     "components:\n"
     "  - {type: parallel_kf, name: pkf}\n"
-    "  - {type: selective_ekf, name: sekf, params: {imu_delay_s: 0.002}}\n"
+    "  - {type: selective_ekf, name: sekf, params: {imu_delay_s: 0.002, diagnostics_every: 1}}\n"
     "  - {type: gauss_newton, name: gn}\n"
     "  - {type: altitude, name: alt, params: {relative_to_start: true}}\n"
     "  - {type: vehicle, name: veh}\n";

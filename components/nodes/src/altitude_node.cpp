@@ -4,7 +4,7 @@
 //           pi_cf, two_step_kf), relative_to_start (report heights above the start: the mean
 //           barometric height over the first second; nothing is published during that second;
 //           default false: heights above the reference pressure level),
-//           diagnostics_every
+//           node keys (NodeParams)
 #include "poise/altitude/altitude_filter.h"
 #include "poise/dds/convert.h"
 #include "poise/nodes/imu_estimator_node.h"

@@ -8,16 +8,21 @@
 namespace poise::nodes {
 
 const std::vector<std::string>& NodeParams::keys() {
-  static const std::vector<std::string> k{"diagnostics_every", "diagnostics_period_s",
-                                          "input_deadline_s"};
+  static const std::vector<std::string> k{"diagnostics_rate_hz", "diagnostics_every",
+                                          "diagnostics_period_s", "input_deadline_s"};
   return k;
 }
 
 NodeParams node_params(const runtime::ComponentSpec& spec) {
   NodeParams p;
+  p.diagnostics_rate_hz = runtime::param<double>(spec, "diagnostics_rate_hz", p.diagnostics_rate_hz);
+  if (!(p.diagnostics_rate_hz >= 0.01 && p.diagnostics_rate_hz <= 1000.0)) {
+    throw runtime::ConfigError(spec.origin + ": diagnostics_rate_hz must be in [0.01, 1000] Hz");
+  }
   p.diagnostics_every = runtime::param<int>(spec, "diagnostics_every", p.diagnostics_every);
-  if (p.diagnostics_every < 1) {
-    throw runtime::ConfigError(spec.origin + ": diagnostics_every must be >= 1");
+  if (p.diagnostics_every < 0) {
+    throw runtime::ConfigError(spec.origin + ": diagnostics_every must be >= 0 samples (0: by diagnostics_rate_hz, "
+                                             "1: every sample)");
   }
   p.diagnostics_period_s = runtime::param<double>(spec, "diagnostics_period_s", p.diagnostics_period_s);
   if (!(p.diagnostics_period_s >= 0.01 && p.diagnostics_period_s <= 3600.0)) {
@@ -65,6 +70,7 @@ StepRunner::StepRunner(std::unique_ptr<EstimatorStep> step, const NodeParams& pa
       params_(params),
       topics_(std::move(topics)),
       clock_(std::move(clock)),
+      diagnostics_interval_ns_(static_cast<int64_t>(1e9 / params_.diagnostics_rate_hz)),
       inputs_(static_cast<int64_t>(params_.input_deadline_s * 1e9), clock_()) {
   inputs_.expect(topics_.imu);
 }
@@ -80,13 +86,18 @@ void StepRunner::imu(const ImuSample& sample, const std::string& source, const s
     ++published_;
     last_latency_ns_ = clock_() - sample.stamp_ns;
   }
-  if (++since_diagnostics_ < static_cast<uint64_t>(params_.diagnostics_every)) {
+  const int64_t now = clock_();
+  if (params_.diagnostics_every > 0) {
+    if (++since_diagnostics_ < static_cast<uint64_t>(params_.diagnostics_every)) {
+      return;
+    }
+    since_diagnostics_ = 0;
+  } else if (diagnostics_sent_ && now - last_diagnostics_ns_ < diagnostics_interval_ns_) {
     return;
   }
-  since_diagnostics_ = 0;
   core_report_ = DiagnosticsReport{};
   step_->diagnostics(core_report_);
-  publish_diagnostics(sample.stamp_ns, sample.seq, clock_(), out);
+  publish_diagnostics(sample.stamp_ns, sample.seq, now, out);
 }
 
 void StepRunner::vision(const msg::VisionPose& m, const std::string& writer) {
@@ -108,9 +119,14 @@ void StepRunner::vehicle_input(const msg::VehicleInput& m, const std::string& wr
   step_->vehicle_input(m);
 }
 
-void StepRunner::periodic_diagnostics(StepOutputs& out) {
+bool StepRunner::periodic_diagnostics(StepOutputs& out) {
   const int64_t now = clock_();
+  const auto half_period_ns = static_cast<int64_t>(params_.diagnostics_period_s * 0.5e9);
+  if (diagnostics_sent_ && now - last_diagnostics_ns_ < half_period_ns) {
+    return false;  // the input path publishes: the timer has nothing to add
+  }
   publish_diagnostics(now, last_seq_, now, out);
+  return true;
 }
 
 void StepRunner::publish_diagnostics(int64_t stamp_ns, uint32_t seq, int64_t now_ns, StepOutputs& out) {
@@ -132,6 +148,8 @@ void StepRunner::publish_diagnostics(int64_t stamp_ns, uint32_t seq, int64_t now
   }
   out.diagnostics(to_diagnostics_msg(diag, step_->sensor_id()));
   ++diagnostics_published_;
+  diagnostics_sent_ = true;
+  last_diagnostics_ns_ = now_ns;
 }
 
 std::string StepRunner::status() const {

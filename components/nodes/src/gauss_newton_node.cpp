@@ -1,6 +1,6 @@
 // Component `gauss_newton`: the Gauss-Newton orientation baseline on DDS.
 //   in:  imu            out: attitude/gauss_newton, diagnostics
-//   params: filter_file (YAML of GaussNewtonParams), diagnostics_every, north (estimator_step.h north_keys())
+//   params: filter_file (YAML of GaussNewtonParams), node keys (NodeParams), north (estimator_step.h north_keys())
 #include "poise/gauss_newton/gauss_newton.h"
 #include "poise/nodes/imu_estimator_node.h"
 #include "poise/nodes/register.h"

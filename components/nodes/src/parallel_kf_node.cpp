@@ -1,6 +1,6 @@
 // Component `parallel_kf`: the parallel Kalman filter (paper 000) on DDS.
 //   in:  imu (ImuSample)      out: attitude/parallel_kf (AttitudeEstimate), diagnostics
-//   params: preset (default | paper), filter_file (YAML of ParallelKfParams), diagnostics_every,
+//   params: preset (default | paper), filter_file (YAML of ParallelKfParams), node keys (NodeParams),
 //           north (declination_deg | location + date: estimator_step.h north_keys())
 #include "poise/nodes/imu_estimator_node.h"
 #include "poise/nodes/register.h"

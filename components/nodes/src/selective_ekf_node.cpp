@@ -3,7 +3,7 @@
 //   out: attitude/selective_ekf (AttitudeEstimate), pose/selective_ekf (PoseEstimate), diagnostics
 //   params: filter_file (YAML of SelectiveEkfParams), q_body_camera [w,x,y,z] and
 //           p_body_camera_m [x,y,z] (camera-to-IMU extrinsic; override the file), imu_delay_s
-//           (the IMU's group delay, s; overrides the file), diagnostics_every, north
+//           (the IMU's group delay, s; overrides the file), node keys (NodeParams), north
 //           (declination_deg | location + date: estimator_step.h north_keys(); vision poses are
 //           then taken as true ENU and turned into the filter's magnetic ENU)
 // The EKF applies its own camera-to-body extrinsic to the camera pose (the message's body pose is

@@ -3,7 +3,7 @@
 //   in:  imu (longitudinal/lateral specific force = body x/y, yaw rate = body z, magnetometer),
 //        vehicle_input (speed; the latest valid one is used with each IMU sample)
 //   out: attitude/vehicle (AttitudeEstimate), diagnostics
-//   params: filter_file (YAML of VehicleParams), diagnostics_every, north (imu_node.h north_keys())
+//   params: filter_file (YAML of VehicleParams), node keys (NodeParams), north (imu_node.h north_keys())
 // Body frame: x forward, y left, z up (the vehicle's axes; remap the IMU in the driver's YAML).
 #include "poise/nodes/imu_estimator_node.h"
 #include "poise/nodes/register.h"

@@ -533,8 +533,9 @@ void register_bench_latency(CLI::App& app) {
   cmd->add_option("--duration", o->seconds, "Measurement time per rate and path, s")->check(CLI::Range(1.0, 600.0))->capture_default_str();
   add_deprecated_alias(cmd, "--seconds", "--duration", &o->seconds)->check(CLI::Range(1.0, 600.0));
   cmd->add_option("--diagnostics-every", o->diagnostics_every,
-                  "parallel_kf publishes FilterDiagnostics every N samples (1 = input rate, the default)")
-      ->check(CLI::Range(1, 100000))
+                  "parallel_kf publishes FilterDiagnostics every N samples (1 = input rate, this bench's default; "
+                  "0 = the node's diagnostics_rate_hz, 5 Hz)")
+      ->check(CLI::Range(0, 100000))
       ->capture_default_str();
   cmd->add_option("--window", o->window_s, "Length of each alternating pipeline / bare-hop window, s")
       ->check(CLI::Range(0.2, 60.0))

@@ -124,8 +124,9 @@ void run_echo(const EchoOptions& o) {
   std::uint64_t dropped = 0;                 // guarded by mutex
   constexpr std::size_t kMaxQueued = 10000;  // a slow terminal drops samples rather than memory
   // Loss on the way (a best-effort topic on a busy link): gaps in header.seq per instance and
-  // writer, as `poise topics` counts them (poise types only: others carry no header.seq).
-  const bool poise_type = writer->type.rfind("poise::msg::", 0) == 0;
+  // writer, as `poise topics` counts them (types whose header.seq numbers their messages: not
+  // FilterDiagnostics, not ROS 2 types; header_seq_counts_messages).
+  const bool poise_type = poise::dds::header_seq_counts_messages(writer->type);
   poise::dds::SequenceGaps gaps;  // guarded by mutex
   const auto enqueue = [&](const poise::dds::RawSample& s,
                            const eprosima::fastdds::dds::SampleInfo& info, const std::string& problem) {
@@ -264,7 +265,7 @@ void run_topics(const TopicsOptions& o) {
         continue;
       }
       auto s = std::make_shared<TopicStats>();
-      s->poise_type = w.type.rfind("poise::msg::", 0) == 0;
+      s->poise_type = poise::dds::header_seq_counts_messages(w.type);
       stats[w.topic] = s;
       try {
         observer.subscribe(w, &table,

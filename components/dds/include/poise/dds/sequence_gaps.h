@@ -99,6 +99,14 @@ class SequenceGaps {
   std::map<std::string, State> sources_;
 };
 
+/// True for the types whose header.seq numbers their messages one by one, so that a gap is a
+/// message lost on the way: every poise::msg type but FilterDiagnostics, whose header.seq is that
+/// of the step it reports on (an estimator publishes them at a rate, not per step) -- and no type
+/// without a poise header (ROS 2 types).
+inline bool header_seq_counts_messages(const std::string& type) {
+  return type.rfind("poise::msg::", 0) == 0 && type != "poise::msg::FilterDiagnostics";
+}
+
 /// header.seq of a serialized poise message (every poise topic type starts with Header{int64
 /// stamp_ns; uint32 seq; ...}): `payload` is the full serialized payload, 4-byte encapsulation
 /// first (CDR big or little endian). nullopt when it is too short or not plain CDR.

@@ -5,9 +5,10 @@
 //   EstimatorStep  one component's core and its conversions: input -> core -> messages
 //   StepOutputs    where the messages go (DDS writers live, MCAP channels offline)
 //   StepRunner     the node's shape around a step: counters, input health, the estimate after
-//                  each accepted IMU sample, diagnostics every `diagnostics_every` samples; the
-//                  time comes from an injected clock (the host's monotonic clock live, the
-//                  stamp of the input being processed offline)
+//                  each accepted IMU sample, diagnostics at `diagnostics_rate_hz` (or every
+//                  `diagnostics_every` samples when asked); the time comes from an injected clock
+//                  (the host's monotonic clock live, the stamp of the input being processed
+//                  offline)
 #pragma once
 
 #include "poise/core/north.h"
@@ -33,8 +34,16 @@ namespace poise::nodes {
 
 /// Node-level parameters common to every estimator node (host-file `params`).
 struct NodeParams {
-  int diagnostics_every = 1;  ///< publish diagnostics every N input samples (1 = input rate)
-  /// ... and on a timer with this period, input or not (a dead input shows as silence; live only)
+  /// Diagnostics on the input path at most this often (Hz, by the runner's clock). Every counter
+  /// in them is cumulative (samples, rejections by reason, per-source fused/rejected counts), so
+  /// nothing is lost between two; what is per step (a source's innovation, this step's reason)
+  /// is the step's at the time of publishing. 5 Hz: about 1.3 kB/s per component.
+  double diagnostics_rate_hz = 5.0;
+  /// > 0: instead of the rate, every N input samples (1: per sample, every decision; for
+  /// debugging a filter, about 200x the bytes at 200 Hz). 0: by diagnostics_rate_hz.
+  int diagnostics_every = 0;
+  /// With no diagnostics for this long (a silent input), on a timer (live only), so a dead input
+  /// shows as "no input for N s".
   double diagnostics_period_s = 1.0;
   /// an input silent for longer is reported silent (`<topic>_silent`, status "no input on ...")
   double input_deadline_s = 0.5;
@@ -136,14 +145,16 @@ class StepRunner {
              Clock clock);
 
   /// One IMU sample from `writer` (an identity of its publisher, for restarts): track, step,
-  /// estimate, diagnostics every `diagnostics_every` samples.
+  /// estimate, diagnostics when due (diagnostics_rate_hz, or every diagnostics_every samples).
   void imu(const ImuSample& sample, const std::string& source, const std::string& writer,
            StepOutputs& out);
   /// Secondary inputs (ignored when the step does not use them).
   void vision(const msg::VisionPose& m, const std::string& writer);
   void vehicle_input(const msg::VehicleInput& m, const std::string& writer);
-  /// The periodic diagnostics (the live timer): the core's last report, counters, input health.
-  void periodic_diagnostics(StepOutputs& out);
+  /// The periodic diagnostics (the live timer): the core's last report, counters, input health,
+  /// when none were published in the last half `diagnostics_period_s` (a silent input); true
+  /// when published.
+  bool periodic_diagnostics(StepOutputs& out);
 
   /// Payloads that did not deserialize (the DDS reader or the processor counts them here).
   std::atomic<uint64_t>& imu_malformed() { return imu_malformed_; }
@@ -180,6 +191,9 @@ class StepRunner {
   uint64_t vehicle_received_ = 0;
   int64_t last_latency_ns_ = 0;
   uint64_t since_diagnostics_ = 0;
+  int64_t diagnostics_interval_ns_ = 0;  ///< 1 / diagnostics_rate_hz
+  bool diagnostics_sent_ = false;
+  int64_t last_diagnostics_ns_ = 0;      ///< clock of the last diagnostics published
   uint32_t last_seq_ = 0;
   InputHealth inputs_;
   DiagnosticsReport core_report_;  ///< the core's last diagnostics()

@@ -1,9 +1,10 @@
 // The live node of every IMU-driven estimator (altitude included): a StepRunner
 // (poise/nodes/estimator_step.h: the step logic `poise process` runs offline too) on DDS. On each
 // ImuSample from `imu`: convert -> step the core -> publish its estimate(s) -> publish
-// FilterDiagnostics on `diagnostics` every `diagnostics_every` input samples, rejected samples
-// included (a core that rejects everything is reported, never silent) -- and on a timer every
-// `diagnostics_period_s`, so a dead input shows as "no input for N s". Every input's sequence
+// FilterDiagnostics on `diagnostics` at `diagnostics_rate_hz` (default 5 Hz; counters cumulative;
+// every `diagnostics_every` input samples when asked), rejected samples included (a core that
+// rejects everything is reported, never silent) -- and on a timer every `diagnostics_period_s`
+// while none come otherwise, so a dead input shows as "no input for N s". Every input's sequence
 // gaps (samples lost on the way) and silence against `input_deadline_s` are counted
 // (InputHealth). The secondary inputs a step uses (`vision_pose`, `vehicle_input`) are subscribed
 // here too; the node only translates: DDS in, step, DDS out.

@@ -37,7 +37,7 @@ struct ProcessFilter {
   NorthReference north;  ///< outputs in true ENU (frame id enu_true) when a declination is set
 };
 
-/// A component run offline: its step and node parameters (diagnostics_every, input_deadline_s).
+/// A component run offline: its step and node parameters (diagnostics_rate_hz, diagnostics_every, ...).
 struct ProcessComponent {
   std::unique_ptr<nodes::EstimatorStep> step;
   nodes::NodeParams params;
