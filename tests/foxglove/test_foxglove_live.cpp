@@ -19,6 +19,7 @@
 #include <nlohmann/json.hpp>
 
 #include <arpa/inet.h>
+#include <signal.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -30,6 +31,7 @@
 #include <fstream>
 #include <map>
 #include <mutex>
+#include <sstream>
 #include <thread>
 
 namespace poise::foxglove {
@@ -525,6 +527,67 @@ TEST(FoxgloveBridge, GivenATopicWhoseWritersLeaveAndReturnThenItIsUnadvertisedAn
   EXPECT_EQ(imu[0], imu[1]) << "the same id, encoding and schema";
   ASSERT_EQ(lines[0]["unadvertised"].size(), 1u) << lines[0].dump();
   EXPECT_EQ(lines[0]["unadvertised"][0], imu[0]["id"]);
+}
+
+/// True when /proc/net/tcp holds a listening socket (state 0A) on `address_hex:port`
+/// (`address_hex` as the kernel prints an IPv4 address: 127.0.0.1 is 0100007F, 0.0.0.0 00000000).
+bool listening(const std::string& address_hex, int port) {
+  std::ifstream in("/proc/net/tcp");
+  char local[32];
+  std::snprintf(local, sizeof local, "%s:%04X", address_hex.c_str(), port);
+  std::string line;
+  while (std::getline(in, line)) {
+    std::istringstream fields(line);
+    std::string slot;
+    std::string l;
+    std::string remote;
+    std::string state;
+    fields >> slot >> l >> remote >> state;
+    if (l == local && state == "0A") {
+      return true;
+    }
+  }
+  return false;
+}
+
+// GIVEN `poise foxglove` with the port and address options every Foxglove bridge takes
+// WHEN it starts
+// THEN it listens on exactly that address and port (the kernel's socket table, read independently);
+//      `--set port=N` still works (every interface by default); the same parameter given both ways
+//      is a usage error naming both (exit 2); a port out of range a startup error naming it (exit 1).
+TEST(FoxgloveCli, GivenPortAndAddressOptionsThenItListensThereSetStillWorksAndBothWaysAreRefused) {
+  poise::testing::DomainLease lease;
+  const std::string domain = std::to_string(lease.id());
+  const std::string poise = poise::testing::bin("poise");
+  const int port = free_port();
+  ASSERT_GT(port, 0);
+  {
+    poise::testing::Child bridge({poise, "foxglove", "--port", std::to_string(port), "--address", "127.0.0.1",
+                                  "--domain", domain, "--duration", "30"});
+    EXPECT_TRUE(poise::testing::wait_until([&] { return listening("0100007F", port); }, 20s)) << bridge.output();
+    EXPECT_FALSE(listening("00000000", port)) << "--address 127.0.0.1 must not listen on every interface";
+    bridge.signal(SIGINT);
+    const auto code = bridge.wait_for(20s);
+    EXPECT_TRUE(code.has_value() && *code == 0) << bridge.output();
+  }
+  const int other = free_port();
+  {
+    poise::testing::Child bridge({poise, "foxglove", "--set", "port=" + std::to_string(other), "--domain", domain,
+                                  "--duration", "30"});
+    EXPECT_TRUE(poise::testing::wait_until([&] { return listening("00000000", other); }, 20s)) << bridge.output();
+    bridge.signal(SIGINT);
+    const auto code = bridge.wait_for(20s);
+    EXPECT_TRUE(code.has_value() && *code == 0) << bridge.output();
+  }
+  const auto both = poise::testing::run({poise, "foxglove", "--port", std::to_string(port), "--set",
+                                         "port=" + std::to_string(other), "--domain", domain, "--duration", "1"},
+                                        30s);
+  EXPECT_EQ(both.exit_code, 2) << both.output;
+  EXPECT_NE(both.output.find("--port and --set port=" + std::to_string(other) + " both set 'port'"), std::string::npos)
+      << both.output;
+  const auto bad = poise::testing::run({poise, "foxglove", "--port", "70000", "--domain", domain, "--duration", "1"}, 30s);
+  EXPECT_EQ(bad.exit_code, 1) << bad.output;
+  EXPECT_NE(bad.output.find("parameter 'port'"), std::string::npos) << bad.output;
 }
 
 // GIVEN `poise demo --foxglove PORT`

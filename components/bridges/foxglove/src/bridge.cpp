@@ -360,6 +360,10 @@ void register_foxglove_bridge(runtime::ComponentRegistry& registry) {
         }
       }};
   t.command = "foxglove";
+  t.command_options = {
+      {"--port", "port", "INT", "TCP port to serve on, 0-65535 (0: any free port; default 8765)"},
+      {"--address", "address", "ADDRESS",
+       "Address to listen on (default 0.0.0.0: every interface; 127.0.0.1: this host only)"}};
   registry.add(std::move(t));
 }
 

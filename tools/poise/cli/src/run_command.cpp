@@ -8,6 +8,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <map>
 #include <memory>
 #include <sstream>
 #include <thread>
@@ -176,6 +177,7 @@ void register_run_commands(CLI::App& app) {
       std::string config;
       std::vector<std::string> sets;
       std::vector<std::string> topics;
+      std::map<std::string, std::string> options;  ///< command option key -> value given
     };
     auto s = std::make_shared<Standalone>();
     CLI::App* sub = app.add_subcommand(type.command.empty() ? dashed(type_name) : type.command,
@@ -189,11 +191,17 @@ void register_run_commands(CLI::App& app) {
         ->allow_extra_args(false)
         ->type_name("KEY=VALUE");
     sub->add_option("--topic", s->topics, "Topic name override key=name, e.g. imu=imu2 (repeatable)");
+    std::vector<std::pair<CLI::Option*, std::string>> key_options;  // the type's command options
+    for (const auto& opt : type.command_options) {
+      key_options.emplace_back(sub->add_option(opt.flag, s->options[opt.key], opt.help + " (= --set " + opt.key + "=VALUE)")
+                                   ->type_name(opt.type_name),
+                               opt.key);
+    }
     add_run_options(sub, s->run);  // --domain, --dds-profile, ...
     add_deprecated_alias(sub, "--profile", "--dds-profile", &s->run.profile);
     const std::string key = type_name;
     const std::string command = sub->get_name();
-    sub->callback([s, key, command] {
+    sub->callback([s, key, command, key_options] {
       runtime::HostSpec spec;  // the profile: --dds-profile, applied by run_host
       runtime::ComponentSpec c;
       c.type = key;
@@ -203,6 +211,18 @@ void register_run_commands(CLI::App& app) {
                                    : runtime::load_param_file(s->config);
       for (const auto& assignment : s->sets) {
         set_param(c.params, assignment);
+      }
+      for (const auto& [option, param] : key_options) {
+        if (option->count() == 0) {
+          continue;
+        }
+        for (const auto& assignment : s->sets) {
+          if (assignment.rfind(param + "=", 0) == 0) {
+            throw Error(option->get_name() + " and --set " + assignment + " both set '" + param + "': give one",
+                        kUsageExitCode);
+          }
+        }
+        set_param(c.params, param + "=" + s->options.at(param));
       }
       YAML::Node topics(YAML::NodeType::Map);
       for (const auto& t : s->topics) {

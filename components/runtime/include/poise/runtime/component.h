@@ -71,6 +71,15 @@ struct ComponentType {
   bool standalone_command = true;
   /// Name of that command ("": the type name with dashes, e.g. `poise parallel-kf`).
   std::string command{};
+  /// Options of that command that set one parameter each: `poise foxglove --port 9000` is
+  /// `--set port=9000` (the value read as YAML, checked by the component like a host file's).
+  struct CommandOption {
+    std::string flag;       ///< e.g. "--port"
+    std::string key;        ///< the parameter it sets, e.g. "port"
+    std::string type_name;  ///< shown in --help, e.g. "INT"
+    std::string help;
+  };
+  std::vector<CommandOption> command_options{};
 };
 
 class ComponentRegistry {
