@@ -12,6 +12,8 @@
 #include <mutex>
 #include <regex>
 #include <string>
+#include <thread>
+#include <vector>
 
 #include <poise/msg/diagnosticsPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
@@ -69,6 +71,48 @@ uint64_t stat_of(const std::string& output, const std::string& key) {
   const std::regex re(key + ": ([0-9]+)");
   std::smatch m;
   return std::regex_search(output, m, re) ? std::stoull(m[1].str()) : ~0ull;
+}
+
+/// The final line `poise imu` prints when it stops: "NAME: final: R samples read (L lines, B bytes),
+/// P published, X rejected: reason n, reason n; G lost (seq gaps); dropped S stale, F queue full, A at
+/// stop, W write failures; D disconnects".
+struct FinalCounts {
+  bool found = false;
+  uint64_t read = 0;
+  uint64_t lines = 0;
+  uint64_t published = 0;
+  uint64_t rejected = 0;
+  std::map<std::string, uint64_t> reasons;
+  uint64_t dropped = 0;  ///< stale + queue full + at stop + write failures
+  [[nodiscard]] uint64_t reason(const std::string& name) const {
+    const auto it = reasons.find(name);
+    return it == reasons.end() ? 0 : it->second;
+  }
+};
+
+FinalCounts final_counts_of(const std::string& output) {
+  static const std::regex line_re(
+      R"((\S+): final: (\d+) samples read \((\d+) lines, \d+ bytes\), (\d+) published, (\d+) rejected(: [^;]*)?; )"
+      R"((\d+) lost \(seq gaps\); dropped (\d+) stale, (\d+) queue full, (\d+) at stop, (\d+) write failures)");
+  FinalCounts c;
+  std::smatch m;
+  if (!std::regex_search(output, m, line_re)) {
+    return c;
+  }
+  c.found = true;
+  c.read = std::stoull(m[2].str());
+  c.lines = std::stoull(m[3].str());
+  c.published = std::stoull(m[4].str());
+  c.rejected = std::stoull(m[5].str());
+  const std::string reasons = m[6].str();
+  static const std::regex reason_re(R"(([a-z_]+) (\d+))");
+  for (auto it = std::sregex_iterator(reasons.begin(), reasons.end(), reason_re); it != std::sregex_iterator(); ++it) {
+    c.reasons[(*it)[1].str()] = std::stoull((*it)[2].str());
+  }
+  for (int i = 8; i <= 11; ++i) {
+    c.dropped += std::stoull(m[i].str());
+  }
+  return c;
 }
 
 TEST(ImuCli, SimImuThroughImuToASubscriberWithFaultsAndADisconnect) {
@@ -151,11 +195,66 @@ TEST(ImuCli, SimImuThroughImuToASubscriberWithFaultsAndADisconnect) {
     EXPECT_GE(received_after_restart, 100u) << "publishing must resume after the reconnect; max seq before "
                                             << max_seq_before_restart << "\n" << driver.output();
   }
-  // AND the driver stops cleanly on SIGINT
+  // AND the driver stops cleanly on SIGINT, printing its final counts: the same rejections by reason
   driver.signal(SIGINT);
   const auto drv_exit = driver.wait_for(15s);
   ASSERT_TRUE(drv_exit.has_value()) << driver.output();
   EXPECT_EQ(*drv_exit, 0) << driver.output();
+  const FinalCounts final_counts = final_counts_of(driver.output());
+  ASSERT_TRUE(final_counts.found) << driver.output();
+  EXPECT_EQ(final_counts.reason("checksum_mismatch"), flips) << driver.output();
+  EXPECT_EQ(final_counts.reason("garbage"), garbage) << driver.output();
+}
+
+// GIVEN `poise imu` reading `poise sim-imu` with bit flips and garbage
+// WHEN it stops at the end of --duration, or on SIGTERM
+// THEN it prints its final counts (stdout, with --quiet too): the rejections by reason equal the
+//      faults the simulator injected (its own counts, the oracle), every sample read is published or
+//      counted dropped, and no more samples are read than the simulator wrote good lines
+TEST(ImuCli, GivenFaultsWhenImuStopsByDurationOrSigtermThenItPrintsItsFinalCountsByReason) {
+  poise::testing::DomainLease domain;
+  const std::string d = std::to_string(domain.id());
+  for (const bool by_signal : {false, true}) {
+    SCOPED_TRACE(by_signal ? "SIGTERM" : "--duration");
+    const std::string link = temp_path(by_signal ? "final-term" : "final-duration");
+    std::vector<std::string> imu_args{poise_bin(), "imu", "--port", link, "--domain", d, "--quiet"};
+    if (!by_signal) {
+      imu_args.insert(imu_args.end(), {"--duration", "12"});
+    }
+    Child driver(imu_args);
+    Child sim({poise_bin(), "sim-imu", "--link", link, "--rate", "200", "--duration", "3", "--faults",
+               "flip=0.04,garbage=0.04,seed=11"});
+    const auto sim_exit = sim.wait_for(30s);
+    ASSERT_TRUE(sim_exit.has_value()) << sim.output();
+    ASSERT_EQ(*sim_exit, 0) << sim.output();
+    const std::string sim_out = sim.output();
+    const uint64_t written = stat_of(sim_out, "lines_written");
+    const uint64_t flips = stat_of(sim_out, "fault_flip");
+    const uint64_t garbage = stat_of(sim_out, "fault_garbage");
+    ASSERT_NE(written, ~0ull) << sim_out;
+    ASSERT_GT(flips, 0u) << sim_out;
+    ASSERT_GT(garbage, 0u) << sim_out;
+    if (by_signal) {
+      std::this_thread::sleep_for(500ms);  // the driver reads what is left in the pty
+      driver.signal(SIGTERM);
+    }
+    const auto code = driver.wait_for(30s);
+    ASSERT_TRUE(code.has_value()) << driver.output();
+    EXPECT_EQ(*code, 0) << driver.output();
+    const FinalCounts c = final_counts_of(driver.output());
+    ASSERT_TRUE(c.found) << driver.output();
+    EXPECT_EQ(c.reason("checksum_mismatch"), flips) << driver.output();
+    EXPECT_EQ(c.reason("garbage"), garbage) << driver.output();
+    uint64_t by_reason = 0;
+    for (const auto& [reason, n] : c.reasons) {
+      by_reason += n;
+    }
+    EXPECT_EQ(c.rejected, by_reason) << driver.output();
+    EXPECT_GT(c.read, 0u) << driver.output();
+    EXPECT_LE(c.read, written - flips) << "a corrupted line is never a sample\n" << driver.output();
+    EXPECT_EQ(c.published + c.dropped, c.read) << "every sample read is published or counted dropped\n"
+                                               << driver.output();
+  }
 }
 
 TEST(ImuCli, CalibrateRecoversAKnownDistortionFromSimImu) {

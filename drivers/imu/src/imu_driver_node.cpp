@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <set>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -147,9 +148,32 @@ void ImuDriverNode::start() {
 
 void ImuDriverNode::stop() {
   stop_.store(true);
+  const bool was_running = thread_.joinable();
   if (thread_.joinable()) thread_.join();
   imu_queue_.stop();
   diag_queue_.stop();
+  if (was_running) {  // the reading thread has ended: the counts are final
+    const std::string line = final_counts(driver_.stats(), imu_queue_.stats());
+    std::lock_guard<std::mutex> lock(status_mutex_);
+    status_ = line;
+  }
+}
+
+std::string final_counts(const DriverStats& st, const dds::PublishQueue<msg::ImuSample>::Stats& q) {
+  std::ostringstream os;
+  os << "final: " << st.samples << " samples read (" << st.lines << " lines, " << st.bytes << " bytes), "
+     << q.written << " published, " << st.rejected_total() << " rejected";
+  const char* sep = ": ";
+  for (std::size_t r = 0; r < kRejectReasonCount; ++r) {
+    if (st.rejects[r] != 0) {
+      os << sep << to_string(static_cast<RejectReason>(r)) << " " << st.rejects[r];
+      sep = ", ";
+    }
+  }
+  os << "; " << st.seq_gap_drops << " lost (seq gaps); dropped " << q.dropped_stale << " stale, " << q.dropped_full
+     << " queue full, " << q.dropped_at_stop << " at stop, " << q.write_failed << " write failures; "
+     << st.disconnects << " disconnects";
+  return os.str();
 }
 
 void ImuDriverNode::on_sample(const ImuSample& sample, const SampleInfo& info) {

@@ -89,10 +89,11 @@ void run_imu(const ImuOptions& o) {
     }
   }
   host->stop();
-  if (!o.quiet) {
-    for (const auto& line : host->status()) std::fprintf(stderr, "  %s\n", line.c_str());
-    std::fprintf(stderr, "poise imu: stopped\n");
-  }
+  // The final counts, whatever stopped it (SIGINT, SIGTERM, --duration), --quiet or not: what was
+  // read, published and rejected by reason (stdout; the driver's status() after stop()).
+  for (const auto& line : host->status()) std::printf("%s\n", line.c_str());
+  std::fflush(stdout);
+  if (!o.quiet) std::fprintf(stderr, "poise imu: stopped\n");
 }
 
 // ---------------------------------------------------------------- poise sim-imu

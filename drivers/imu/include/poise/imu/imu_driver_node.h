@@ -55,6 +55,11 @@ nodes::DiagnosticsReport driver_diagnostics(const DriverStats& stats,
                                             const RateLatencyMeter::Summary& rate, bool connected,
                                             uint64_t connects, int64_t stamp_ns, uint32_t seq);
 
+/// The counts when the driver stops, one line: samples read (lines, bytes), published, rejected
+/// by reason (the reasons that occurred), lost to sequence gaps, dropped by the publish queue.
+std::string final_counts(const DriverStats& stats, const dds::PublishQueue<msg::ImuSample>::Stats& queue);
+
+/// status() while running: the last diagnostics period's line; after stop(): final_counts().
 class ImuDriverNode : public runtime::Component {
  public:
   ImuDriverNode(const ImuNodeOptions& options, const std::string& sensor_id,
