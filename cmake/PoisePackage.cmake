@@ -58,6 +58,10 @@ function(poise_package)
   set(CPACK_PACKAGE_VERSION ${PROJECT_VERSION})
   set(CPACK_PACKAGE_DESCRIPTION_SUMMARY "real-time attitude and pose estimation over DDS")
   set(CPACK_PACKAGING_INSTALL_PREFIX /usr)
+  # The packages and cpack's work tree (_CPack_Packages) go to BUILD/packages, wherever cpack is
+  # run from (`cpack --config build/CPackConfig.cmake` in the source tree wrote them into it);
+  # `cpack -B DIR` still chooses another directory.
+  set(CPACK_PACKAGE_DIRECTORY ${CMAKE_BINARY_DIR}/packages)
   set(CPACK_DEB_COMPONENT_INSTALL ON)
   set(CPACK_COMPONENTS_ALL runtime dev dds)
   set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)
