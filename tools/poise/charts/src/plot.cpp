@@ -47,7 +47,8 @@ void text(cv::Mat& img, const std::string& s, cv::Point at, double scale, int th
 void draw_panel(cv::Mat& img, const Panel& panel, const cv::Rect& area, double x_lo, double x_hi) {
   double y_lo = panel.y_min;
   double y_hi = panel.y_max;
-  if (!(y_lo < y_hi)) {
+  const bool fixed = y_lo < y_hi;
+  if (!fixed) {
     y_lo = std::numeric_limits<double>::infinity();
     y_hi = -std::numeric_limits<double>::infinity();
     for (const auto& s : panel.series) {
@@ -70,50 +71,69 @@ void draw_panel(cv::Mat& img, const Panel& panel, const cv::Rect& area, double x
       y_hi += 0.5;
     }
   }
-  const cv::Rect plot(area.x + kMarginLeft, area.y + kMarginTop,
-                      area.width - kMarginLeft - kMarginRight,
-                      area.height - kMarginTop - kMarginBottom);
+  // A fixed range never hides values silently: count what falls outside it.
+  std::size_t clipped = 0;
+  double extreme = 0.0;
+  if (fixed) {
+    for (const auto& s : panel.series) {
+      for (double v : s.y) {
+        if (std::isfinite(v) && (v > y_hi || v < y_lo)) {
+          ++clipped;
+          extreme = std::abs(v) > std::abs(extreme) ? v : extreme;
+        }
+      }
+    }
+  }
+  const int plot_x = area.x + kMarginLeft;
+  const int plot_w = area.width - kMarginLeft - kMarginRight;
   auto px = [&](double x) {
-    return plot.x + static_cast<int>(std::lround((x - x_lo) / (x_hi - x_lo) * plot.width));
+    return plot_x + static_cast<int>(std::lround((x - x_lo) / (x_hi - x_lo) * plot_w));
   };
+
+  // Band labels in a strip of their own above the plot (never over the data), each on the first
+  // row where it runs into no other label (overlapping episodes, e.g. "stairs down" during
+  // "magnet attached", stack), each row showing the band's extent in its colour.
+  constexpr double kBandLabelScale = 0.42;
+  constexpr int kBandLabelRowPx = 16;
+  std::vector<std::pair<int, int>> starts;  // per band: start px, label width px (0: no label)
+  std::vector<std::pair<int, int>> spans;   // per band: clamped [a, b] px
+  for (const auto& band : panel.bands) {
+    const int a = std::clamp(px(band.x0), plot_x, plot_x + plot_w);
+    const int b = std::clamp(px(band.x1), plot_x, plot_x + plot_w);
+    int baseline = 0;
+    const int label_w = (b > a && !band.label.empty())
+                            ? cv::getTextSize(band.label, cv::FONT_HERSHEY_SIMPLEX, kBandLabelScale, 1, &baseline).width + 8
+                            : 0;
+    // a row holds the label and the band's extent, which neither another label nor band may share
+    starts.emplace_back(a, label_w > 0 ? std::max(label_w, b - a) : 0);
+    spans.emplace_back(a, b);
+  }
+  int label_rows = 0;
+  const auto places = place_band_labels(starts, plot_x + plot_w, 6, label_rows);
+  const int strip_top = area.y + kMarginTop;
+  const cv::Rect plot(plot_x, strip_top + label_rows * kBandLabelRowPx + (label_rows > 0 ? 4 : 0), plot_w,
+                      area.y + area.height - kMarginBottom - (strip_top + label_rows * kBandLabelRowPx +
+                                                              (label_rows > 0 ? 4 : 0)));
   auto py = [&](double y) {
     const double c = std::clamp(y, y_lo, y_hi);
     return plot.y + plot.height - static_cast<int>(std::lround((c - y_lo) / (y_hi - y_lo) * plot.height));
   };
-
-  // Bands first, then their labels left to right, each on the first row where it does not run
-  // into an earlier label (overlapping episodes, e.g. "stairs down" during "magnet attached",
-  // stack instead of overprinting).
-  constexpr double kBandLabelScale = 0.42;
-  constexpr int kBandLabelRowPx = 16;
-  std::vector<std::pair<int, const std::string*>> labels;  // x of the band start, label
-  for (const auto& band : panel.bands) {
-    const int a = std::clamp(px(band.x0), plot.x, plot.x + plot.width);
-    const int b = std::clamp(px(band.x1), plot.x, plot.x + plot.width);
-    if (b > a) {
-      cv::Mat roi = img(cv::Rect(a, plot.y, b - a, plot.height));
-      cv::Mat fill(roi.size(), roi.type(), bgr(band.rgb));
-      cv::addWeighted(fill, 0.35, roi, 0.65, 0.0, roi);
-      if (!band.label.empty()) {
-        labels.emplace_back(a, &band.label);
-      }
+  for (std::size_t i = 0; i < panel.bands.size(); ++i) {
+    const auto& band = panel.bands[i];
+    const auto [a, b] = spans[i];
+    if (b <= a) {
+      continue;
     }
-  }
-  std::stable_sort(labels.begin(), labels.end(),
-                   [](const auto& l, const auto& r) { return l.first < r.first; });
-  std::vector<int> label_row_end;
-  for (const auto& [a, label] : labels) {
-    int baseline = 0;
-    const int width = cv::getTextSize(*label, cv::FONT_HERSHEY_SIMPLEX, kBandLabelScale, 1, &baseline).width;
-    size_t row = 0;
-    while (row < label_row_end.size() && label_row_end[row] > a) {
-      ++row;
+    cv::Mat roi = img(cv::Rect(a, plot.y, b - a, plot.height));
+    cv::Mat fill(roi.size(), roi.type(), bgr(band.rgb));
+    cv::addWeighted(fill, 0.35, roi, 0.65, 0.0, roi);
+    if (places[i].row >= 0) {
+      const int top = strip_top + places[i].row * kBandLabelRowPx;
+      cv::Mat tag = img(cv::Rect(a, top + 1, b - a, kBandLabelRowPx - 2));
+      cv::Mat tag_fill(tag.size(), tag.type(), bgr(band.rgb));
+      cv::addWeighted(tag_fill, 0.6, tag, 0.4, 0.0, tag);
+      text(img, band.label, {places[i].x_px + 4, top + kBandLabelRowPx - 4}, kBandLabelScale);
     }
-    if (row == label_row_end.size()) {
-      label_row_end.push_back(0);
-    }
-    label_row_end[row] = a + 4 + width + 6;
-    text(img, *label, {a + 4, plot.y + kBandLabelRowPx * static_cast<int>(row + 1)}, kBandLabelScale);
   }
   const auto y_ticks = nice_ticks(y_lo, y_hi, 5);
   const double y_step = y_ticks.size() > 1 ? y_ticks[1] - y_ticks[0] : 1.0;
@@ -156,11 +176,23 @@ void draw_panel(cv::Mat& img, const Panel& panel, const cv::Rect& area, double x
     flush();
   }
   text(img, panel.title, {plot.x, area.y + 26}, 0.62, 2);
+  if (clipped > 0) {
+    char note[160];
+    std::snprintf(note, sizeof note, "clipped: %zu values outside [%g, %g] not shown (extreme %.3g)", clipped,
+                  y_lo, y_hi, extreme);
+    int baseline = 0;
+    const int title_w = cv::getTextSize(panel.title, cv::FONT_HERSHEY_SIMPLEX, 0.62, 2, &baseline).width;
+    cv::putText(img, note, {plot.x + title_w + 16, area.y + 26}, cv::FONT_HERSHEY_SIMPLEX, 0.45,
+                cv::Scalar(0, 0, 200), 1, cv::LINE_AA);
+  }
   text(img, panel.y_label, {area.x + 8, area.y + 26}, 0.45);
   text(img, panel.x_label, {plot.x + plot.width / 2, plot.y + plot.height + 42}, 0.45, 1, true);
   // Legend, top right.
   int lx = plot.x + plot.width - 10;
   for (auto it = panel.series.rbegin(); it != panel.series.rend(); ++it) {
+    if (it->label.empty()) {
+      continue;  // a panel of one series names it in its title
+    }
     int baseline = 0;
     const int w = cv::getTextSize(it->label, cv::FONT_HERSHEY_SIMPLEX, 0.45, 1, &baseline).width;
     lx -= w + 36;
@@ -171,6 +203,46 @@ void draw_panel(cv::Mat& img, const Panel& panel, const cv::Rect& area, double x
 
 }  // namespace
 #endif
+
+std::vector<LabelPlace> place_band_labels(const std::vector<std::pair<int, int>>& start_and_width_px,
+                                          int right_px, int gap_px, int& rows) {
+  std::vector<std::size_t> order(start_and_width_px.size());
+  for (std::size_t i = 0; i < order.size(); ++i) {
+    order[i] = i;
+  }
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t l, std::size_t r) {
+    return start_and_width_px[l].first < start_and_width_px[r].first;
+  });
+  std::vector<LabelPlace> out(start_and_width_px.size());
+  std::vector<std::vector<std::pair<int, int>>> taken;  // per row: [x0, x1) of its labels
+  for (const std::size_t i : order) {
+    const auto [start, width] = start_and_width_px[i];
+    if (width <= 0) {
+      continue;
+    }
+    const int x0 = std::min(start, right_px - width);
+    const int x1 = x0 + width;
+    std::size_t row = 0;
+    const auto free = [&](std::size_t r) {
+      for (const auto& [a, b] : taken[r]) {
+        if (x0 < b + gap_px && a < x1 + gap_px) {
+          return false;
+        }
+      }
+      return true;
+    };
+    while (row < taken.size() && !free(row)) {
+      ++row;
+    }
+    if (row == taken.size()) {
+      taken.emplace_back();
+    }
+    taken[row].emplace_back(x0, x1);
+    out[i] = {static_cast<int>(row), x0};
+  }
+  rows = static_cast<int>(taken.size());
+  return out;
+}
 
 std::vector<double> nice_ticks(double lo, double hi, int target) {
   std::vector<double> ticks;
@@ -222,6 +294,10 @@ void write_png(const Figure& figure, const std::string& path) {
         }
       }
     }
+  }
+  if (figure.x_min < figure.x_max) {
+    x_lo = figure.x_min;
+    x_hi = figure.x_max;
   }
   if (!(x_hi > x_lo)) {
     x_lo = 0.0;

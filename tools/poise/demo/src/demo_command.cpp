@@ -119,11 +119,19 @@ std::string dashboard(const DemoOptions& o, const demo::PipelineMonitor& monitor
   char line[256];
   std::snprintf(line, sizeof line, "poise demo   t = %5.1f / %.0f s   domain %d   %s\n", t, o.duration_s,
                 o.domain, devices.c_str());
-  os << line << "episode: " << active_episodes(episode_list, t) << "\n\n";
+  os << line;
+  const bool truth = o.port.empty();  // only the simulated IMU publishes a truth (and has a script)
+  if (truth) {
+    os << "episode: " << active_episodes(episode_list, t) << "\n";
+  }
+  os << "\n";
   std::snprintf(line, sizeof line, "%-14s %7s %8s %8s %8s %9s %17s\n", "filter", "rate", "roll",
                 "pitch", "yaw", "error", "latency p50/p99");
   os << line;
-  std::vector<std::string> rows{"truth"};
+  std::vector<std::string> rows;
+  if (truth) {
+    rows.emplace_back("truth");
+  }
   rows.insert(rows.end(), filters.begin(), filters.end());
   for (const auto& f : rows) {
     const auto it = stats.find(f);
@@ -137,7 +145,11 @@ std::string dashboard(const DemoOptions& o, const demo::PipelineMonitor& monitor
     char err[32] = "";
     char lat[48] = "";
     if (f != "truth") {
-      std::snprintf(err, sizeof err, "%.2f deg", s.error_deg);
+      if (truth) {
+        std::snprintf(err, sizeof err, "%.2f deg", s.error_deg);
+      } else {
+        std::snprintf(err, sizeof err, "-");
+      }
       std::snprintf(lat, sizeof lat, "%.2f/%.2f ms", demo::percentile(s.latencies_ms, 50),
                     demo::percentile(s.latencies_ms, 99));
     }
@@ -157,8 +169,8 @@ std::string dashboard(const DemoOptions& o, const demo::PipelineMonitor& monitor
     const auto it = stats.find(f);
     return it == stats.end() ? std::string("-") : std::string(it->second.latest.mag_trusted ? "yes" : "NO");
   };
-  os << "\nmagnetic disturbance: truth " << disturbance("truth") << ", parallel_kf "
-     << disturbance("parallel_kf") << "   magnetometer trusted: parallel_kf " << trusted("parallel_kf")
+  os << "\nmagnetic disturbance: " << (truth ? "truth " + disturbance("truth") + ", " : std::string())
+     << "parallel_kf " << disturbance("parallel_kf") << "   magnetometer trusted: parallel_kf " << trusted("parallel_kf")
      << ", selective_ekf " << trusted("selective_ekf") << "\n";
   const auto cam = monitor.camera_stats();
   std::snprintf(line, sizeof line, "camera: %llu frames, tags in view %d, vision poses %llu%s\n",
@@ -174,9 +186,14 @@ std::string dashboard(const DemoOptions& o, const demo::PipelineMonitor& monitor
     const double truth_h = (at != alt.end() && !at->second.empty()) ? at->second.back().height_m : std::numeric_limits<double>::quiet_NaN();
     const double truth_v =
         (at != alt.end() && !at->second.empty()) ? at->second.back().vertical_velocity_mps : std::numeric_limits<double>::quiet_NaN();
-    std::snprintf(line, sizeof line,
-                  "altitude: %.2f m (truth %.2f)   vertical velocity %.2f m/s (truth %.2f)   %s\n",
-                  p.height_m, truth_h, p.vertical_velocity_mps, truth_v, p.stationary ? "stationary" : "moving");
+    if (truth) {
+      std::snprintf(line, sizeof line,
+                    "altitude: %.2f m (truth %.2f)   vertical velocity %.2f m/s (truth %.2f)   %s\n",
+                    p.height_m, truth_h, p.vertical_velocity_mps, truth_v, p.stationary ? "stationary" : "moving");
+    } else {
+      std::snprintf(line, sizeof line, "altitude: %.2f m   vertical velocity %.2f m/s   %s\n", p.height_m,
+                    p.vertical_velocity_mps, p.stationary ? "stationary" : "moving");
+    }
     os << line;
   }
   os << "rejected:";
@@ -215,8 +232,10 @@ void run_demo(const DemoOptions& o) {
     driver["config_file"] = o.imu_config;
   }
   spec.components.push_back(component("imu_driver", "imu0", driver));
+  // The synthetic camera renders the simulated truth: with a real IMU (--port) it would see
+  // nothing, so only a real camera (--camera) is used then.
   const bool camera = !o.no_camera && (!o.camera.empty() ? registry.find("camera") != nullptr
-                                                          : registry.find("sim_camera") != nullptr);
+                                                          : simulated_imu && registry.find("sim_camera") != nullptr);
   if (camera) {
     if (o.camera.empty()) {
       spec.components.push_back(component(
@@ -240,7 +259,10 @@ void run_demo(const DemoOptions& o) {
   }
   std::vector<std::string> filters;
   for (const char* f : {"parallel_kf", "selective_ekf", "gauss_newton"}) {
-    if (registry.find(f) != nullptr && (std::string(f) != "selective_ekf" || camera)) {
+    // the selective EKF: with a camera, or on a real IMU alone as before the synthetic camera was
+    // left out there (--no-camera: without it)
+    const bool selective_runs = camera || (!simulated_imu && !o.no_camera);
+    if (registry.find(f) != nullptr && (std::string(f) != "selective_ekf" || selective_runs)) {
       YAML::Node params(YAML::NodeType::Map);
       if (std::string(f) == "selective_ekf" && o.camera.empty()) {
         params["q_body_camera"] = YAML::Load("[0, 1, 0, 0]");  // the synthetic camera looks down
@@ -323,15 +345,20 @@ void run_demo(const DemoOptions& o) {
   input.title = "poise demo";
   input.filters = filters;
   input.episodes = episode_list;
-  input.notes = {"devices: " + devices, "scenario: " + o.scenario + " (seed " + std::to_string(o.seed) +
-                                            "), IMU " + std::to_string(static_cast<int>(o.rate_hz)) + " Hz",
+  input.simulated_truth = simulated_imu;
+  input.notes = {"devices: " + devices,
+                 simulated_imu ? "scenario: " + o.scenario + " (seed " + std::to_string(o.seed) + "), IMU " +
+                                     std::to_string(static_cast<int>(o.rate_hz)) + " Hz"
+                               : "real hardware: no simulated scenario, no truth",
                  "duration: " + std::to_string(static_cast<int>(monitor.elapsed_s())) + " s"};
   const std::string index = demo::write_report(o.out, input, monitor);
   std::printf("%s\nreport: %s\n", dashboard(o, monitor, filters, episode_list, devices).c_str(),
               std::filesystem::absolute(index).c_str());
   const auto stats = monitor.filter_stats();
-  std::printf("against the simulated truth (NEES of the published attitude_covariance; consistent: median "
-              "about 2.37, 95 %% inside):\n");
+  if (simulated_imu) {  // a real IMU has no truth to compare with
+    std::printf("against the simulated truth (NEES of the published attitude_covariance; consistent: median "
+                "about 2.37, 95 %% inside):\n");
+  }
   for (const auto& f : filters) {
     const auto it = stats.find(f);
     if (it == stats.end() || it->second.compared == 0) {

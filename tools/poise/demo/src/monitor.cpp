@@ -39,6 +39,11 @@ struct PipelineMonitor::Impl {
   };
   std::map<std::string, std::map<uint32_t, Estimate>> pending;  // estimates before truth
   std::map<std::string, std::vector<AltitudePoint>> altitude;
+  std::map<std::string, std::vector<PositionPoint>> positions;
+  std::map<std::string, std::vector<std::pair<double, double>>> position_errors;
+  std::map<uint32_t, Eigen::Vector3d> truth_position_by_seq;  // recent truth, for matching
+  std::map<std::string, std::map<uint32_t, PositionPoint>> pending_positions;  // before their truth
+  std::vector<std::unique_ptr<dds::Reader<msg::PoseEstimatePubSubType>>> pose_readers;
   CameraStats camera;
   std::map<std::string, uint64_t> rejected;
   std::vector<std::unique_ptr<AttitudeReader>> attitude_readers;
@@ -64,6 +69,39 @@ struct PipelineMonitor::Impl {
     ++s.compared;
     errors[filter].emplace_back(t_s, e);
     errors_by_seq[filter][seq] = e;
+  }
+
+  void on_pose(const std::string& filter, const msg::PoseEstimate& m) {
+    PositionPoint p;
+    p.t_s = now_s();
+    p.seq = m.header().seq();
+    p.p_m = dds::from_msg(m.position_m());
+    std::lock_guard<std::mutex> lock(mutex);
+    positions[filter].push_back(p);
+    if (filter != "truth") {
+      const auto it = truth_position_by_seq.find(p.seq);
+      if (it == truth_position_by_seq.end()) {
+        auto& waiting = pending_positions[filter];
+        waiting[p.seq] = p;
+        while (waiting.size() > 2000) {
+          waiting.erase(waiting.begin());
+        }
+        return;
+      }
+      position_errors[filter].emplace_back(p.t_s, (p.p_m - it->second).norm());
+      return;
+    }
+    truth_position_by_seq[p.seq] = p.p_m;
+    while (truth_position_by_seq.size() > 4000) {
+      truth_position_by_seq.erase(truth_position_by_seq.begin());
+    }
+    for (auto& [name, waiting] : pending_positions) {  // estimates that arrived before their truth
+      const auto w = waiting.find(p.seq);
+      if (w != waiting.end()) {
+        position_errors[name].emplace_back(w->second.t_s, (w->second.p_m - p.p_m).norm());
+        waiting.erase(w);
+      }
+    }
   }
 
   void on_attitude(const std::string& filter, const msg::AttitudeEstimate& m) {
@@ -125,6 +163,16 @@ PipelineMonitor::PipelineMonitor(dds::Participant& participant, const dds::Topic
     impl->attitude_readers.push_back(std::make_unique<Impl::AttitudeReader>(
         participant, topic, dds::QosKind::kEstimate,
         [impl, filter](const msg::AttitudeEstimate& m, const auto&) { impl->on_attitude(filter, m); }));
+  }
+  std::vector<std::pair<std::string, std::string>> pose_subscriptions{{"truth", simulated::kTruthPoseTopic}};
+  for (const auto& f : filters) {
+    pose_subscriptions.emplace_back(f, topics.pose(f));  // only the filters that publish a pose send any
+  }
+  for (const auto& [name, topic] : pose_subscriptions) {
+    const std::string filter = name;
+    impl->pose_readers.push_back(std::make_unique<dds::Reader<msg::PoseEstimatePubSubType>>(
+        participant, topic, dds::QosKind::kEstimate,
+        [impl, filter](const msg::PoseEstimate& m, const auto&) { impl->on_pose(filter, m); }));
   }
   auto on_altitude = [impl](const std::string& key) {
     return [impl, key](const msg::AltitudeEstimate& m, const auto&) {
@@ -200,6 +248,16 @@ std::map<std::string, std::vector<std::pair<double, double>>> PipelineMonitor::e
 std::map<std::string, std::map<uint32_t, double>> PipelineMonitor::errors_by_seq() const {
   std::lock_guard<std::mutex> lock(impl_->mutex);
   return impl_->errors_by_seq;
+}
+
+std::map<std::string, std::vector<PositionPoint>> PipelineMonitor::position_series() const {
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  return impl_->positions;
+}
+
+std::map<std::string, std::vector<std::pair<double, double>>> PipelineMonitor::position_errors() const {
+  std::lock_guard<std::mutex> lock(impl_->mutex);
+  return impl_->position_errors;
 }
 
 PipelineMonitor::CameraStats PipelineMonitor::camera_stats() const {

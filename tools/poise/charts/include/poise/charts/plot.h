@@ -4,13 +4,14 @@
 
 #include <array>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace poise::charts {
 
 /// One line of a chart.
 struct Series {
-  std::string label;
+  std::string label;  ///< in the legend; empty: not in it
   std::vector<double> x;
   std::vector<double> y;
   std::array<int, 3> rgb{31, 119, 180};
@@ -33,7 +34,8 @@ struct Panel {
   std::string y_label;
   std::vector<Series> series;
   std::vector<Band> bands;
-  /// Fixed y range when y_min < y_max; otherwise fitted to the data (with a margin).
+  /// Fixed y range when y_min < y_max; otherwise fitted to the data (with a margin). Values
+  /// outside a fixed range are never dropped silently: the panel says how many and the extreme.
   double y_min = 0.0;
   double y_max = 0.0;
 };
@@ -44,7 +46,24 @@ struct Figure {
   std::vector<Panel> panels;
   int width_px = 1400;
   int panel_height_px = 320;
+  /// Fixed x range (shared by the panels) when x_min < x_max; otherwise that of the data.
+  double x_min = 0.0;
+  double x_max = 0.0;
 };
+
+/// Where a band's label goes: its row in the label strip above the plot (-1: no label) and its
+/// left edge, px.
+struct LabelPlace {
+  int row = -1;
+  int x_px = 0;
+};
+
+/// Lays out band labels so that none overlaps another: given each band's start and its label's
+/// width in px (width 0: no label), each label starts at its band (shifted left to end at
+/// `right_px` when it would run past it) on the first row where it keeps `gap_px` from every
+/// label already there. `rows` gets the number of rows used. Pure (the charts' layout; tested).
+std::vector<LabelPlace> place_band_labels(const std::vector<std::pair<int, int>>& start_and_width_px,
+                                          int right_px, int gap_px, int& rows);
 
 /// True when PNG charts can be written (poise built with OpenCV, i.e. POISE_WITH_CAMERA=ON).
 bool png_supported();

@@ -39,6 +39,13 @@ struct AltitudePoint {
   bool stationary = false;
 };
 
+/// One position sample (a filter's pose or the simulated truth's).
+struct PositionPoint {
+  double t_s = 0.0;             ///< seconds since the monitor started (receive time)
+  uint32_t seq = 0;             ///< IMU seq of the sample (header.seq): matches the truth's
+  Eigen::Vector3d p_m{0, 0, 0};  ///< position in the world (ENU), m
+};
+
 /// Per-filter accumulated figures.
 struct FilterStats {
   uint64_t received = 0;
@@ -66,6 +73,10 @@ class PipelineMonitor {
   [[nodiscard]] std::map<std::string, std::vector<std::pair<double, double>>> error_series() const;
   /// The same errors by IMU seq: filter -> seq -> error deg (for comparisons sample by sample).
   [[nodiscard]] std::map<std::string, std::map<uint32_t, double>> errors_by_seq() const;
+  /// Positions per filter that publishes a pose (`pose/<filter>`) and "truth" (`truth/pose`).
+  [[nodiscard]] std::map<std::string, std::vector<PositionPoint>> position_series() const;
+  /// Position error of each pose filter vs truth over time (matched by IMU seq): filter -> (t_s, m).
+  [[nodiscard]] std::map<std::string, std::vector<std::pair<double, double>>> position_errors() const;
   /// Camera: frames with a pose, tags in the last frame, last pose time.
   struct CameraStats {
     uint64_t frames = 0;

@@ -1,5 +1,6 @@
-// The demo report: PNG charts (estimate vs truth per filter, errors with the scripted episodes,
-// magnetic disturbance and trust, altitude) and an index.html with the summary table.
+// The demo report: PNG charts (estimate vs truth per filter, each filter's error on its own scale
+// with the scripted episodes, the selective EKF's position and path, magnetic disturbance and
+// trust, altitude) and an index.html with the summary tables and what every figure means.
 #pragma once
 
 #include "poise/demo/monitor.h"
@@ -22,6 +23,9 @@ struct ReportInput {
   std::vector<std::string> filters;
   std::vector<Episode> episodes;
   std::vector<std::string> notes;  ///< free lines (configuration, devices)
+  /// The IMU is the simulator, which publishes the truth: errors are computed and charted. False
+  /// with real hardware (--port): estimates only, and the report says why there is no error.
+  bool simulated_truth = true;
 };
 
 /// Writes the charts and index.html into `dir` (created if needed); returns the index path.
