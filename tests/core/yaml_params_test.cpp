@@ -55,7 +55,7 @@ TEST(YamlParamReader, GivenAnEmptyDocumentThenEveryDefaultIsKept) {
   }
 }
 
-TEST(YamlParamReader, GivenEveryKindOfKeyThenEachIsReadAndNullKeepsTheDefaultOrMeansNaNWhereDocumented) {
+TEST(YamlParamReader, GivenEveryKindOfKeyThenEachIsReadAndNullIsRefusedOrMeansNaNWhereDocumented) {
   Example e;
   ASSERT_EQ(load("gain: 2.5\ndip_deg: ~\ncount: 7\non: true\nname: b\nv: [4, 5, 6]\ncolour: blue\ninner: {x: 9}\n", e),
             "");
@@ -68,8 +68,10 @@ TEST(YamlParamReader, GivenEveryKindOfKeyThenEachIsReadAndNullKeepsTheDefaultOrM
   EXPECT_EQ(e.colour, Colour::kBlue);
   EXPECT_EQ(e.inner_x, 9.0);
   Example d;
-  ASSERT_EQ(load("gain: ~\n", d), "");
-  EXPECT_EQ(d.gain, 1.0);  // get: null keeps the default
+  // get: a key without a value is refused (it kept the default silently before issue 33)
+  EXPECT_EQ(load("gain: ~\n", d), "f.yaml: gain has no value (empty or ~): give one, or leave the key out for the default");
+  EXPECT_EQ(load("inner:\n  x:\n", d), "f.yaml: inner.x has no value (empty or ~): give one, or leave the key out for the default");
+  EXPECT_EQ(d.gain, 1.0);
 }
 
 TEST(YamlParamReader, GivenADottedKeyThenItIsTheSameAsTheNestedOneAndBothAtOnceAreRefused) {

@@ -23,7 +23,10 @@
 
 #include <gtest/gtest.h>
 
+#include <sys/stat.h>
+
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <functional>
@@ -37,6 +40,16 @@ std::string write_file(const std::string& name, const std::string& text) {
   const std::string path = ::testing::TempDir() + "/" + name;
   std::ofstream(path) << text;
   return path;
+}
+
+/// A component `type` named `<type>0` with `params` (YAML), as a host file's first entry gives it.
+runtime::ComponentSpec spec(const std::string& type, const std::string& params) {
+  runtime::ComponentSpec c;
+  c.type = type;
+  c.name = type + "0";
+  c.params = parse_yaml(params, "params");
+  c.origin = "host.yaml: components[0] (" + c.name + ")";
+  return c;
 }
 
 /// Runs `f`, which must throw; returns the message.
@@ -127,14 +140,6 @@ TEST(HostileConfig, GivenAnUnknownKeyInAnyLoaderWhenLoadedThenTheOneMessageNames
   const std::string host_entry = write_file("host_entry.yaml", "components:\n  - {type: parallel_kf, parms: {}}\n");
   const std::string host_topics = write_file("host_topic.yaml", "topics: {imus: x}\ncomponents: [{type: parallel_kf}]\n");
   const std::string host_rt = write_file("host_rt.yaml", "realtime: {prio: 5}\ncomponents: [{type: parallel_kf}]\n");
-  const auto spec = [](const std::string& type, const std::string& params) {
-    runtime::ComponentSpec c;
-    c.type = type;
-    c.name = type + "0";
-    c.params = parse_yaml(params, "params");
-    c.origin = "host.yaml: components[0] (" + c.name + ")";
-    return c;
-  };
   const auto msg = [](auto f) { return [f] { return testing::error_message(f); }; };
   const std::vector<Case> cases = {
       {"parallel_kf", msg([&] { (void)load_parallel_kf_params(kf); }), kf, "parallel_kf.mag_norm_toll",
@@ -159,9 +164,9 @@ TEST(HostileConfig, GivenAnUnknownKeyInAnyLoaderWhenLoadedThenTheOneMessageNames
        {"imu", "diagnostics"}},
       {"host realtime", msg([&] { (void)runtime::load_host_file(host_rt); }), host_rt, "realtime.prio",
        {"priority", "cpus", "lock_memory"}},
-      {"imu_driver component", msg([&] { (void)imu::imu_node_options(spec("imu_driver", "{port: /dev/x, bogus: 1}")); }),
+      {"imu_driver component", msg([] { (void)imu::imu_node_options(spec("imu_driver", "{port: /dev/x, bogus: 1}")); }),
        "host.yaml: components[0] (imu_driver0): imu_driver", "bogus", {"port", "config_file", "serial", "calibration"}},
-      {"camera component", msg([&] { (void)camera::camera_node_options(spec("camera", "{sorce: x}")); }),
+      {"camera component", msg([] { (void)camera::camera_node_options(spec("camera", "{sorce: x}")); }),
        "host.yaml: components[0] (camera0): camera", "sorce", {"source", "intrinsics_file", "pace"}},
       {"ros2_bridge component", msg([] { (void)ros2::parse_bridge_config(parse_yaml("out: {attitud: [a]}", "p"), "o"); }),
        "o: ros2_bridge", "out.attitud", {"attitude", "tf"}},
@@ -175,6 +180,157 @@ TEST(HostileConfig, GivenAnUnknownKeyInAnyLoaderWhenLoadedThenTheOneMessageNames
     std::printf("%-22s %s\n", c.loader, message.c_str());
     testing::expect_unknown_key_message(message, c.where, c.key, c.allowed);
   }
+}
+
+// Issue 33: a YAML alias (*name) is a shared node, so a self-reference (`&c [ {params: *c} ]`) is a
+// cycle every tree walk follows forever (SIGSEGV) and nine lines of aliases make 9^9 nodes (a
+// minute of CPU). Every loader reads YAML through parse_yaml(), which refuses an alias from the
+// parser's events before a node is built. Oracle: the documented message names the file, the line
+// and the alias.
+TEST(HostileYaml, GivenAnAliasInAnyLoaderWhenLoadedThenRefusedNamingTheFileLineAndAlias) {
+  std::string bomb = "a: &a [x, x, x, x, x, x, x, x, x]\n";
+  for (char c = 'b'; c <= 'i'; ++c) {
+    const char prev = static_cast<char>(c - 1);
+    bomb += std::string(1, c) + ": &" + c + " [";
+    for (int i = 0; i < 9; ++i) bomb += std::string(i ? ", " : "") + "*" + prev;
+    bomb += "]\n";
+  }
+  const std::string cycle_host = write_file("alias_host.yaml", "components: &c [ {type: parallel_kf, params: *c} ]\n");
+  const std::string rt_host = write_file("alias_rt.yaml", "realtime: &r {priority: *r}\ncomponents: [{type: parallel_kf}]\n");
+  const std::string topics_host = write_file("alias_topics.yaml", "topics: {imu: &t imu, diagnostics: *t}\n"
+                                                                  "components: [{type: parallel_kf}]\n");
+  const std::string kf = write_file("alias_bomb.yaml", "parallel_kf:\n" + bomb);  // the alias on line 3
+  const std::string gn = write_file("alias_gn.yaml", "gauss_newton: {max_iterations: &n 3, dip_deg: *n}\n");
+  const std::string ekf = write_file("alias_ekf.yaml", "selective_ekf: &s {gauss_newton: *s}\n");
+  const std::string alt = write_file("alias_alt.yaml", "cf: &c {gains: *c}\n");
+  const std::string veh = write_file("alias_veh.yaml", "ekf: &e {r_mag_ut2: *e}\n");
+  struct Case {
+    const char* loader;
+    std::function<void()> load;
+    std::string where;  // "<file>:<line>: the alias *<name>"
+  };
+  const std::vector<Case> cases = {
+      {"host components", [&] { (void)runtime::load_host_file(cycle_host); }, cycle_host + ":1: the alias *c"},
+      {"host realtime", [&] { (void)runtime::load_host_file(rt_host); }, rt_host + ":1: the alias *r"},
+      {"host topics", [&] { (void)runtime::load_host_file(topics_host); }, topics_host + ":1: the alias *t"},
+      {"parallel_kf bomb", [&] { (void)load_parallel_kf_params(kf); }, kf + ":3: the alias *a"},
+      {"gauss_newton", [&] { (void)load_gauss_newton_params(gn); }, gn + ":1: the alias *n"},
+      {"selective_ekf", [&] { (void)load_selective_ekf_params(ekf); }, ekf + ":1: the alias *s"},
+      {"altitude", [&] { (void)load_altitude_params(alt); }, alt + ":1: the alias *c"},
+      {"vehicle", [&] { (void)load_vehicle_params(veh); }, veh + ":1: the alias *e"},
+      {"imu driver", [] { (void)imu::parse_driver_config("serial: &s {baud: *s}\n", "drv.yaml"); }, "drv.yaml:1: the alias *s"},
+      {"camera", [] { (void)camera::parse_camera_config("detector: &d {threads: *d}\n", "cam.yaml"); },
+       "cam.yaml:1: the alias *d"},
+      {"tag map", [] { (void)camera::parse_tag_map("tags: &t [*t]\n", "map.yaml"); }, "map.yaml:1: the alias *t"},
+      {"intrinsics", [] { (void)camera::parse_intrinsics("image_width: &w 640\nimage_height: *w\n", "c.yaml"); },
+       "c.yaml:2: the alias *w"},
+      {"--set value", [] { (void)parse_yaml("&a [*a]", "--set parallel_kf.filter_file=&a [*a]"); },
+       "--set parallel_kf.filter_file=&a [*a]:1: the alias *a"},
+      {"north --set", [] { (void)read_north_params(parse_yaml("{location: &a {lat_deg: *a, lon_deg: 0}}", "--set")); },
+       "--set:1: the alias *a"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.loader);
+    const std::string message = error_of(c.load);
+    EXPECT_HAS(message, c.where + " is not accepted: poise reads no YAML anchors or aliases");
+  }
+  // an anchor nothing refers to is harmless and still reads
+  EXPECT_EQ(parse_yaml("a: &x 1\n", "f.yaml")["a"].as<int>(), 1);
+}
+
+// The same through the command line, as the issue ran them: an exit with the message within a
+// bounded wait, not a crash (SIGSEGV) or a minute of CPU.
+TEST(HostileYaml, GivenTheIssuesAliasInputsWhenPoiseRunsThemThenItExitsWithTheMessage) {
+  const std::string cycle_host = write_file("alias_cli_host.yaml", "components: &c [ {type: parallel_kf, params: *c} ]\n");
+  const std::string host = write_file("alias_cli_ok.yaml", "components:\n  - {type: parallel_kf, name: parallel_kf}\n");
+  std::string bomb = "a: &a [x, x, x, x, x, x, x, x, x]\n";
+  for (char c = 'b'; c <= 'i'; ++c) {
+    bomb += std::string(1, c) + ": &" + c + " [*" + static_cast<char>(c - 1) + ", *" + static_cast<char>(c - 1) +
+            ", *" + static_cast<char>(c - 1) + "]\n";
+  }
+  const std::string bomb_file = write_file("alias_cli_bomb.yaml", bomb);
+  const std::vector<std::pair<std::vector<std::string>, std::string>> runs = {
+      {{testing::bin("poise"), "run", cycle_host}, cycle_host + ":1: the alias *c is not accepted"},
+      {{testing::bin("poise"), "run", host, "--set", "parallel_kf.filter_file=&a [*a]"}, ":1: the alias *a is not accepted"},
+      {{testing::bin("poise"), "run", host, "--set", "parallel_kf.filter_file=" + bomb_file},
+       bomb_file + ":2: the alias *a is not accepted"},
+      {{testing::bin("poise"), "parallel-kf", "--config", bomb_file, "--duration", "1"},
+       bomb_file + ":2: the alias *a is not accepted"},
+  };
+  for (const auto& [argv, expected] : runs) {
+    SCOPED_TRACE(argv.back());
+    const auto r = testing::run(argv, std::chrono::seconds(20));
+    // 1: a setup error, 2: a usage error (--set's value); -1 would be the timeout, a signal another value
+    EXPECT_TRUE(r.exit_code == 1 || r.exit_code == 2) << r.exit_code << ": " << r.output;
+    EXPECT_HAS(r.output, expected);
+  }
+}
+
+TEST(HostileYaml, GivenNestingTooDeepTextTooLargeOrAFifoWhenLoadedThenRefusedBeforeParsing) {
+  const std::string deep = std::string(static_cast<std::size_t>(kMaxYamlDepth) + 1, '[') +
+                           std::string(static_cast<std::size_t>(kMaxYamlDepth) + 1, ']');
+  EXPECT_HAS(error_of([&] { (void)parse_yaml(deep, "deep.yaml"); }), "deep.yaml:1: nested more than 32 levels deep");
+  const std::string ok_depth = std::string(static_cast<std::size_t>(kMaxYamlDepth), '[') +
+                               std::string(static_cast<std::size_t>(kMaxYamlDepth), ']');
+  EXPECT_NO_THROW((void)parse_yaml(ok_depth, "deep.yaml"));
+  const std::string huge = write_file("huge.yaml", "# " + std::string(kMaxYamlBytes, 'x') + "\n");
+  EXPECT_HAS(error_of([&] { (void)load_parallel_kf_params(huge); }),
+             huge + ": " + std::to_string(kMaxYamlBytes + 3) + " bytes: more than the 1048576 a configuration may hold");
+  const std::string fifo = ::testing::TempDir() + "/filter_fifo.yaml";
+  std::remove(fifo.c_str());
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  for (const auto& load : std::vector<std::function<void()>>{[&] { (void)load_parallel_kf_params(fifo); },
+                                                              [&] { (void)runtime::load_host_file(fifo); },
+                                                              [&] { (void)imu::load_driver_config(fifo); },
+                                                              [&] { (void)camera::load_tag_map(fifo); }}) {
+    EXPECT_HAS(error_of(load), fifo + ": not a regular file (a FIFO, device or directory)");
+  }
+  EXPECT_HAS(error_of([] { (void)load_parallel_kf_params("/dev/zero"); }), "/dev/zero: not a regular file");
+}
+
+// Issue 33: `key:` or `key: ~` is a key given without a value. It was read as absent, so the
+// default was kept silently (the file looked configured). Every loader refuses it naming the key,
+// except the keys where null is documented to mean "learn it" (get_nullable: dip_deg, ...).
+TEST(HostileConfig, GivenAKeyWithoutAValueInAnyLoaderWhenLoadedThenRefusedNamingTheKeyUnlessNullIsDocumented) {
+  const std::string kf = write_file("null_kf.yaml", "parallel_kf:\n  mag_norm_tol:\n");
+  const std::string gn = write_file("null_gn.yaml", "gauss_newton:\n  max_iterations: ~\n");
+  const std::string ekf = write_file("null_ekf.yaml", "selective_ekf:\n  gauss_newton: {max_iterations: ~}\n");
+  const std::string alt = write_file("null_alt.yaml", "cf:\n  sigma_baro_m:\n");
+  const std::string veh = write_file("null_veh.yaml", "ekf:\n  r_mag_ut2: ~\n");
+  struct Case {
+    const char* loader;
+    std::function<void()> load;
+    std::string message;
+  };
+  const std::vector<Case> cases = {
+      {"parallel_kf", [&] { (void)load_parallel_kf_params(kf); }, kf + ": parallel_kf.mag_norm_tol has no value"},
+      {"gauss_newton", [&] { (void)load_gauss_newton_params(gn); }, gn + ": gauss_newton.max_iterations has no value"},
+      {"selective_ekf", [&] { (void)load_selective_ekf_params(ekf); },
+       ekf + ": selective_ekf.gauss_newton.max_iterations has no value"},
+      {"altitude", [&] { (void)load_altitude_params(alt); }, alt + ": cf.sigma_baro_m has no value"},
+      {"vehicle", [&] { (void)load_vehicle_params(veh); }, veh + ": ekf.r_mag_ut2 has no value"},
+      {"imu driver", [] { (void)imu::parse_driver_config("serial:\n  baud:\n", "drv.yaml"); },
+       "drv.yaml: serial.baud has no value"},
+      {"camera", [] { (void)camera::parse_camera_config("detector: {threads: ~}\n", "cam.yaml"); },
+       "cam.yaml: detector.threads has no value"},
+      {"component parameter", [] { (void)imu::imu_node_options(spec("imu_driver", "{port: ~}")); },
+       "parameter 'port' of component 'imu_driver0' has no value"},
+      {"ros2_bridge", [] { (void)ros2::parse_bridge_config(parse_yaml("world_frame: ~", "p"), "o"); },
+       "o: ros2_bridge: 'world_frame' has no value"},
+      {"north keys", [] { (void)read_north_params(parse_yaml("declination_deg:", "p")); },
+       "declination_deg has no value"},
+      {"north location", [] { (void)read_north_params(parse_yaml("location: ~", "p")); }, "location has no value"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.loader);
+    EXPECT_HAS(error_of(c.load), c.message);
+  }
+  // documented nullable: `dip_deg: ~` is NaN ("learn it"), not an error
+  const std::string gn_dip = write_file("null_gn_dip.yaml", "gauss_newton:\n  dip_deg: ~\n");
+  EXPECT_TRUE(std::isnan(load_gauss_newton_params(gn_dip).dip_deg));
+  // an empty section is an empty mapping: the defaults
+  const std::string kf_empty = write_file("null_kf_section.yaml", "parallel_kf:\n  limits:\n");
+  EXPECT_NO_THROW((void)load_parallel_kf_params(kf_empty));
 }
 
 TEST(HostileConfig, GivenAHostFileWithATopicThatIsNotAStringWhenLoadedThenTheFileAndTopicAreNamed) {

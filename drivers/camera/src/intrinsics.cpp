@@ -21,15 +21,9 @@ constexpr int kMaxCalibratedSidePx = 32768;
 bool finite(double v) { return std::isfinite(v); }
 
 std::string read_text(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) {
-    throw ConfigError("cannot read intrinsics file '" + path +
-                      "': check the path (expected an OpenCV calibration YAML or a ROS "
-                      "camera_info YAML)");
-  }
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  return buffer.str();
+  return read_yaml_text<ConfigError>(path, "cannot read intrinsics file '" + path +
+                                               "': check the path (expected an OpenCV calibration YAML or a ROS "
+                                               "camera_info YAML)");
 }
 
 bool looks_like_opencv(const std::string& text) {

@@ -108,13 +108,7 @@ CameraConfig parse_camera_config(const std::string& yaml_text, const std::string
 }
 
 CameraConfig load_camera_config(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) {
-    throw ConfigError("cannot read camera config '" + path + "'");
-  }
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  return parse_camera_config(buffer.str(), path);
+  return parse_camera_config(read_yaml_text<ConfigError>(path, "cannot read camera config '" + path + "'"), path);
 }
 
 CameraPipeline::CameraPipeline(const CameraConfig& config, const CameraIntrinsics& intrinsics,

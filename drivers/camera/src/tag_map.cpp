@@ -125,13 +125,7 @@ void check_tag_map_family(const TagMap& map, const std::string& family, const st
 }
 
 TagMap load_tag_map(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) {
-    throw ConfigError("cannot read tag map '" + path + "': check the path");
-  }
-  std::stringstream buffer;
-  buffer << in.rdbuf();
-  return parse_tag_map(buffer.str(), path);
+  return parse_tag_map(read_yaml_text<ConfigError>(path, "cannot read tag map '" + path + "': check the path"), path);
 }
 
 }  // namespace poise::camera

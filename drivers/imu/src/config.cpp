@@ -124,14 +124,9 @@ DriverConfig parse_driver_config(const std::string& yaml_text, const std::string
 }
 
 DriverConfig load_driver_config(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) {
-    throw ConfigError(path + ": cannot read the IMU driver configuration (does the file exist? "
-                             "`poise calibrate imu` writes one)");
-  }
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return parse_driver_config(ss.str(), path);
+  return parse_driver_config(read_yaml_text<ConfigError>(path, path + ": cannot read the IMU driver configuration (does "
+                                                                      "the file exist? `poise calibrate imu` writes one)"),
+                             path);
 }
 
 std::string to_yaml(const DriverConfig& c) {

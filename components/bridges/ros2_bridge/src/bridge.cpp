@@ -37,6 +37,9 @@ std::string read_string(const YAML::Node& map, const std::string& key, const std
   if (!map[key]) {
     return fallback;
   }
+  if (map[key].IsNull()) {  // never silently the default (or the string "null")
+    throw ConfigError(where + ": '" + key + "' has no value (empty or ~): give one, or leave the key out");
+  }
   try {
     return map[key].as<std::string>();
   } catch (const YAML::Exception&) {
@@ -49,6 +52,9 @@ T read_value(const YAML::Node& map, const std::string& key, const T& fallback, c
              const char* what) {
   if (!map[key]) {
     return fallback;
+  }
+  if (map[key].IsNull()) {  // never silently the default (or the string "null")
+    throw ConfigError(where + ": '" + key + "' has no value (empty or ~): give one, or leave the key out");
   }
   try {
     return map[key].as<T>();

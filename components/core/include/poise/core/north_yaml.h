@@ -36,8 +36,12 @@ inline NorthParams read_north_params(const YAML::Node& params) {
   }
   auto get = [&params](const char* key, auto& out, const char* what) {
     const YAML::Node v = params[key];
-    if (!v || v.IsNull()) {
+    if (!v) {
       return;
+    }
+    if (v.IsNull()) {  // never silently "not configured"
+      throw std::invalid_argument(std::string(key) + " has no value (empty or ~): give " + what +
+                                  ", or leave the key out");
     }
     try {
       out = v.as<std::decay_t<decltype(out)>>();
@@ -50,7 +54,10 @@ inline NorthParams read_north_params(const YAML::Node& params) {
   get("magnetic_model", p.model_file, "a file name (.COF)");
   get("seed_field", p.seed_field, "true or false");
   const YAML::Node loc = params["location"];
-  if (loc && !loc.IsNull()) {
+  if (loc && loc.IsNull()) {
+    throw std::invalid_argument("location has no value (empty or ~): give {lat_deg, lon_deg, alt_m}, or leave the key out");
+  }
+  if (loc) {
     if (!loc.IsMap()) {
       throw std::invalid_argument("location must be a mapping {lat_deg, lon_deg, alt_m}");
     }

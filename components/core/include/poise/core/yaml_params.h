@@ -8,13 +8,18 @@
 #include "poise/core/params_check.h"
 #include "poise/core/sample_check.h"
 
+#include <yaml-cpp/eventhandler.h>
+#include <yaml-cpp/parser.h>
 #include <yaml-cpp/yaml.h>
+
+#include <sys/stat.h>
 
 #include <Eigen/Core>
 
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <fstream>
 #include <initializer_list>
 #include <map>
 #include <sstream>
@@ -66,13 +71,75 @@ void check_yaml_tree(const YAML::Node& node, const std::string& source, const st
   }
 }
 
+/// Bounds on every YAML document poise reads (docs/DEVELOPING.md "Loading configuration"): a
+/// configuration file is a few kilobytes; these stop a hostile one before it costs memory or time.
+inline constexpr std::size_t kMaxYamlBytes = std::size_t{1} << 20;  ///< 1 MiB of text
+inline constexpr int kMaxYamlDepth = 32;                            ///< nested sequences / mappings
+
+/// The parser's events checked before any node is built: no alias (`*name`: a shared or cyclic
+/// node, the alias bomb and the self-reference `&c [ {params: *c} ]`), no nesting deeper than
+/// kMaxYamlDepth. Throws Error "<source>:<line>: ...".
+template <typename Error>
+class YamlBoundsCheck : public YAML::EventHandler {
+ public:
+  YamlBoundsCheck(const std::string& text, const std::string& source) : text_(text), source_(source) {}
+
+  void OnDocumentStart(const YAML::Mark&) override {}
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark&, YAML::anchor_t) override {}
+  void OnScalar(const YAML::Mark&, const std::string&, YAML::anchor_t, const std::string&) override {}
+  void OnAlias(const YAML::Mark& mark, YAML::anchor_t) override {
+    std::string name;
+    if (mark.pos >= 0 && static_cast<std::size_t>(mark.pos) < text_.size()) {
+      const std::size_t end = text_.find_first_of(" \t\r\n,]}", static_cast<std::size_t>(mark.pos));
+      name = text_.substr(static_cast<std::size_t>(mark.pos), end == std::string::npos ? std::string::npos
+                                                                                        : end - mark.pos);
+    }
+    throw Error(where(mark) + "the alias " + (name.empty() ? std::string("*") : name) +
+                " is not accepted: poise reads no YAML anchors or aliases (&name / *name); write the value out");
+  }
+  void OnSequenceStart(const YAML::Mark& mark, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override {
+    enter(mark);
+  }
+  void OnSequenceEnd() override { --depth_; }
+  void OnMapStart(const YAML::Mark& mark, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override {
+    enter(mark);
+  }
+  void OnMapEnd() override { --depth_; }
+
+ private:
+  [[nodiscard]] std::string where(const YAML::Mark& mark) const {
+    return source_ + ":" + std::to_string(mark.line + 1) + ": ";
+  }
+  void enter(const YAML::Mark& mark) {
+    if (++depth_ > kMaxYamlDepth) {
+      throw Error(where(mark) + "nested more than " + std::to_string(kMaxYamlDepth) +
+                  " levels deep: not a poise configuration");
+    }
+  }
+  const std::string& text_;
+  const std::string& source_;
+  int depth_ = 0;
+};
+
 /// Parses YAML text (`source` names it in messages) and applies check_yaml_tree(): every loader
-/// (host, filter, driver, camera, intrinsics, tag map, overrides) reads YAML through here or
-/// load_yaml_file(). Throws Error "<source>: not valid YAML: ..." on a syntax error.
+/// (host, filter, driver, camera, intrinsics, tag map, overrides, --set, --grid) reads YAML through
+/// here or load_yaml_file(). Refused before a node is built: more than kMaxYamlBytes of text
+/// ("<source>: N bytes: more than the 1048576 a configuration may hold"), an alias and nesting
+/// deeper than kMaxYamlDepth (YamlBoundsCheck). Throws Error "<source>: not valid YAML: ..." on a
+/// syntax error. Only the first document is read.
 template <typename Error = std::runtime_error>
 YAML::Node parse_yaml(const std::string& text, const std::string& source) {
+  if (text.size() > kMaxYamlBytes) {
+    throw Error(source + ": " + std::to_string(text.size()) + " bytes: more than the " +
+                std::to_string(kMaxYamlBytes) + " a configuration may hold");
+  }
   YAML::Node root;
   try {
+    std::istringstream in(text);
+    YAML::Parser parser(in);
+    YamlBoundsCheck<Error> bounds(text, source);
+    parser.HandleNextDocument(bounds);
     root = YAML::Load(text);
   } catch (const YAML::Exception& e) {
     throw Error(source + ": not valid YAML: " + e.what());
@@ -81,20 +148,37 @@ YAML::Node parse_yaml(const std::string& text, const std::string& source) {
   return root;
 }
 
-/// Loads a YAML file; Error ("<path>: cannot open the <what>" / "not valid YAML" / the checks of
-/// check_yaml_tree()).
+/// The text of a configuration file, read only when it is a regular file of at most kMaxYamlBytes
+/// (a FIFO would block, /dev/zero never ends). Error(`cannot_open`) when it cannot be opened,
+/// "<path>: not a regular file (a FIFO, device or directory): give a YAML file" and
+/// "<path>: N bytes: more than the 1048576 a configuration may hold".
+template <typename Error = std::runtime_error>
+std::string read_yaml_text(const std::string& path, const std::string& cannot_open) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) {
+    throw Error(cannot_open);
+  }
+  if (!S_ISREG(st.st_mode)) {
+    throw Error(path + ": not a regular file (a FIFO, device or directory): give a YAML file");
+  }
+  if (static_cast<unsigned long long>(st.st_size) > kMaxYamlBytes) {
+    throw Error(path + ": " + std::to_string(st.st_size) + " bytes: more than the " +
+                std::to_string(kMaxYamlBytes) + " a configuration may hold");
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    throw Error(cannot_open);
+  }
+  std::string text(kMaxYamlBytes + 1, '\0');
+  in.read(text.data(), static_cast<std::streamsize>(text.size()));
+  text.resize(static_cast<std::size_t>(in.gcount()));
+  return text;  // a file grown past the limit since stat() is refused by parse_yaml()
+}
+
+/// Loads a YAML file; Error ("<path>: cannot open the <what>" / read_yaml_text() / parse_yaml()).
 template <typename Error = std::runtime_error>
 YAML::Node load_yaml_file(const std::string& path, const std::string& what) {
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::BadFile&) {
-    throw Error(path + ": cannot open the " + what);
-  } catch (const YAML::Exception& e) {
-    throw Error(path + ": not valid YAML: " + e.what());
-  }
-  check_yaml_tree<Error>(root, path);
-  return root;
+  return parse_yaml<Error>(read_yaml_text<Error>(path, path + ": cannot open the " + what), path);
 }
 
 /// The one message for a key that nothing reads, in every loader (filter, driver and camera files,
@@ -141,7 +225,7 @@ void check_known_keys(const YAML::Node& node, const std::vector<std::string>& kn
 /// The one shape of loading a YAML mapping into a Params / config struct whose fields hold the
 /// defaults (docs/DEVELOPING.md "Loading configuration"):
 ///   YamlParamReader r(root, path);          // or a section: r.child("limits")
-///   r.get("max_dt_s", p.max_dt_s);           // optional: absent or null keeps the default
+///   r.get("max_dt_s", p.max_dt_s);           // optional: absent keeps the default, null is refused
 ///   r.finish();                              // every key nothing asked for: unknown_key_message()
 ///   validate_loaded(p, path);                // ranges: Params::validate() (ParamCheck)
 /// The known keys are the ones the code reads (no list to keep in step). A key `a.b: v` is the
@@ -161,7 +245,7 @@ class BasicYamlParamReader {
     node_ = present_ ? nest_dotted(node) : YAML::Node();
   }
 
-  /// Reads `key` into `out` when given; keeps `out` (the default) when absent or null. T: bool,
+  /// Reads `key` into `out` when given; keeps `out` (the default) when absent; refuses null. T: bool,
   /// integers, floating point, std::string, std::vector<double>, fixed-size Eigen matrices of
   /// double (a list of numbers; a matrix: a list of rows).
   template <typename T>
@@ -201,7 +285,7 @@ class BasicYamlParamReader {
     out = v;
   }
   /// A number given in the file's unit (the key's suffix, e.g. `_ms`, `_deg`): when given,
-  /// out = value * scale (e.g. 1e-3 for ms -> s); absent or null keeps the default untouched.
+  /// out = value * scale (e.g. 1e-3 for ms -> s); absent keeps the default untouched.
   void get_scaled(const std::string& key, double& out, double scale) {
     if (given(key)) {
       double v = 0.0;
@@ -260,7 +344,7 @@ class BasicYamlParamReader {
     }
     get_enum(key, out, names);
   }
-  /// True when `key` is given with a value (not null). Marks it known.
+  /// True when `key` is given (a null value is refused, as by get()). Marks it known.
   [[nodiscard]] bool given(const std::string& key) { return static_cast<bool>(value(key)); }
   /// True when the mapping holds `key` (null included). Marks it known.
   [[nodiscard]] bool has(const std::string& key) {
@@ -371,12 +455,17 @@ class BasicYamlParamReader {
     if (std::find(known_.begin(), known_.end(), key) == known_.end()) {
       known_.push_back(key);
     }
-    return present_ ? static_cast<const YAML::Node&>(node_)[key] : YAML::Node();
+    return present_ ? static_cast<const YAML::Node&>(node_)[key] : YAML::Node(YAML::NodeType::Undefined);
   }
-  /// The node of `key` when given and not null, else an undefined node.
+  /// The node of `key` when given, else an undefined node. A null value (`key:` or `key: ~`) is
+  /// refused: it would look like a value and silently keep the default (get_nullable() alone gives
+  /// null a meaning).
   YAML::Node value(const std::string& key) {
     const YAML::Node v = raw(key);
-    return v.IsDefined() && !v.IsNull() ? v : YAML::Node(YAML::NodeType::Undefined);
+    if (v.IsDefined() && v.IsNull()) {
+      fail(key, "has no value (empty or ~): give one, or leave the key out for the default");
+    }
+    return v;
   }
 
   /// A copy of `map` with every dotted key `a.b: v` moved under `a: {b: v}` (the document itself

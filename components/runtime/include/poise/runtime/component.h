@@ -95,11 +95,15 @@ class ComponentRegistry {
 };
 
 /// Reads a typed parameter with a default; throws ConfigError naming the key and the component
-/// when the value has the wrong type.
+/// when the value has the wrong type or none (`key:` / `key: ~`: never silently the default).
 template <typename T>
 T param(const ComponentSpec& spec, const std::string& key, const T& fallback) {
   if (!spec.params || !spec.params[key]) {
     return fallback;
+  }
+  if (spec.params[key].IsNull()) {
+    throw ConfigError(spec.origin + ": parameter '" + key + "' of component '" + spec.name +
+                      "' has no value (empty or ~): give one, or leave the key out for the default");
   }
   try {
     return spec.params[key].as<T>();
