@@ -8,6 +8,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <random>
 #include <set>
 #include <string>
@@ -427,6 +428,177 @@ TEST(Mcap, GivenAChannelNamingASchemaTheFileDoesNotDefineWhenReadThenReportedAnd
     }
     EXPECT_EQ(n, 30);
     r.verify();
+  }
+}
+
+/// Little-endian bytes appended one at a time (MCAP's field encodings).
+struct Bytes {
+  std::vector<uint8_t> v;
+  Bytes& uint(uint64_t x, int n) {
+    for (int i = 0; i < n; ++i) v.push_back(static_cast<uint8_t>(x >> (8 * i)));
+    return *this;
+  }
+  Bytes& u16(uint16_t x) { return uint(x, 2); }
+  Bytes& u32(uint32_t x) { return uint(x, 4); }
+  Bytes& u64(uint64_t x) { return uint(x, 8); }
+  Bytes& raw(const std::vector<uint8_t>& b) {
+    for (const uint8_t x : b) v.push_back(x);
+    return *this;
+  }
+  Bytes& str(const std::string& s) {
+    u32(static_cast<uint32_t>(s.size()));
+    for (const char c : s) v.push_back(static_cast<uint8_t>(c));
+    return *this;
+  }
+  /// A record: opcode, u64 length, body.
+  Bytes& record(Opcode op, const std::vector<uint8_t>& body) {
+    v.push_back(static_cast<uint8_t>(op));
+    return u64(body.size()).raw(body);
+  }
+};
+
+/// A hand-written MCAP (no writer, so it can lie): records appended in order, then Data End, an
+/// empty Footer and the magic.
+class RawMcap {
+ public:
+  RawMcap() {
+    for (int i = 0; i < 8; ++i) bytes_.v.push_back(kMagic[i]);
+    bytes_.record(Opcode::kHeader, Bytes{}.str("").str("test").v);
+  }
+  void record(Opcode op, const std::vector<uint8_t>& body) { bytes_.record(op, body); }
+  static std::vector<uint8_t> channel(uint16_t id, const std::string& topic) {
+    return Bytes{}.u16(id).u16(0).str(topic).str("cdr").u32(0).v;
+  }
+  static std::vector<uint8_t> message(uint16_t channel, uint64_t log_ns) {
+    return Bytes{}.u16(channel).u32(0).u64(log_ns).u64(log_ns).raw({1, 2, 3}).v;
+  }
+  /// A Chunk record body: `records` stored as given, claiming `uncompressed` bytes.
+  static std::vector<uint8_t> chunk(const std::string& compression, const std::vector<uint8_t>& records,
+                                    uint64_t uncompressed) {
+    return Bytes{}.u64(0).u64(0).u64(uncompressed).u32(0).str(compression).u64(records.size()).raw(records).v;
+  }
+  std::vector<uint8_t> finish() {
+    bytes_.record(Opcode::kDataEnd, Bytes{}.u32(0).v);
+    bytes_.record(Opcode::kFooter, Bytes{}.u64(0).u64(0).u32(0).v);
+    for (int i = 0; i < 8; ++i) bytes_.v.push_back(kMagic[i]);
+    return bytes_.v;
+  }
+
+ private:
+  Bytes bytes_;
+};
+
+/// A 10-byte zstd frame without a content size: one raw block holding one byte.
+const std::vector<uint8_t> kTinyZstdFrame = {0x28, 0xB5, 0x2F, 0xFD, 0x00, 0x00, 0x09, 0x00, 0x00, 0x7A};
+
+/// The process's peak resident memory so far (VmHWM), MiB; -1 when /proc is not there.
+long peak_rss_mib() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("VmHWM:", 0) == 0) {
+      return std::stol(line.substr(6)) / 1024;
+    }
+  }
+  return -1;
+}
+
+bool have_zstd() {
+  try {
+    (void)chunk_records(RawMcap::chunk("zstd", kTinyZstdFrame, 1).data(), RawMcap::chunk("zstd", kTinyZstdFrame, 1).size());
+  } catch (const ReadError& e) {
+    return std::string(e.what()).find("no libzstd") == std::string::npos;
+  }
+  return true;
+}
+
+// Issue 33, "memory on a lying MCAP": 8 chunks of a 10-byte zstd frame (no content size), each
+// claiming 1 GiB, took `info` to 1.13 GB. Each claim is now checked against the chunk's compressed
+// size (at most kMaxCompressionRatio times it, never above kMaxChunkBytes) before anything is
+// allocated. Oracles: the documented message per chunk, the count, and the process's peak memory
+// (a 1 GiB allocation would show; the bound is far above what the reader needs).
+TEST(Mcap, GivenChunksClaimingFarMoreThanTheyHoldWhenReadThenEachIsRefusedBeforeAllocating) {
+  constexpr long kPeakBoundMib = 200;
+  RawMcap raw;
+  for (int i = 0; i < 8; ++i) {
+    raw.record(Opcode::kChunk, RawMcap::chunk("zstd", kTinyZstdFrame, 1ULL << 30));
+  }
+  const std::vector<uint8_t> bytes = raw.finish();
+  McapReader r = read_buffer(bytes);
+  EXPECT_EQ(r.report().corrupt, 8u) << joined(r.report().problems);
+  EXPECT_NE(joined(r.report().problems)
+                .find("chunk claims 1073741824 bytes uncompressed from 10 compressed: more than the 1000x / "
+                      "128 MiB a chunk may hold"),
+            std::string::npos)
+      << joined(r.report().problems);
+  r.verify();
+  EXPECT_EQ(r.report().corrupt, 8u);
+  const long peak = peak_rss_mib();
+  std::printf("peak resident memory after reading: %ld MiB (bound %ld)\n", peak, kPeakBoundMib);
+  EXPECT_LT(peak, kPeakBoundMib);
+}
+
+// A claim within the ratio is decompressed by streaming: the buffer grows with what zstd gives,
+// and a frame that gives less or more than the claim is refused with what it gave.
+TEST(Mcap, GivenAZstdFrameWithoutContentSizeWhenItHoldsLessOrMoreThanClaimedThenRefusedNamingBoth) {
+  if (!have_zstd()) {
+    POISE_SKIP("this build has no libzstd");
+  }
+  const auto error = [](uint64_t claim) {
+    const std::vector<uint8_t> body = RawMcap::chunk("zstd", kTinyZstdFrame, claim);
+    try {
+      (void)chunk_records(body.data(), body.size());
+    } catch (const ReadError& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_EQ(error(5000), "zstd chunk decompressed to 1 bytes, expected 5000");
+  EXPECT_EQ(error(0), "zstd chunk decompresses to more than the 0 bytes it claims");
+  EXPECT_EQ(error(10001), "chunk claims 10001 bytes uncompressed from 10 compressed: more than the 1000x / 128 MiB a "
+                          "chunk may hold (corrupt)");
+  const std::vector<uint8_t> exact = RawMcap::chunk("zstd", kTinyZstdFrame, 1);
+  EXPECT_EQ(chunk_records(exact.data(), exact.size()), std::vector<uint8_t>{0x7A});
+  std::vector<uint8_t> cut = kTinyZstdFrame;
+  cut.resize(8);  // the block header promises a byte that is not there
+  const std::vector<uint8_t> cut_body = RawMcap::chunk("zstd", cut, 1);
+  EXPECT_THROW((void)chunk_records(cut_body.data(), cut_body.size()), ReadError);
+}
+
+// Issue 33: messages on a channel id without a Channel record were counted by `info` and dropped
+// silently by everything that reads them. They are now a counted problem of the file.
+TEST(Mcap, GivenMessagesOnAChannelTheFileDoesNotDefineWhenReadThenTheyAreCountedAndReported) {
+  RawMcap raw;
+  Bytes records;
+  records.record(Opcode::kChannel, RawMcap::channel(1, "imu"));
+  records.record(Opcode::kMessage, RawMcap::message(1, 10));
+  records.record(Opcode::kMessage, RawMcap::message(7, 11));
+  records.record(Opcode::kMessage, RawMcap::message(7, 12));
+  raw.record(Opcode::kChunk, RawMcap::chunk("", records.v, records.v.size()));
+  McapReader r = read_buffer(raw.finish());
+  EXPECT_NE(joined(r.report().problems)
+                .find("2 messages on channel 7, which the file does not define (no Channel record): they cannot be read"),
+            std::string::npos)
+      << joined(r.report().problems);
+  EXPECT_GE(r.report().corrupt, 1u);
+  EXPECT_FALSE(r.report().complete);
+  EXPECT_EQ(read_all(r).size(), 1u);
+}
+
+// Issue 33, "wrong words": the writer refused the 65536th channel saying "MCAP allows 65536".
+// Channel ids are 0-65535: all 65536 are accepted, the next is refused saying so.
+TEST(Mcap, GivenEveryChannelIdTakenWhenOneMoreIsAddedThenRefusedWithTheTrueLimit) {
+  std::vector<uint8_t> buf;
+  McapWriter w(std::make_unique<MemorySink>(buf), WriterOptions{});
+  const uint16_t schema = w.add_schema("poise::msg::A", "omgidl", {'x'});
+  for (uint32_t i = 0; i < 65536; ++i) {
+    ASSERT_EQ(w.add_channel(schema, "t", "cdr", {}), static_cast<uint16_t>(i));
+  }
+  try {
+    (void)w.add_channel(schema, "t", "cdr", {});
+    ADD_FAILURE() << "accepted";
+  } catch (const WriteError& e) {
+    EXPECT_STREQ(e.what(), "too many channels: an MCAP file holds at most 65536 (channel ids 0-65535)");
   }
 }
 

@@ -5,6 +5,7 @@
 #include "poise/process/compare.h"
 #include "poise/record/idl_schema.h"
 #include "poise/record/mcap.h"
+#include "poise/record/replayer.h"
 #include "poise/process/process.h"
 #include "record_test_support.h"
 
@@ -16,6 +17,7 @@
 #include <fstream>
 #include <iterator>
 #include <limits>
+#include <sstream>
 
 #include <sys/stat.h>
 
@@ -67,7 +69,7 @@ std::vector<uint8_t> read_bytes(const std::string& path) {
 
 /// A recording with kImu stationary IMU samples at 100 Hz, attitude messages, one garbage payload
 /// at the end (and with `garbage_mid`, one more in the middle).
-void write_input(const std::string& path, bool garbage_mid = false) {
+void write_input(const std::string& path, bool garbage_mid = false, int empty_channels = 0) {
   int64_t clock = 0;
   WriterOptions opt;
   opt.clock = [&clock] { return clock; };
@@ -78,6 +80,9 @@ void write_input(const std::string& path, bool garbage_mid = false) {
   const uint16_t a = w.add_schema("poise::msg::AttitudeEstimate", "omgidl", {aidl.begin(), aidl.end()});
   const uint16_t imu = w.add_channel(s, "imu", "cdr", {{"qos_profile", "sensor"}});
   const uint16_t att = w.add_channel(a, "attitude/live", "cdr", {});
+  for (int i = 0; i < empty_channels; ++i) {  // declared, never written
+    (void)w.add_channel(s, "empty/" + std::to_string(i), "cdr", {});
+  }
   const int64_t t0 = 5'000'000'000LL;
   for (int i = 0; i < kImu; ++i) {
     const int64_t stamp = t0 + i * 10'000'000LL;
@@ -653,6 +658,69 @@ TEST(Replay, GivenACorruptChunkAndAMalformedPayloadWhenReplayedThenEveryReadable
   allowed.emplace_back("--allow-damaged");
   const auto ok = poise::testing::run(allowed, 60s, env);
   EXPECT_EQ(ok.exit_code, 0) << ok.output;
+}
+
+// Issue 33: `replay` and `process` exited 0 on a file cut short (a killed recorder) although their
+// help says 3 without --allow-damaged. Oracle: the documented exit codes; the readable part is
+// still used either way.
+TEST(Process, GivenARecordingCutShortWhenProcessedOrReplayedThenExit3UnlessDamageIsAllowed) {
+  const std::string dir = testing::cases_dir("process-cut");
+  const std::string input = dir + "/input.mcap";
+  write_input(input);
+  std::filesystem::resize_file(input, std::filesystem::file_size(input) * 6 / 10);
+  ASSERT_FALSE(McapReader::open_file(input).report().complete);
+  const std::string out = dir + "/out.mcap";
+  const std::vector<std::string> process = {poise::testing::bin("poise"), "process", input, "-o", out,
+                                            "--filter", "parallel_kf"};
+  const auto r = poise::testing::run(process, 60s);
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find("the input is incomplete"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("exit code 3: the input is damaged or incomplete (see above); --allow-damaged accepts it"),
+            std::string::npos)
+      << r.output;
+  std::vector<std::string> allowed = process;
+  allowed.emplace_back("--allow-damaged");
+  EXPECT_EQ(poise::testing::run(allowed, 60s).exit_code, 0);
+
+  poise::testing::DomainLease lease;
+  const std::vector<std::string> env = {"POISE_DDS_PROFILE=poise_loopback"};
+  const std::vector<std::string> replay = {poise::testing::bin("poise"), "replay", input, "--as-fast-as-possible",
+                                           "--wait", "0", "--domain", std::to_string(lease.id())};
+  const auto rr = poise::testing::run(replay, 60s, env);
+  EXPECT_EQ(rr.exit_code, 3) << rr.output;
+  EXPECT_NE(rr.output.find("the file was incomplete"), std::string::npos) << rr.output;
+  std::vector<std::string> replay_allowed = replay;
+  replay_allowed.emplace_back("--allow-damaged");
+  EXPECT_EQ(poise::testing::run(replay_allowed, 60s, env).exit_code, 0);
+}
+
+// Issue 33: `replay` made a DDS writer (~90 KB) for every declared channel, so a file declaring
+// 65535 channels ended in std::bad_alloc. Writers are made for channels that carry messages and at
+// most max_writers of them; the messages beyond are counted. Oracle: the file's own layout (2
+// channels with messages, 2000 without; 50 attitude messages).
+TEST(Replay, GivenAFileDeclaringManyChannelsWhenReplayedThenOnlyChannelsWithMessagesGetAWriterWithinTheLimit) {
+  const std::string dir = testing::cases_dir("replay-channels");
+  const std::string input = dir + "/input.mcap";
+  write_input(input, false, 2000);
+  poise::testing::DomainLease lease;
+  ReplayOptions o;
+  o.input = input;
+  o.domain = lease.id();
+  o.participant_profile = "poise_loopback";
+  o.wait_for_subscribers_s = 0.0;
+  o.schedule.as_fast_as_possible = true;
+  std::ostringstream log;
+  o.log = &log;
+  const ReplayStats all = replay(o);
+  EXPECT_EQ(all.writers, 2u) << log.str();
+  EXPECT_EQ(all.channels_over_limit, 0u);
+  o.max_writers = 1;
+  const ReplayStats limited = replay(o);
+  EXPECT_EQ(limited.writers, 1u) << log.str();
+  EXPECT_EQ(limited.channels_over_limit, 1u);
+  EXPECT_EQ(limited.over_limit_messages, static_cast<uint64_t>(kImu / 10));
+  EXPECT_NE(log.str().find("skipping 'attitude/live' (channel 1): more than 1 topics carry messages"), std::string::npos)
+      << log.str();
 }
 
 // Outputs never open an input (issue 33, "data destroyed"): `-o` naming the input itself, or a

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <memory>
 
 #ifdef POISE_RECORD_HAVE_ZSTD
 #include <zstd.h>
@@ -91,35 +92,73 @@ std::vector<uint8_t> chunk_records(const uint8_t* body, size_t size) {
     throw ReadError("Chunk record has " + std::to_string(p.left() - records_len) +
                     " stray bytes after its records");
   }
-  if (uncompressed_size > kMaxRecordBytes) {
-    throw ReadError("Chunk claims an uncompressed size of " + std::to_string(uncompressed_size) +
-                    " bytes (corrupt)");
+  if (compression.empty() && records_len != uncompressed_size) {
+    throw ReadError("uncompressed Chunk: records length " + std::to_string(records_len) +
+                    " != uncompressed size " + std::to_string(uncompressed_size));
+  }
+  if (!compression.empty() &&
+      (uncompressed_size > kMaxChunkBytes || uncompressed_size > records_len * kMaxCompressionRatio)) {  // records_len: bytes in memory, no overflow
+    throw ReadError("chunk claims " + std::to_string(uncompressed_size) + " bytes uncompressed from " +
+                    std::to_string(records_len) + " compressed: more than the " +
+                    std::to_string(kMaxCompressionRatio) + "x / " + std::to_string(kMaxChunkBytes >> 20) +
+                    " MiB a chunk may hold (corrupt)");
   }
   std::vector<uint8_t> out;
   if (compression.empty()) {
-    if (records_len != uncompressed_size) {
-      throw ReadError("uncompressed Chunk: records length " + std::to_string(records_len) +
-                      " != uncompressed size " + std::to_string(uncompressed_size));
-    }
-    out.assign(p.here(), p.here() + records_len);
+    out.assign(p.here(), p.here() + records_len);  // bytes that are in the file
   } else if (compression == "zstd") {
 #ifdef POISE_RECORD_HAVE_ZSTD
     const unsigned long long frame_size =
         ZSTD_getFrameContentSize(p.here(), static_cast<size_t>(records_len));
-    if (frame_size != ZSTD_CONTENTSIZE_UNKNOWN && frame_size != uncompressed_size) {
+    if (frame_size != ZSTD_CONTENTSIZE_UNKNOWN && frame_size != ZSTD_CONTENTSIZE_ERROR &&
+        frame_size != uncompressed_size) {
       throw ReadError("zstd chunk holds " + std::to_string(frame_size) +
                       " bytes but claims " + std::to_string(uncompressed_size));
     }
-    out.resize(static_cast<size_t>(uncompressed_size));
-    const size_t n = ZSTD_decompress(out.data(), out.size(), p.here(),
-                                     static_cast<size_t>(records_len));
-    if (ZSTD_isError(n) != 0U) {
-      throw ReadError(std::string("zstd chunk does not decompress: ") + ZSTD_getErrorName(n));
+    // Streamed: the buffer grows by what zstd produces (at most the claimed size), so a frame
+    // without a content size that claims much and holds little costs what it holds.
+    const std::unique_ptr<ZSTD_DStream, size_t (*)(ZSTD_DStream*)> stream(ZSTD_createDStream(), ZSTD_freeDStream);
+    if (!stream) {
+      throw ReadError("zstd: cannot create a decompression stream");
     }
-    if (n != uncompressed_size) {
-      throw ReadError("zstd chunk decompressed to " + std::to_string(n) + " bytes, expected " +
+    ZSTD_inBuffer in{p.here(), static_cast<size_t>(records_len), 0};
+    constexpr size_t kStep = size_t{1} << 20;
+    const auto step = [&stream, &in](ZSTD_outBuffer& o) {
+      const size_t before_in = in.pos;
+      const size_t before_out = o.pos;
+      const size_t r = ZSTD_decompressStream(stream.get(), &o, &in);
+      if (ZSTD_isError(r) != 0U) {
+        throw ReadError(std::string("zstd chunk does not decompress: ") + ZSTD_getErrorName(r));
+      }
+      if (r != 0 && in.pos == before_in && o.pos == before_out) {
+        throw ReadError("zstd chunk is cut short (its frame does not end)");
+      }
+      return r == 0 && in.pos == in.size;  // every frame decoded and flushed
+    };
+    size_t produced = 0;
+    for (bool done = false; !done;) {
+      if (produced == out.size() && out.size() == uncompressed_size) {
+        uint8_t extra = 0;  // full: one byte more would exceed the claim
+        ZSTD_outBuffer probe{&extra, 1, 0};
+        done = step(probe);
+        if (probe.pos > 0) {
+          throw ReadError("zstd chunk decompresses to more than the " + std::to_string(uncompressed_size) +
+                          " bytes it claims");
+        }
+        continue;
+      }
+      if (produced == out.size()) {
+        out.resize(static_cast<size_t>(std::min<uint64_t>(uncompressed_size, out.size() + kStep)));
+      }
+      ZSTD_outBuffer o{out.data(), out.size(), produced};
+      done = step(o);
+      produced = o.pos;
+    }
+    if (produced != uncompressed_size) {
+      throw ReadError("zstd chunk decompressed to " + std::to_string(produced) + " bytes, expected " +
                       std::to_string(uncompressed_size));
     }
+    out.resize(produced);
 #else
     throw ReadError("zstd-compressed chunk but this build has no libzstd (install libzstd-dev "
                     "and rebuild)");
@@ -182,6 +221,16 @@ void McapReader::check_channel_schemas() {
       ++report_.corrupt;
       report_.complete = false;
       channel.schema_id = 0;
+    }
+  }
+  // Messages on a channel id without a Channel record cannot be read (no topic, no type): said
+  // and counted, never dropped silently.
+  for (const auto& [id, counts] : report_.channels) {
+    if (counts.messages > 0 && channels_.count(id) == 0) {
+      report_.problems.push_back(std::to_string(counts.messages) + " messages on channel " + std::to_string(id) +
+                                 ", which the file does not define (no Channel record): they cannot be read");
+      ++report_.corrupt;
+      report_.complete = false;
     }
   }
 }

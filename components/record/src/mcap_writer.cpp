@@ -119,8 +119,8 @@ uint16_t McapWriter::add_channel(uint16_t schema_id, const std::string& topic,
   if (schema_id > schemas_.size()) {
     throw WriteError("add_channel: unknown schema id " + std::to_string(schema_id));
   }
-  if (channels_.size() >= 0xFFFFu) {
-    throw WriteError("too many channels (MCAP allows 65536)");
+  if (channels_.size() > 0xFFFFu) {  // ids 0..65535 are all taken
+    throw WriteError("too many channels: an MCAP file holds at most 65536 (channel ids 0-65535)");
   }
   Channel channel;
   channel.id = static_cast<uint16_t>(channels_.size());

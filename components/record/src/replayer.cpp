@@ -9,6 +9,8 @@
 
 #include <chrono>
 #include <iostream>
+#include <optional>
+#include <set>
 #include <thread>
 
 namespace poise::record {
@@ -62,17 +64,29 @@ ReplayStats replay(const ReplayOptions& options) {
   }
   dds::Participant participant(
       {options.domain, options.participant_profile, "", "poise replay"});
-  std::map<uint16_t, Output> outputs;
-  for (const auto& [id, channel] : reader.channels()) {
+  // One DDS writer per channel that carries messages, made before the replay for the channels the
+  // file's counts name and on the first message for the rest; never more than max_writers (a
+  // writer costs ~90 KB: a file declaring 65535 channels must not cost gigabytes).
+  std::map<uint16_t, std::optional<Output>> outputs;
+  std::set<uint16_t> over_limit;
+  const auto make_output = [&](const Channel& channel) -> std::optional<Output> {
     if (!options.schedule.topics.empty() && options.schedule.topics.count(channel.topic) == 0) {
-      continue;
+      return std::nullopt;
     }
     const auto schema = reader.schemas().find(channel.schema_id);
     const std::string type_name =
         schema != reader.schemas().end() ? schema->second.name : meta(channel, "dds_type");
     if (type_name.empty() || channel.message_encoding != "cdr") {
       log << "poise replay: skipping '" << channel.topic << "' (no DDS type or not CDR)\n";
-      continue;
+      return std::nullopt;
+    }
+    if (stats.writers >= options.max_writers) {
+      over_limit.insert(channel.id);
+      if (++stats.channels_over_limit <= kMaxDescribedSkips) {
+        log << "poise replay: skipping '" << channel.topic << "' (channel " << channel.id << "): more than "
+            << options.max_writers << " topics carry messages\n";
+      }
+      return std::nullopt;
     }
     const schema::TypeTable& table = schema::TypeTable::builtin();
     if (table.find_struct(type_name) == nullptr) {
@@ -108,9 +122,24 @@ ReplayStats replay(const ReplayOptions& options) {
     if (out.writer == nullptr) {
       throw dds::DdsError("cannot create a DDS writer on '" + channel.topic + "'");
     }
-    outputs.emplace(id, std::move(out));
+    ++stats.writers;
+    return out;
+  };
+  const auto output_for = [&](const Channel& channel) -> Output* {
+    auto it = outputs.find(channel.id);
+    if (it == outputs.end()) {
+      it = outputs.emplace(channel.id, make_output(channel)).first;
+    }
+    return it->second ? &*it->second : nullptr;
+  };
+  bool any = false;
+  for (const auto& [id, channel] : reader.channels()) {
+    const auto counted = reader.report().channels.find(id);
+    if (counted != reader.report().channels.end() && counted->second.messages > 0) {
+      any = output_for(channel) != nullptr || any;
+    }
   }
-  if (outputs.empty()) {
+  if (!any && reader.report().messages > 0 && !reader.report().channels.empty()) {
     log << "poise replay: no topic selected\n";
     return stats;
   }
@@ -121,7 +150,7 @@ ReplayStats replay(const ReplayOptions& options) {
   while (std::chrono::steady_clock::now() < deadline) {
     bool all = true;
     for (const auto& [id, out] : outputs) {
-      all = all && out.matches->matched() > 0;
+      all = all && (!out || out->matches->matched() > 0);
     }
     if (all || (options.schedule.should_stop && options.schedule.should_stop())) {
       break;
@@ -130,11 +159,14 @@ ReplayStats replay(const ReplayOptions& options) {
   }
   ScheduleOptions schedule = options.schedule;
   stats.schedule = run_schedule(reader, schedule, options.clock, [&](const MessageView& m) {
-    const auto found = outputs.find(m.channel->id);
-    if (found == outputs.end()) {
+    Output* const found = output_for(*m.channel);
+    if (found == nullptr) {
+      if (over_limit.count(m.channel->id) > 0) {
+        ++stats.over_limit_messages;  // counted; topics not selected or not CDR are said above
+      }
       return false;
     }
-    Output& out = found->second;
+    Output& out = *found;
     const std::optional<std::string> problem = schema::payload_problem(
         schema::TypeTable::builtin(), out.type_name, m.data, m.size);
     if (problem) {
@@ -156,8 +188,10 @@ ReplayStats replay(const ReplayOptions& options) {
   }
   // Let reliable writers deliver what they hold before the participant goes away.
   for (auto& [id, out] : outputs) {
-    out.writer->wait_for_acknowledgments(eprosima::fastrtps::Duration_t(2, 0));
-    out.writer->set_listener(nullptr);
+    if (out) {
+      out->writer->wait_for_acknowledgments(eprosima::fastrtps::Duration_t(2, 0));
+      out->writer->set_listener(nullptr);
+    }
   }
   return stats;
 }

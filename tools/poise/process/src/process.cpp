@@ -363,7 +363,12 @@ std::map<uint16_t, uint16_t> copy_input_channels(const McapReader& reader, McapW
   }
   for (const auto& [id, channel] : reader.channels()) {
     const uint16_t schema_id = channel.schema_id == 0 ? 0 : schema_map.at(channel.schema_id);
-    channel_map[id] = writer.add_channel(schema_id, channel.topic, channel.message_encoding, channel.metadata);
+    try {
+      channel_map[id] = writer.add_channel(schema_id, channel.topic, channel.message_encoding, channel.metadata);
+    } catch (const WriteError& e) {
+      throw WriteError("the recording has " + std::to_string(reader.channels().size()) +
+                       " channels, copied into the output with the estimates' own: " + e.what());
+    }
   }
   return channel_map;
 }

@@ -70,12 +70,13 @@ struct ProcessArgs {
   bool allow_damaged = false;
 };
 
-// Damaged input (incomplete file, unreadable chunks): the readable part was used and reported;
-// exit code 3 (as `poise info`) unless the user accepts damaged input.
+// Damaged input (incomplete file: cut short, no footer or summary; unreadable chunks): the
+// readable part was used and reported; exit code 3 (as `poise info`) unless the user accepts
+// damaged input (issue 33: a file cut short exited 0 although the help says 3).
 void refuse_damaged(const char* command, bool damaged, bool allow_damaged) {
   if (damaged && !allow_damaged) {
     std::cerr << "poise " << command
-              << ": exit code 3: the input is damaged (see above); --allow-damaged accepts it\n";
+              << ": exit code 3: the input is damaged or incomplete (see above); --allow-damaged accepts it\n";
     throw ExitCode{3};
   }
 }
@@ -303,7 +304,7 @@ void run_process(const ProcessArgs& a) {
       throw Error(std::string("comparison: ") + e.what());
     }
   }
-  refuse_damaged("process", stats.input_damaged(), a.allow_damaged);
+  refuse_damaged("process", stats.input_damaged() || !stats.input_complete, a.allow_damaged);
 }
 
 void run_info(const InfoArgs& a) {
@@ -414,6 +415,10 @@ void run_replay(const ReplayArgs& a) {
   if (stats.malformed > 0) {
     std::cerr << "  skipped " << stats.malformed << " malformed payload(s) (not published)\n";
   }
+  if (stats.channels_over_limit > 0) {
+    std::cerr << "  skipped " << stats.over_limit_messages << " message(s) on " << stats.channels_over_limit
+              << " channel(s) beyond the first " << stats.writers << " topics with messages (one DDS writer each)\n";
+  }
   if (stats.damaged()) {
     std::cerr << "poise replay: the file is damaged ("
               << stats.corrupt_in_file + stats.schedule.problems.size()
@@ -422,7 +427,7 @@ void run_replay(const ReplayArgs& a) {
     std::cerr << "poise replay: the file was incomplete (see above); the recovered part was "
                  "replayed\n";
   }
-  refuse_damaged("replay", stats.damaged(), a.allow_damaged);
+  refuse_damaged("replay", stats.damaged() || !stats.complete, a.allow_damaged);
 }
 
 }  // namespace

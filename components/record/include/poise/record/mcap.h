@@ -321,8 +321,18 @@ class McapReader {
   std::vector<ChunkLocation> chunks_;
 };
 
-/// Decompresses/validates one chunk record body. Throws ReadError with the reason. Exposed for
-/// the cursor and tests.
+/// What a chunk may claim to hold once decompressed, checked before anything is allocated (a
+/// lying file must not cost memory): at most kMaxCompressionRatio times its compressed records
+/// (zstd reaches about 10x on poise recordings; 1000x is zeros) and never more than
+/// kMaxChunkBytes (the writer closes chunks at 1 MiB; other writers use a few MiB). Larger claims
+/// are a corrupt chunk: "chunk claims N bytes uncompressed from M compressed: more than the
+/// 1000x / 128 MiB a chunk may hold".
+inline constexpr uint64_t kMaxCompressionRatio = 1000;
+inline constexpr uint64_t kMaxChunkBytes = 128ULL << 20;
+
+/// Decompresses/validates one chunk record body. Throws ReadError with the reason. The output
+/// grows with what zstd actually produces (streamed, never the claimed size at once), up to the
+/// claimed size. Exposed for the cursor and tests.
 std::vector<uint8_t> chunk_records(const uint8_t* body, size_t size);
 
 }  // namespace poise::record

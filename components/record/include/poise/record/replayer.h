@@ -4,6 +4,7 @@
 
 #include "poise/record/replay_schedule.h"
 
+#include <cstddef>
 #include <ostream>
 #include <string>
 
@@ -18,6 +19,10 @@ struct ReplayOptions {
   double wait_for_subscribers_s = 1.0;
   ReplayClock clock = ReplayClock::steady();
   std::ostream* log = nullptr;  ///< stderr when null
+  /// At most this many DDS writers (one per channel carrying messages, made when its first
+  /// message is due or before the replay for the channels the file counts); the messages of
+  /// further channels are skipped and counted (ReplayStats::over_limit_messages).
+  std::size_t max_writers = 1024;
 };
 
 struct ReplayStats {
@@ -27,6 +32,9 @@ struct ReplayStats {
   std::vector<std::string> file_problems;  ///< what the reader recovered (empty if complete)
   bool complete = true;
   uint64_t corrupt_in_file = 0;  ///< FileReport::corrupt
+  std::size_t writers = 0;              ///< DDS writers made (channels that carried messages)
+  std::size_t channels_over_limit = 0;  ///< channels left out: max_writers reached
+  uint64_t over_limit_messages = 0;     ///< their messages (not published)
   /// Corrupt chunks or bytes (in the file or met while replaying); a file cut short is not.
   [[nodiscard]] bool damaged() const { return corrupt_in_file > 0 || !schedule.problems.empty(); }
 };
