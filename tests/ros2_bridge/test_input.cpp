@@ -155,5 +155,100 @@ TEST(Ros2Input, GivenHostileMessagesThenEachIsRejectedByReasonAndNothingNonFinit
   }
 }
 
+// Issue 33: one Imu stamped a day ahead became the time base, and every normal Imu after it was
+// rejected as non-monotonic for the bridge's lifetime. It is now held as a stamp jump and, when the
+// next Imu agrees with the old time base, rejected and counted. Oracle: the stamps sent.
+TEST(Ros2Input, GivenOneImuADayAheadThen300NormalOnesThenThe300AreAcceptedAndTheJumpCounted) {
+  constexpr int64_t kDayNs = 86'400'000'000'000;
+  constexpr int kNormal = 300;
+  ImuAssembler a(config(false, false));
+  std::vector<ImuSample> out;
+  const auto take = [&out](std::vector<ImuSample> v) { out.insert(out.end(), v.begin(), v.end()); };
+  take(a.on_imu(imu(kT0)));
+  take(a.on_imu(imu(kT0 + kDayNs)));
+  for (int k = 1; k <= kNormal; ++k) {
+    take(a.on_imu(imu(kT0 + k * kPeriodNs)));
+  }
+  ASSERT_EQ(out.size(), static_cast<std::size_t>(kNormal + 1));
+  for (const ImuSample& sample : out) {
+    EXPECT_LT(sample.stamp_ns, kT0 + kDayNs);
+  }
+  EXPECT_EQ(a.rejected().at("imu_stamp_jump"), 1U);
+  EXPECT_EQ(a.rejected_total(), 1U);
+}
+
+// A stamp of INT32_MAX s (2038... as ns: the year 2081 after the offset) among normal ones is never
+// forwarded, wherever it comes.
+TEST(Ros2Input, GivenAnImuStampedInt32MaxSecondsAmongNormalOnesThenItIsNeverForwarded) {
+  ImuAssembler a(config(false, false));
+  std::vector<ImuSample> out;
+  const auto take = [&out](std::vector<ImuSample> v) { out.insert(out.end(), v.begin(), v.end()); };
+  for (int k = 0; k < 10; ++k) {
+    take(a.on_imu(imu(kT0 + k * kPeriodNs)));
+  }
+  ros_sensor::Imu_ wild = imu(kT0);
+  wild.header().stamp().sec(std::numeric_limits<int32_t>::max());
+  take(a.on_imu(wild));
+  take(a.on_imu(wild));  // the same wild stamp again does not agree with itself (dt = 0)
+  for (int k = 10; k < 20; ++k) {
+    take(a.on_imu(imu(kT0 + k * kPeriodNs)));
+  }
+  ASSERT_EQ(out.size(), 20U);
+  EXPECT_EQ(out.back().stamp_ns, kT0 + 19 * kPeriodNs);
+  EXPECT_EQ(a.rejected().at("imu_stamp_jump"), 2U);
+}
+
+// A clock that really jumped (a driver restarted with another epoch) moves the time base once
+// reanchor_samples (3) consecutive Imu agree; the held ones are emitted then, none is lost.
+TEST(Ros2Input, GivenAClockThatReallyJumpedThenTheTimeBaseMovesAfterThreeAgreeingSamplesAndNoneIsLost) {
+  constexpr int64_t kNewEpoch = 500'000'000'000;  // 500 s
+  ImuAssembler a(config(false, false));
+  std::vector<ImuSample> out;
+  const auto take = [&out](std::vector<ImuSample> v) { out.insert(out.end(), v.begin(), v.end()); };
+  for (int k = 0; k < 5; ++k) {
+    take(a.on_imu(imu(kT0 + k * kPeriodNs)));
+  }
+  EXPECT_TRUE(a.on_imu(imu(kNewEpoch)).empty()) << "held: one jumped stamp is not a new clock";
+  EXPECT_TRUE(a.on_imu(imu(kNewEpoch + kPeriodNs)).empty());
+  take(a.on_imu(imu(kNewEpoch + 2 * kPeriodNs)));  // the third agrees: all three go out
+  take(a.on_imu(imu(kNewEpoch + 3 * kPeriodNs)));
+  ASSERT_EQ(out.size(), 9U);
+  EXPECT_EQ(out[5].stamp_ns, kNewEpoch);
+  EXPECT_EQ(out[8].stamp_ns, kNewEpoch + 3 * kPeriodNs);
+  EXPECT_EQ(a.rejected_total(), 0U);
+}
+
+// Issue 33: one MagneticField stamped in 2038 took the magnetometer pairing from 200/201 to 0/199,
+// counted nowhere (its stamp became the stream's newest, so no Imu waited for its magnetometer).
+// Oracle: the pairs sent (every Imu has its magnetometer at the same stamp).
+TEST(Ros2Input, GivenOneMagneticFieldFarFromTheImuClockThenPairingGoesOnAndItIsCounted) {
+  constexpr int kPairs = 200;
+  constexpr int64_t k2038Ns = 2'145'916'800'000'000'000;  // 2038-01-01
+  ImuAssembler a(config(true, false));
+  std::vector<ImuSample> out;
+  const auto take = [&out](std::vector<ImuSample> v) { out.insert(out.end(), v.begin(), v.end()); };
+  take(a.on_mag(mag(k2038Ns)));  // before any Imu: dropped when the first Imu sets the time base
+  for (int k = 0; k < kPairs; ++k) {
+    const int64_t t = kT0 + k * kPeriodNs;
+    if (k == 0) {  // the first pair magnetometer first: nothing seen yet would not be waited for
+      take(a.on_mag(mag(t)));
+      take(a.on_imu(imu(t)));
+      continue;
+    }
+    take(a.on_imu(imu(t)));  // Imu first: held until its magnetometer arrives
+    take(a.on_mag(mag(t)));
+    if (k == kPairs / 2) {
+      take(a.on_mag(mag(k2038Ns)));
+    }
+  }
+  take(a.on_imu(imu(kT0 + kPairs * kPeriodNs)));
+  EXPECT_EQ(a.paired_mag(), static_cast<uint64_t>(kPairs));
+  EXPECT_EQ(a.rejected().at("mag_stamp_jump"), 2U);
+  ASSERT_GE(out.size(), static_cast<std::size_t>(kPairs));
+  for (int k = 0; k < kPairs; ++k) {
+    EXPECT_TRUE(out[static_cast<std::size_t>(k)].has_mag) << k;
+  }
+}
+
 }  // namespace
 }  // namespace poise::ros2

@@ -15,7 +15,8 @@ bool provided(const std::array<double, 9>& covariance) { return covariance[0] !=
 ImuAssembler::ImuAssembler(InputConfig config)
     : config_(std::move(config)),
       tolerance_ns_(static_cast<int64_t>(std::llround(config_.pair_tolerance_s * 1e9))),
-      stale_ns_(static_cast<int64_t>(std::llround(config_.stale_s * 1e9))) {
+      stale_ns_(static_cast<int64_t>(std::llround(config_.stale_s * 1e9))),
+      jump_ns_(static_cast<int64_t>(std::llround(config_.max_jump_s * 1e9))) {
   mag_.enabled = config_.mag;
   pressure_.enabled = config_.pressure;
 }
@@ -43,15 +44,81 @@ std::vector<ImuSample> ImuAssembler::on_imu(const ros_sensor::Imu_& m) {
   s.has_mag = false;
   s.has_pressure = false;
   RejectCounters counters;
+  if (last_stamp_ns_ >= 0 && far(s.stamp_ns, last_stamp_ns_)) {
+    const SampleCheck values = check_imu_sample(s, -1, config_.limits, counters);  // its values alone
+    if (!values.accept) {
+      reject(std::string("imu_") + to_string(values.reject));
+      return {};
+    }
+    return on_jump(s);
+  }
   const SampleCheck check = check_imu_sample(s, last_stamp_ns_, config_.limits, counters);
   if (!check.accept && check.reject != RejectReason::kTimeGap) {
     reject(std::string("imu_") + to_string(check.reject));
     return {};
   }
-  // A time gap is forwarded: the estimators re-anchor on it themselves.
+  // Agrees with the time base: a run of jumped stamps was wild, not a new clock.
+  for (std::size_t i = 0; i < jumped_.size(); ++i) {
+    reject("imu_stamp_jump");
+  }
+  jumped_.clear();
+  // A time gap (up to max_jump_s) is forwarded: the estimators re-anchor on it themselves.
+  const bool first = last_stamp_ns_ < 0;
   last_stamp_ns_ = s.stamp_ns;
+  if (first) {
+    rebase_sides(s.stamp_ns);
+  }
   pending_.push_back(s);
   return drain();
+}
+
+bool ImuAssembler::far(int64_t stamp_ns, int64_t base_ns) const {
+  // in double: both are in [0, 2^62], their difference fits, but keep it plain
+  return std::abs(static_cast<double>(stamp_ns) - static_cast<double>(base_ns)) > static_cast<double>(jump_ns_);
+}
+
+std::vector<ImuSample> ImuAssembler::on_jump(const ImuSample& s) {
+  const bool agrees = !jumped_.empty() && s.stamp_ns > jumped_.back().stamp_ns &&
+                      !far(s.stamp_ns, jumped_.back().stamp_ns);
+  if (!agrees) {
+    for (std::size_t i = 0; i < jumped_.size(); ++i) {
+      reject("imu_stamp_jump");
+    }
+    jumped_.clear();
+  }
+  jumped_.push_back(s);
+  if (static_cast<int>(jumped_.size()) < std::max(config_.reanchor_samples, 2)) {
+    return {};
+  }
+  // They agree: the clock really moved. The held samples go out on the new time base (those
+  // pending on the old one first, paired with its side samples), then the side samples of the
+  // old base are dropped.
+  for (const ImuSample& held : jumped_) {
+    pending_.push_back(held);
+  }
+  last_stamp_ns_ = jumped_.back().stamp_ns;
+  jumped_.clear();
+  std::vector<ImuSample> out = drain();
+  rebase_sides(last_stamp_ns_);
+  return out;
+}
+
+void ImuAssembler::rebase_sides(int64_t base_ns) {
+  rebase_side(mag_, base_ns, "mag_stamp_jump");
+  rebase_side(pressure_, base_ns, "pressure_stamp_jump");
+}
+
+void ImuAssembler::rebase_side(Stream& stream, int64_t base_ns, const char* reason) {
+  const auto wild = std::remove_if(stream.buffer.begin(), stream.buffer.end(),
+                                   [&](const Side& side) { return far(side.stamp_ns, base_ns); });
+  for (auto it = wild; it != stream.buffer.end(); ++it) {
+    reject(reason);
+  }
+  stream.buffer.erase(wild, stream.buffer.end());
+  stream.newest_ns = -1;
+  for (const Side& side : stream.buffer) {
+    stream.newest_ns = std::max(stream.newest_ns, side.stamp_ns);
+  }
 }
 
 std::vector<ImuSample> ImuAssembler::on_mag(const ros_sensor::MagneticField_& m) {
@@ -61,6 +128,10 @@ std::vector<ImuSample> ImuAssembler::on_mag(const ros_sensor::MagneticField_& m)
   const std::optional<int64_t> stamp = from_ros_time(m.header().stamp(), config_.offset_ns);
   if (!stamp || *stamp > kMaxStampNs) {
     reject("mag_bad_stamp");
+    return {};
+  }
+  if (last_stamp_ns_ >= 0 && far(*stamp, last_stamp_ns_)) {
+    reject("mag_stamp_jump");
     return {};
   }
   constexpr double kMicroteslaPerTesla = 1e6;
@@ -89,6 +160,10 @@ std::vector<ImuSample> ImuAssembler::on_pressure(const ros_sensor::FluidPressure
   const std::optional<int64_t> stamp = from_ros_time(m.header().stamp(), config_.offset_ns);
   if (!stamp || *stamp > kMaxStampNs) {
     reject("pressure_bad_stamp");
+    return {};
+  }
+  if (last_stamp_ns_ >= 0 && far(*stamp, last_stamp_ns_)) {
+    reject("pressure_stamp_jump");
     return {};
   }
   const double pa = m.fluid_pressure();

@@ -5,7 +5,14 @@
 //    arrives, or the side stream is stale (its newest stamp older than `stale_s`): an Imu is held
 //    at most one IMU period, and not at all behind a dead stream;
 //  - it then takes the side sample nearest in stamp within `pair_tolerance_s` (each side sample
-//    is used once).
+//    is used once);
+//  - stamps are held to the serial driver's plausibility rule (issue 33): an Imu more than
+//    `max_jump_s` from the last accepted one (a day ahead, INT32_MAX s, an hour back) is held, not
+//    adopted; the time base moves only when `reanchor_samples` consecutive such Imu agree with
+//    each other (each 0 < dt <= max_jump_s after the one before), and they are then emitted. A
+//    sample that agrees with the old time base ends the run: the held ones are rejected and
+//    counted (imu_stamp_jump). A side sample more than max_jump_s from the IMU time base is
+//    rejected and counted (mag_stamp_jump, pressure_stamp_jump): it must not stop the pairing.
 // Every input is hostile: a message that cannot become a valid sample is rejected and counted by
 // reason (the shared sample check's reasons, poise/core/sample_check.h, plus bad_stamp), never
 // repaired; a bad magnetometer or pressure drops that channel of the sample, counted.
@@ -32,6 +39,8 @@ struct InputConfig {
   SampleLimits limits;               ///< physical ranges (the cores' defaults)
   double min_pressure_pa = 1.0e3;    ///< plausible static pressure range, Pa
   double max_pressure_pa = 2.0e5;
+  double max_jump_s = 1.0;   ///< farther from the time base: a stamp jump (held, see above), s
+  int reanchor_samples = 3;  ///< consecutive agreeing jumped Imu that move the time base (>= 2)
 };
 
 class ImuAssembler {
@@ -69,11 +78,20 @@ class ImuAssembler {
   bool waits_for(const Stream& stream, int64_t stamp_ns) const;
   /// Removes and returns the side sample nearest `stamp_ns` within the tolerance.
   bool take_nearest(Stream& stream, int64_t stamp_ns, Side& out) const;
+  /// True when `stamp_ns` is more than max_jump_s from `base_ns` (either way).
+  [[nodiscard]] bool far(int64_t stamp_ns, int64_t base_ns) const;
+  /// Holds a jumped Imu (see the file comment); returns what it releases.
+  std::vector<ImuSample> on_jump(const ImuSample& s);
+  /// The time base moved to `base_ns`: side samples far from it are dropped (counted).
+  void rebase_sides(int64_t base_ns);
+  void rebase_side(Stream& stream, int64_t base_ns, const char* reason);
 
   InputConfig config_;
   int64_t tolerance_ns_;
   int64_t stale_ns_;
   int64_t last_stamp_ns_ = -1;  // last Imu accepted (stamps must increase)
+  int64_t jump_ns_;
+  std::vector<ImuSample> jumped_;  // consecutive jumped Imu that agree, held
   uint32_t seq_ = 0;
   std::deque<ImuSample> pending_;
   Stream mag_;
