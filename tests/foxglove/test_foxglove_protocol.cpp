@@ -78,7 +78,8 @@ TEST(FoxgloveProtocol, GivenSubscriptionsThenOnePerChannelAndIdsNotReusedWhileAc
   EXPECT_EQ(session.subscription_for(1), 10u);
   EXPECT_EQ(session.subscription_for(2), 11u);
   r = session.handle_text(R"({"op":"subscribe","subscriptions":[{"id":10,"channelId":2},{"id":12,"channelId":1}]})", known);
-  EXPECT_EQ(r.replies.size(), 2u);  // id in use; channel already subscribed
+  ASSERT_EQ(r.replies.size(), 1u);  // id in use; channel already subscribed: one status per request
+  EXPECT_EQ(r.replies[0].message, "subscribe: 2 of 2 refused: subscription id 10 is already in use (and 1 more)");
   r = session.handle_text(R"({"op":"unsubscribe","subscriptionIds":[10, 99]})", known);
   ASSERT_EQ(r.replies.size(), 1u);
   EXPECT_EQ(r.replies[0].level, StatusLevel::kWarning);
@@ -88,6 +89,30 @@ TEST(FoxgloveProtocol, GivenSubscriptionsThenOnePerChannelAndIdsNotReusedWhileAc
   EXPECT_TRUE(session.channel_removed(2));
   EXPECT_FALSE(session.subscription_for(2).has_value());
   EXPECT_EQ(ClientSession::binary_refused(6).level, StatusLevel::kError);
+}
+
+// Issue 33: 100 requests of 32000 invalid ids each were answered id by id (3.2 million statuses,
+// 6.7 s of the bridge's CPU). A request is answered with one status however many entries it
+// refuses, and a list longer than kMaxEntriesPerRequest is refused whole, unread.
+TEST(FoxgloveProtocol, GivenARequestFloodingInvalidIdsThenOneStatusPerRequestAndLongListsRefusedUnread) {
+  ClientSession session;
+  auto known = [](std::uint32_t id) { return id == 1; };
+  std::string ids;
+  for (int i = 0; i < 32000; ++i) {
+    ids += (i ? "," : "") + std::to_string(i % 10);
+  }
+  auto r = session.handle_text(R"({"op":"unsubscribe","subscriptionIds":[)" + ids + "]}", known);
+  ASSERT_EQ(r.replies.size(), 1u);
+  EXPECT_EQ(r.replies[0].level, StatusLevel::kError);
+  EXPECT_EQ(r.replies[0].message, "unsubscribe: 32000 entries in one request, more than the 256 accepted: refused");
+  std::string subs;
+  for (std::size_t i = 0; i < ClientSession::kMaxEntriesPerRequest; ++i) {
+    subs += (i ? "," : "") + std::string(R"({"id":)") + std::to_string(i) + R"(,"channelId":)" + std::to_string(100 + i) + "}";
+  }
+  r = session.handle_text(R"({"op":"subscribe","subscriptions":[)" + subs + "]}", known);
+  ASSERT_EQ(r.replies.size(), 1u);
+  EXPECT_EQ(r.replies[0].message, "subscribe: 256 of 256 refused: unknown channel 100 (and 255 more)");
+  EXPECT_TRUE(session.subscriptions().empty());
 }
 
 TEST(FoxgloveProtocol, GivenAFullQueueThenTheOldestFramesAreDroppedAndCounted) {

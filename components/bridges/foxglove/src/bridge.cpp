@@ -116,7 +116,8 @@ class Bridge : public runtime::Component {
         os << " (client " << c.id << " " << c.remote << ": " << c.dropped << ")";
       }
     }
-    os << ", requests refused " << s.errors << ", malformed in " << malformed_.load()
+    os << ", requests refused " << s.errors << " (over budget " << s.throttled << "), idle closed "
+       << s.idle_closed << ", malformed in " << malformed_.load()
        << ", panel skipped " << panel_skipped_.load();
     return os.str();
   }
@@ -283,6 +284,8 @@ class Bridge : public runtime::Component {
     report.counters["messages_out"] = s.sent;
     report.counters["messages_dropped"] = s.dropped;
     report.counters["requests_refused"] = s.errors;
+    report.counters["requests_over_budget"] = s.throttled;
+    report.counters["clients_idle_closed"] = s.idle_closed;
     report.counters["samples_malformed"] = malformed_.load();
     report.counters["panel_skipped"] = panel_skipped_.load();
     for (const auto& c : s.clients) {
@@ -317,7 +320,8 @@ class Bridge : public runtime::Component {
 BridgeConfig parse_bridge_config(const runtime::ComponentSpec& spec) {
   runtime::check_known_params(spec, {"port", "address", "topics", "world_frame", "frame_spacing_m", "stamps",
                                      "max_clients", "queue_frames", "queue_bytes", "socket_buffer_bytes",
-                                     "max_request_bytes", "unadvertise_after_s", "diagnostics_period_s"});
+                                     "max_request_bytes", "max_requests_per_s", "idle_timeout_s",
+                                     "unadvertise_after_s", "diagnostics_period_s"});
   BridgeConfig c;
   c.server.port = static_cast<std::uint16_t>(bounded<int>(spec, "port", c.server.port, 0, 65535));
   c.server.address = runtime::param<std::string>(spec, "address", c.server.address);
@@ -342,6 +346,9 @@ BridgeConfig parse_bridge_config(const runtime::ComponentSpec& spec) {
   c.server.max_request_bytes =
       bounded<std::size_t>(spec, "max_request_bytes", c.server.max_request_bytes, 256, 16u << 20);
   c.server.max_frame_bytes = std::max(c.server.max_frame_bytes, 4 * c.server.max_request_bytes);
+  c.server.max_requests_per_s =
+      bounded<double>(spec, "max_requests_per_s", c.server.max_requests_per_s, 1.0, 100000.0);
+  c.server.idle_timeout_s = bounded<double>(spec, "idle_timeout_s", c.server.idle_timeout_s, 0.0, 86400.0);
   c.unadvertise_after_s = bounded<double>(spec, "unadvertise_after_s", c.unadvertise_after_s, 0.1, 3600.0);
   c.diagnostics_period_s = bounded<double>(spec, "diagnostics_period_s", c.diagnostics_period_s, 0.05, 3600.0);
   return c;

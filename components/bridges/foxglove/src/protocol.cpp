@@ -129,6 +129,35 @@ ClientSession::Result ClientSession::handle_text(std::string_view text,
   return out;
 }
 
+namespace {
+/// One error status for a request, however many of its entries were refused (a flood of invalid
+/// ids costs one reply, not one per id): "<op>: N of M refused: <the first reason> (and K more)".
+void refused_entries(const char* op, std::size_t refused, std::size_t total, const std::string& first,
+                     StatusLevel level, ClientSession::Result& out) {
+  if (refused == 0) {
+    return;
+  }
+  std::string message = std::string(op) + ": " + std::to_string(refused) + " of " + std::to_string(total) +
+                        " refused: " + first;
+  if (refused > 1) {
+    message += " (and " + std::to_string(refused - 1) + " more)";
+  }
+  out.replies.push_back({level, message});
+}
+
+/// A request listing more than kMaxEntriesPerRequest entries is refused whole, unread.
+bool too_many_entries(const char* op, const json& list, ClientSession::Result& out) {
+  if (list.size() <= ClientSession::kMaxEntriesPerRequest) {
+    return false;
+  }
+  out.replies.push_back({StatusLevel::kError, std::string(op) + ": " + std::to_string(list.size()) +
+                                                  " entries in one request, more than the " +
+                                                  std::to_string(ClientSession::kMaxEntriesPerRequest) +
+                                                  " accepted: refused"});
+  return true;
+}
+}  // namespace
+
 void ClientSession::subscribe(const json& request, const std::function<bool(std::uint32_t)>& channel_known,
                               Result& out) {
   const auto list = request.find("subscriptions");
@@ -136,37 +165,35 @@ void ClientSession::subscribe(const json& request, const std::function<bool(std:
     out.replies.push_back({StatusLevel::kError, "subscribe: 'subscriptions' must be an array"});
     return;
   }
+  if (too_many_entries("subscribe", *list, out)) {
+    return;
+  }
+  std::size_t refused = 0;
+  std::string first;
+  const auto refuse = [&](std::string why) {
+    if (refused++ == 0) {
+      first = std::move(why);
+    }
+  };
   for (const json& s : *list) {
     std::uint32_t id = 0;
     std::uint32_t channel = 0;
     if (!read_u32(s, "id", id) || !read_u32(s, "channelId", channel)) {
-      out.replies.push_back({StatusLevel::kError,
-                             "subscribe: each subscription needs integer 'id' and 'channelId' in "
-                             "[0, 2^32)"});
-      continue;
+      refuse("each subscription needs integer 'id' and 'channelId' in [0, 2^32)");
+    } else if (!channel_known(channel)) {
+      refuse("unknown channel " + std::to_string(channel));
+    } else if (subscriptions_.count(id) != 0) {
+      refuse("subscription id " + std::to_string(id) + " is already in use");
+    } else if (subscription_for(channel)) {
+      refuse("channel " + std::to_string(channel) + " is already subscribed (one subscription per channel)");
+    } else if (subscriptions_.size() >= kMaxSubscriptions) {
+      refuse("too many subscriptions");
+    } else {
+      subscriptions_[id] = channel;
+      out.subscriptions_changed = true;
     }
-    if (!channel_known(channel)) {
-      out.replies.push_back({StatusLevel::kError, "subscribe: unknown channel " + std::to_string(channel)});
-      continue;
-    }
-    if (subscriptions_.count(id) != 0) {
-      out.replies.push_back({StatusLevel::kError,
-                             "subscribe: subscription id " + std::to_string(id) + " is already in use"});
-      continue;
-    }
-    if (subscription_for(channel)) {
-      out.replies.push_back({StatusLevel::kError, "subscribe: channel " + std::to_string(channel) +
-                                                      " is already subscribed (one subscription "
-                                                      "per channel)"});
-      continue;
-    }
-    if (subscriptions_.size() >= kMaxSubscriptions) {
-      out.replies.push_back({StatusLevel::kError, "subscribe: too many subscriptions"});
-      continue;
-    }
-    subscriptions_[id] = channel;
-    out.subscriptions_changed = true;
   }
+  refused_entries("subscribe", refused, list->size(), first, StatusLevel::kError, out);
 }
 
 void ClientSession::unsubscribe(const json& request, Result& out) {
@@ -175,18 +202,28 @@ void ClientSession::unsubscribe(const json& request, Result& out) {
     out.replies.push_back({StatusLevel::kError, "unsubscribe: 'subscriptionIds' must be an array"});
     return;
   }
+  if (too_many_entries("unsubscribe", *list, out)) {
+    return;
+  }
+  std::size_t bad = 0;
+  std::size_t unknown = 0;
+  std::string first_bad;
+  std::string first_unknown;
   for (const json& s : *list) {
     std::uint32_t id = 0;
     if (!read_u32(s, id)) {
-      out.replies.push_back({StatusLevel::kError, "unsubscribe: ids must be integers in [0, 2^32)"});
-      continue;
+      bad += 1;
+      first_bad = "ids must be integers in [0, 2^32)";
+    } else if (subscriptions_.erase(id) == 0) {
+      if (unknown++ == 0) {
+        first_unknown = "no subscription " + std::to_string(id);
+      }
+    } else {
+      out.subscriptions_changed = true;
     }
-    if (subscriptions_.erase(id) == 0) {
-      out.replies.push_back({StatusLevel::kWarning, "unsubscribe: no subscription " + std::to_string(id)});
-      continue;
-    }
-    out.subscriptions_changed = true;
   }
+  refused_entries("unsubscribe", bad, list->size(), first_bad, StatusLevel::kError, out);
+  refused_entries("unsubscribe", unknown, list->size(), first_unknown, StatusLevel::kWarning, out);
 }
 
 ClientSession::Reply ClientSession::binary_refused(std::size_t size) {

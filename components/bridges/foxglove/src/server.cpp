@@ -39,6 +39,7 @@ std::string session_id() {
 }  // namespace
 
 struct Server::Impl {
+  using Clock = std::chrono::steady_clock;
   struct Client {
     Client(std::uint32_t i, Hdl h, std::string r, const ServerOptions& o)
         : id(i), hdl(std::move(h)), remote(std::move(r)), queue(o.queue_frames, o.queue_bytes) {}
@@ -50,6 +51,12 @@ struct Server::Impl {
     bool flush_posted = false;
     std::uint64_t sent = 0;
     std::uint64_t errors = 0;
+    std::uint64_t throttled = 0;
+    // request budget: a token bucket of max_requests_per_s, refilled continuously
+    double tokens = 0.0;
+    Clock::time_point refilled = Clock::now();
+    Clock::time_point throttle_said{};  // last "over budget" status sent
+    Clock::time_point idle_since = Clock::now();  // without subscription since
   };
   using ClientPtr = std::shared_ptr<Client>;
 
@@ -74,6 +81,9 @@ struct Server::Impl {
   std::uint64_t sent_closed = 0;     // counts of clients that left
   std::uint64_t dropped_closed = 0;
   std::uint64_t errors_closed = 0;
+  std::uint64_t throttled_closed = 0;
+  std::uint64_t idle_closed = 0;
+  Clock::time_point idle_checked = Clock::now();
 
   explicit Impl(ServerOptions o) : options(std::move(o)) {
     ws.clear_access_channels(websocketpp::log::alevel::all);
@@ -150,6 +160,7 @@ struct Server::Impl {
         remote = "?";
       }
       c = std::make_shared<Client>(next_client_id++, h, remote, options);
+      c->tokens = std::max(1.0, options.max_requests_per_s);
       clients[h] = c;
       ++connections;
       for (const auto& [id, channel] : channels) {
@@ -169,6 +180,7 @@ struct Server::Impl {
     sent_closed += it->second->sent;
     dropped_closed += it->second->queue.dropped();
     errors_closed += it->second->errors;
+    throttled_closed += it->second->throttled;
     clients.erase(it);
     rebuild_subscribers();
   }
@@ -184,7 +196,20 @@ struct Server::Impl {
       }
       c = it->second;
       const std::string& payload = m->get_payload();
-      if (m->get_opcode() != opcode::text) {
+      if (!take_token(*c)) {
+        // over budget: not parsed; one status per second says so
+        ++c->throttled;
+        ++c->errors;
+        const auto now = Clock::now();
+        if (now - c->throttle_said < std::chrono::seconds(1)) {
+          return;
+        }
+        c->throttle_said = now;
+        replies.push_back({StatusLevel::kError, "requests refused unread: more than " +
+                                                    std::to_string(static_cast<long>(options.max_requests_per_s)) +
+                                                    " per second from this client (" + std::to_string(c->throttled) +
+                                                    " so far)"});
+      } else if (m->get_opcode() != opcode::text) {
         replies.push_back(ClientSession::binary_refused(payload.size()));
       } else if (payload.size() > options.max_request_bytes) {
         replies.push_back({StatusLevel::kError, "request of " + std::to_string(payload.size()) +
@@ -198,13 +223,55 @@ struct Server::Impl {
         replies = std::move(result.replies);
       }
       for (const auto& r : replies) {
-        if (r.level == StatusLevel::kError) {
+        if (r.level == StatusLevel::kError && r.message.rfind("requests refused unread", 0) != 0) {
           ++c->errors;
         }
       }
     }
     for (const auto& r : replies) {
       send_text(*c, status_json(r.level, r.message));
+    }
+  }
+
+  /// One request of the client's budget (mutex held); false when it is spent.
+  bool take_token(Client& c) const {
+    const auto now = Clock::now();
+    const double burst = std::max(1.0, options.max_requests_per_s);
+    c.tokens = std::min(burst, c.tokens + std::chrono::duration<double>(now - c.refilled).count() *
+                                              options.max_requests_per_s);
+    c.refilled = now;
+    if (c.tokens < 1.0) {
+      return false;
+    }
+    c.tokens -= 1.0;
+    return true;
+  }
+
+  /// Closes the clients without a subscription for idle_timeout_s (checked about once a second).
+  void close_idle() {
+    const auto now = Clock::now();
+    if (options.idle_timeout_s <= 0.0 || now - idle_checked < std::chrono::seconds(1)) {
+      return;
+    }
+    idle_checked = now;
+    const auto limit = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(options.idle_timeout_s));
+    std::vector<Hdl> idle;
+    {
+      std::lock_guard<std::mutex> lock(mutex);
+      for (const auto& [h, c] : clients) {
+        if (!c->session.subscriptions().empty()) {
+          c->idle_since = now;
+        } else if (now - c->idle_since > limit) {
+          idle.push_back(h);
+          c->idle_since = now;  // closing: not again
+        }
+      }
+      idle_closed += idle.size();
+    }
+    for (const auto& h : idle) {
+      std::error_code ec;
+      ws.close(h, websocketpp::close::status::policy_violation,
+               "idle: no subscription for " + std::to_string(static_cast<long>(options.idle_timeout_s)) + " s", ec);
     }
   }
 
@@ -265,6 +332,7 @@ struct Server::Impl {
       for (const auto& c : waiting) {
         flush(c);
       }
+      close_idle();
       arm_timer();
     });
   }
@@ -418,6 +486,8 @@ ServerStats Server::stats() const {
     s.sent = impl_->sent_closed;
     s.dropped = impl_->dropped_closed;
     s.errors = impl_->errors_closed;
+    s.throttled = impl_->throttled_closed;
+    s.idle_closed = impl_->idle_closed;
     for (const auto& [h, c] : impl_->clients) {
       ClientStats cs;
       cs.id = c->id;
@@ -426,10 +496,12 @@ ServerStats Server::stats() const {
       cs.sent = c->sent;
       cs.dropped = c->queue.dropped();
       cs.errors = c->errors;
+      cs.throttled = c->throttled;
       cs.queued = c->queue.size();
       s.sent += cs.sent;
       s.dropped += cs.dropped;
       s.errors += cs.errors;
+      s.throttled += cs.throttled;
       list.emplace_back(h, cs);
     }
   }

@@ -26,6 +26,8 @@
 //       queue_bytes: 4194304    # per client: bytes waiting; the oldest is dropped beyond
 //       socket_buffer_bytes: 1048576   # per client: bytes handed to the socket layer at most
 //       max_request_bytes: 65536       # larger client requests are refused with an error status
+//       max_requests_per_s: 20         # per client; more are refused unread (counted)
+//       idle_timeout_s: 30             # a client without a subscription this long is closed (0: never)
 //       unadvertise_after_s: 5
 //       diagnostics_period_s: 1
 #pragma once

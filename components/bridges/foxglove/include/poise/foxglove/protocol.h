@@ -82,6 +82,10 @@ class ClientSession {
 
   /// Largest number of simultaneous subscriptions of one client (bounds the state a client can make).
   static constexpr std::size_t kMaxSubscriptions = 4096;
+  /// Largest number of entries (subscriptions, ids) one subscribe / unsubscribe may list; a longer
+  /// list is refused whole with one error status, unread. Each request is answered with at most
+  /// one status per kind (the count refused and the first reason), never one per entry.
+  static constexpr std::size_t kMaxEntriesPerRequest = 256;
 
  private:
   void subscribe(const nlohmann::json& request, const std::function<bool(std::uint32_t)>& channel_known, Result& out);

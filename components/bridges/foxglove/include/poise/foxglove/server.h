@@ -13,6 +13,11 @@
 // to `max_frame_bytes` are refused with an error status; beyond `max_frame_bytes` websocketpp
 // closes the connection with 1009 (message too big) before reading it. Clients that do not offer
 // the subprotocol are refused at the handshake (HTTP 400), and past `max_clients` (HTTP 503).
+// Budgets per client (issue 33: one client flooding invalid ids cut another from 2200 to 377
+// frames/s; 16 idle clients locked everyone out): at most `max_requests_per_s` requests are
+// parsed per second (the rest refused unread, counted, one status per second), a request lists at
+// most ClientSession::kMaxEntriesPerRequest entries and gets one status, and a client without a
+// subscription for `idle_timeout_s` is closed.
 #pragma once
 
 #include "poise/foxglove/protocol.h"
@@ -42,6 +47,12 @@ struct ServerOptions {
   std::size_t max_socket_buffer_bytes = 1u << 20;  ///< per client, handed to websocketpp
   std::size_t max_request_bytes = 64u << 10;       ///< a larger text frame is refused (status)
   std::size_t max_frame_bytes = 1u << 20;          ///< a larger frame closes the connection (1009)
+  /// Per client: requests parsed per second, sustained (a burst of as many is allowed). Requests
+  /// beyond are refused unread and counted, with at most one error status per second.
+  double max_requests_per_s = 20.0;
+  /// A client with no subscription for this long is closed (1008, "idle: ..."): connections
+  /// that never subscribe cannot hold the max_clients places. 0: never.
+  double idle_timeout_s = 30.0;
 };
 
 struct ClientStats {
@@ -51,6 +62,7 @@ struct ClientStats {
   std::uint64_t sent = 0;       ///< message frames handed to the socket
   std::uint64_t dropped = 0;    ///< message frames dropped (queue full: the client is too slow)
   std::uint64_t errors = 0;     ///< refused requests (error statuses sent)
+  std::uint64_t throttled = 0;  ///< requests refused unread: over max_requests_per_s
   std::size_t queued = 0;       ///< frames waiting
   std::size_t buffered_bytes = 0;  ///< bytes websocketpp still has to write
 };
@@ -63,6 +75,8 @@ struct ServerStats {
   std::uint64_t sent = 0;            ///< message frames, all clients, since start
   std::uint64_t dropped = 0;         ///< message frames dropped, all clients, since start
   std::uint64_t errors = 0;          ///< refused client requests, since start
+  std::uint64_t throttled = 0;       ///< of which refused unread (request budget), since start
+  std::uint64_t idle_closed = 0;     ///< clients closed for idling (idle_timeout_s), since start
 };
 
 class Server {
