@@ -136,6 +136,19 @@ TEST(GeomagneticModel, GivenADateOutsideTheModelsValidityThenRefused) {
   EXPECT_THROW((void)GeomagneticModel::wmm2025().field({0, 0, std::nan("")}, 2026.0), std::invalid_argument);
 }
 
+// Issue 33: 2024-12-31 (2024.997) was refused as "date 2025 is outside WMM-2025's validity": the
+// message rounded the date into the range it refused. Oracle: the date's own decimal year.
+TEST(GeomagneticModel, GivenTheLastDayBeforeTheEpochThenTheMessageNamesThatDateNotTheEpoch) {
+  const double last_day = decimal_year_from_date("2024-12-31");
+  ASSERT_LT(last_day, 2025.0);
+  try {
+    (void)GeomagneticModel::wmm2025().field({0, 0, 0}, last_day);
+    ADD_FAILURE() << "accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_EQ(std::string(e.what()), "date 2024.997 is outside WMM-2025's validity [2025, 2030)");
+  }
+}
+
 TEST(DecimalYear, IsoDatesFollowNoaasConvention) {
   EXPECT_DOUBLE_EQ(decimal_year_from_date("2025-01-01"), 2025.0);
   EXPECT_DOUBLE_EQ(decimal_year_from_date("2026-07-02"), 2026.0 + 182.0 / 365.0);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <iomanip>
 #include <sstream>
 #include <stdexcept>
 
@@ -149,7 +150,10 @@ GeomagneticField GeomagneticModel::field(const GeodeticPoint& p, double decimal_
   }
   if (!(decimal_year >= epoch_ && decimal_year < epoch_ + kValidityYears)) {
     std::ostringstream os;
-    os << "date " << decimal_year << " is outside " << name_ << "'s validity [" << epoch_ << ", "
+    // three decimals: 2024-12-31 is 2024.997, which the default precision printed as "2025" (issue 33)
+    std::ostringstream date;
+    date << std::fixed << std::setprecision(3) << decimal_year;
+    os << "date " << date.str() << " is outside " << name_ << "'s validity [" << epoch_ << ", "
        << epoch_ + kValidityYears << ")";
     throw std::invalid_argument(os.str());
   }

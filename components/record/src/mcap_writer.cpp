@@ -436,8 +436,8 @@ void McapWriter::fail(const std::string& what) {
     }
   }
   closed_ = true;
-  failure_ = "recording to " + sink_name_ + " stopped: " + what + "; " + outcome + " (" +
-             std::to_string(stats_.lost_messages) + " messages lost)";
+  failure_detail_ = "recording to " + sink_name_ + " stopped: " + what + "; " + outcome;
+  failure_ = failure_detail_ + " (" + std::to_string(stats_.lost_messages) + " messages lost)";
   stats_.bytes = sink_->position();
   throw WriteError(failure_);
 }

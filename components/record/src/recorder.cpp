@@ -519,6 +519,11 @@ RecorderStats Recorder::run() {
   im.destroy_participant();
   im.account_lost();
   std::lock_guard<std::mutex> lock(im.mutex);
+  if (!im.stats.error.empty() && im.writer && !im.writer->failure_detail().empty()) {
+    // The writer knew what was lost when it failed; the recorder's count adds the queue and what
+    // arrived until it unsubscribed: the error line says the same number as the table (issue 33).
+    im.stats.error = im.writer->failure_detail() + " (" + std::to_string(im.stats.lost) + " messages lost)";
+  }
   im.stats.elapsed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return im.stats;
 }

@@ -125,6 +125,10 @@ class McapWriter {
   void close();
 
   [[nodiscard]] const WriterStats& stats() const { return stats_; }
+  /// After a write failure: what happened and what the file holds, without the count of messages
+  /// lost (the writer's failure message adds the ones it knows of; a caller that queued more, the
+  /// recorder, gives its own total). "" before any failure.
+  [[nodiscard]] const std::string& failure_detail() const { return failure_detail_; }
   /// Messages per channel id in closed (durable) chunks: what the file holds.
   [[nodiscard]] const std::map<uint16_t, uint64_t>& channel_messages() const {
     return channel_counts_;
@@ -150,6 +154,7 @@ class McapWriter {
   WriterOptions options_;
   bool closed_ = false;
   std::string failure_;  // non-empty once writing failed
+  std::string failure_detail_;  // failure_ without the lost count
 
   std::vector<Schema> schemas_;
   std::vector<Channel> channels_;
