@@ -239,6 +239,32 @@ TEST(ImuDriver, CountsSequenceGapsAndResyncsAfterReconnect) {
   EXPECT_EQ(drv.stats().disconnects, 1u);
 }
 
+// Issue 33: a firmware whose t_us advances at a tenth of real time (the wrong unit) made the driver
+// drop 45 % of its samples as "stale" with no word about the clock. The driver measures the
+// sensor clock against the arrivals and names the ratio. Oracle: the ratio the test feeds.
+TEST(ImuDriver, GivenASensorClockAtATenthOfRealTimeThenTheRatioIsMeasuredAndNamed) {
+  constexpr double kRatioTolerance = 0.01;  // dimensionless, over a 5 s window of 10 ms steps
+  const auto run = [](uint32_t t_step_us) {
+    ImuDriver drv({}, {}, [](const ImuSample&, const SampleInfo&) {});
+    int64_t now = 1'000'000'000;
+    for (uint32_t seq = 0; seq < 1200; ++seq) {  // 12 s at 100 Hz
+      now += 10 * kNsPerMs;
+      drv.feed(format_imu_line(sample(seq, 1000u + seq * t_step_us)), now);
+    }
+    return drv.stats();
+  };
+  const DriverStats slow = run(1000);  // 1 ms of sensor time per 10 ms line
+  EXPECT_NEAR(slow.clock_ratio, 0.1, kRatioTolerance);
+  const std::string problem = clock_ratio_problem(slow);
+  EXPECT_NE(problem.find("the sensor clock advances at 0.10 x host time (t_us +0.50 s in 5.00 s of arrivals): is "
+                         "the firmware's t_us in microseconds?"),
+            std::string::npos)
+      << problem;
+  const DriverStats normal = run(10000);
+  EXPECT_NEAR(normal.clock_ratio, 1.0, kRatioTolerance);
+  EXPECT_EQ(clock_ratio_problem(normal), "");
+}
+
 TEST(ImuDriver, RejectsSensorTimeGoingBackwardsWhileSeqAdvances) {
   std::vector<ImuSample> out;
   ImuDriver drv({}, {}, [&](const ImuSample& s, const SampleInfo&) { out.push_back(s); });

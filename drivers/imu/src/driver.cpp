@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <utility>
 #include <vector>
 
@@ -34,6 +35,7 @@ void ImuDriver::reset() {
   time_.reset();
   clock_.reset();
   jump_.clear();
+  window_arrival_ns_ = -1;
   ++stats_.disconnects;
 }
 
@@ -66,6 +68,7 @@ void ImuDriver::on_line(std::string_view line) {
     case SequenceTracker::Verdict::kRestart:
       // The sensor restarted (or its counter jumped): resynchronise on this sample.
       ++stats_.sensor_restarts;
+      window_arrival_ns_ = -1;
       sequence_.reset();
       time_.reset();
       clock_.reset();
@@ -87,6 +90,7 @@ void ImuDriver::on_line(std::string_view line) {
     // reanchor_samples consecutive lines agree on the new clock: restart the time base here
     // (ClockSync keeps published stamps increasing across its reset).
     ++stats_.clock_reanchors;
+    window_arrival_ns_ = -1;
     time_.reset();
     clock_.reset();
     sensor_ns = time_.peek_ns(raw.t_us);
@@ -111,6 +115,7 @@ void ImuDriver::on_line(std::string_view line) {
   stats_.clock_drift_ppm = clock_.drift_ppm();
   stats_.clock_valid = clock_.valid();
   stats_.clock_resets = clock_.resets();
+  watch_clock_ratio(sensor_ns, arrival_first_byte);
   ++stats_.samples;
   if (!raw.has_mag) ++stats_.samples_without_mag;
   if (sink_) {
@@ -120,6 +125,34 @@ void ImuDriver::on_line(std::string_view line) {
     info.arrival_ns = arrival_ns_;
     sink_(s, info);
   }
+}
+
+void ImuDriver::watch_clock_ratio(int64_t sensor_ns, int64_t arrival_ns) {
+  const auto window_ns = static_cast<int64_t>(kClockRatioWindowS * 1e9);
+  if (window_arrival_ns_ < 0 || sensor_ns < window_sensor_ns_ || arrival_ns < window_arrival_ns_) {
+    window_sensor_ns_ = sensor_ns;
+    window_arrival_ns_ = arrival_ns;
+    return;
+  }
+  if (arrival_ns - window_arrival_ns_ >= window_ns) {
+    stats_.clock_ratio = static_cast<double>(sensor_ns - window_sensor_ns_) /
+                         static_cast<double>(arrival_ns - window_arrival_ns_);
+    window_sensor_ns_ = sensor_ns;
+    window_arrival_ns_ = arrival_ns;
+  }
+}
+
+std::string clock_ratio_problem(const DriverStats& stats) {
+  const double r = stats.clock_ratio;
+  if (r == 0.0 || (r >= 1.0 / kClockRatioLimit && r <= kClockRatioLimit)) {
+    return "";
+  }
+  char text[320];
+  std::snprintf(text, sizeof text,
+                "the sensor clock advances at %.2f x host time (t_us +%.2f s in %.2f s of arrivals): is the "
+                "firmware's t_us in microseconds? stamps cannot follow the arrivals (samples are dropped as stale)",
+                r, r * kClockRatioWindowS, kClockRatioWindowS);
+  return text;
 }
 
 void RateLatencyMeter::add(int64_t stamp_ns, int64_t arrival_ns) {

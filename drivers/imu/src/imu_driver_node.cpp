@@ -173,6 +173,9 @@ std::string final_counts(const DriverStats& st, const dds::PublishQueue<msg::Imu
   os << "; " << st.seq_gap_drops << " lost (seq gaps); dropped " << q.dropped_stale << " stale, " << q.dropped_full
      << " queue full, " << q.dropped_at_stop << " at stop, " << q.write_failed << " write failures; "
      << st.disconnects << " disconnects";
+  if (const std::string clock = clock_ratio_problem(st); !clock.empty()) {
+    os << "; " << clock;
+  }
   return os.str();
 }
 
@@ -200,6 +203,7 @@ void ImuDriverNode::on_tick(int64_t now_ns) {
   report.counters["publish_queue_high_water"] = q.high_water;
   report.counters["slow_writes"] = q.slow_writes;
   report.metrics.push_back({"longest_write", static_cast<double>(q.longest_write_ns) * 1e-6, "ms"});
+  report.metrics.push_back({"clock_ratio", st.clock_ratio, "ratio"});  // sensor s per host s
   diag_queue_.push(nodes::to_diagnostics_msg(report, sensor_id_), now_ns);
   char line[640];
   std::snprintf(line, sizeof line,
@@ -213,9 +217,16 @@ void ImuDriverNode::on_tick(int64_t now_ns) {
                 static_cast<double>(q.longest_write_ns) * 1e-6, summary.latency_p50_ms,
                 summary.latency_p99_ms, static_cast<double>(st.clock_offset_ns) * 1e-9,
                 st.clock_drift_ppm);
+  const std::string clock = clock_ratio_problem(st);
   {
     std::lock_guard<std::mutex> lock(status_mutex_);
-    status_ = line;
+    status_ = clock.empty() ? std::string(line) : std::string(line) + "; " + clock;
+  }
+  // The sensor clock does not keep the host's pace (t_us in the wrong unit): said once, by name,
+  // instead of a silent stream of stale drops (issue 33).
+  if (!clock.empty() && !warned_clock_ && options_.log_to_stderr) {
+    warned_clock_ = true;
+    std::fprintf(stderr, "imu_driver %s: %s\n", sensor_id_.c_str(), clock.c_str());
   }
   // Bytes arriving without a single valid line: most likely the wrong baud rate.
   if (reader_.connected() && st.samples == 0 && st.bytes > 2000 && warned_no_valid_at_bytes_ == 0) {

@@ -51,9 +51,23 @@ struct DriverStats {
   int64_t clock_offset_ns = 0;  ///< stamp - sensor time of the last sample
   double clock_drift_ppm = 0.0;
   bool clock_valid = false;
+  /// Sensor time over host arrival time, measured over kClockRatioWindowS of arrivals (0: not yet).
+  /// 1.0 within the clock's drift; far from it (t_us in the wrong unit) the stamps cannot follow the
+  /// arrivals: clock_ratio_problem() says so.
+  double clock_ratio = 0.0;
   std::string last_info;     ///< last '#' message from the firmware
   [[nodiscard]] uint64_t rejected_total() const;
 };
+
+/// Host time over which DriverStats::clock_ratio is measured, s.
+inline constexpr double kClockRatioWindowS = 5.0;
+/// A sensor clock this far from the host's (ratio below 1/x or above x) is not drift: a unit error.
+inline constexpr double kClockRatioLimit = 1.5;
+
+/// "" while the sensor clock keeps the host's pace; else what is wrong, e.g. "the sensor clock
+/// advances at 0.10 x host time (t_us +0.50 s in 5.00 s of arrivals): is the firmware's t_us in
+/// microseconds? stamps cannot follow the arrivals (samples are dropped as stale)".
+std::string clock_ratio_problem(const DriverStats& stats);
 
 using SampleSink = std::function<void(const ImuSample&, const SampleInfo&)>;
 
@@ -74,6 +88,8 @@ class ImuDriver : private FrameSink {
   void on_line(std::string_view line) override;
   void on_info(std::string_view text) override;
   void on_reject(RejectReason reason, std::size_t bytes) override;
+  /// Measures DriverStats::clock_ratio over windows of kClockRatioWindowS of arrivals.
+  void watch_clock_ratio(int64_t sensor_ns, int64_t arrival_ns);
 
   DriverParams params_;
   Calibration calibration_;
@@ -86,6 +102,9 @@ class ImuDriver : private FrameSink {
   ClockJumpAnchor jump_;
   int64_t arrival_ns_ = 0;
   int64_t last_sensor_ns_ = 0;
+  // clock ratio window: its first sample's sensor and arrival times (window_ns_ < 0: none)
+  int64_t window_sensor_ns_ = 0;
+  int64_t window_arrival_ns_ = -1;
   DriverStats stats_;
 };
 

@@ -94,6 +94,7 @@ class ImuDriverNode : public runtime::Component {
   mutable std::mutex status_mutex_;
   std::string status_;
   uint64_t warned_no_valid_at_bytes_ = 0;
+  bool warned_clock_ = false;
 };
 
 }  // namespace poise::imu
