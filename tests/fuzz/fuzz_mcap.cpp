@@ -41,6 +41,15 @@ void read_all(const poise::record::McapReader& reader, poise::record::ReadFilter
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   using namespace poise::record;
+  // Size claims (issue 33): the bytes as one Chunk record's body. What it decompresses to never
+  // exceeds kMaxCompressionRatio times its bytes nor kMaxChunkBytes (checked before allocating;
+  // seed lying_chunk_sizes.mcap: 8 chunks of 10 bytes each claiming 1 GiB).
+  try {
+    const std::vector<uint8_t> records = chunk_records(data, size);
+    if (records.size() > size * kMaxCompressionRatio || records.size() > kMaxChunkBytes) std::abort();
+  } catch (const ReadError& e) {
+    if (e.what()[0] == '\0') std::abort();
+  }
   std::unique_ptr<McapReader> reader;
   try {
     reader = std::make_unique<McapReader>(
