@@ -204,37 +204,50 @@ TEST(Decimate, GivenATrialWhenEveryThirdSampleIsKeptThenTheRowsAreThoseSamplesAn
   EXPECT_THROW(decimate_trial(t, 6), std::invalid_argument);  // one sample left
 }
 
-// Issue 32: beside the 100 Hz / 1 kHz test above, the rates a user's sensor gives when only every
-// 3rd or 7th sample of BROAD's 285.7 Hz is kept (95.2 and 40.8 Hz; nothing per sample changes in
-// the filter). Oracle: VQF on the same decimated trials (kVqf95*, kVqf41*).
-TEST(BroadRate, GivenTheNineteenTrialsAtEveryThirdOrSeventhSampleWhenTheDefaultRunsThenItsMeansBeatVqfAtThatRate) {
-  POISE_REQUIRE_SHARED_DIR(shared);
+/// The 19 BROAD files of the shared directory.
+std::vector<std::string> shared_broad_files(const std::string& shared) {
   std::vector<std::string> files;
   for (const auto& e : std::filesystem::directory_iterator(shared + "/broad")) {
     if (e.path().extension() == ".hdf5") {
       files.push_back(e.path().string());
     }
   }
+  return files;
+}
+
+/// The default parallel KF with BROAD's IMU delay on `files`, every `every`-th sample (1: all).
+GroupMeans default_means(const std::vector<std::string>& files, size_t every, double* rate_hz = nullptr) {
+  std::vector<TrialResult> rs;
+  auto f = make_filter_for_broad("parallel_kf");  // the defaults + BROAD's IMU delay (its sensor)
+  for (const auto& path : files) {
+    const BroadTrial t = every == 1 ? load_broad(path) : decimate_trial(load_broad(path), every);
+    if (rate_hz != nullptr) {
+      *rate_hz = t.rate_hz;
+    }
+    TrialResult r;
+    r.stem = t.stem;
+    r.number = t.number;
+    r.disturbed = t.disturbed();
+    r.errors = broad_errors(run_filter(*f, t), t);
+    rs.push_back(r);
+  }
+  return group_means(rs);
+}
+
+// Issue 32: beside the 100 Hz / 1 kHz test above, the rates a user's sensor gives when only every
+// 3rd or 7th sample of BROAD's 285.7 Hz is kept (95.2 and 40.8 Hz; nothing per sample changes in
+// the filter). Oracle: VQF on the same decimated trials (kVqf95*, kVqf41*).
+TEST(BroadRate, GivenTheNineteenTrialsAtEveryThirdOrSeventhSampleWhenTheDefaultRunsThenItsMeansBeatVqfAtThatRate) {
+  POISE_REQUIRE_SHARED_DIR(shared);
+  const std::vector<std::string> files = shared_broad_files(shared);
   ASSERT_EQ(files.size(), 19u);
   struct Rate {
     size_t every;
     double vqf_undisturbed_deg, vqf_disturbed_deg;
   };
   for (const Rate& rate : {Rate{3, kVqf95UndisturbedDeg, kVqf95DisturbedDeg}, Rate{7, kVqf41UndisturbedDeg, kVqf41DisturbedDeg}}) {
-    std::vector<TrialResult> rs;
-    auto f = make_filter_for_broad("parallel_kf");  // the defaults + BROAD's IMU delay (its sensor)
     double rate_hz = 0;
-    for (const auto& path : files) {
-      const BroadTrial t = decimate_trial(load_broad(path), rate.every);
-      rate_hz = t.rate_hz;
-      TrialResult r;
-      r.stem = t.stem;
-      r.number = t.number;
-      r.disturbed = t.disturbed();
-      r.errors = broad_errors(run_filter(*f, t), t);
-      rs.push_back(r);
-    }
-    const GroupMeans g = group_means(rs);
+    const GroupMeans g = default_means(files, rate.every, &rate_hz);
     std::printf("parallel_kf default, one sample in %zu (%.1f Hz): undisturbed %.3f (incl %.3f), disturbed %.3f "
                 "(incl %.3f) deg; VQF %.2f / %.2f\n",
                 rate.every, rate_hz, g.undisturbed.total_deg, g.undisturbed.inclination_deg, g.disturbed.total_deg,
@@ -246,25 +259,9 @@ TEST(BroadRate, GivenTheNineteenTrialsAtEveryThirdOrSeventhSampleWhenTheDefaultR
 
 TEST(BroadGolden, GivenTheNineteenSharedTrialsWhenTheDefaultParallelKfRunsThenItsMeansAndItsInclinationBeatVqf) {
   POISE_REQUIRE_SHARED_DIR(shared);
-  std::vector<std::string> files;
-  for (const auto& e : std::filesystem::directory_iterator(shared + "/broad")) {
-    if (e.path().extension() == ".hdf5") {
-      files.push_back(e.path().string());
-    }
-  }
+  const std::vector<std::string> files = shared_broad_files(shared);
   ASSERT_EQ(files.size(), 19u);
-  std::vector<TrialResult> rs;
-  auto f = make_filter_for_broad("parallel_kf");  // the defaults + BROAD's IMU delay (its sensor)
-  for (const auto& path : files) {
-    const BroadTrial t = load_broad(path);
-    TrialResult r;
-    r.stem = t.stem;
-    r.number = t.number;
-    r.disturbed = t.disturbed();
-    r.errors = broad_errors(run_filter(*f, t), t);
-    rs.push_back(r);
-  }
-  const GroupMeans g = group_means(rs);
+  const GroupMeans g = default_means(files, 1);
   std::printf("parallel_kf default: undisturbed %.3f (incl %.3f), disturbed %.3f (incl %.3f) deg\n",
               g.undisturbed.total_deg, g.undisturbed.inclination_deg, g.disturbed.total_deg,
               g.disturbed.inclination_deg);
