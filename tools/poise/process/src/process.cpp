@@ -322,6 +322,20 @@ InputScan scan_inputs(const McapReader& reader, const ProcessOptions& options, c
   uint64_t ordinal = 0;
   while (const MessageView* m = cursor.next()) {
     const uint64_t index = ordinal++;
+    // the IMU's delay is a property of the sensor: taken from anywhere in the recording (a
+    // transient-local info is recorded once, maybe before --start)
+    if (m->schema != nullptr && m->channel->topic == options.topics.imu_info &&
+        m->schema->name == dds::type_names::kImuSensorInfo) {
+      msg::ImuSensorInfo info;
+      const std::optional<std::string> problem = decode<msg::ImuSensorInfoPubSubType>(*m, info);
+      if (problem) {
+        count_undecodable(*m, *problem, stats);
+      } else {
+        ++stats.imu_infos;
+        scan.imu_infos.push_back(std::move(info));
+      }
+      continue;
+    }
     if (cut.outside(*m)) {
       continue;
     }
@@ -329,18 +343,6 @@ InputScan scan_inputs(const McapReader& reader, const ProcessOptions& options, c
     progress(0, stats.input_messages);
     Input in;
     std::optional<std::string> problem;
-    if (m->schema != nullptr && m->channel->topic == options.topics.imu_info &&
-        m->schema->name == dds::type_names::kImuSensorInfo) {
-      msg::ImuSensorInfo info;
-      problem = decode<msg::ImuSensorInfoPubSubType>(*m, info);
-      if (!problem) {
-        ++stats.imu_infos;
-        scan.imu_infos.push_back(std::move(info));
-        continue;
-      }
-      count_undecodable(*m, *problem, stats);
-      continue;
-    }
     const InputKind kind = decode_input(*m, options, wants.vision, wants.vehicle, in, problem);
     if (kind == InputKind::kNone) {
       continue;
