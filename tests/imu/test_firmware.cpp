@@ -66,6 +66,10 @@ void run_sketch_and_check() {
   driver.feed(Serial.out, 1'000'000'000);
   EXPECT_EQ(driver.stats().rejected_total(), 0u) << Serial.out.substr(0, 400);
   EXPECT_EQ(driver.stats().last_info, "# gy87_poise v1 ready");
+  // the sketch says its DLPF setting ($INF at start): the driver knows the datasheet's delay
+  ASSERT_TRUE(driver.sensor_delay()) << Serial.out.substr(0, 400);
+  EXPECT_EQ(driver.sensor_delay()->setting, 3);
+  EXPECT_NEAR(driver.sensor_delay()->gyro_delay_s, 4.8e-3, 1e-12);
   ASSERT_GE(out.size(), 25u) << Serial.out.substr(0, 400);
   EXPECT_EQ(driver.stats().seq_gap_drops, 0u);
   constexpr double kAccelTol = 2e-3;   // 3 decimals (SI) or one count (raw), m/s^2

@@ -32,6 +32,9 @@ QosKind default_qos_for_topic(const std::string& topic, const TopicNames& names)
   if (topic == names.imu || topic == names.tag_detections || topic == names.vehicle_input) {
     return QosKind::kSensor;
   }
+  if (topic == names.imu_info) {
+    return QosKind::kStatic;
+  }
   return QosKind::kEstimate;
 }
 

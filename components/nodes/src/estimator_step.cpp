@@ -3,6 +3,7 @@
 #include "poise/core/north_yaml.h"
 #include "poise/runtime/utc_date.h"
 
+#include <cstdio>
 #include <sstream>
 
 namespace poise::nodes {
@@ -78,6 +79,20 @@ StepRunner::StepRunner(std::unique_ptr<EstimatorStep> step, const NodeParams& pa
 void StepRunner::imu(const ImuSample& sample, const std::string& source, const std::string& writer,
                      StepOutputs& out) {
   ++received_;
+  if (!imu_infos_.empty()) {
+    const auto it = imu_infos_.find(source);
+    if (it != imu_infos_.end()) {
+      const msg::ImuSensorInfo& info = it->second;
+      char what[160];
+      std::snprintf(what, sizeof what, "%s setting %d, gyro %.2f ms, accel %.2f ms, from %s",
+                    info.chip().c_str(), info.filter_setting(), info.gyro_delay_s() * 1e3,
+                    info.accel_delay_s() * 1e3, info.origin().c_str());
+      if (step_->published_imu_delay(info.gyro_delay_s(), what) && step_->imu_delay() != nullptr) {
+        pending_delay_message_ = step_->imu_delay()->describe();
+      }
+      imu_infos_.erase(it);
+    }
+  }
   inputs_.on_sample(topics_.imu, source, sample.seq, writer, clock_());
   last_seq_ = sample.seq;
   if (!step_->step(sample)) {
@@ -119,6 +134,24 @@ void StepRunner::vehicle_input(const msg::VehicleInput& m, const std::string& wr
   step_->vehicle_input(m);
 }
 
+std::string StepRunner::imu_info(const msg::ImuSensorInfo& m) {
+  // A delay outside [0, 0.05] s (the filters' range) or not finite is not offered: counted.
+  if (!(m.gyro_delay_s() >= 0.0 && m.gyro_delay_s() <= 0.05)) {
+    ++imu_info_refused_;
+    return "refused imu_info of '" + m.sensor_id().to_string() + "': gyro_delay_s " +
+           std::to_string(m.gyro_delay_s()) + " is not in [0, 0.05] s";
+  }
+  imu_info_seen_ = true;
+  imu_infos_[m.sensor_id().to_string()] = m;
+  return {};
+}
+
+std::string StepRunner::take_imu_delay_message() {
+  std::string m;
+  m.swap(pending_delay_message_);
+  return m;
+}
+
 bool StepRunner::periodic_diagnostics(StepOutputs& out) {
   const int64_t now = clock_();
   const auto half_period_ns = static_cast<int64_t>(params_.diagnostics_period_s * 0.5e9);
@@ -140,6 +173,13 @@ void StepRunner::publish_diagnostics(int64_t stamp_ns, uint32_t seq, int64_t now
   diag.counters["samples_rejected"] = rejected_;
   diag.counters["samples_malformed"] = imu_malformed_.load();
   diag.counters["estimates_published"] = published_;
+  if (imu_info_seen_ || imu_info_refused_ > 0) {  // only with an IMU that publishes its delay
+    diag.counters["imu_info_refused"] = imu_info_refused_;
+    if (const ImuDelayChoice* d = step_->imu_delay()) {
+      diag.metrics.push_back({"imu_delay", d->in_use_s(), "s"});
+      diag.counters["imu_delay_published"] = d->published_in_use() ? 1 : 0;
+    }
+  }
   if (step_->uses_vision()) {
     diag.counters["vision_malformed"] = vision_malformed_.load();
   }
@@ -168,6 +208,9 @@ std::string StepRunner::status() const {
   if (step_->uses_vehicle_input()) {
     os << ", vehicle_input in " << vehicle_received_ << ", vehicle_input malformed "
        << vehicle_input_malformed_.load();
+  }
+  if (const ImuDelayChoice* d = step_->imu_delay()) {
+    os << ", " << d->describe();
   }
   return os.str();
 }

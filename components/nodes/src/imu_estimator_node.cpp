@@ -3,6 +3,7 @@
 #include "poise/dds/convert.h"
 
 #include <chrono>
+#include <cstdio>
 #include <ctime>
 
 namespace poise::nodes {
@@ -58,6 +59,22 @@ ImuEstimatorNode::~ImuEstimatorNode() { ImuEstimatorNode::stop(); }
 
 void ImuEstimatorNode::start() {
   running_.store(true);
+  if (!imu_info_reader_ && runner_.step().imu_delay() != nullptr) {
+    std::fprintf(stderr, "%s %s: %s\n", runner_.step().component().c_str(), runner_.step().sensor_id().c_str(),
+                 runner_.step().imu_delay()->describe().c_str());
+    // before the samples' reader: a transient-local info is usually there before the first sample
+    imu_info_reader_ = std::make_unique<dds::Reader<msg::ImuSensorInfoPubSubType>>(
+        host_.participant, host_.topics.imu_info, dds::QosKind::kStatic,
+        [this](const msg::ImuSensorInfo& m, const auto& /*info*/) {
+          std::lock_guard<std::mutex> lock(mutex_);
+          const std::string problem = runner_.imu_info(m);
+          if (!problem.empty()) {
+            std::fprintf(stderr, "%s %s: %s\n", runner_.step().component().c_str(),
+                         runner_.step().sensor_id().c_str(), problem.c_str());
+          }
+        },
+        &imu_info_malformed_);
+  }
   if (!imu_reader_) {
     imu_reader_ = std::make_unique<dds::Reader<msg::ImuSamplePubSubType>>(
         host_.participant, host_.topics.imu, dds::QosKind::kSensor,
@@ -97,6 +114,7 @@ void ImuEstimatorNode::stop() {
   vision_reader_.reset();
   vehicle_reader_.reset();
   imu_reader_.reset();
+  imu_info_reader_.reset();
   {
     std::lock_guard<std::mutex> lock(timer_mutex_);
     timer_stop_ = true;
@@ -123,6 +141,11 @@ void ImuEstimatorNode::on_imu(const msg::ImuSample& m, const eprosima::fastdds::
   const ImuSample sample = dds::from_msg(m);
   std::lock_guard<std::mutex> lock(mutex_);
   runner_.imu(sample, m.sensor_id().to_string(), dds::writer_key(info), writers_);
+  const std::string delay = runner_.take_imu_delay_message();
+  if (!delay.empty()) {
+    std::fprintf(stderr, "%s %s: %s\n", runner_.step().component().c_str(), runner_.step().sensor_id().c_str(),
+                 delay.c_str());
+  }
 }
 
 std::string ImuEstimatorNode::status() const {

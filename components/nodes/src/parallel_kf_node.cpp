@@ -1,7 +1,10 @@
 // Component `parallel_kf`: the parallel Kalman filter (paper 000) on DDS.
 //   in:  imu (ImuSample)      out: attitude/parallel_kf (AttitudeEstimate), diagnostics
-//   params: preset (default | paper), filter_file (YAML of ParallelKfParams), node keys (NodeParams),
-//           north (declination_deg | location + date: estimator_step.h north_keys())
+//   params: preset (default | paper), filter_file (YAML of ParallelKfParams), imu_delay_s (the
+//           IMU's group delay, s; overrides the file), node keys (NodeParams), north
+//           (declination_deg | location + date: estimator_step.h north_keys())
+//   Without imu_delay_s here or in the file, the delay the IMU's driver publishes on `imu_info`
+//   is used (poise/nodes/imu_delay.h).
 #include "poise/nodes/imu_estimator_node.h"
 #include "poise/nodes/register.h"
 #include "poise/parallel_kf/parallel_kf.h"
@@ -15,12 +18,13 @@ namespace {
 ParallelKfParams load_params(const runtime::ComponentSpec& spec, const NorthReference& north) {
   std::vector<std::string> known = NodeParams::keys();
   known.insert(known.end(), north_keys().begin(), north_keys().end());
-  known.insert(known.end(), {"preset", "filter_file"});
+  known.insert(known.end(), {"preset", "filter_file", "imu_delay_s"});
   runtime::check_known_params(spec, known);
   const auto file = runtime::param<std::string>(spec, "filter_file", "");
   try {
     ParallelKfParams p = file.empty() ? ParallelKfParams::named(runtime::param<std::string>(spec, "preset", "default"))
                                       : load_parallel_kf_params(file);
+    p.imu_delay_s = runtime::param<double>(spec, "imu_delay_s", p.imu_delay_s);
     seed_field_reference(north, p.field_magnitude_ut, p.dip_deg);
     p.validate();
     return p;
@@ -32,7 +36,19 @@ ParallelKfParams load_params(const runtime::ComponentSpec& spec, const NorthRefe
 class ParallelKfStep : public AttitudeStep {
  public:
   explicit ParallelKfStep(const runtime::ComponentSpec& spec)
-      : AttitudeStep(spec.name, "parallel_kf", north_reference(spec)), kf_(load_params(spec, north())) {}
+      : AttitudeStep(spec.name, "parallel_kf", north_reference(spec)),
+        kf_(load_params(spec, north())),
+        delay_(kf_.params().imu_delay_s,
+               imu_delay_configured(spec, runtime::param<std::string>(spec, "filter_file", ""), "parallel_kf")) {}
+
+  bool published_imu_delay(double delay_s, const std::string& what) override {
+    if (!delay_.offer(delay_s, what)) {
+      return false;
+    }
+    kf_.set_imu_delay_s(delay_s);  // the output's prediction only: any time
+    return true;
+  }
+  [[nodiscard]] const ImuDelayChoice* imu_delay() const override { return &delay_; }
 
   bool step(const ImuSample& sample) override { return kf_.update(sample); }
   bool attitude(AttitudeReport& report) const override {
@@ -68,6 +84,7 @@ class ParallelKfStep : public AttitudeStep {
 
  private:
   ParallelKf kf_;
+  ImuDelayChoice delay_;
 };
 
 }  // namespace

@@ -3,7 +3,9 @@
 //   out: attitude/selective_ekf (AttitudeEstimate), pose/selective_ekf (PoseEstimate), diagnostics
 //   params: filter_file (YAML of SelectiveEkfParams), q_body_camera [w,x,y,z] and
 //           p_body_camera_m [x,y,z] (camera-to-IMU extrinsic; override the file), imu_delay_s
-//           (the IMU's group delay, s; overrides the file), node keys (NodeParams), north
+//           (the IMU's group delay, s; overrides the file; without it here or in the file, the
+//           delay the IMU's driver publishes on `imu_info`: poise/nodes/imu_delay.h; one that
+//           arrives after the first sample restarts the EKF with it), node keys (NodeParams), north
 //           (declination_deg | location + date: estimator_step.h north_keys(); vision poses are
 //           then taken as true ENU and turned into the filter's magnetic ENU)
 // The EKF applies its own camera-to-body extrinsic to the camera pose (the message's body pose is
@@ -60,7 +62,22 @@ SelectiveEkfParams load_params(const runtime::ComponentSpec& spec, const NorthRe
 class SelectiveEkfStep : public AttitudeStep {
  public:
   explicit SelectiveEkfStep(const runtime::ComponentSpec& spec)
-      : AttitudeStep(spec.name, "selective_ekf", north_reference(spec)), ekf_(load_params(spec, north())) {}
+      : AttitudeStep(spec.name, "selective_ekf", north_reference(spec)),
+        ekf_(load_params(spec, north())),
+        delay_(ekf_.params().imu_delay_s,
+               imu_delay_configured(spec, runtime::param<std::string>(spec, "filter_file", ""), "selective_ekf")) {}
+
+  bool published_imu_delay(double delay_s, const std::string& what) override {
+    if (!delay_.offer(delay_s, what)) {
+      return false;
+    }
+    if (ekf_.initialized()) {
+      ekf_.reset();  // the state's time is the IMU stamp minus the delay: restart on the new one
+    }
+    ekf_.set_imu_delay_s(delay_s);
+    return true;
+  }
+  [[nodiscard]] const ImuDelayChoice* imu_delay() const override { return &delay_; }
 
   [[nodiscard]] unsigned kinds() const override { return kAttitudeOut | kPoseOut; }
   [[nodiscard]] bool uses_vision() const override { return true; }
@@ -122,6 +139,7 @@ class SelectiveEkfStep : public AttitudeStep {
 
  private:
   SelectiveEkf ekf_;
+  ImuDelayChoice delay_;
 };
 
 }  // namespace

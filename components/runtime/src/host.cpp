@@ -88,6 +88,7 @@ void apply_topic_overrides(const YAML::Node& map, const std::string& origin, dds
   }
   const std::vector<std::pair<std::string, std::string*>> fields{
       {"imu", &names.imu},
+      {"imu_info", &names.imu_info},
       {"tag_detections", &names.tag_detections},
       {"vision_pose", &names.vision_pose},
       {"attitude_prefix", &names.attitude_prefix},

@@ -36,7 +36,29 @@ void ImuDriver::reset() {
   clock_.reset();
   jump_.clear();
   window_arrival_ns_ = -1;
+  delay_replaceable_ = true;
   ++stats_.disconnects;
+}
+
+void ImuDriver::on_info_line(const SensorInfoLine& line, std::size_t bytes) {
+  InfoResolution r = resolve_sensor_info(line);
+  if (r.delay && delay_ && *r.delay != *delay_ && !delay_replaceable_) {
+    r.reason = RejectReason::kInfoConflict;
+    r.message = "$INF: " + r.delay->describe() + " contradicts the info in effect since the sensor started, " +
+                delay_->describe() + ": kept (a new setting is taken after a sensor restart)";
+    r.delay.reset();
+  }
+  if (!r.delay) {
+    on_reject(r.reason, bytes);
+    stats_.last_info_problem = r.message;
+    if (info_problem_sink_) info_problem_sink_(r.message);
+    return;
+  }
+  ++stats_.sensor_info_lines;
+  delay_replaceable_ = false;
+  if (delay_ && *delay_ == *r.delay) return;
+  delay_ = *r.delay;
+  if (delay_sink_) delay_sink_(*delay_);
 }
 
 void ImuDriver::on_info(std::string_view text) {
@@ -55,6 +77,10 @@ void ImuDriver::on_line(std::string_view line) {
     on_reject(r.reason, line.size());
     return;
   }
+  if (r.is_info) {
+    on_info_line(r.info, line.size());
+    return;
+  }
   const RawSample& raw = r.sample;
   uint32_t gap = 0;
   SequenceTracker::Verdict verdict = sequence_.check(raw.seq, &gap);
@@ -69,6 +95,7 @@ void ImuDriver::on_line(std::string_view line) {
       // The sensor restarted (or its counter jumped): resynchronise on this sample.
       ++stats_.sensor_restarts;
       window_arrival_ns_ = -1;
+      delay_replaceable_ = true;
       sequence_.reset();
       time_.reset();
       clock_.reset();

@@ -82,6 +82,21 @@ ImuNodeOptions imu_node_options(const runtime::ComponentSpec& spec) {
   return o;
 }
 
+msg::ImuSensorInfo to_info_msg(const SensorDelay& delay, const std::string& sensor_id, int64_t stamp_ns) {
+  msg::ImuSensorInfo m;
+  msg::Header h;
+  h.stamp_ns(stamp_ns);
+  h.frame_id("body");
+  m.header(h);
+  m.sensor_id(sensor_id);
+  m.chip(delay.chip);
+  m.filter_setting(delay.setting);
+  m.accel_delay_s(delay.accel_delay_s);
+  m.gyro_delay_s(delay.gyro_delay_s);
+  m.origin(delay.origin);
+  return m;
+}
+
 nodes::DiagnosticsReport driver_diagnostics(const DriverStats& st, const RateLatencyMeter::Summary& rate,
                                             bool connected, uint64_t connects, int64_t stamp_ns,
                                             uint32_t seq) {
@@ -104,6 +119,7 @@ nodes::DiagnosticsReport driver_diagnostics(const DriverStats& st, const RateLat
   r.counters["connects"] = connects;
   r.counters["clock_resets"] = st.clock_resets;
   r.counters["clock_reanchors"] = st.clock_reanchors;
+  r.counters["sensor_info_lines"] = st.sensor_info_lines;
   r.metrics.push_back({"rate", rate.rate_hz, "Hz"});
   r.metrics.push_back({"latency_p50", rate.latency_p50_ms, "ms"});
   r.metrics.push_back({"latency_p99", rate.latency_p99_ms, "ms"});
@@ -122,6 +138,7 @@ ImuDriverNode::ImuDriverNode(const ImuNodeOptions& options, const std::string& s
       imu_writer_(host.participant, host.topics.imu,
                   options.reliable ? dds::QosKind::kEstimate : dds::QosKind::kSensor),
       diag_writer_(host.participant, host.topics.diagnostics),
+      info_writer_(host.participant, host.topics.imu_info, dds::QosKind::kStatic),
       driver_(options.config.params, options.config.calibration,
               [this](const ImuSample& s, const SampleInfo& i) { on_sample(s, i); }),
       reader_(ReaderOptions{options.port, options.config.serial},
@@ -134,7 +151,25 @@ ImuDriverNode::ImuDriverNode(const ImuNodeOptions& options, const std::string& s
                  [this](const msg::ImuSample& m) { return imu_writer_.write(m); },
                  monotonic_now_ns),
       diag_queue_({4, 0}, [this](const msg::FilterDiagnostics& m) { return diag_writer_.write(m); },
-                  monotonic_now_ns) {}
+                  monotonic_now_ns),
+      info_queue_({4, 0}, [this](const msg::ImuSensorInfo& m) { return info_writer_.write(m); },
+                  monotonic_now_ns) {
+  driver_.set_delay_sink([this](const SensorDelay& d) { on_delay(d); });
+  driver_.set_info_problem_sink([this](const std::string& m) {
+    if (options_.log_to_stderr) {
+      std::fprintf(stderr, "imu_driver %s: refused: %s\n", sensor_id_.c_str(), m.c_str());
+    }
+  });
+}
+
+void ImuDriverNode::on_delay(const SensorDelay& delay) {
+  const int64_t now = monotonic_now_ns();
+  if (options_.log_to_stderr) {
+    std::fprintf(stderr, "imu_driver %s: sensor delay %s; published on %s\n", sensor_id_.c_str(),
+                 delay.describe().c_str(), host_.topics.imu_info.c_str());
+  }
+  info_queue_.push(to_info_msg(delay, sensor_id_, now), now);
+}
 
 ImuDriverNode::~ImuDriverNode() { stop(); }
 
@@ -152,6 +187,7 @@ void ImuDriverNode::stop() {
   if (thread_.joinable()) thread_.join();
   imu_queue_.stop();
   diag_queue_.stop();
+  info_queue_.stop();
   if (was_running) {  // the reading thread has ended: the counts are final
     const std::string line = final_counts(driver_.stats(), imu_queue_.stats());
     std::lock_guard<std::mutex> lock(status_mutex_);

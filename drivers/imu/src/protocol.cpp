@@ -84,6 +84,61 @@ ParseResult reject(RejectReason r) {
 
 bool within(const Eigen::Vector3d& v, double max_abs) { return v.cwiseAbs().maxCoeff() <= max_abs; }
 
+bool chip_name_ok(std::string_view chip) {
+  if (chip.empty() || chip.size() > 16) return false;
+  for (const char c : chip) {
+    const bool ok = (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' || c == '-';
+    if (!ok) return false;
+  }
+  return true;
+}
+
+// "$INF,<version>,<chip>,<setting>,<accel_delay_us>,<gyro_delay_us>": `rest` is the text after
+// "INF,". The version comes first so that a later version (other fields) is counted, not misread.
+ParseResult parse_info(std::string_view rest) {
+  constexpr std::size_t kInfoFields = 5;
+  std::array<std::string_view, kInfoFields> f{};
+  std::size_t n = 0;
+  std::size_t start = 0;
+  while (true) {
+    const std::size_t next = rest.find(',', start);
+    if (n == kInfoFields) {
+      n = kInfoFields + 1;
+      break;
+    }
+    f[n++] = rest.substr(start, next == std::string_view::npos ? next : next - start);
+    if (next == std::string_view::npos) break;
+    start = next + 1;
+  }
+  ParseResult out;
+  SensorInfoLine& info = out.info;
+  FieldStatus st = parse_u32(f[0], &info.version);
+  if (st != FieldStatus::kOk) return reject(reason_of(st));
+  if (info.version != 1) return reject(RejectReason::kInfoUnsupported);
+  if (n != kInfoFields) return reject(RejectReason::kFieldCount);
+  if (!chip_name_ok(f[1])) return reject(f[1].empty() ? RejectReason::kMissingField : RejectReason::kInfoUnsupported);
+  info.chip.assign(f[1].data(), f[1].size());
+  if (!f[2].empty()) {
+    st = parse_i32(f[2], &info.setting);
+    if (st != FieldStatus::kOk) return reject(reason_of(st));
+    if (info.setting < 0 || info.setting > 255) return reject(RejectReason::kOutOfRange);
+  }
+  if (f[3].empty() != f[4].empty()) return reject(RejectReason::kMissingField);
+  info.has_delays = !f[3].empty();
+  if (info.has_delays) {
+    for (int i = 0; i < 2; ++i) {
+      uint32_t& d = i == 0 ? info.accel_delay_us : info.gyro_delay_us;
+      st = parse_u32(f[3 + i], &d);
+      if (st != FieldStatus::kOk) return reject(reason_of(st));
+      if (d > kMaxInfoDelayUs) return reject(RejectReason::kOutOfRange);
+    }
+  }
+  if (info.setting < 0 && !info.has_delays) return reject(RejectReason::kMissingField);
+  out.ok = true;
+  out.is_info = true;
+  return out;
+}
+
 }  // namespace
 
 const char* to_string(RejectReason reason) {
@@ -102,6 +157,9 @@ const char* to_string(RejectReason reason) {
     case RejectReason::kDuplicateSeq: return "duplicate_seq";
     case RejectReason::kOutOfOrderSeq: return "out_of_order_seq";
     case RejectReason::kTimeNotMonotonic: return "time_not_monotonic";
+    case RejectReason::kInfoUnsupported: return "info_unsupported";
+    case RejectReason::kInfoUnknownSetting: return "info_unknown_setting";
+    case RejectReason::kInfoConflict: return "info_conflict";
     case RejectReason::kCount: break;
   }
   return "unknown";
@@ -138,6 +196,10 @@ ParseResult LineParser::parse(std::string_view line) const {
   std::size_t comma = payload.find(',');
   const std::string_view talker = payload.substr(0, comma);
   bool raw = false;
+  if (talker == "INF") {
+    if (comma == std::string_view::npos) return reject(RejectReason::kFieldCount);
+    return parse_info(payload.substr(comma + 1));
+  }
   if (talker == "IMU") {
     raw = false;
   } else if (talker == "RAW") {
@@ -232,6 +294,15 @@ ParseResult LineParser::parse(std::string_view line) const {
   }
   out.ok = true;
   return out;
+}
+
+std::string format_info_line(const SensorInfoLine& info) {
+  std::string p = "INF," + std::to_string(info.version) + "," + info.chip + ",";
+  if (info.setting >= 0) p += std::to_string(info.setting);
+  p += ",";
+  if (info.has_delays) p += std::to_string(info.accel_delay_us) + "," + std::to_string(info.gyro_delay_us);
+  else p += ",";
+  return wrap_payload(p);
 }
 
 std::string wrap_payload(std::string_view payload) {

@@ -243,7 +243,8 @@ void Gy87Emulator::on_uart_byte(uint8_t byte) {
     LineRecord& r = lines_.back();
     while (!r.text.empty() && (r.text.back() == '\r' || r.text.back() == '\n')) r.text.pop_back();
     unsigned long seq = 0, t_us = 0;
-    if (std::sscanf(r.text.c_str(), "$%*3[A-Z],%lu,%lu,", &seq, &t_us) == 2) {
+    r.info = r.text.rfind("$INF,", 0) == 0;
+    if (!r.info && std::sscanf(r.text.c_str(), "$%*3[A-Z],%lu,%lu,", &seq, &t_us) == 2) {
       r.seq = static_cast<uint32_t>(seq);
       r.t_us = static_cast<uint32_t>(t_us);
     }
@@ -277,7 +278,13 @@ void Gy87Emulator::on_twi(uint32_t value) {
 
 std::vector<LineRecord> Gy87Emulator::lines() const {
   std::lock_guard<std::mutex> lock(mu_);
-  return lines_;
+  std::vector<LineRecord> samples;
+  samples.reserve(lines_.size());
+  for (const LineRecord& r : lines_) {
+    // "$IN": a $INF line, also while it is still being sent ("$IMU" differs at its third byte)
+    if (!r.info && r.text.rfind("$IN", 0) != 0) samples.push_back(r);
+  }
+  return samples;
 }
 
 std::string Gy87Emulator::uart_text() const {

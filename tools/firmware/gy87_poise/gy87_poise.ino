@@ -7,6 +7,9 @@
 //   $IMU,<seq>,<t_us>,<ax>,<ay>,<az>,<gx>,<gy>,<gz>,<mx>,<my>,<mz>,<p_pa>,<temp_c>*<CS>\r\n
 // or, with OUTPUT_RAW 1, the register counts:
 //   $RAW,<seq>,<t_us>,<ax>,<ay>,<az>,<gx>,<gy>,<gz>,<mx>,<my>,<mz>,<p_pa>,<mpu_temp_counts>*<CS>\r\n
+// and, at start and every INFO_EVERY samples, what the sensor is (its low-pass setting, from which
+// the driver knows the delay of the samples: the MPU6050 register map's DLPF_CFG table):
+//   $INF,1,MPU6050,<DLPF_CFG>,,*<CS>\r\n
 // CS = XOR of every character between '$' and '*', two uppercase hex digits.
 // Messages for humans start with '#' (the driver logs them and never counts them as errors).
 // The three magnetometer fields are left empty when there is no magnetometer, it saturated or it
@@ -34,6 +37,15 @@
 #ifndef GYRO_FS_SEL
 #define GYRO_FS_SEL 1            // 0: 250, 1: 500, 2: 1000, 3: 2000 deg/s
 #endif
+#ifndef DLPF_CFG
+#define DLPF_CFG 3               // MPU6050 digital low-pass filter (CONFIG 0x1A), 0..6: 3 = accel
+#endif                           // 44 Hz / 4.9 ms, gyro 42 Hz / 4.8 ms (the driver has the table)
+#if DLPF_CFG < 0 || DLPF_CFG > 6
+#error "DLPF_CFG must be 0..6 (7 is reserved)"
+#endif
+#ifndef INFO_EVERY
+#define INFO_EVERY 100           // samples between $INF lines (a driver that attaches late learns
+#endif                           // the delay within this many; 100 = 1 s at 100 Hz)
 #ifndef BARO_OSS
 #define BARO_OSS 1               // BMP180 oversampling 0..3
 #endif
@@ -138,6 +150,16 @@ static void finishAndSend() {
   line[len++] = '\r';
   line[len++] = '\n';
   Serial.write((const uint8_t*)line, len);
+}
+
+// The sensor info line (docs/SERIAL_PROTOCOL.md "Sensor info"): version 1, chip, setting; the
+// delay fields stay empty (the driver's datasheet table is the one copy of the figures).
+static void sendInfo() {
+  len = 0;
+  putStr("$INF,1,MPU6050,");
+  putUnsigned(DLPF_CFG);
+  putStr(",,");
+  finishAndSend();
 }
 
 // ------------------------------------------------------------------ BMP180
@@ -311,7 +333,7 @@ void setup() {
   writeReg(MPU_ADDR, 0x6B, 0x01);                       // wake up, clock = PLL with X gyro
   const uint32_t wokeUs = micros();
   writeReg(MPU_ADDR, 0x19, 0x00);                       // sample rate divider: 1 kHz
-  writeReg(MPU_ADDR, 0x1A, 0x03);                       // DLPF 44 Hz
+  writeReg(MPU_ADDR, 0x1A, DLPF_CFG);                   // DLPF (3: 44 Hz, 4.9 ms)
   writeReg(MPU_ADDR, 0x1B, (uint8_t)(GYRO_FS_SEL << 3));
   writeReg(MPU_ADDR, 0x1C, (uint8_t)(ACCEL_FS_SEL << 3));
   writeReg(MPU_ADDR, 0x6A, 0x00);                       // I2C master off
@@ -322,6 +344,7 @@ void setup() {
   while ((uint32_t)(micros() - wokeUs) < STARTUP_WAIT_US) {
   }
   Serial.print(F("# gy87_poise v1 ready\r\n"));
+  sendInfo();
   nextUs = micros();
 }
 
@@ -384,4 +407,5 @@ void loop() {
   putFloat(tc / 340.0f + 36.53f, 2);
 #endif
   finishAndSend();
+  if (seq % INFO_EVERY == 0) sendInfo();  // after the sample: its timing is untouched
 }

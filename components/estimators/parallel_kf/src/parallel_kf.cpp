@@ -447,6 +447,13 @@ void ParallelKf::update_attitude() {
   s_.q_world_body = q;
 }
 
+void ParallelKf::set_imu_delay_s(double delay_s) {
+  ParallelKfParams p = p_;
+  p.imu_delay_s = delay_s;
+  p.validate();
+  p_.imu_delay_s = delay_s;
+}
+
 ParallelKfOutput ParallelKf::output() const {
   ParallelKfOutput o;
   o.q_world_body = s_.q_world_body;

@@ -4,6 +4,7 @@
 #include "aid.h"
 
 #include <algorithm>
+#include <stdexcept>
 
 namespace poise {
 namespace aids = selective_ekf_aids;
@@ -95,6 +96,17 @@ void SelectiveEkf::reset() {
   vision_log_.clear();
   newest_vision_capture_ns_ = -1;
   health_ = StateHealth{};
+}
+
+void SelectiveEkf::set_imu_delay_s(double delay_s) {
+  if (initialized_) {
+    throw std::logic_error("selective_ekf: imu_delay_s is set before the first sample or after reset()");
+  }
+  SelectiveEkfParams p = p_;
+  p.imu_delay_s = delay_s;
+  validate(p);
+  p_.imu_delay_s = delay_s;
+  imu_delay_ns_ = seconds_to_ns(delay_s);
 }
 
 Eigen::Quaterniond SelectiveEkf::q_world_body() const {

@@ -7,6 +7,31 @@
 
 namespace poise::eval {
 
+BroadTrial decimate_trial(const BroadTrial& in, size_t every) {
+  if (every == 0 || in.size() < 2 * every) {
+    throw std::invalid_argument("decimate: trial '" + in.stem + "' every " + std::to_string(every) +
+                                " leaves fewer than 2 samples (or every is 0)");
+  }
+  BroadTrial out = in;
+  out.rate_hz = in.rate_hz / static_cast<double>(every);
+  auto keep = [every](auto& rows) {
+    size_t j = 0;
+    for (size_t k = 0; k < rows.size(); k += every) {
+      rows[j++] = rows[k];
+    }
+    rows.resize(j);
+  };
+  keep(out.gyr_rps);
+  keep(out.acc_mps2);
+  keep(out.mag_ut);
+  keep(out.opt_quat_wxyz);
+  keep(out.movement);
+  if (!out.opt_pos_m.empty()) {
+    keep(out.opt_pos_m);
+  }
+  return out;
+}
+
 BroadTrial resample_trial(const BroadTrial& in, double rate_hz) {
   try {
     check_rate(rate_hz, "resample: rate");

@@ -9,6 +9,7 @@
 #include <poise/msg/diagnosticsPubSubTypes.h>
 #include <poise/msg/estimatesPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
+#include <poise/msg/sensor_infoPubSubTypes.h>
 #include <poise/msg/visionPubSubTypes.h>
 
 #include <fastdds/rtps/common/SerializedPayload.h>
@@ -256,6 +257,8 @@ struct InputScan {
   int64_t first_stamp_ns = 0;
   /// The farthest any input sits after its place in the stamp order (0 in recorded order).
   uint64_t window = 0;
+  /// The IMU infos (`imu_info`) in file order: each component gets them before the first sample.
+  std::vector<msg::ImuSensorInfo> imu_infos;
 };
 
 using Progress = std::function<void(uint64_t phase, uint64_t done)>;
@@ -298,6 +301,15 @@ class LogCut {
   uint64_t end_ns_ = std::numeric_limits<uint64_t>::max();
 };
 
+/// A malformed payload: counted, and described while fewer than kMaxDescribedSkips are.
+void count_undecodable(const MessageView& m, const std::string& problem, ProcessStats& stats) {
+  ++stats.undecodable;
+  if (stats.undecodable_details.size() < kMaxDescribedSkips) {
+    stats.undecodable_details.push_back(describe_position(m) + " on '" + m.channel->topic + "', " +
+                                        std::to_string(m.size) + " bytes: " + problem);
+  }
+}
+
 /// Pass 1, a scan: what is malformed (counted and named, never processed; the components'
 /// diagnostics carry the totals from their first message), the first stamp, and how far the stamp
 /// order strays from the file order. Only (stamp, ordinal) is kept per input, so the memory used
@@ -310,6 +322,20 @@ InputScan scan_inputs(const McapReader& reader, const ProcessOptions& options, c
   uint64_t ordinal = 0;
   while (const MessageView* m = cursor.next()) {
     const uint64_t index = ordinal++;
+    // the IMU's delay is a property of the sensor: taken from anywhere in the recording (a
+    // transient-local info is recorded once, maybe before --start)
+    if (m->schema != nullptr && m->channel->topic == options.topics.imu_info &&
+        m->schema->name == dds::type_names::kImuSensorInfo) {
+      msg::ImuSensorInfo info;
+      const std::optional<std::string> problem = decode<msg::ImuSensorInfoPubSubType>(*m, info);
+      if (problem) {
+        count_undecodable(*m, *problem, stats);
+      } else {
+        ++stats.imu_infos;
+        scan.imu_infos.push_back(std::move(info));
+      }
+      continue;
+    }
     if (cut.outside(*m)) {
       continue;
     }
@@ -330,11 +356,7 @@ InputScan scan_inputs(const McapReader& reader, const ProcessOptions& options, c
     }
     if (problem) {
       ++*malformed;
-      ++stats.undecodable;
-      if (stats.undecodable_details.size() < kMaxDescribedSkips) {
-        stats.undecodable_details.push_back(describe_position(*m) + " on '" + m->channel->topic + "', " +
-                                            std::to_string(m->size) + " bytes: " + *problem);
-      }
+      count_undecodable(*m, *problem, stats);
       continue;
     }
     keys.emplace_back(in.stamp_ns, index);
@@ -546,6 +568,12 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
     runner->imu_malformed().store(scan.malformed_imu);
     runner->vision_malformed().store(scan.malformed_vision);
     runner->vehicle_input_malformed().store(scan.malformed_vehicle);
+    for (const msg::ImuSensorInfo& info : scan.imu_infos) {
+      const std::string problem = runner->imu_info(info);
+      if (!problem.empty()) {
+        stats.imu_delay_notes.push_back(runner->step().sensor_id() + ": " + problem);
+      }
+    }
     runners.push_back(std::move(runner));
   }
   components.clear();
@@ -566,6 +594,11 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
     run.add(*m, index, channel_map, valid_input ? std::optional<Input>(std::move(in)) : std::nullopt);
   }
   run.finish();
+  for (const auto& r : runners) {
+    if (const nodes::ImuDelayChoice* d = r->step().imu_delay()) {
+      stats.imu_delay_notes.push_back(r->step().sensor_id() + ": " + d->describe());
+    }
+  }
   for (const auto& r : runners) {
     const std::string& name = r->step().sensor_id();
     stats.estimates[name] += r->published();

@@ -233,6 +233,9 @@ void print_process_summary(const ProcessArgs& a, const record::ProcessOptions& o
   for (const auto& d : stats.undecodable_details) {
     std::cerr << "  skipped " << d << "\n";
   }
+  for (const auto& n : stats.imu_delay_notes) {
+    std::cerr << "  " << n << "\n";
+  }
   if (stats.undecodable > stats.undecodable_details.size()) {
     std::cerr << "  ... and " << stats.undecodable - stats.undecodable_details.size()
               << " more malformed payload(s)\n";

@@ -22,6 +22,8 @@
 #include "poise/imu/serial_port.h"
 #include "poise/runtime/host.h"
 #include "poise/runtime/shipped.h"
+#include "poise/imu/sensor_info.h"
+#include "poise/sim/sample_delay.h"
 #include "poise/sim/sensor_simulator.h"
 
 namespace poise::cli {
@@ -114,6 +116,7 @@ struct SimImuOptions {
   std::vector<double> mag_soft_iron;  // 9 values, row-major
   bool loop = false;
   bool quiet = false;
+  int dlpf = -1;  // MPU6050 DLPF_CFG to model (its datasheet delay + the $INF line); -1: none
 };
 
 /// A still start then tumbling through every orientation, no magnets: for `poise calibrate imu`.
@@ -273,6 +276,21 @@ void run_sim_imu(const SimImuOptions& o) {
     }
     for (int i = 0; i < 9; ++i) soft_iron(i / 3, i % 3) = o.mag_soft_iron[static_cast<std::size_t>(i)];
   }
+  // The MPU6050's digital low-pass filter: its datasheet delay on accel and gyro, and the $INF line
+  // the GY-87 firmware sends at boot and once a second (docs/SERIAL_PROTOCOL.md "Sensor info").
+  std::unique_ptr<sim::SampleDelay> dlpf_delay;
+  std::string info_line;
+  if (o.dlpf >= 0) {
+    const imu::Mpu6050Dlpf* row = imu::mpu6050_dlpf(o.dlpf);
+    if (row == nullptr) throw Error("--dlpf must be an MPU6050 DLPF_CFG setting 0..6", kUsageExitCode);
+    dlpf_delay = std::make_unique<sim::SampleDelay>(row->accel_delay_ms * 1e-3, row->gyro_delay_ms * 1e-3);
+    imu::SensorInfoLine info;
+    info.version = 1;
+    info.chip = "MPU6050";
+    info.setting = o.dlpf;
+    info_line = imu::format_info_line(info);
+  }
+  const auto info_every = static_cast<uint64_t>(std::max(1.0, std::round(rate)));
   imu::FaultInjector injector(spec);
   install_stop_handlers();
   std::unique_ptr<imu::PtyLink> link;
@@ -335,9 +353,12 @@ void run_sim_imu(const SimImuOptions& o) {
       seq = 0;
       boot_ns = t_ns;
       link->write("# poise sim-imu board ready\r\n");
+      if (dlpf_delay) dlpf_delay->reset();  // the board restarts: no history
     }
+    if (!info_line.empty() && seq % info_every == 0) link->write(info_line);  // at boot, then every second
     ImuSample s;
     if (!source.next(&s)) break;
+    if (dlpf_delay) s = dlpf_delay->apply(s);
     if (s.has_mag) s.mag_ut = soft_iron * s.mag_ut + hard_iron;
     const double sensor_s =
         static_cast<double>(t_ns - boot_ns) * 1e-9 * o.speed * (1.0 + o.drift_ppm * 1e-6);
@@ -430,6 +451,10 @@ void register_imu_cli(CLI::App& app) {
   sim_cmd->add_option("--mag-soft-iron", so->mag_soft_iron, "Distort the magnetometer: A, 9 values "
                                                             "row-major")
       ->delimiter(',')->expected(9);
+  sim_cmd->add_option("--dlpf", so->dlpf,
+                      "Model the MPU6050's digital low-pass filter DLPF_CFG N (0..6): delay accel and "
+                      "gyro by its datasheet figure and send the firmware's $INF line")
+      ->check(CLI::Range(0, 6));
   sim_cmd->add_flag("--loop", so->loop, "Repeat a BROAD file forever");
   sim_cmd->add_flag("--quiet", so->quiet, "No progress messages");
   sim_cmd->callback([so] { run_sim_imu(*so); });

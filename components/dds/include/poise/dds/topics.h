@@ -10,6 +10,7 @@ namespace poise::dds {
 /// host file (`topics:` map) or command line.
 struct TopicNames {
   std::string imu = "imu";                        ///< msg::ImuSample
+  std::string imu_info = "imu_info";              ///< msg::ImuSensorInfo (the IMU's delay)
   std::string tag_detections = "tag_detections";  ///< msg::TagDetections
   std::string vision_pose = "vision_pose";        ///< msg::VisionPose
   std::string attitude_prefix = "attitude/";      ///< msg::AttitudeEstimate, + filter id
@@ -45,12 +46,13 @@ enum class QosKind {
 const char* profile_name(QosKind kind);
 
 /// The QoS kind poise uses for a topic name under the default names: sensor streams for `imu`,
-/// `tag_detections`, `vehicle_input`; estimate for everything else.
+/// `tag_detections`, `vehicle_input`; static for `imu_info`; estimate for everything else.
 QosKind default_qos_for_topic(const std::string& topic, const TopicNames& names = TopicNames{});
 
 /// Fully qualified DDS type names of the poise messages (as registered by the generated types).
 namespace type_names {
 inline constexpr const char* kImuSample = "poise::msg::ImuSample";
+inline constexpr const char* kImuSensorInfo = "poise::msg::ImuSensorInfo";
 inline constexpr const char* kVehicleInput = "poise::msg::VehicleInput";
 inline constexpr const char* kTagDetections = "poise::msg::TagDetections";
 inline constexpr const char* kVisionPose = "poise::msg::VisionPose";

@@ -14,6 +14,7 @@
 #include "poise/core/north.h"
 #include "poise/core/types.h"
 #include "poise/dds/topics.h"
+#include "poise/nodes/imu_delay.h"
 #include "poise/nodes/input_health.h"
 #include "poise/nodes/reports.h"
 #include "poise/runtime/component.h"
@@ -22,10 +23,12 @@
 #include <poise/msg/estimates.h>
 #include <poise/msg/vision.h>
 #include <poise/msg/imu.h>
+#include <poise/msg/sensor_info.h>
 
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -100,6 +103,13 @@ class EstimatorStep {
   [[nodiscard]] virtual bool uses_vehicle_input() const { return false; }
   virtual void vehicle_input(const msg::VehicleInput& /*m*/) {}
 
+  /// The IMU's group delay as its driver publishes it (`imu_info`, ImuSensorInfo::gyro_delay_s;
+  /// `what` describes it). A step whose core compensates a delay takes it unless its
+  /// configuration set imu_delay_s (poise/nodes/imu_delay.h); true when the delay in use changed.
+  virtual bool published_imu_delay(double /*delay_s*/, const std::string& /*what*/) { return false; }
+  /// Which IMU delay the step uses and why; nullptr for a step without one.
+  [[nodiscard]] virtual const ImuDelayChoice* imu_delay() const { return nullptr; }
+
   [[nodiscard]] const std::string& sensor_id() const { return sensor_id_; }
   [[nodiscard]] const std::string& component() const { return component_; }
 
@@ -151,6 +161,13 @@ class StepRunner {
   /// Secondary inputs (ignored when the step does not use them).
   void vision(const msg::VisionPose& m, const std::string& writer);
   void vehicle_input(const msg::VehicleInput& m, const std::string& writer);
+  /// What an IMU says about itself (`imu_info`): its delay goes to the step with the next sample
+  /// of that sensor_id. A delay outside [0, 0.05] s is refused and counted (`imu_info_refused`);
+  /// returns the refusal's message ("" when kept).
+  std::string imu_info(const msg::ImuSensorInfo& m);
+  /// The step's imu_delay()->describe() once after the delay in use changed (for the node's log),
+  /// "" otherwise.
+  std::string take_imu_delay_message();
   /// The periodic diagnostics (the live timer): the core's last report, counters, input health,
   /// when none were published in the last half `diagnostics_period_s` (a silent input); true
   /// when published.
@@ -196,6 +213,12 @@ class StepRunner {
   int64_t last_diagnostics_ns_ = 0;      ///< clock of the last diagnostics published
   uint32_t last_seq_ = 0;
   InputHealth inputs_;
+  /// The last ImuSensorInfo of each sensor_id; its delay is offered to the step at that sensor's
+  /// next sample (a node may hear of several IMUs; the step takes the one it is fed).
+  std::map<std::string, msg::ImuSensorInfo> imu_infos_;
+  std::string pending_delay_message_;
+  bool imu_info_seen_ = false;
+  uint64_t imu_info_refused_ = 0;
   DiagnosticsReport core_report_;  ///< the core's last diagnostics()
   std::atomic<uint64_t> imu_malformed_{0};
   std::atomic<uint64_t> vision_malformed_{0};

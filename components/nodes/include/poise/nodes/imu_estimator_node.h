@@ -7,7 +7,9 @@
 // while none come otherwise, so a dead input shows as "no input for N s". Every input's sequence
 // gaps (samples lost on the way) and silence against `input_deadline_s` are counted
 // (InputHealth). The secondary inputs a step uses (`vision_pose`, `vehicle_input`) are subscribed
-// here too; the node only translates: DDS in, step, DDS out.
+// here too; the node only translates: DDS in, step, DDS out. A step with an IMU delay
+// (imu_delay_s) also reads `imu_info` (transient-local: the delay the IMU's driver publishes) and
+// says on stderr which delay it uses, at start and when it changes (poise/nodes/imu_delay.h).
 #pragma once
 
 #include "poise/core/types.h"
@@ -17,6 +19,7 @@
 #include <poise/msg/diagnosticsPubSubTypes.h>
 #include <poise/msg/estimatesPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
+#include <poise/msg/sensor_infoPubSubTypes.h>
 #include <poise/msg/visionPubSubTypes.h>
 
 #include <atomic>
@@ -68,6 +71,8 @@ class ImuEstimatorNode : public runtime::Component {
   std::condition_variable timer_cv_;
   bool timer_stop_ = false;
   std::thread timer_;
+  std::unique_ptr<dds::Reader<msg::ImuSensorInfoPubSubType>> imu_info_reader_;
+  std::atomic<uint64_t> imu_info_malformed_{0};
   std::unique_ptr<dds::Reader<msg::ImuSamplePubSubType>> imu_reader_;
   std::unique_ptr<dds::Reader<msg::VisionPosePubSubType>> vision_reader_;
   std::unique_ptr<dds::Reader<msg::VehicleInputPubSubType>> vehicle_reader_;

@@ -12,7 +12,10 @@
 #include "poise/imu/calibration.h"
 #include "poise/imu/framer.h"
 #include "poise/imu/protocol.h"
+#include "poise/imu/sensor_info.h"
 #include "poise/imu/timing.h"
+
+#include <optional>
 
 namespace poise::imu {
 
@@ -56,6 +59,8 @@ struct DriverStats {
   /// arrivals: clock_ratio_problem() says so.
   double clock_ratio = 0.0;
   std::string last_info;     ///< last '#' message from the firmware
+  uint64_t sensor_info_lines = 0;  ///< $INF lines accepted (repeats of the info in effect included)
+  std::string last_info_problem;   ///< why the last refused $INF line was refused
   [[nodiscard]] uint64_t rejected_total() const;
 };
 
@@ -70,6 +75,10 @@ inline constexpr double kClockRatioLimit = 1.5;
 std::string clock_ratio_problem(const DriverStats& stats);
 
 using SampleSink = std::function<void(const ImuSample&, const SampleInfo&)>;
+/// Called when the sensor's delay becomes known or changes (a new $INF after a restart).
+using DelaySink = std::function<void(const SensorDelay&)>;
+/// Called with the message of each refused $INF line (unknown setting, conflict, ...).
+using InfoProblemSink = std::function<void(const std::string&)>;
 
 class ImuDriver : private FrameSink {
  public:
@@ -83,8 +92,13 @@ class ImuDriver : private FrameSink {
   [[nodiscard]] const DriverStats& stats() const { return stats_; }
   void set_link_bytes_per_s(double v) { params_.link_bytes_per_s = v; }
   [[nodiscard]] const DriverParams& params() const { return params_; }
+  /// The sensor's delay from its $INF line; empty until one was accepted (old firmware: never).
+  [[nodiscard]] const std::optional<SensorDelay>& sensor_delay() const { return delay_; }
+  void set_delay_sink(DelaySink sink) { delay_sink_ = std::move(sink); }
+  void set_info_problem_sink(InfoProblemSink sink) { info_problem_sink_ = std::move(sink); }
 
  private:
+  void on_info_line(const SensorInfoLine& line, std::size_t bytes);
   void on_line(std::string_view line) override;
   void on_info(std::string_view text) override;
   void on_reject(RejectReason reason, std::size_t bytes) override;
@@ -106,6 +120,12 @@ class ImuDriver : private FrameSink {
   int64_t window_sensor_ns_ = 0;
   int64_t window_arrival_ns_ = -1;
   DriverStats stats_;
+  std::optional<SensorDelay> delay_;
+  /// A different $INF may replace the one in effect: at the start, after a reset (reconnect) or a
+  /// sensor restart (the board may have been reflashed); otherwise a different one is a conflict.
+  bool delay_replaceable_ = true;
+  DelaySink delay_sink_;
+  InfoProblemSink info_problem_sink_;
 };
 
 /// Sample rate and latency (arrival - stamp) over a sliding window of host time (pure).

@@ -1,5 +1,7 @@
-// The serial IMU driver as a DDS component: port -> ImuDriver -> `imu` topic (ImuSample) and
-// `diagnostics` (FilterDiagnostics, component_name "imu_driver", once per diagnostics period).
+// The serial IMU driver as a DDS component: port -> ImuDriver -> `imu` topic (ImuSample),
+// `imu_info` (ImuSensorInfo: the sensor's group delay from the firmware's $INF line, when it
+// sends one; transient-local) and `diagnostics` (FilterDiagnostics, component_name "imu_driver",
+// once per diagnostics period).
 // Runs its own reader thread; survives unplug/replug (PortReader). The reading thread never
 // writes to DDS: samples and diagnostics go through PublishQueues whose writer threads may block
 // (a link cut) without stopping the serial port from being read (docs/NETWORK.md).
@@ -27,6 +29,7 @@
 
 #include <poise/msg/diagnosticsPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
+#include <poise/msg/sensor_infoPubSubTypes.h>
 
 #include "poise/dds/publish_queue.h"
 #include "poise/imu/config.h"
@@ -49,6 +52,9 @@ struct ImuNodeOptions {
 
 /// Parses component parameters into options (ConfigError with what to fix).
 ImuNodeOptions imu_node_options(const runtime::ComponentSpec& spec);
+
+/// The ImuSensorInfo message of a sensor delay.
+msg::ImuSensorInfo to_info_msg(const SensorDelay& delay, const std::string& sensor_id, int64_t stamp_ns);
 
 /// Diagnostics report of the driver (pure; counters per reject reason, rates, clock).
 nodes::DiagnosticsReport driver_diagnostics(const DriverStats& stats,
@@ -74,12 +80,14 @@ class ImuDriverNode : public runtime::Component {
  private:
   void on_sample(const ImuSample& sample, const SampleInfo& info);
   void on_tick(int64_t now_ns);
+  void on_delay(const SensorDelay& delay);
 
   ImuNodeOptions options_;
   std::string sensor_id_;
   runtime::HostContext& host_;
   dds::Writer<msg::ImuSamplePubSubType> imu_writer_;
   dds::Writer<msg::FilterDiagnosticsPubSubType> diag_writer_;
+  dds::Writer<msg::ImuSensorInfoPubSubType> info_writer_;
   ImuDriver driver_;
   PortReader reader_;
   RateLatencyMeter meter_;
@@ -88,6 +96,7 @@ class ImuDriverNode : public runtime::Component {
   // Declared after the writers they write to (destroyed first, which stops their threads).
   dds::PublishQueue<msg::ImuSample> imu_queue_;
   dds::PublishQueue<msg::FilterDiagnostics> diag_queue_;
+  dds::PublishQueue<msg::ImuSensorInfo> info_queue_;
   int64_t next_diag_ns_ = 0;
   uint32_t diag_seq_ = 0;
   int64_t last_stamp_ns_ = 0;

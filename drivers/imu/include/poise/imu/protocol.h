@@ -10,6 +10,9 @@
 //     with RawScale. p_pa and temp may be empty; mag may be empty (all three) and an HMC5883L
 //     overflow count (-4096) on any axis also marks the magnetometer invalid for that sample.
 //   CS: two hex digits, XOR of every byte strictly between '$' and '*'.
+//   $INF,<version>,<chip>,<setting>,<accel_delay_us>,<gyro_delay_us>*CS\r\n
+//     what the sensor says about itself (version 1): the chip, its low-pass setting (MPU6050
+//     DLPF_CFG) and, optionally, its group delays; resolved by resolve_sensor_info (sensor_info.h).
 //   Lines starting with '#' are informational messages from the firmware (not samples).
 #pragma once
 
@@ -42,6 +45,9 @@ enum class RejectReason : int {
   kDuplicateSeq,      ///< same seq as the last accepted sample
   kOutOfOrderSeq,     ///< seq older than the last accepted sample (within the reorder window)
   kTimeNotMonotonic,  ///< seq advanced but the sensor clock went backwards
+  kInfoUnsupported,   ///< $INF of another version, or a chip name that is not [A-Za-z0-9_-]{1,16}
+  kInfoUnknownSetting,  ///< $INF whose setting the driver's table lacks (and no delays given)
+  kInfoConflict,      ///< $INF whose delays disagree with the table, or with the info in effect
   kCount
 };
 
@@ -89,12 +95,28 @@ struct RawSample {
   bool from_raw_counts = false;  ///< true for $RAW lines
 };
 
+/// The fields of a version-1 `$INF` line, checked for form only (resolve_sensor_info, in
+/// sensor_info.h, gives them a meaning).
+struct SensorInfoLine {
+  uint32_t version = 0;
+  std::string chip;           ///< e.g. "MPU6050"
+  int32_t setting = -1;       ///< the chip's low-pass setting (MPU6050 DLPF_CFG); -1: field empty
+  bool has_delays = false;    ///< both delay fields given (they are given together or not at all)
+  uint32_t accel_delay_us = 0;
+  uint32_t gyro_delay_us = 0;
+};
+
 /// Outcome of parsing one line.
 struct ParseResult {
   bool ok = false;
   RejectReason reason = RejectReason::kGarbage;  ///< valid iff !ok
-  RawSample sample;                              ///< valid iff ok
+  bool is_info = false;                          ///< ok and a $INF line: `info`, not `sample`
+  RawSample sample;                              ///< valid iff ok and !is_info
+  SensorInfoLine info;                           ///< valid iff ok and is_info
 };
+
+/// Largest group delay a $INF line may give, us: the filters' imu_delay_s range [0, 0.05] s.
+inline constexpr uint32_t kMaxInfoDelayUs = 50000;
 
 /// XOR of the bytes of `payload` (the text strictly between '$' and '*').
 uint8_t nmea_checksum(std::string_view payload);
@@ -132,6 +154,10 @@ struct RawCounts {
   int32_t temperature = 0;  ///< MPU6050 TEMP_OUT counts
 };
 std::string format_raw_line(const RawCounts& c);
+
+/// Formats a version-1 sensor info line "$INF,1,<chip>,<setting>,<a>,<g>*CS\r\n"; the delays are
+/// left empty when !has_delays, the setting when it is negative.
+std::string format_info_line(const SensorInfoLine& info);
 
 /// Wraps a payload (text between '$' and '*') into a full line with checksum and "\r\n".
 std::string wrap_payload(std::string_view payload);

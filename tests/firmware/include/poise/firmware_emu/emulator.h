@@ -49,6 +49,7 @@ struct LineRecord {
   bool delivered = false;     ///< every byte reached a reader of the pty
   bool lost = false;          ///< some byte was dropped (no reader, or the reader fell behind)
   bool complete = false;      ///< its \n was sent (seq and t_us are parsed)
+  bool info = false;          ///< a $INF line (sensor info, no sample): lines() leaves it out
   std::string text;           ///< the line without \r\n
   uint32_t seq = 0;           ///< parsed from the line
   uint32_t t_us = 0;          ///< parsed from the line (the firmware's micros())

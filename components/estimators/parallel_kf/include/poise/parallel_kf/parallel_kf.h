@@ -359,6 +359,10 @@ class ParallelKf {
   /// Resets after an unhealthy state (poise/core/state_health.h).
   [[nodiscard]] uint64_t state_resets() const { return s_.health.resets; }
   [[nodiscard]] const ParallelKfParams& params() const { return p_; }
+  /// Sets imu_delay_s (e.g. the delay the IMU's driver publishes), any time: only the output's
+  /// prediction over the delay uses it, from the next update on. Throws std::invalid_argument
+  /// outside [0, 0.05] s (the range validate() checks).
+  void set_imu_delay_s(double delay_s);
   /// Per source for the last sample (parallel_kf_report.cpp), in this order:
   ///   gyro   fused when it propagated both KFs (not available on the first sample / after a gap);
   ///   accel  KF1's correction: innovation s_A - H1 x1 (m/s^2; of the low-passed accelerometer when

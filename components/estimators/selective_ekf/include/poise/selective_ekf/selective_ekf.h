@@ -467,6 +467,10 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// Resets after an unhealthy state (poise/core/state_health.h).
   [[nodiscard]] uint64_t state_resets() const { return health_.resets; }
   [[nodiscard]] const SelectiveEkfParams& params() const { return p_; }
+  /// Sets imu_delay_s (e.g. the delay the IMU's driver publishes) before the first sample or after
+  /// reset(): the state's time is the IMU stamp minus the delay. Throws std::invalid_argument
+  /// outside [0, 0.05] s, std::logic_error once initialized.
+  void set_imu_delay_s(double delay_s);
   [[nodiscard]] const GaussNewton& gauss_newton() const { return gn_; }
   /// Body-frame attitude standard deviations, deg.
   [[nodiscard]] Eigen::Vector3d attitude_sigma_deg() const;

@@ -94,6 +94,11 @@ Eigen::Vector3d broad_sample_errors_deg(const Eigen::Quaterniond& q_est, const E
 /// for a rate outside [kBroadMinRateHz, kBroadMaxRateHz] or a trial with fewer than 2 samples.
 BroadTrial resample_trial(const BroadTrial& trial, double rate_hz);
 
+/// Every `every`-th sample of a trial (0, every, 2 every, ...), every row kept as recorded (no
+/// anti-alias filter: what a sensor read at the lower rate gives when its own filter is left as it
+/// was), rate_hz / every. Throws std::invalid_argument for every == 0 or fewer than 2 samples left.
+BroadTrial decimate_trial(const BroadTrial& trial, size_t every);
+
 /// Leading integer of a file stem ("24_disturbed_tapping_A" -> 24), 0 if none.
 int trial_number_from_stem(const std::string& stem);
 

@@ -51,7 +51,7 @@ enum class ProcessOrder {
 struct ProcessOptions {
   std::string input;
   std::string output;
-  dds::TopicNames topics;  ///< input topic names (imu, vision_pose, vehicle_input)
+  dds::TopicNames topics;  ///< input topic names (imu, imu_info, vision_pose, vehicle_input)
   std::string output_prefix = "processed/";
   ProcessOrder order = ProcessOrder::kStamp;
   bool copy_input = true;
@@ -73,6 +73,10 @@ struct ProcessStats {
   uint64_t imu_gaps = 0;     ///< gaps in the recorded IMU's header.seq (per sensor, stamp order)
   uint64_t imu_missing = 0;  ///< samples those gaps leave out (live may have processed them)
   uint64_t undecodable = 0;  ///< input payloads that are malformed (skipped, counted)
+  /// ImuSensorInfo messages on `imu_info` (the IMU's delay, given to every component before the
+  /// first sample: a property of the sensor), and what each component then uses
+  uint64_t imu_infos = 0;
+  std::vector<std::string> imu_delay_notes;
   std::vector<std::string> undecodable_details;  ///< the first 10: position (index, offset) + why
   uint64_t damaged_chunks = 0;  ///< chunks that could not be read while processing (skipped)
   /// Inputs held at most to run them in stamp order (how far the stamp order strays from the
