@@ -66,6 +66,7 @@ class ParallelKfStep : public AttitudeStep {
     const SourceReports sources = kf_.sources();
     report.sources_fused = sources_fused_bits(sources);
     report.mag_trusted = source_fused(sources, Source::kMag);
+    report.heading_status = kf_.heading_status();
     return true;
   }
   void diagnostics(DiagnosticsReport& diag) const override {

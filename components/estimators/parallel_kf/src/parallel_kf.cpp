@@ -356,6 +356,7 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a,
     s_.gate_norm_ut = s_.gate.last_norm_ut;
     s_.gate_sin_dip = s_.gate.last_sin_dip;
   }
+  s_.heading_verified = s_.gate.learnt && (verdict == FieldVerdict::kAccepted);
   using MagUse = ParallelKfState::MagUse;
   switch (verdict) {
     case FieldVerdict::kLearning: s_.mag_use = MagUse::kLearning; break;
@@ -475,6 +476,13 @@ ParallelKfOutput ParallelKf::output() const {
   o.field_magnitude_ut = s_.gate.m_ut;
   o.dip_rad = s_.gate.dip_rad;
   return o;
+}
+
+HeadingStatus ParallelKf::heading_status() const {
+  if (!s_.initialized || !s_.heading_initialized || s_.heading_from_gyro) {
+    return HeadingStatus::kNoReference;
+  }
+  return s_.heading_verified ? HeadingStatus::kVerified : HeadingStatus::kUnverified;
 }
 
 double ParallelKf::heading_lag_s(double dt) const {

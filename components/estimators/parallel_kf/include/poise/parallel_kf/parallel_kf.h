@@ -296,6 +296,7 @@ struct ParallelKfState {
   double field_dv_lp = 0.0;    ///< m (dip - alpha) of the same, low-passed the same way, uT
   double since_mag_s = 0.0;    ///< time since a field last corrected the heading, s
   double last_dt_s = 0.0;      ///< the last step, s
+  bool heading_verified = false;  ///< heading_status(): the heading is backed by a verified field
   /// body -> an inertial frame by the gyro alone, and that attitude low-passed as the tilt
   /// (accel_lowpass_tau_s) and the heading (KF2's lag) follow it (gyro scale error)
   Eigen::Quaterniond q_ib = Eigen::Quaterniond::Identity();
@@ -344,6 +345,10 @@ class ParallelKf {
   ///             gate can see (the mean of their squares).
   /// Not coupled between tilt and heading (the two KFs are independent by design).
   [[nodiscard]] Eigen::Matrix3d attitude_covariance(const ParallelKfOutput& out) const;
+  /// Whether the heading is backed by a trusted field (poise/core/heading_status.h):
+  /// kNoReference before a field (6-axis: the gyro's heading), kVerified while the heading is
+  /// corrected by a field the gate accepts against a verified reference, kUnverified otherwise.
+  [[nodiscard]] HeadingStatus heading_status() const;
   /// q_world_body (ENU) from sZ and sX' (2) after the last accepted sample (the state's); the
   /// last valid one if they are (anti)parallel.
   [[nodiscard]] Eigen::Quaterniond q_world_body() const { return s_.q_world_body; }
@@ -435,6 +440,7 @@ class ParallelKfFilter : public AttitudeFilter {
     }
     return kf_.attitude_covariance(kf_.output());
   }
+  [[nodiscard]] HeadingStatus heading_status() const override { return kf_.heading_status(); }
   [[nodiscard]] const ParallelKf& core() const { return kf_; }
 
  private:
