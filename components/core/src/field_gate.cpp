@@ -6,6 +6,11 @@
 #include <algorithm>
 
 namespace poise {
+namespace {
+
+bool earth_like(double norm_ut) { return norm_ut >= kEarthFieldMinUt && norm_ut <= kEarthFieldMaxUt; }
+
+}  // namespace
 
 void FieldGateParams::validate(const ParamCheck& check, const Keys& keys) const {
   check.require(std::isnan(field_magnitude_ut) || (std::isfinite(field_magnitude_ut) && field_magnitude_ut > 0.0),
@@ -114,7 +119,8 @@ FieldVerdict FieldGate::step(const FieldGateParams& p, const Eigen::Vector3d& ma
       cand_norm = norm;
       cand_dip = dip;
     }
-    if (provisional && cand_stable_s >= p.startup_s) {
+    if (provisional && cand_stable_s >= p.startup_s && earth_like(cand_norm) &&
+        (!earth_like(m_ut) || cand_stable_s > consistent_s)) {
       adopt_candidate();
       ++relearnt;
       consistent_s = 0.0;

@@ -19,9 +19,11 @@
 //     has accepted the field against it for verify_s seconds: a start next to a magnet learns the
 //     magnet's field, and nothing in the field tells that until it changes. While provisional, a
 //     gated field that stays consistent (norm within reacquire_tol and dip within dip_tol / 2 of
-//     their own 1 s low-pass) for startup_s, as long as the start-up learnt the first one from,
-//     replaces it at once ("relearnt": of two unverified fields the current consistent one is the
-//     better guess, the old one is gone) and must itself be accepted for verify_s. A configured
+//     their own 1 s low-pass, restarted whenever the field moves) replaces it ("relearnt") when
+//     its magnitude is one the Earth's field can have (kEarthFieldMinUt..kEarthFieldMaxUt) and
+//     either the reference's is not (it held for startup_s, as long as the start-up learnt the
+//     first one from) or it has held longer than the reference was accepted; it must then itself
+//     be accepted for verify_s. A configured
 //     (or World Magnetic Model) reference is verified from the start. 0: a learnt reference is
 //     verified when learnt (the behaviour before verify_s).
 // Times in seconds of sample time (the dt given to step), never per sample. A value type: its
@@ -39,6 +41,11 @@ class ParamCheck;
 
 /// Length of the window over which accepted samples are summed before the reference follows, s.
 inline constexpr double kFieldGateWindowS = 0.04;
+/// The Earth's field magnitude at the surface lies within this range everywhere (the World
+/// Magnetic Model's total intensity spans about 22-67 uT), with a margin for calibration, uT. A
+/// field outside it is not the Earth's alone.
+inline constexpr double kEarthFieldMinUt = 20.0;
+inline constexpr double kEarthFieldMaxUt = 70.0;
 
 struct FieldGateParams {
   bool enabled = true;                  ///< false: every sample accepted (learning still runs)
