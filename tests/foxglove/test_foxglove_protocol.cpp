@@ -213,6 +213,31 @@ TEST(FoxglovePanels, GivenAnAttitudeThenThePlotHasDegreesTheDisturbanceAndTrustW
   EXPECT_EQ(json::parse(attitude_plot_schema())["title"], "poise.AttitudePlot");
 }
 
+TEST(FoxglovePanels, GivenAnUnverifiedHeadingThenThePlotSaysSoWithTheYawSigmaFromTheCovariance) {
+  schema::Value a = attitude(2'500'000'000, 1, 0, 0, 0);
+  schema::Value status;
+  status.kind = schema::Value::Kind::kEnum;
+  status.u = 2;
+  status.s = "HEADING_UNVERIFIED";  // as the CDR decoder names the IDL enumerator
+  schema::Value cov;
+  cov.kind = schema::Value::Kind::kList;
+  for (int k = 0; k < 9; ++k) {
+    cov.items.push_back(leaf(k == 8 ? std::pow(20.0 * M_PI / 180.0, 2) : 0.0));  // yaw sigma 20 deg
+  }
+  a.fields.emplace_back("attitude_covariance", cov);
+  a.fields.emplace_back("heading_status", status);
+  const json j = json::parse(*attitude_plot_json(a, 0));
+  EXPECT_EQ(j["heading_status"], "unverified");
+  EXPECT_EQ(j["heading_verified"], 0);
+  constexpr double kSqrtTolDeg = 1e-12;
+  EXPECT_NEAR(j["yaw_sigma_deg"].get<double>(), 20.0, kSqrtTolDeg);
+  a.fields.back().second.s = "HEADING_VERIFIED";
+  EXPECT_EQ(json::parse(*attitude_plot_json(a, 0))["heading_verified"], 1);
+  const json schema = json::parse(attitude_plot_schema());
+  EXPECT_TRUE(schema["properties"].contains("heading_status"));
+  EXPECT_TRUE(schema["properties"].contains("yaw_sigma_deg"));
+}
+
 TEST(FoxglovePanels, GivenTopicsThenChildFramesAndSlotsAreFixedForPoiseFilters) {
   EXPECT_EQ(child_frame("attitude/parallel_kf"), "parallel_kf");
   EXPECT_EQ(child_frame("truth/attitude"), "truth");

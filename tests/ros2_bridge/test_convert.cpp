@@ -3,10 +3,17 @@
 // against an oracle written here by hand.
 #include "poise/ros2_bridge/convert.h"
 
+#include <poise/ros2/sensor_msgsPubSubTypes.h>
+
+#include <Eigen/Core>
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <limits>
+#include <stdexcept>
+#include <string>
+#include <vector>
 
 namespace poise::ros2 {
 namespace {
@@ -224,6 +231,127 @@ TEST(Ros2Convert, GivenRosNamesThenDdsTopicsHaveTheRtPrefixAndBadNamesAreRefused
   for (const char* bad : {"", "/", "/a//b", "/a/", "/a b", "/1imu", "/imu/9x", "/a-b"}) {
     EXPECT_THROW(dds_topic(bad), std::invalid_argument) << bad;
   }
+}
+
+
+namespace cdr_reader {
+
+/// A little-endian XCDR1 reader written here from the CDR rules (alignment of each primitive to
+/// its size, counted from the end of the 4-byte encapsulation header), independent of the bridge's
+/// generated serializer.
+class Reader {
+ public:
+  explicit Reader(const std::vector<uint8_t>& bytes) : b_(bytes) {
+    if (b_.size() < 4 || b_[0] != 0x00 || b_[1] != 0x01) {
+      throw std::runtime_error("not a little-endian plain CDR payload");
+    }
+  }
+  template <typename T>
+  T read() {
+    pos_ = (pos_ + sizeof(T) - 1) / sizeof(T) * sizeof(T);
+    if (4 + pos_ + sizeof(T) > b_.size()) {
+      throw std::runtime_error("payload too short");
+    }
+    T v;
+    std::memcpy(&v, b_.data() + 4 + pos_, sizeof(T));
+    pos_ += sizeof(T);
+    return v;
+  }
+  std::string string() {
+    const auto n = read<uint32_t>();  // length including the terminating NUL
+    if (n == 0 || 4 + pos_ + n > b_.size()) {
+      throw std::runtime_error("bad string length");
+    }
+    std::string s(reinterpret_cast<const char*>(b_.data() + 4 + pos_), n - 1);
+    pos_ += n;
+    return s;
+  }
+
+ private:
+  const std::vector<uint8_t>& b_;
+  std::size_t pos_ = 0;
+};
+
+}  // namespace cdr_reader
+
+// sensor_msgs/Imu: header {stamp {int32 sec, uint32 nanosec}, string frame_id}, orientation
+// {x, y, z, w}, orientation_covariance[9], ... (the public .msg order).
+TEST(Ros2Convert, GivenAnAttitudeEstimateWhenBridgedThenAnIndependentCdrDecodeOfTheImuGivesThePublishedCovarianceRowMajor) {
+  // A published covariance with distinct variances about world east (x), north (y) and up (z)
+  // and distinct correlations, on an attitude yawed 90 deg: if the bridge rotated it into the body
+  // frame, or transposed or reordered it, x and y or the off-diagonal entries would trade places.
+  Eigen::Matrix3d published;
+  published << 1.0e-4, 2.0e-5, -3.0e-5,  //
+      2.0e-5, 4.0e-4, 5.0e-5,            //
+      -3.0e-5, 5.0e-5, 9.0e-4;
+  msg::AttitudeEstimate a;
+  a.header().stamp_ns(3'000'000'000LL);
+  const double h = std::sqrt(0.5);
+  a.q_world_body().w(h);
+  a.q_world_body().z(h);  // 90 deg about up
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      a.attitude_covariance()[static_cast<std::size_t>(3 * r + c)] = published(r, c);
+    }
+  }
+  ros_sensor::Imu_ imu = attitude_to_imu(a, nullptr, kFrames, 0);
+  ros_sensor::Imu_PubSubType type;
+  eprosima::fastrtps::rtps::SerializedPayload_t payload(type.m_typeSize);
+  ASSERT_TRUE(type.serialize(&imu, &payload));
+  const std::vector<uint8_t> bytes(payload.data, payload.data + payload.length);
+
+  cdr_reader::Reader in(bytes);
+  EXPECT_EQ(in.read<int32_t>(), 3);
+  EXPECT_EQ(in.read<uint32_t>(), 0U);
+  EXPECT_EQ(in.string(), "imu_link");
+  const double qx = in.read<double>();
+  const double qy = in.read<double>();
+  const double qz = in.read<double>();
+  const double qw = in.read<double>();
+  EXPECT_EQ(qx, 0.0);
+  EXPECT_EQ(qy, 0.0);
+  EXPECT_EQ(qz, h);
+  EXPECT_EQ(qw, h) << "ROS order x, y, z, w";
+  double cov[9];
+  for (double& v : cov) {
+    v = in.read<double>();
+  }
+  // REP 145 / sensor_msgs/Imu: row-major, rows and columns the rotation about the fixed frame's
+  // x, y, z axes (REP 103: ENU world, east, north, up), rad^2
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_EQ(cov[3 * r + c], published(r, c)) << "row " << r << " column " << c;
+    }
+  }
+  EXPECT_EQ(cov[8], 9.0e-4) << "element 8: the yaw variance (rotation about up)";
+}
+
+TEST(Ros2Convert, GivenAnUnverifiedHeadingThenTheCompanionStatusIsWarnStampedAsTheImuWithTheYawSigma) {
+  msg::AttitudeEstimate a;
+  a.header().stamp_ns(2'000'000'007LL);
+  a.sensor_id("imu0");
+  a.attitude_covariance()[8] = std::pow(10.0 * 3.14159265358979323846 / 180.0, 2);  // (10 deg)^2
+  a.heading_status(msg::HEADING_UNVERIFIED);
+  const auto d = heading_status_to_diagnostics(a, "parallel_kf", kFrames, 0);
+  const auto imu = attitude_to_imu(a, nullptr, kFrames, 0);
+  EXPECT_EQ(d.header().stamp().sec(), imu.header().stamp().sec());
+  EXPECT_EQ(d.header().stamp().nanosec(), imu.header().stamp().nanosec());
+  ASSERT_EQ(d.status().size(), 1U);
+  const auto& s = d.status()[0];
+  EXPECT_EQ(s.level(), 1) << "WARN";
+  EXPECT_EQ(s.name(), "poise/parallel_kf/heading");
+  EXPECT_EQ(s.message(), "unverified");
+  EXPECT_EQ(s.hardware_id(), "imu0");
+  ASSERT_EQ(s.values().size(), 2U);
+  EXPECT_EQ(s.values()[0].key(), "heading_status");
+  EXPECT_EQ(s.values()[0].value(), "unverified");
+  EXPECT_EQ(s.values()[1].key(), "yaw_sigma_deg");
+  constexpr double kPrintedDegTol = 1e-4;  // default stream precision (6 digits), deg
+  EXPECT_NEAR(std::stod(s.values()[1].value()), 10.0, kPrintedDegTol);
+  a.heading_status(msg::HEADING_VERIFIED);
+  EXPECT_EQ(heading_status_to_diagnostics(a, "parallel_kf", kFrames, 0).status()[0].level(), 0) << "OK";
+  a.heading_status(msg::HEADING_NO_REFERENCE);
+  EXPECT_EQ(heading_status_to_diagnostics(a, "parallel_kf", kFrames, 0).status()[0].message(), "no_reference");
 }
 
 }  // namespace

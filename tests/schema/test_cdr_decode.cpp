@@ -214,6 +214,12 @@ TEST(CdrDecode, GivenAFilledAttitudeEstimateWhenSerializedByFastcdrThenEveryFiel
   m.mag_trusted(g.b());
   m.sources_fused(g.u32());
   g.vec(m.gyro_bias_rps());
+  m.heading_status(poise::msg::HEADING_UNVERIFIED);  // an enum: decoded as its enumerator's name
+  Value status;
+  status.kind = Value::Kind::kEnum;
+  status.u = 2;
+  status.s = "HEADING_UNVERIFIED";
+  g.expected.push_back(to_json(status));
   const Value v = expect_round_trip("poise::msg::AttitudeEstimate",
                                     serialize<poise::msg::AttitudeEstimatePubSubType>(m), g);
   EXPECT_EQ(v.at("attitude_covariance.8")->d, m.attitude_covariance()[8]);

@@ -6,6 +6,11 @@
 #include <algorithm>
 
 namespace poise {
+namespace {
+
+bool earth_like(double norm_ut) { return norm_ut >= kEarthFieldMinUt && norm_ut <= kEarthFieldMaxUt; }
+
+}  // namespace
 
 void FieldGateParams::validate(const ParamCheck& check, const Keys& keys) const {
   check.require(std::isnan(field_magnitude_ut) || (std::isfinite(field_magnitude_ut) && field_magnitude_ut > 0.0),
@@ -18,6 +23,7 @@ void FieldGateParams::validate(const ParamCheck& check, const Keys& keys) const 
   check.non_negative(reacquire_s, keys.reacquire_s, "s, 0 = never");
   check.positive(reacquire_tol, keys.reacquire_tol, "relative");
   check.non_negative(max_reject_s, keys.max_reject_s, "s, 0 = never");
+  check.non_negative(verify_s, keys.verify_s, "s, 0 = verified when learnt");
 }
 
 void FieldGate::reset(const FieldGateParams& p) {
@@ -25,6 +31,7 @@ void FieldGate::reset(const FieldGateParams& p) {
   m_ut = std::isfinite(p.field_magnitude_ut) ? p.field_magnitude_ut : 0.0;
   dip_rad = std::isfinite(p.dip_deg) ? p.dip_deg * kRadPerDeg : 0.0;
   learnt = std::isfinite(p.field_magnitude_ut) && std::isfinite(p.dip_deg);
+  verified = learnt;  // configured or from the magnetic model: trusted
 }
 
 void FieldGate::learn(const FieldGateParams& p, double norm, double dip, double dt_s) {
@@ -41,6 +48,8 @@ void FieldGate::learn(const FieldGateParams& p, double norm, double dip, double 
   }
   if (learn_time_s >= p.startup_s) {
     learnt = true;
+    verified = !(p.verify_s > 0.0);
+    consistent_s = 0.0;
   }
 }
 
@@ -69,6 +78,10 @@ FieldVerdict FieldGate::step(const FieldGateParams& p, const Eigen::Vector3d& ma
   const bool disturbed =
       (p.norm_tol > 0.0 && std::abs(norm - m_ut) > p.norm_tol * m_ut) || sin_dip < sin_lo || sin_dip > sin_hi;
   if (!disturbed) {
+    if (!verified) {
+      consistent_s += dt_s;
+      verified = consistent_s >= p.verify_s;
+    }
     rejected_s = 0.0;
     cand_stable_s = 0.0;
     cand_norm = 0.0;
@@ -85,7 +98,8 @@ FieldVerdict FieldGate::step(const FieldGateParams& p, const Eigen::Vector3d& ma
   }
   ++gated;
   rejected_s += dt_s;
-  if (p.reacquire_s > 0.0) {
+  const bool provisional = !verified && p.verify_s > 0.0;
+  if (p.reacquire_s > 0.0 || provisional) {
     // candidate for a new reference: norm and dip low-passed over 1 s, and how long they stayed
     // stable around that low-pass
     const double dip = std::asin(std::clamp(sin_dip, -1.0, 1.0));
@@ -99,16 +113,33 @@ FieldVerdict FieldGate::step(const FieldGateParams& p, const Eigen::Vector3d& ma
     const bool stable = std::abs(norm - cand_norm) < p.reacquire_tol * cand_norm &&
                         std::abs(dip - cand_dip) < 0.5 * p.dip_tol_deg * kRadPerDeg;
     cand_stable_s = stable ? cand_stable_s + dt_s : 0.0;
-    if (rejected_s >= p.reacquire_s && cand_stable_s >= p.reacquire_s) {
-      m_ut = cand_norm;
-      dip_rad = cand_dip;
+    if (!stable && provisional) {
+      // a provisional reference is replaced by a field steady from now on: the candidate starts
+      // again here rather than dragging the changing field's past behind it
+      cand_norm = norm;
+      cand_dip = dip;
+    }
+    if (provisional && cand_stable_s >= p.startup_s && earth_like(cand_norm) &&
+        (!earth_like(m_ut) || cand_stable_s > consistent_s)) {
+      adopt_candidate();
+      ++relearnt;
+      consistent_s = 0.0;
+      return FieldVerdict::kRelearnt;
+    }
+    if (p.reacquire_s > 0.0 && rejected_s >= p.reacquire_s && cand_stable_s >= p.reacquire_s) {
+      adopt_candidate();
       ++reacquired;
-      rejected_s = 0.0;
-      cand_stable_s = 0.0;
-      cand_norm = 0.0;
     }
   }
   return FieldVerdict::kGated;
+}
+
+void FieldGate::adopt_candidate() {
+  m_ut = cand_norm;
+  dip_rad = cand_dip;
+  rejected_s = 0.0;
+  cand_stable_s = 0.0;
+  cand_norm = 0.0;
 }
 
 void FieldGate::tick(const FieldGateParams& p, double dt_s) {

@@ -41,6 +41,7 @@ class GaussNewtonStep : public AttitudeStep {
     const SourceReports sources = gn_.sources();  // both fused for every estimate it gives
     report.sources_fused = sources_fused_bits(sources);
     report.mag_trusted = source_fused(sources, Source::kMag);
+    report.heading_status = gn_.heading_status();
     return true;
   }
   void diagnostics(DiagnosticsReport& diag) const override {

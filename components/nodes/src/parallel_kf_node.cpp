@@ -66,6 +66,7 @@ class ParallelKfStep : public AttitudeStep {
     const SourceReports sources = kf_.sources();
     report.sources_fused = sources_fused_bits(sources);
     report.mag_trusted = source_fused(sources, Source::kMag);
+    report.heading_status = kf_.heading_status();
     return true;
   }
   void diagnostics(DiagnosticsReport& diag) const override {
@@ -75,6 +76,7 @@ class ParallelKfStep : public AttitudeStep {
     diag.counters["mag_gated_disturbed"] = kf_.mag_gated_count();
     diag.counters["mag_forced"] = kf_.mag_forced_count();
     diag.counters["field_reacquired"] = kf_.field_reacquired_count();
+    diag.counters["field_relearnt"] = kf_.field_relearnt_count();
     diag.counters["state_resets"] = kf_.state_resets();
     diag.metrics = {{"field_magnitude", out.field_magnitude_ut, "uT"},
                     {"dip", out.dip_rad, "rad"},

@@ -48,6 +48,29 @@ bool source_fused(const SourceReports& sources, Source source) {
                      [source](const SourceReport& s) { return s.source == source && s.fused(); });
 }
 
+HeadingStatus heading_status_from_mag(const SourceReports& sources) {
+  for (const SourceReport& s : sources) {
+    if (s.source == Source::kMag) {
+      if (s.fused()) {
+        return HeadingStatus::kVerified;
+      }
+      if (s.decision == SourceDecision::kRejected) {
+        return HeadingStatus::kUnverified;
+      }
+    }
+  }
+  return HeadingStatus::kNoReference;
+}
+
+msg::HeadingStatus to_msg(HeadingStatus status) {
+  switch (status) {  // no default: a new status fails to compile until it is mapped
+    case HeadingStatus::kNoReference: return msg::HEADING_NO_REFERENCE;
+    case HeadingStatus::kVerified: return msg::HEADING_VERIFIED;
+    case HeadingStatus::kUnverified: return msg::HEADING_UNVERIFIED;
+  }
+  return msg::HEADING_NO_REFERENCE;
+}
+
 msg::AttitudeEstimate to_attitude_msg(const AttitudeReport& r, const std::string& sensor_id,
                                       const std::string& filter_id) {
   msg::AttitudeEstimate m;
@@ -70,6 +93,7 @@ msg::AttitudeEstimate to_attitude_msg(const AttitudeReport& r, const std::string
   m.mag_trusted(r.mag_trusted);
   m.sources_fused(r.sources_fused);
   m.gyro_bias_rps(dds::to_msg(r.gyro_bias_rps));
+  m.heading_status(to_msg(r.heading_status));
   return m;
 }
 

@@ -51,6 +51,7 @@ class VehicleStep : public AttitudeStep {
     report.q_world_body = e.q_world_body;
     report.sources_fused = sources_fused_bits(sources);
     report.mag_trusted = source_fused(sources, Source::kMag);
+    report.heading_status = heading_status_from_mag(sources);
     return true;
   }
   void diagnostics(DiagnosticsReport& diag) const override {

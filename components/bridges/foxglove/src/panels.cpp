@@ -2,6 +2,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cctype>
 #include <cmath>
 
 namespace poise::foxglove {
@@ -100,7 +101,14 @@ const std::string& attitude_plot_schema() {
          {"mag_disturbance_angle_deg",
           {{"type", "number"}, {"description", "|measured dip - reference dip|, deg"}}},
          {"mag_trusted",
-          {{"type", "integer"}, {"description", "1 when the magnetometer was used for heading, else 0"}}}}}});
+          {{"type", "integer"}, {"description", "1 when the magnetometer was used for heading, else 0"}}},
+         {"heading_status",
+          {{"type", "string"},
+           {"description", "verified | unverified | no_reference: is the heading backed by a trusted field "
+                           "(AttitudeEstimate.heading_status)"}}},
+         {"heading_verified", {{"type", "integer"}, {"description", "1 when heading_status is verified, else 0"}}},
+         {"yaw_sigma_deg",
+          {{"type", "number"}, {"description", "square root of the published covariance's yaw (zz) element, deg"}}}}}});
   return text;
 }
 
@@ -187,6 +195,23 @@ std::optional<std::string> frame_transform_json(const std::string& type, const s
                {"rotation", {{"x", x / norm}, {"y", y / norm}, {"z", z / norm}, {"w", w / norm}}}});
 }
 
+namespace {
+
+/// heading_status as a word: the IDL enumerator without HEADING_, in lower case ("" when absent).
+std::string heading_word(const schema::Value& attitude) {
+  const schema::Value* v = attitude.at("heading_status");
+  if (v == nullptr || v->kind != schema::Value::Kind::kEnum) {
+    return "";
+  }
+  std::string word = v->s.rfind("HEADING_", 0) == 0 ? v->s.substr(8) : v->s;
+  for (char& c : word) {
+    c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  }
+  return word;
+}
+
+}  // namespace
+
 std::optional<std::string> attitude_plot_json(const schema::Value& attitude, std::int64_t offset_ns) {
   const auto stamp = stamp_ns(attitude);
   const auto time = stamp ? time_json(*stamp, offset_ns) : std::nullopt;
@@ -207,7 +232,10 @@ std::optional<std::string> attitude_plot_json(const schema::Value& attitude, std
          {"z", finite_or_null(number(attitude, "mag_disturbance_world_ut.z"))}}},
        {"mag_disturbance_norm_ut", finite_or_null(number(attitude, "mag_disturbance_norm_ut"))},
        {"mag_disturbance_angle_deg", finite_or_null(number(attitude, "mag_disturbance_angle_rad") * kRadToDeg)},
-       {"mag_trusted", number(attitude, "mag_trusted") == 1.0 ? 1 : 0}});
+       {"mag_trusted", number(attitude, "mag_trusted") == 1.0 ? 1 : 0},
+       {"heading_status", heading_word(attitude)},
+       {"heading_verified", heading_word(attitude) == "verified" ? 1 : 0},
+       {"yaw_sigma_deg", finite_or_null(std::sqrt(number(attitude, "attitude_covariance.8")) * kRadToDeg)}});
 }
 
 }  // namespace poise::foxglove

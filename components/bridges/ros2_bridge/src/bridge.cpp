@@ -10,6 +10,7 @@
 
 #include <poise/msg/estimatesPubSubTypes.h>
 #include <poise/msg/imuPubSubTypes.h>
+#include <poise/ros2/diagnostic_msgsPubSubTypes.h>
 #include <poise/ros2/geometry_msgsPubSubTypes.h>
 #include <poise/ros2/nav_msgsPubSubTypes.h>
 #include <poise/ros2/sensor_msgsPubSubTypes.h>
@@ -163,6 +164,7 @@ std::vector<BridgedTopic> bridged_topics(const BridgeConfig& c, const dds::Topic
   const std::string& ns = c.ros_namespace;
   for (const auto& f : c.attitude) {
     add(ns + "/" + f + "/imu", "sensor_msgs/msg/Imu", names.attitude(f));
+    add(ns + "/" + f + "/heading_status", "diagnostic_msgs/msg/DiagnosticArray", names.attitude(f));
   }
   for (const auto& f : c.pose) {
     add(ns + "/" + f + "/pose", "geometry_msgs/msg/PoseWithCovarianceStamped", names.pose(f));
@@ -217,6 +219,7 @@ class Bridge : public runtime::Component {
     const std::string& ns = config_.ros_namespace;
     for (const auto& f : config_.attitude) {
       attitude_out_[f] = std::make_unique<ImuWriter>(p, dds_topic(ns + "/" + f + "/imu"), kOut);
+      heading_out_[f] = std::make_unique<DiagWriter>(p, dds_topic(ns + "/" + f + "/heading_status"), kOut);
     }
     for (const auto& f : config_.pose) {
       pose_out_[f] = std::make_unique<PoseWriter>(p, dds_topic(ns + "/" + f + "/pose"), kOut);
@@ -357,6 +360,7 @@ class Bridge : public runtime::Component {
   using PoseWriter = dds::Writer<ros_geo::PoseWithCovarianceStamped_PubSubType>;
   using OdomWriter = dds::Writer<ros_nav::Odometry_PubSubType>;
   using TfWriter = dds::Writer<ros_tf::TFMessage_PubSubType>;
+  using DiagWriter = dds::Writer<ros_diag::DiagnosticArray_PubSubType>;
   static constexpr dds::QosKind kOut = dds::QosKind::kEstimate;  // reliable, volatile
   static constexpr std::size_t kRecentSamples = 512;              // IMU samples kept for pairing
   static constexpr std::size_t kMaxPending = 64;                  // estimates waiting for theirs
@@ -452,6 +456,8 @@ class Bridge : public runtime::Component {
     if (out == attitude_out_.end()) {
       return;
     }
+    write(heading_out_.at(filter).get(), heading_status_to_diagnostics(m, filter, config_.frames, offset_ns_), t,
+          "heading_" + filter);
     ImuWriter* writer = out->second.get();
     with_sample(t, [this, writer, m, filter](const msg::ImuSample* sample) {
       write(writer, attitude_to_imu(m, sample, config_.frames, offset_ns_), m.header().stamp_ns(),
@@ -568,6 +574,7 @@ class Bridge : public runtime::Component {
   uint64_t written_ = 0;
   std::map<std::string, uint64_t> refused_;
   std::map<std::string, std::unique_ptr<ImuWriter>> attitude_out_;
+  std::map<std::string, std::unique_ptr<DiagWriter>> heading_out_;  // the attitude Imu's heading status
   std::map<std::string, std::unique_ptr<PoseWriter>> pose_out_;
   std::map<std::string, std::unique_ptr<OdomWriter>> odom_out_;
   std::unique_ptr<ImuWriter> raw_out_;

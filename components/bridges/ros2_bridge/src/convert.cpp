@@ -6,6 +6,7 @@
 #include <cctype>
 #include <cmath>
 #include <limits>
+#include <sstream>
 #include <stdexcept>
 
 namespace poise::ros2 {
@@ -119,6 +120,42 @@ ros_sensor::Imu_ attitude_to_imu(const msg::AttitudeEstimate& estimate, const ms
   out.angular_velocity_covariance(presence<9>(gyro));
   out.linear_acceleration(accel ? vec(sample->accel_mps2()) : vec(0, 0, 0));
   out.linear_acceleration_covariance(presence<9>(accel));
+  return out;
+}
+
+std::string heading_status_word(msg::HeadingStatus status) {
+  switch (status) {
+    case msg::HEADING_NO_REFERENCE: return "no_reference";
+    case msg::HEADING_VERIFIED: return "verified";
+    case msg::HEADING_UNVERIFIED: return "unverified";
+  }
+  return "unknown";
+}
+
+ros_diag::DiagnosticArray_ heading_status_to_diagnostics(const msg::AttitudeEstimate& estimate,
+                                                         const std::string& filter, const Frames& frames,
+                                                         int64_t offset_ns) {
+  constexpr uint8_t kOk = 0;
+  constexpr uint8_t kWarn = 1;
+  const std::string word = heading_status_word(estimate.heading_status());
+  ros_diag::DiagnosticStatus_ status;
+  status.level(estimate.heading_status() == msg::HEADING_VERIFIED ? kOk : kWarn);
+  status.name("poise/" + filter + "/heading");
+  status.message(word);
+  status.hardware_id(estimate.sensor_id().to_string());
+  const double var = estimate.attitude_covariance()[8];
+  std::ostringstream sigma;
+  sigma << (var >= 0.0 ? std::sqrt(var) * (180.0 / 3.14159265358979323846) : -1.0);
+  ros_diag::KeyValue_ kv_status;
+  kv_status.key("heading_status");
+  kv_status.value(word);
+  ros_diag::KeyValue_ kv_sigma;
+  kv_sigma.key("yaw_sigma_deg");
+  kv_sigma.value(sigma.str());
+  status.values({kv_status, kv_sigma});
+  ros_diag::DiagnosticArray_ out;
+  out.header(header(estimate.header().stamp_ns(), frames.world, offset_ns));
+  out.status({status});
   return out;
 }
 
@@ -282,6 +319,8 @@ bool all_finite(const ros_tf::TFMessage_& m) {
   }
   return true;
 }
+
+bool all_finite(const ros_diag::DiagnosticArray_& /*m*/) { return true; }  // text only
 
 std::string dds_topic(const std::string& ros_name) {
   const auto bad = [&ros_name](const std::string& why) {

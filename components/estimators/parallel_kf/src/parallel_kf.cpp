@@ -12,7 +12,8 @@ namespace {
 constexpr double kInitVarDirection = 1e-2;  // P11 / P21 at (re)initialisation, unit-vector comps^2
 constexpr double kInitVarDisturbanceUt2 = 4.0;  // P22 of KF2 at initialisation, uT^2
 constexpr double kMinCos2Dip = 0.05;        // guard for the heading part of the KF2 correction
-constexpr double kBiasPeriodS = 0.04;  // the bias filter runs once per window of this length, s (25 Hz)
+constexpr double kBiasPeriodS = 0.04;
+constexpr double kUnknownHeadingVar = kPi * kPi / 3.0;  // a heading uniform over +-180 deg, rad^2  // the bias filter runs once per window of this length, s (25 Hz)
 
 }  // namespace
 
@@ -34,6 +35,7 @@ ParallelKfParams ParallelKfParams::paper() {
   p.accel_lowpass_order = 1;
   p.share_tilt_correction = false;
   p.mag_reference_tau_s = 0.0;
+  p.mag_verify_s = 0.0;
   return p;
 }
 
@@ -76,7 +78,8 @@ void ParallelKfParams::validate() const {
   check.require(!share_tilt_correction || (tilt.renormalize && tilt.exact_rotation), "share_tilt_correction",
                 "false unless tilt.renormalize and tilt.exact_rotation are true (unit directions)");
   field_gate().validate(check, {"field_magnitude_ut", "dip_deg", "startup_s", "mag_norm_tol", "mag_dip_tol_deg",
-                                "mag_reference_tau_s", "mag_reacquire_s", "mag_reacquire_tol", "mag_max_reject_s"});
+                                "mag_reference_tau_s", "mag_reacquire_s", "mag_reacquire_tol", "mag_max_reject_s",
+                                "mag_verify_s"});
   poise::validate(limits, check);
 }
 
@@ -207,6 +210,11 @@ void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
     s_.heading_initialized = true;
     if (!s_.gate.learnt) {
       s_.gate.step(gp_, s.mag_ut, s_.kf1.up_body(), 0.0);  // learning
+      s_.heading_anchored = true;
+    } else {
+      // a configured reference: a start on a field it gates is not anchored
+      s_.heading_anchored = !p_.mag_gating || !(p_.mag_verify_s > 0.0) ||
+                            s_.gate.step(gp_, s.mag_ut, s_.kf1.up_body(), 0.0) != FieldVerdict::kGated;
     }
   } else {
     // 6-axis: KF2 carries north at ZYX yaw 0 for this tilt (horizontal), propagated by the gyro
@@ -334,6 +342,7 @@ FieldGateParams ParallelKfParams::field_gate() const {
   g.reacquire_s = mag_reacquire_s;
   g.reacquire_tol = mag_reacquire_tol;
   g.max_reject_s = mag_max_reject_s;
+  g.verify_s = mag_verify_s;
   return g;
 }
 
@@ -346,12 +355,20 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a,
   if (!mag_ok) {
     return;
   }
-  if (!s_.heading_initialized || s_.heading_from_gyro) {  // the first field: heading observable now
+  const bool first_field = !s_.heading_initialized || s_.heading_from_gyro;
+  if (first_field) {  // the first field: heading observable now
     s_.kf2.reset(mag.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
     s_.heading_initialized = true;
     s_.heading_from_gyro = false;
   }
   const FieldVerdict verdict = s_.gate.step(gp_, mag, s_.kf1.up_body(), dt);
+  if (first_field) {
+    s_.heading_anchored = verdict != FieldVerdict::kGated || !(p_.mag_verify_s > 0.0);
+  }
+  if (verdict == FieldVerdict::kRelearnt || (verdict == FieldVerdict::kAccepted && !s_.heading_anchored)) {
+    restart_heading(mag);
+    return;
+  }
   if (std::isfinite(s_.gate.last_norm_ut)) {
     s_.gate_norm_ut = s_.gate.last_norm_ut;
     s_.gate_sin_dip = s_.gate.last_sin_dip;
@@ -367,6 +384,7 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a,
       s_.kf2.set_e(mag - s_.gate.m_ut * s_.kf2.u());
       return;
     case FieldVerdict::kAccepted: break;
+    case FieldVerdict::kRelearnt: break;  // restarted above
   }
   if (p_.mag_soft_weight > 0.0 && std::isfinite(s_.gate.last_norm_ut)) {
     // inflate M2 smoothly with the gate ratios (1 at the gate)
@@ -406,6 +424,18 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a,
     s_.mb_head += corr.dot(s_.kf1.up_body()) / s_.c2_dip;
     s_.mb_head_used = true;
   }
+}
+
+void ParallelKf::restart_heading(const Eigen::Vector3d& mag) {
+  s_.kf2.reset(mag.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
+  s_.heading_anchored = true;
+  s_.mag_use = ParallelKfState::MagUse::kRestarted;
+  s_.mag_used = true;
+  s_.since_mag_s = 0.0;
+  s_.field_dn_lp = 0.0;  // deviations from the reference it replaced
+  s_.field_dv_lp = 0.0;
+  s_.mb_head_trusted = false;  // a jump of the heading, not a measurement of the bias
+  s_.q_lp_heading = s_.q_ib;   // the heading's low-passed attitude (gyro scale error) starts again
 }
 
 void ParallelKf::update_attitude() {
@@ -477,6 +507,19 @@ ParallelKfOutput ParallelKf::output() const {
   return o;
 }
 
+bool ParallelKf::heading_unknown() const {
+  // nothing bounds the heading: a provisional reference, or a start on a field the gate gated
+  return s_.heading_initialized && !s_.heading_from_gyro && (!s_.gate.verified || !s_.heading_anchored);
+}
+
+HeadingStatus ParallelKf::heading_status() const {
+  if (!s_.initialized || !s_.heading_initialized || s_.heading_from_gyro) {
+    return HeadingStatus::kNoReference;
+  }
+  const bool long_gated = p_.mag_verify_s > 0.0 && s_.gate.rejected_s >= p_.mag_verify_s;
+  return heading_unknown() || long_gated ? HeadingStatus::kUnverified : HeadingStatus::kVerified;
+}
+
 double ParallelKf::heading_lag_s(double dt) const {
   // With c_d = 0 an accepted sample is weighed against the direction noise 2 sigma_M^2 / m^2
   // (sensor noise and the white disturbance), so KF2's gain per step about the vertical is about
@@ -530,6 +573,9 @@ Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) con
     cov(2, 2) += p_bias(2, 2) * t * t;
     const double power = 0.5 * (s_.field_dn_lp * s_.field_dn_lp + s_.field_dv_lp * s_.field_dv_lp);
     cov(2, 2) += power / (m * m * c * c);
+  }
+  if (heading_unknown()) {
+    cov(2, 2) += kUnknownHeadingVar;
   }
   return cov;
 }

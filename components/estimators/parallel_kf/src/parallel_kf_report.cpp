@@ -81,6 +81,7 @@ void ParallelKf::report(const ImuSample& s, const SampleCheck& c, bool accepted,
     case MagUse::kGated: s_.mag_src.mark_rejected("disturbed"); return;
     case MagUse::kForced: s_.mag_src.mark_fused(s.stamp_ns, "forced_after_max_reject"); return;
     case MagUse::kLearning: s_.mag_src.mark_not_available("learning_field"); return;
+    case MagUse::kRestarted: s_.mag_src.mark_fused(s.stamp_ns, "heading_restarted"); return;
     case MagUse::kNone: break;
   }
   if (s_.mag_used) {

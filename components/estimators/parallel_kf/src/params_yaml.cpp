@@ -52,6 +52,7 @@ ParallelKfParams load_parallel_kf_params(const std::string& path, const Parallel
     r.get("mag_reacquire_s", p.mag_reacquire_s);
     r.get("mag_reacquire_tol", p.mag_reacquire_tol);
     r.get("mag_max_reject_s", p.mag_max_reject_s);
+    r.get("mag_verify_s", p.mag_verify_s);
     r.get("mag_soft_weight", p.mag_soft_weight);
     read_sample_limits(r, p.limits);
     read_magnetometer_use(r, p.use_magnetometer);

@@ -25,7 +25,7 @@ class NorthFilter : public AttitudeFilter, public TrialInputs {
     const std::optional<Eigen::Matrix3d> p = inner_->attitude_covariance();
     return p ? std::optional<Eigen::Matrix3d>(north_.to_true(*p)) : std::nullopt;
   }
-  [[nodiscard]] bool heading_unverified() const override { return inner_->heading_unverified(); }
+  [[nodiscard]] HeadingStatus heading_status() const override { return inner_->heading_status(); }
   void begin_trial(const BroadTrial& trial) override {
     if (auto* inputs = dynamic_cast<TrialInputs*>(inner_.get())) {
       inputs->begin_trial(trial);

@@ -104,12 +104,30 @@ std::string format_flag(const char* what, const FlagDifference& d) {
 
 namespace {
 
+/// A recording made before AttitudeEstimate.heading_status (its channel's schema text lacks it):
+/// the payload with the field appended as HEADING_NO_REFERENCE (a 4-byte enum after
+/// gyro_bias_rps, whose doubles leave the end 8-aligned), so its live estimates still compare.
+/// Any other message unchanged.
+MessageView pre_heading_status(const MessageView& m) {
+  static thread_local std::vector<uint8_t> padded;
+  const std::string schema_text(m.schema->data.begin(), m.schema->data.end());
+  if (schema_text.find("heading_status") != std::string::npos || m.size < 4 || (m.size - 4) % 8 != 0) {
+    return m;
+  }
+  padded.assign(m.data, m.data + m.size);
+  padded.insert(padded.end(), 4, 0);
+  MessageView out = m;
+  out.data = padded.data();
+  out.size = padded.size();
+  return out;
+}
+
 /// Decodes an estimate message into (kind, sensor, seq, sample); false when it is not one.
 bool decode_estimate(const MessageView& m, std::string& kind, std::string& sensor, uint32_t& seq, Sample& s) {
   const std::string& type = m.schema->name;
   if (type == dds::type_names::kAttitudeEstimate) {
     msg::AttitudeEstimate e;
-    if (decode<msg::AttitudeEstimatePubSubType>(m, e)) {
+    if (decode<msg::AttitudeEstimatePubSubType>(pre_heading_status(m), e)) {
       return false;
     }
     kind = "attitude";

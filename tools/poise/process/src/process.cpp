@@ -53,6 +53,7 @@ class FilterStep : public nodes::AttitudeStep {
     if (!cov) {
       report.covariance(0, 0) = -1.0;  // unknown (REP 145)
     }
+    report.heading_status = filter_->heading_status();
     return true;
   }
   void diagnostics(nodes::DiagnosticsReport& /*diag*/) const override {}

@@ -4,6 +4,7 @@
 // libraries extend (see poise/eval/filter_registry.h).
 #pragma once
 
+#include "poise/core/heading_status.h"
 #include "poise/core/types.h"
 
 #include <Eigen/Geometry>
@@ -37,10 +38,11 @@ class AttitudeFilter {
   /// e of q_true (x) q_est^-1 (rad^2, about ENU x, y, z; the IDL's attitude_covariance). Empty
   /// when the filter has none (or is not initialised): a consumer then reads "unknown", never 0.
   [[nodiscard]] virtual std::optional<Eigen::Matrix3d> attitude_covariance() const { return std::nullopt; }
-  /// True while the heading is not verified by a field the filter trusts (a cold start in a
-  /// disturbed field, a long gated stretch): the heading part of attitude_covariance() says how
-  /// far it may be off. False for filters that do not estimate a heading from a field.
-  [[nodiscard]] virtual bool heading_unverified() const { return false; }
+  /// Whether the heading is backed by a field the filter trusts (poise/core/heading_status.h):
+  /// kUnverified during a cold start whose field reference is not yet verified or a long gated
+  /// stretch (the heading part of attitude_covariance() then says how far it may be off),
+  /// kNoReference for filters without an absolute heading (the default).
+  [[nodiscard]] virtual HeadingStatus heading_status() const { return HeadingStatus::kNoReference; }
 };
 
 }  // namespace poise

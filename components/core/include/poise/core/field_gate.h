@@ -15,6 +15,17 @@
 //     becomes the reference (the sensor was moved into another field for good).
 //   - After max_reject_s of continuous rejection the sample is used anyway ("forced"): the gyro-only
 //     heading drift stays bounded in a field that changed for good but never looked stable.
+//   - verify_s > 0: a reference learnt at start-up is provisional ("not verified") until the gate
+//     has accepted the field against it for verify_s seconds: a start next to a magnet learns the
+//     magnet's field, and nothing in the field tells that until it changes. While provisional, a
+//     gated field that stays consistent (norm within reacquire_tol and dip within dip_tol / 2 of
+//     their own 1 s low-pass, restarted whenever the field moves) replaces it ("relearnt") when
+//     its magnitude is one the Earth's field can have (kEarthFieldMinUt..kEarthFieldMaxUt) and
+//     either the reference's is not (it held for startup_s, as long as the start-up learnt the
+//     first one from) or it has held longer than the reference was accepted; it must then itself
+//     be accepted for verify_s. A configured
+//     (or World Magnetic Model) reference is verified from the start. 0: a learnt reference is
+//     verified when learnt (the behaviour before verify_s).
 // Times in seconds of sample time (the dt given to step), never per sample. A value type: its
 // state is copied with the filter's state (VQF-style getState/setState, replays).
 #pragma once
@@ -30,6 +41,11 @@ class ParamCheck;
 
 /// Length of the window over which accepted samples are summed before the reference follows, s.
 inline constexpr double kFieldGateWindowS = 0.04;
+/// The Earth's field magnitude at the surface lies within this range everywhere (the World
+/// Magnetic Model's total intensity spans about 22-67 uT), with a margin for calibration, uT. A
+/// field outside it is not the Earth's alone.
+inline constexpr double kEarthFieldMinUt = 20.0;
+inline constexpr double kEarthFieldMaxUt = 70.0;
 
 struct FieldGateParams {
   bool enabled = true;                  ///< false: every sample accepted (learning still runs)
@@ -42,6 +58,7 @@ struct FieldGateParams {
   double reacquire_s = 20.0;            ///< adopt a stable new field after this long gated, s (0 = never)
   double reacquire_tol = 0.05;          ///< relative stability of the candidate field for adoption
   double max_reject_s = 60.0;           ///< use the field anyway after this long gated, s (0 = never)
+  double verify_s = 0.0;                ///< a learnt reference is provisional until accepted this long, s (0 = verified when learnt)
 
   /// Throws std::invalid_argument naming the key `<prefix><name>` (as spelled in the YAML file of
   /// the filter that embeds the gate; `names` maps each field to its key).
@@ -55,6 +72,7 @@ struct FieldGateParams {
     const char* reacquire_s;
     const char* reacquire_tol;
     const char* max_reject_s;
+    const char* verify_s = "verify_s";
   };
   void validate(const ParamCheck& check, const Keys& keys) const;
 };
@@ -65,6 +83,7 @@ enum class FieldVerdict : uint8_t {
   kAccepted,  ///< within the gate (or the gate is off)
   kGated,     ///< disturbed: do not use it for heading
   kForced,    ///< disturbed, but gated for max_reject_s already: use it anyway
+  kRelearnt,  ///< the provisional reference was replaced by this consistent field: restart the heading on it
 };
 
 struct FieldGate {
@@ -72,6 +91,8 @@ struct FieldGate {
   double m_ut = 0.0;        ///< reference magnitude, uT
   double dip_rad = 0.0;     ///< reference dip, rad
   bool learnt = false;      ///< m and alpha known (configured or learnt)
+  bool verified = false;    ///< the reference is verified (configured, or accepted for verify_s)
+  double consistent_s = 0.0;  ///< accepted time since the provisional reference was learnt, s
   // learning
   double learn_time_s = 0.0;
   double learn_norm_sum = 0.0;
@@ -95,6 +116,7 @@ struct FieldGate {
   uint64_t gated = 0;
   uint64_t forced = 0;
   uint64_t reacquired = 0;
+  uint64_t relearnt = 0;    ///< provisional references replaced (kRelearnt)
   // the last sample tested (reporting): |s_M| (NaN when not tested) and sin(dip)
   double last_norm_ut = std::nan("");
   double last_sin_dip = 0.0;
@@ -117,6 +139,7 @@ struct FieldGate {
  private:
   void learn(const FieldGateParams& p, double norm, double dip, double dt_s);
   void follow(const FieldGateParams& p);
+  void adopt_candidate();  ///< the candidate becomes the reference; rejection and candidate restart
 };
 
 }  // namespace poise

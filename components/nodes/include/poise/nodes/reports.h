@@ -2,6 +2,7 @@
 // every estimator node (so each node stays a thin adapter: sample -> core -> report -> write).
 #pragma once
 
+#include "poise/core/heading_status.h"
 #include "poise/core/source_report.h"
 
 #include <poise/msg/diagnostics.h>
@@ -31,6 +32,8 @@ struct AttitudeReport {
   bool mag_trusted = false;
   uint32_t sources_fused = 0;  ///< msg::SOURCE_* bits
   Eigen::Vector3d gyro_bias_rps{0, 0, 0};
+  /// the core's heading_status() (msg::HEADING_*: the same values)
+  HeadingStatus heading_status = HeadingStatus::kNoReference;
   std::string frame_id = "enu_magnetic";  ///< the world frame: enu_magnetic or enu_true (poise/core/north.h)
 };
 
@@ -46,6 +49,12 @@ uint32_t sources_fused_bits(const SourceReports& sources);
 /// Whether the report of `source` is among `sources` and says fused (the nodes' mag_trusted:
 /// the report of Source::kMag).
 bool source_fused(const SourceReports& sources, Source source);
+
+/// The heading status of a core that keeps none, from its magnetometer report at this step: fused
+/// kVerified, rejected kUnverified, absent or not available kNoReference (the vehicle estimator).
+HeadingStatus heading_status_from_mag(const SourceReports& sources);
+/// The one mapping of the core's HeadingStatus to the IDL's HEADING_* (estimates.idl).
+msg::HeadingStatus to_msg(HeadingStatus status);
 
 /// Builds the message (roll/pitch/yaw ZYX from q, disturbance norm from the vector).
 msg::AttitudeEstimate to_attitude_msg(const AttitudeReport& report, const std::string& sensor_id,

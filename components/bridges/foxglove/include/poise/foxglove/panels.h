@@ -6,7 +6,8 @@
 //    fixed display offset (`FrameLayout`) so the filters' frames stand side by side with the
 //    truth; poses and the camera keep their estimated position.
 //  - poise.AttitudePlot (the Plot panel): roll/pitch/yaw, the magnetic disturbance (world vector,
-//    norm, dip-angle deviation) and whether the magnetometer was trusted, per filter.
+//    norm, dip-angle deviation), whether the magnetometer was trusted, and the heading status
+//    (heading_status word, heading_verified 1/0, yaw_sigma_deg from the covariance), per filter.
 // Stamps: header.stamp_ns + offset_ns (the bridge's `stamps`: CLOCK_REALTIME - CLOCK_MONOTONIC
 // so Foxglove's timeline, built from the receive times, and the messages agree; or 0).
 #pragma once

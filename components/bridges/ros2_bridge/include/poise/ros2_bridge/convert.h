@@ -11,6 +11,7 @@
 
 #include <poise/msg/estimates.h>
 #include <poise/msg/imu.h>
+#include <poise/ros2/diagnostic_msgs.h>
 #include <poise/ros2/nav_msgs.h>
 #include <poise/ros2/sensor_msgs.h>
 #include <poise/ros2/tf2_msgs.h>
@@ -27,6 +28,7 @@ namespace ros_geo = ::geometry_msgs::msg::dds_;
 namespace ros_sensor = ::sensor_msgs::msg::dds_;
 namespace ros_nav = ::nav_msgs::msg::dds_;
 namespace ros_tf = ::tf2_msgs::msg::dds_;
+namespace ros_diag = ::diagnostic_msgs::msg::dds_;
 
 /// Frame ids of the bridged messages.
 struct Frames {
@@ -49,6 +51,18 @@ std::optional<int64_t> from_ros_time(const ros_time::Time_& t, int64_t offset_ns
 /// the orientation of that frame in the fixed (world) frame.
 ros_sensor::Imu_ attitude_to_imu(const msg::AttitudeEstimate& estimate, const msg::ImuSample* sample,
                                  const Frames& frames, int64_t offset_ns);
+/// The heading status companion of attitude_to_imu() (sensor_msgs/Imu has no field for it; topic
+/// `<ns>/<filter>/heading_status`, docs/ROS2.md): diagnostic_msgs/DiagnosticArray with the same
+/// header.stamp as the Imu and one DiagnosticStatus: level OK (0) when the heading is verified,
+/// WARN (1) when unverified or without an absolute reference; name "poise/<filter>/heading";
+/// message "verified" | "unverified" | "no_reference" (the IDL's HEADING_*, lower case);
+/// hardware_id the estimate's sensor_id; values heading_status (the same word) and yaw_sigma_deg
+/// (the square root of orientation_covariance[8], deg, the yaw variance a fuser reads).
+ros_diag::DiagnosticArray_ heading_status_to_diagnostics(const msg::AttitudeEstimate& estimate,
+                                                         const std::string& filter, const Frames& frames,
+                                                         int64_t offset_ns);
+/// "verified", "unverified", "no_reference" (an out-of-range value: "unknown").
+std::string heading_status_word(msg::HeadingStatus status);
 /// sensor_msgs/Imu of a raw sample (`imu/data_raw`): orientation absent (element 0 = -1).
 ros_sensor::Imu_ sample_to_imu(const msg::ImuSample& sample, const Frames& frames, int64_t offset_ns);
 /// sensor_msgs/MagneticField in tesla; nullopt when the sample carries no magnetometer.
@@ -87,6 +101,7 @@ bool all_finite(const ros_sensor::FluidPressure_& m);
 bool all_finite(const ros_geo::PoseWithCovarianceStamped_& m);
 bool all_finite(const ros_nav::Odometry_& m);
 bool all_finite(const ros_tf::TFMessage_& m);
+bool all_finite(const ros_diag::DiagnosticArray_& m);
 
 /// The DDS topic of a ROS 2 topic name: "rt/" + the name without its leading '/'. Throws
 /// std::invalid_argument naming `ros_name` when it is not a ROS name (empty, characters other

@@ -119,6 +119,12 @@ class GaussNewton {
   /// one it sees.
   [[nodiscard]] Eigen::Matrix3d attitude_covariance() const;
   [[nodiscard]] bool initialized() const { return s_.initialized; }
+  /// kVerified whenever an estimate exists: every estimate is solved from the sample's own
+  /// magnetometer (no gate, no memory of the field), so its heading is the field's, disturbed or
+  /// not; the covariance (from the residual) is what tells a disturbance. kNoReference before.
+  [[nodiscard]] HeadingStatus heading_status() const {
+    return s_.initialized ? HeadingStatus::kVerified : HeadingStatus::kNoReference;
+  }
   [[nodiscard]] double dip_rad() const { return s_.dip_rad; }
   [[nodiscard]] const RejectCounters& rejections() const { return s_.rejections; }
   /// Per source (accel, mag) for the last sample: both fused together, or the sample's reason.
@@ -167,6 +173,7 @@ class GaussNewtonFilter : public AttitudeFilter {
     }
     return gn_.attitude_covariance();
   }
+  [[nodiscard]] HeadingStatus heading_status() const override { return gn_.heading_status(); }
   [[nodiscard]] const GaussNewton& core() const { return gn_; }
 
  private:

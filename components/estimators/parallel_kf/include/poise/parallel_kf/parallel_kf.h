@@ -185,6 +185,15 @@ struct ParallelKfParams {
   /// After this long of continuous rejection the magnetometer is used again even though it fails
   /// the gate (bounds the gyro-only heading drift in a permanently changed field), s. 0 = never.
   double mag_max_reject_s = 60.0;
+  /// A field reference learnt at start-up is provisional until the gate has accepted the field
+  /// against it for this long, s (FieldGateParams::verify_s; 0 = verified when learnt, the paper).
+  /// While provisional the heading is unverified and its variance that of a heading uniform over
+  /// +-180 deg, and a gated field that stays consistent for startup_s replaces the reference and
+  /// restarts the heading on it (a cold start next to a magnet). Also: gated for this long, the
+  /// heading is unverified (its variance grows with the gyro's). 5 s: a magnet near a handheld
+  /// device changes the field within seconds of motion, and a start-up field that held that long
+  /// is taken as the Earth's; shorter than mag_reacquire_s, the gate's patience with a verified one.
+  double mag_verify_s = 5.0;
   /// > 0: below the gate, sigma_M^2 is inflated by weight * sigma_M^2 * (r_norm^2 + r_dip^2), r =
   /// deviation / tolerance (soft weighting of a nearly disturbed field). 0 = off.
   double mag_soft_weight = 0.0;
@@ -238,7 +247,7 @@ struct ParallelKfOutput {
 /// are here too, so a restored state gives the same outputs and reports bit for bit.
 struct ParallelKfState {
   /// What the last sample's heading step did with s_M (for the mag report).
-  enum class MagUse : uint8_t { kNone, kLearning, kGated, kForced };
+  enum class MagUse : uint8_t { kNone, kLearning, kGated, kForced, kRestarted };
 
   TiltKf kf1;
   DirectionKf kf2;
@@ -296,6 +305,10 @@ struct ParallelKfState {
   double field_dv_lp = 0.0;    ///< m (dip - alpha) of the same, low-passed the same way, uT
   double since_mag_s = 0.0;    ///< time since a field last corrected the heading, s
   double last_dt_s = 0.0;      ///< the last step, s
+  /// KF2's direction was (re)started from a field the gate did not gate (learning, accepted or
+  /// relearnt); false after a start on a gated field (a configured reference next to a magnet):
+  /// the first accepted field then restarts it
+  bool heading_anchored = false;
   /// body -> an inertial frame by the gyro alone, and that attitude low-passed as the tilt
   /// (accel_lowpass_tau_s) and the heading (KF2's lag) follow it (gyro scale error)
   Eigen::Quaterniond q_ib = Eigen::Quaterniond::Identity();
@@ -341,9 +354,20 @@ class ParallelKf {
   ///           + the disturbance of the fields used, averaged over KF2's lag (the norm and dip
   ///             deviations from the reference, low-passed), over (m cos(dip))^2: its horizontal
   ///             part across the field, which moves the heading, is taken as large as the two the
-  ///             gate can see (the mean of their squares).
+  ///             gate can see (the mean of their squares);
+  ///           + pi^2 / 3 (a heading uniform over +-180 deg) while the field reference is not
+  ///             verified or the heading was started on a gated field: nothing bounds it then.
   /// Not coupled between tilt and heading (the two KFs are independent by design).
   [[nodiscard]] Eigen::Matrix3d attitude_covariance(const ParallelKfOutput& out) const;
+  /// Whether the heading is backed by a trusted field (poise/core/heading_status.h):
+  /// kNoReference before a field (6-axis: the gyro's heading); kVerified when the field reference
+  /// is verified (configured, or accepted for mag_verify_s), the heading was started or corrected
+  /// by a field the gate did not gate, and the gate has not rejected the field for mag_verify_s;
+  /// kUnverified otherwise (learning, a provisional reference, a long gated stretch).
+  [[nodiscard]] HeadingStatus heading_status() const;
+  /// True while nothing bounds the heading (a provisional field reference, or KF2 started on a
+  /// field the gate gated): attitude_covariance() then adds pi^2 / 3 to the heading variance.
+  [[nodiscard]] bool heading_unknown() const;
   /// q_world_body (ENU) from sZ and sX' (2) after the last accepted sample (the state's); the
   /// last valid one if they are (anti)parallel.
   [[nodiscard]] Eigen::Quaterniond q_world_body() const { return s_.q_world_body; }
@@ -354,6 +378,8 @@ class ParallelKf {
   /// Magnetometer samples not used for the heading: gated as disturbed.
   [[nodiscard]] uint64_t mag_gated_count() const { return s_.gate.gated; }
   [[nodiscard]] uint64_t field_reacquired_count() const { return s_.gate.reacquired; }
+  /// Provisional (not yet verified) references replaced by a consistent field (mag_verify_s).
+  [[nodiscard]] uint64_t field_relearnt_count() const { return s_.gate.relearnt; }
   /// Magnetometer samples used although gated, because rejection lasted mag_max_reject_s.
   [[nodiscard]] uint64_t mag_forced_count() const { return s_.gate.forced; }
   /// Resets after an unhealthy state (poise/core/state_health.h).
@@ -390,6 +416,9 @@ class ParallelKf {
   [[nodiscard]] double heading_lag_s(double dt) const;
   void heading_step(const Eigen::Matrix3d& a,
                     const Eigen::Vector3d& mag, bool mag_ok, double dt);
+  /// KF2 restarted on the field `mag` (a relearnt reference, or the first accepted field after a
+  /// start on a gated one): the heading jumps to it, as at a start
+  void restart_heading(const Eigen::Vector3d& mag);
 
   /// s_.q_world_body from sZ and sX' (2), predicted over imu_delay_s; kept when they are
   /// (anti)parallel or sZ is not a direction.
@@ -435,6 +464,7 @@ class ParallelKfFilter : public AttitudeFilter {
     }
     return kf_.attitude_covariance(kf_.output());
   }
+  [[nodiscard]] HeadingStatus heading_status() const override { return kf_.heading_status(); }
   [[nodiscard]] const ParallelKf& core() const { return kf_; }
 
  private:
