@@ -6,6 +6,8 @@
 
 #include <poise/ros2/sensor_msgsPubSubTypes.h>
 
+#include <fastdds/rtps/transport/UDPTransportDescriptor.h>
+#include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -37,6 +39,33 @@ TEST(Participant, ExplicitProfileWinsOverEnvironment) {
   ParticipantOptions options;
   options.profile = "poise_udp";
   EXPECT_EQ(resolve_participant_profile(options), "poise_udp");
+}
+
+// Issue 37: a UDP send that waits for kernel buffer space blocked the IMU driver's writer 2.65 s.
+// Every built-in profile (and the built-in transports of poise_default) sends without waiting;
+// poise_default keeps shared memory beside UDPv4, as Fast DDS's built-in transports do.
+TEST(Participant, GivenEveryShippedProfileWhenItsQosIsMadeThenEveryUdpTransportSendsWithoutBlocking) {
+  namespace rtps = eprosima::fastdds::rtps;
+  // (config/qos/discovery_server_client.xml's profiles take the same path: a user UDPv4 transport;
+  // loading it here beside the built-in file would only log its duplicate endpoint profiles.)
+  for (const std::string profile : {"poise_default", "poise_udp", "poise_loopback"}) {
+    SCOPED_TRACE(profile);
+    ParticipantOptions o;
+    o.profile = profile;
+    const auto qos = participant_qos(o);
+    EXPECT_FALSE(qos.transport().use_builtin_transports) << "the built-in UDP transport would block";
+    int udp = 0;
+    int shm = 0;
+    for (const auto& d : qos.transport().user_transports) {
+      if (const auto* u = dynamic_cast<const rtps::UDPTransportDescriptor*>(d.get())) {
+        ++udp;
+        EXPECT_TRUE(u->non_blocking_send);
+      }
+      shm += dynamic_cast<const rtps::SharedMemTransportDescriptor*>(d.get()) != nullptr ? 1 : 0;
+    }
+    EXPECT_GE(udp, 1);
+    EXPECT_EQ(shm, profile == "poise_default" ? 1 : 0);
+  }
 }
 
 TEST(Participant, TopicNameCannotChangeType) {

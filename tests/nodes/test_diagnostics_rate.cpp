@@ -142,5 +142,79 @@ TEST(DiagnosticsRate, GivenABadRateOrCountWhenReadThenTheErrorNamesTheKeyAndItsR
   EXPECT_NE(error("{diagnostics_every: -1}").find("diagnostics_every must be >= 0"), std::string::npos);
 }
 
+double metric(const msg::FilterDiagnostics& m, const std::string& name) {
+  for (const auto& k : m.metrics()) {
+    if (k.name().to_string() == name) {
+      return k.value();
+    }
+  }
+  ADD_FAILURE() << "no metric " << name;
+  return -1.0;
+}
+
+// Issue 37: no estimator fuses stale input. A stream on the publisher's clock (0.25 s ahead of
+// the runner's), then the stale burst a link cut leaves (20 samples sent 0.8 .. 0.705 s before they
+// arrive), 10 samples 0.3 s late, then the fresh flow. Oracle: the test's own arrival and send
+// times.
+TEST(StepRunnerAge, GivenAStaleBurstWhenFedThenItIsCountedStaleNeverSteppedAndTheFusedAgesAreReported) {
+  constexpr int64_t kPublisherAhead = 250'000'000;
+  constexpr int kFresh = 200;
+  constexpr int kStale = 20;
+  constexpr int kLate = 10;
+  constexpr double kLateAgeS = 0.3;
+  constexpr double kDriftToleranceS = 1e-3;  // InputAge::kDriftAllowance over ~1.2 s, and more
+  for (const std::string method : {"relative", "host_clock", "off"}) {
+    SCOPED_TRACE(method);
+    Fed f(node_params(spec_with("{diagnostics_every: 1, input_age: " + method + "}")));
+    const int64_t ahead = method == "host_clock" ? 0 : kPublisherAhead;  // host_clock: same clock
+    uint32_t seq = 0;
+    const auto send = [&](int64_t sent_ns) {
+      ImuSample s;
+      s.seq = seq++;
+      s.stamp_ns = sent_ns + ahead;
+      f.runner->imu(s, "imu0", "writer", f.out);
+    };
+    for (int i = 0; i < kFresh; ++i, f.now_ns += kSampleStepNs) {
+      send(f.now_ns);
+    }
+    for (int i = 0; i < kStale; ++i) {  // arrive together
+      send(f.now_ns - 800'000'000 + i * kSampleStepNs);
+    }
+    for (int i = 0; i < kLate; ++i, f.now_ns += kSampleStepNs) {
+      send(f.now_ns - static_cast<int64_t>(kLateAgeS * 1e9));
+    }
+    for (int i = 0; i < kFresh; ++i, f.now_ns += kSampleStepNs) {
+      send(f.now_ns);
+    }
+    const msg::FilterDiagnostics& last = f.out.all.back();
+    const uint64_t total = 2 * kFresh + kStale + kLate;
+    EXPECT_EQ(counter(last, "samples_received"), total);
+    if (method == "off") {
+      EXPECT_EQ(counter(last, "core_steps"), total) << "nothing judged";
+      EXPECT_EQ(f.runner->stale(), 0U);
+      continue;
+    }
+    EXPECT_EQ(counter(last, "imu_stale"), static_cast<uint64_t>(kStale));
+    EXPECT_EQ(f.runner->stale(), static_cast<uint64_t>(kStale));
+    EXPECT_EQ(counter(last, "core_steps"), total - kStale) << "a stale sample is never stepped";
+    EXPECT_EQ(counter(last, "samples_rejected"), 0U) << "stale is its own reason, not the core's";
+    EXPECT_NEAR(metric(last, "imu_age_max"), kLateAgeS, kDriftToleranceS);
+    EXPECT_NEAR(metric(last, "imu_age"), 0.0, kDriftToleranceS);
+    EXPECT_NE(f.runner->status().find("stale 20"), std::string::npos) << f.runner->status();
+  }
+}
+
+TEST(StepRunnerAge, GivenTheDefaultOrABadInputAgeWhenReadThenRelativeOrAnErrorNamingTheKeyAndTheMethods) {
+  EXPECT_EQ(node_params(spec_with("{}")).input_age, AgeMethod::kRelative);
+  try {
+    (void)node_params(spec_with("{input_age: wall}"));
+    FAIL() << "accepted";
+  } catch (const runtime::ConfigError& e) {
+    EXPECT_NE(std::string(e.what()).find("input_age: 'wall' is not an input age method (relative, host_clock, off)"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace poise::nodes

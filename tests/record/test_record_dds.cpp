@@ -366,6 +366,51 @@ TEST(RecordReplay, SplitSizeStartsNewCompleteFilesWithoutLosingMessages) {
   EXPECT_EQ(total, static_cast<uint64_t>(kMessages));
 }
 
+// Issue 37: a recorder that matched the IMU writer 2.4 s late said "lost 0" while it had missed
+// 489 samples. The writer's first sample to reach the recorder carries its DDS sequence number;
+// everything below it was written before the match.
+TEST(RecordReplay, GivenAWriterThatWroteBeforeTheRecorderMatchedWhenRecordedThenThoseSamplesAreReportedMissedBeforeMatch) {
+  poise::testing::DomainLease lease;
+  const std::string dir = testing::cases_dir("before_match");
+  constexpr int kBefore = 37;  // written while no recorder exists (the oracle: our own count)
+  constexpr int kAfter = 50;   // written once the recorder matched
+  dds::Participant pub({lease.id(), kProfile, "", "test_pub"});
+  // Reliable, volatile: a late reader gets nothing written before it matched, and everything after.
+  dds::Writer<msg::AttitudeEstimatePubSubType> writer(pub, "attitude/late");
+  // GIVEN a writer that has written kBefore samples with nobody listening
+  for (int i = 0; i < kBefore; ++i) {
+    writer.write(testing::make_attitude(static_cast<uint32_t>(i), 1000 + i));
+  }
+  // WHEN a recorder starts, matches it, and kAfter more are written
+  RecorderOptions ro = testing::recorder_options(dir + "/late.mcap", lease.id(), kProfile);
+  ro.topics = {"attitude/late"};
+  testing::RecorderThread recorder(ro);
+  const bool matched = writer.wait_for_readers(1, kMatchTimeout);
+  ASSERT_TRUE(recorder.matched(matched, "recorder did not match the writer"));
+  for (int i = kBefore; i < kBefore + kAfter; ++i) {
+    writer.write(testing::make_attitude(static_cast<uint32_t>(i), 1000 + i));
+    std::this_thread::sleep_for(1ms);
+  }
+  poise::testing::wait_until([&] { return recorder->written() >= kAfter; }, kDeliveryTimeout);
+  const RecorderStats stats = recorder.stop();
+  ASSERT_TRUE(stats.error.empty()) << stats.error;
+  // THEN the samples from before the match are reported as such, not as a gap, and not as 0
+  const TopicStats& t = stats.topics.at("attitude/late");
+  EXPECT_EQ(t.received, static_cast<uint64_t>(kAfter)) << recorder.log();
+  EXPECT_EQ(t.before_match, static_cast<uint64_t>(kBefore));
+  EXPECT_EQ(t.gaps, 0U);
+  EXPECT_EQ(stats.before_match, static_cast<uint64_t>(kBefore));
+  // and the file holds exactly the samples after the match (header.seq kBefore ...)
+  const McapReader r = McapReader::open_file(dir + "/late.mcap");
+  MessageCursor cursor = r.messages();
+  uint32_t next_seq = kBefore;
+  while (const MessageView* m = cursor.next()) {
+    const auto msg = deserialize<msg::AttitudeEstimatePubSubType, msg::AttitudeEstimate>(m->data, m->size);
+    EXPECT_EQ(msg.header().seq(), next_seq++);
+  }
+  EXPECT_EQ(next_seq, static_cast<uint32_t>(kBefore + kAfter));
+}
+
 TEST(RecordCli, DurationEndsTheRecordingWithACompleteFile) {
   poise::testing::DomainLease lease;
   const std::string dir = testing::cases_dir("duration");

@@ -2,7 +2,11 @@
 
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/rtps/attributes/ServerAttributes.h>
+#include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
+#include <fastdds/rtps/transport/UDPv6TransportDescriptor.h>
+#include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -111,6 +115,35 @@ std::string diagnose_security(const SecurityConfig& security, int domain) {
 }
 }  // namespace
 
+void make_udp_sends_non_blocking(fdds::DomainParticipantQos& qos) {
+  namespace rtps = eprosima::fastdds::rtps;
+  auto& transport = qos.transport();
+  if (transport.use_builtin_transports) {
+    // Fast DDS 2.9's built-in transports, spelled out (RTPSParticipantImpl): UDPv4 with the
+    // participant's socket buffer sizes, and shared memory with a segment of twice the larger.
+    auto udp = std::make_shared<rtps::UDPv4TransportDescriptor>();
+    udp->sendBufferSize = transport.send_socket_buffer_size;
+    udp->receiveBufferSize = transport.listen_socket_buffer_size;
+    auto shm = std::make_shared<rtps::SharedMemTransportDescriptor>();
+    shm->segment_size(std::max(transport.send_socket_buffer_size, transport.listen_socket_buffer_size) * 2);
+    shm->max_message_size(udp->max_message_size());
+    transport.user_transports.insert(transport.user_transports.begin(), {udp, shm});
+    transport.use_builtin_transports = false;
+  }
+  for (auto& descriptor : transport.user_transports) {
+    // Copies: the descriptors are shared with the loaded XML profile.
+    if (const auto* v4 = dynamic_cast<const rtps::UDPv4TransportDescriptor*>(descriptor.get())) {
+      auto copy = std::make_shared<rtps::UDPv4TransportDescriptor>(*v4);
+      copy->non_blocking_send = true;
+      descriptor = copy;
+    } else if (const auto* v6 = dynamic_cast<const rtps::UDPv6TransportDescriptor*>(descriptor.get())) {
+      auto copy = std::make_shared<rtps::UDPv6TransportDescriptor>(*v6);
+      copy->non_blocking_send = true;
+      descriptor = copy;
+    }
+  }
+}
+
 fdds::DomainParticipantQos participant_qos(const ParticipantOptions& options) {
   load_profiles(options.qos_file);
   auto* factory = fdds::DomainParticipantFactory::get_instance();
@@ -122,6 +155,7 @@ fdds::DomainParticipantQos participant_qos(const ParticipantOptions& options) {
                    "those of config/qos/discovery_server_client.xml)");
   }
   qos.name(options.name);
+  make_udp_sends_non_blocking(qos);
   const std::optional<SecurityConfig> security = security_from_env();
   if (security) {
     for (const auto& [name, value] : security_properties(*security)) {

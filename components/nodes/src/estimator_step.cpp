@@ -10,7 +10,7 @@ namespace poise::nodes {
 
 const std::vector<std::string>& NodeParams::keys() {
   static const std::vector<std::string> k{"diagnostics_rate_hz", "diagnostics_every",
-                                          "diagnostics_period_s", "input_deadline_s"};
+                                          "diagnostics_period_s", "input_deadline_s", "input_age"};
   return k;
 }
 
@@ -32,6 +32,12 @@ NodeParams node_params(const runtime::ComponentSpec& spec) {
   p.input_deadline_s = runtime::param<double>(spec, "input_deadline_s", p.input_deadline_s);
   if (!(p.input_deadline_s > 0.0 && p.input_deadline_s <= 3600.0)) {
     throw runtime::ConfigError(spec.origin + ": input_deadline_s must be in (0, 3600] s");
+  }
+  const std::string age = runtime::param<std::string>(spec, "input_age", to_string(p.input_age));
+  try {
+    p.input_age = parse_age_method(age);
+  } catch (const std::invalid_argument& e) {
+    throw runtime::ConfigError(spec.origin + ": input_age: " + e.what());
   }
   return p;
 }
@@ -72,7 +78,8 @@ StepRunner::StepRunner(std::unique_ptr<EstimatorStep> step, const NodeParams& pa
       topics_(std::move(topics)),
       clock_(std::move(clock)),
       diagnostics_interval_ns_(static_cast<int64_t>(1e9 / params_.diagnostics_rate_hz)),
-      inputs_(static_cast<int64_t>(params_.input_deadline_s * 1e9), clock_()) {
+      inputs_(static_cast<int64_t>(params_.input_deadline_s * 1e9), clock_()),
+      ages_(params_.input_age, static_cast<int64_t>(params_.input_deadline_s * 1e9)) {
   inputs_.expect(topics_.imu);
 }
 
@@ -93,13 +100,20 @@ void StepRunner::imu(const ImuSample& sample, const std::string& source, const s
       imu_infos_.erase(it);
     }
   }
-  inputs_.on_sample(topics_.imu, source, sample.seq, writer, clock_());
+  const int64_t arrival = clock_();
+  inputs_.on_sample(topics_.imu, source, sample.seq, writer, arrival);
   last_seq_ = sample.seq;
-  if (!step_->step(sample)) {
+  const InputAge::Verdict age = ages_.judge(topics_.imu, writer, sample.stamp_ns, arrival);
+  if (age.stale) {
+    // counted by ages_ (imu_stale), never stepped: no estimator fuses stale input
+  } else if (!step_->step(sample)) {
     ++rejected_;
-  } else if (step_->estimate(sample, out)) {
-    ++published_;
-    last_latency_ns_ = clock_() - sample.stamp_ns;
+  } else {
+    ages_.fused(topics_.imu, age.age_ns);
+    if (step_->estimate(sample, out)) {
+      ++published_;
+      last_latency_ns_ = clock_() - sample.stamp_ns;
+    }
   }
   const int64_t now = clock_();
   if (params_.diagnostics_every > 0) {
@@ -120,8 +134,11 @@ void StepRunner::vision(const msg::VisionPose& m, const std::string& writer) {
     return;
   }
   ++vision_received_;
-  inputs_.on_sample(topics_.vision_pose, m.sensor_id().to_string(), m.header().seq(), writer, clock_());
-  step_->vision(m);
+  const int64_t arrival = clock_();
+  inputs_.on_sample(topics_.vision_pose, m.sensor_id().to_string(), m.header().seq(), writer, arrival);
+  if (pass_on(topics_.vision_pose, writer, m.header().stamp_ns(), arrival)) {
+    step_->vision(m);
+  }
 }
 
 void StepRunner::vehicle_input(const msg::VehicleInput& m, const std::string& writer) {
@@ -129,9 +146,21 @@ void StepRunner::vehicle_input(const msg::VehicleInput& m, const std::string& wr
     return;
   }
   ++vehicle_received_;
+  const int64_t arrival = clock_();
   inputs_.on_sample(topics_.vehicle_input, m.sensor_id().to_string(), m.header().seq(), writer,
-                    clock_());
-  step_->vehicle_input(m);
+                    arrival);
+  if (pass_on(topics_.vehicle_input, writer, m.header().stamp_ns(), arrival)) {
+    step_->vehicle_input(m);
+  }
+}
+
+bool StepRunner::pass_on(const std::string& topic, const std::string& writer, int64_t stamp_ns,
+                         int64_t arrival_ns) {
+  const InputAge::Verdict age = ages_.judge(topic, writer, stamp_ns, arrival_ns);
+  if (!age.stale) {
+    ages_.fused(topic, age.age_ns);  // handed to the core (which may still refuse it)
+  }
+  return !age.stale;
 }
 
 std::string StepRunner::imu_info(const msg::ImuSensorInfo& m) {
@@ -168,6 +197,7 @@ void StepRunner::publish_diagnostics(int64_t stamp_ns, uint32_t seq, int64_t now
   diag.seq = seq;
   diag.component = step_->component();
   inputs_.report(now_ns, diag);
+  ages_.report(diag);
   diag.metrics.push_back({"latency", static_cast<double>(last_latency_ns_) * 1e-6, "ms"});
   diag.counters["samples_received"] = received_;
   diag.counters["samples_rejected"] = rejected_;
@@ -199,7 +229,11 @@ std::string StepRunner::status() const {
     os << silence << "; ";
   }
   os << "imu lost " << inputs_.totals(topics_.imu).lost << ", imu in " << received_
-     << ", estimates out " << published_ << ", rejected " << rejected_ << ", malformed "
+     << ", estimates out " << published_ << ", rejected " << rejected_;
+  if (ages_.method() != AgeMethod::kOff) {
+    os << ", stale " << ages_.stale(topics_.imu);
+  }
+  os << ", malformed "
      << imu_malformed_.load() << ", last latency " << static_cast<double>(last_latency_ns_) * 1e-3
      << " us";
   if (step_->uses_vision()) {

@@ -93,16 +93,15 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
         }
         const std::optional<std::string> problem = schema::payload_problem(
             schema::TypeTable::builtin(), type_, sample.data.data(), sample.data.size());
+        const uint64_t seq = info.sample_identity.sequence_number().to64long();
         if (problem) {
-          std::ostringstream from;
-          from << info.sample_identity.writer_guid();
-          impl_->reject(index_, sample.data.size(), from.str(), *problem);
+          impl_->reject(index_, sample.data.size(), info.sample_identity.writer_guid(), seq,
+                        *problem);
           continue;
         }
         Pending p;
         p.sub = index_;
         p.log_ns = impl_->log_now();
-        const uint64_t seq = info.sample_identity.sequence_number().to64long();
         p.sequence = static_cast<uint32_t>(seq & 0xFFFFFFFFu);
         // publish_time: the header stamp of poise types and of ROS 2 types, else the source time.
         const std::optional<int64_t> stamp =
@@ -178,17 +177,29 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
     cv.notify_one();
   }
 
-  void push(Pending&& p, const eprosima::fastrtps::rtps::GUID_t& writer_guid, uint64_t seq) {
-    std::lock_guard<std::mutex> lock(mutex);
-    TopicStats& t = stats.topics[subs_topic_name(p.sub)];
+  // Per writer and topic, from DDS sequence numbers (1 for a writer's first sample): the
+  // writer's first sample to reach us says how many it wrote before the match (a recorder that
+  // matches a running writer late never sees them: they are in no gap), a later jump is a gap.
+  // Caller holds the mutex; malformed samples count too (they were received).
+  void track_sequence(TopicStats& t, size_t sub, const eprosima::fastrtps::rtps::GUID_t& writer_guid,
+                      uint64_t seq) {
     ++t.received;
     ++stats.received;
-    uint64_t& last = last_seq[{writer_guid, p.sub}];
-    if (last != 0 && seq > last + 1) {
+    uint64_t& last = last_seq[{writer_guid, sub}];
+    if (last == 0 && seq > 1) {
+      t.before_match += seq - 1;
+      stats.before_match += seq - 1;
+    } else if (last != 0 && seq > last + 1) {
       t.gaps += seq - last - 1;
       stats.sequence_gaps += seq - last - 1;
     }
     last = std::max(last, seq);
+  }
+
+  void push(Pending&& p, const eprosima::fastrtps::rtps::GUID_t& writer_guid, uint64_t seq) {
+    std::lock_guard<std::mutex> lock(mutex);
+    TopicStats& t = stats.topics[subs_topic_name(p.sub)];
+    track_sequence(t, p.sub, writer_guid, seq);
     if (queue.size() >= opt.max_queue_messages) {
       ++stats.dropped_queue_full;
       ++t.dropped;
@@ -199,15 +210,17 @@ struct Recorder::Impl : public fdds::DomainParticipantListener {
   }
 
   // A malformed payload (listener thread): counted; its reason is kept for the report.
-  void reject(size_t sub, size_t bytes, const std::string& writer, const std::string& problem) {
+  void reject(size_t sub, size_t bytes, const eprosima::fastrtps::rtps::GUID_t& writer_guid,
+              uint64_t seq, const std::string& problem) {
     std::lock_guard<std::mutex> lock(mutex);
     TopicStats& t = stats.topics[subs_topic_name(sub)];
-    ++t.received;
+    track_sequence(t, sub, writer_guid, seq);
     ++t.malformed;
-    ++stats.received;
     ++stats.malformed;
     if (t.first_problem.empty()) {
-      t.first_problem = std::to_string(bytes) + " bytes from writer " + writer + ": " + problem;
+      std::ostringstream from;
+      from << writer_guid;
+      t.first_problem = std::to_string(bytes) + " bytes from writer " + from.str() + ": " + problem;
     }
   }
 

@@ -564,6 +564,8 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
   std::vector<std::unique_ptr<nodes::StepRunner>> runners;
   for (ProcessComponent& c : components) {
     outputs.declare(*c.step, options.topics);
+    // No arrival times offline (the clock is the stamps): input ages are a live matter.
+    c.params.input_age = nodes::AgeMethod::kOff;
     auto runner = std::make_unique<nodes::StepRunner>(std::move(c.step), c.params, options.topics,
                                                       [&now_ns] { return now_ns; });
     runner->imu_malformed().store(scan.malformed_imu);

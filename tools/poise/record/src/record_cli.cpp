@@ -361,7 +361,8 @@ void run_record(const RecordArgs& a) {
   for (const auto& [topic, t] : stats.topics) {
     std::cerr << "  " << topic << " (" << t.type << "): received " << t.received << ", written "
               << t.written << ", malformed " << t.malformed << ", dropped " << t.dropped
-              << ", lost " << t.lost << ", sequence gaps " << t.gaps << "\n";
+              << ", lost " << t.lost << ", sequence gaps " << t.gaps << ", before match "
+              << t.before_match << "\n";
     if (t.malformed > 0) {
       std::cerr << "    malformed payloads were rejected, not recorded (first: " << t.first_problem
                 << ")\n";
@@ -369,6 +370,11 @@ void run_record(const RecordArgs& a) {
   }
   if (stats.dropped_queue_full > 0) {
     std::cerr << "  dropped (writer could not keep up): " << stats.dropped_queue_full << "\n";
+  }
+  if (stats.before_match > 0) {
+    std::cerr << "  missed before the first match (written by a publisher before the recorder "
+                 "matched it, from its sequence numbers; not in the file): "
+              << stats.before_match << "\n";
   }
   if (stats.lost > 0) {
     std::cerr << "  lost (received, not in the file because writing failed): " << stats.lost

@@ -89,8 +89,17 @@ void load_profiles(const std::string& qos_file = {});
 /// The participant profile that `options` resolve to.
 std::string resolve_participant_profile(const ParticipantOptions& options);
 
+/// No UDP send of a poise participant ever waits (issue 37): every UDP transport of `qos` gets
+/// Fast DDS's `non_blocking_send`, the built-in transports spelled out (UDPv4 + shared memory, as
+/// Fast DDS 2.9 makes them) so that theirs does too. A datagram the kernel cannot take at once
+/// (the socket's send buffer full, e.g. of datagrams held for unreachable hosts) is dropped as if
+/// lost on the wire: best-effort samples are lost, reliable ones resent. Without it a write on
+/// the sensor path blocked 2.65 s when a host with two unreachable neighbours was cut off.
+void make_udp_sends_non_blocking(eprosima::fastdds::dds::DomainParticipantQos& qos);
+
 /// The one participant factory of every poise process, tools included: the QoS of `options`'
-/// participant profile (QoS file loaded first), its name, DDS Security from the environment
+/// participant profile (QoS file loaded first), its name, non-blocking UDP sends
+/// (make_udp_sends_non_blocking), DDS Security from the environment
 /// (security_from_env()) and the discovery setup (a Discovery Server client from
 /// ROS_DISCOVERY_SERVER or the profile; SUPER_CLIENT for ParticipantRole::kObserver).
 /// Throws DdsError with what to fix (unknown profile, bad ROS_DISCOVERY_SERVER, missing files).

@@ -15,6 +15,7 @@
 #include "poise/core/types.h"
 #include "poise/dds/topics.h"
 #include "poise/nodes/imu_delay.h"
+#include "poise/nodes/input_age.h"
 #include "poise/nodes/input_health.h"
 #include "poise/nodes/reports.h"
 #include "poise/runtime/component.h"
@@ -48,8 +49,13 @@ struct NodeParams {
   /// With no diagnostics for this long (a silent input), on a timer (live only), so a dead input
   /// shows as "no input for N s".
   double diagnostics_period_s = 1.0;
-  /// an input silent for longer is reported silent (`<topic>_silent`, status "no input on ...")
+  /// an input silent for longer is reported silent (`<topic>_silent`, status "no input on ..."),
+  /// and a sample older than this when it arrives is stale: counted (`<topic>_stale`), never fused
   double input_deadline_s = 0.5;
+  /// How a sample's age is judged (poise/nodes/input_age.h): `relative` (sound whatever the
+  /// publisher's clock), `host_clock` (stamps on this host's clock only), `off`. Live only: `poise
+  /// process` has no arrival times (its clock is the stamps) and runs with `off`.
+  AgeMethod input_age = AgeMethod::kRelative;
   static const std::vector<std::string>& keys();
 };
 NodeParams node_params(const runtime::ComponentSpec& spec);
@@ -154,11 +160,12 @@ class StepRunner {
   StepRunner(std::unique_ptr<EstimatorStep> step, const NodeParams& params, dds::TopicNames topics,
              Clock clock);
 
-  /// One IMU sample from `writer` (an identity of its publisher, for restarts): track, step,
-  /// estimate, diagnostics when due (diagnostics_rate_hz, or every diagnostics_every samples).
+  /// One IMU sample from `writer` (an identity of its publisher, for restarts): track, judge its
+  /// age (a stale one is counted and not stepped), step, estimate, diagnostics when due
+  /// (diagnostics_rate_hz, or every diagnostics_every samples).
   void imu(const ImuSample& sample, const std::string& source, const std::string& writer,
            StepOutputs& out);
-  /// Secondary inputs (ignored when the step does not use them).
+  /// Secondary inputs (ignored when the step does not use them; stale ones counted, not passed on).
   void vision(const msg::VisionPose& m, const std::string& writer);
   void vehicle_input(const msg::VehicleInput& m, const std::string& writer);
   /// What an IMU says about itself (`imu_info`): its delay goes to the step with the next sample
@@ -185,16 +192,21 @@ class StepRunner {
   [[nodiscard]] uint64_t received() const { return received_; }
   [[nodiscard]] uint64_t published() const { return published_; }
   [[nodiscard]] uint64_t rejected() const { return rejected_; }
+  /// IMU samples older than the input deadline when they arrived (never stepped).
+  [[nodiscard]] uint64_t stale() const { return ages_.stale(topics_.imu); }
   [[nodiscard]] uint64_t diagnostics_published() const { return diagnostics_published_; }
   [[nodiscard]] uint64_t vision_received() const { return vision_received_; }
   [[nodiscard]] uint64_t vehicle_inputs_received() const { return vehicle_received_; }
-  /// "imu lost N, imu in N, estimates out N, rejected N, malformed N, last latency X us", then
+  /// "imu lost N, imu in N, estimates out N, rejected N, malformed N, last latency X us" (", stale
+  /// N" after "rejected N" while ages are judged), then
   /// ", vision in N, vision malformed N" / ", vehicle_input in N, vehicle_input malformed N" for
   /// the secondary inputs the step uses; preceded by the silent inputs.
   [[nodiscard]] std::string status() const;
 
  private:
   void publish_diagnostics(int64_t stamp_ns, uint32_t seq, int64_t now_ns, StepOutputs& out);
+  /// Judges a secondary input's age; true when it may be handed to the core.
+  bool pass_on(const std::string& topic, const std::string& writer, int64_t stamp_ns, int64_t arrival_ns);
 
   std::unique_ptr<EstimatorStep> step_;
   NodeParams params_;
@@ -219,6 +231,7 @@ class StepRunner {
   std::string pending_delay_message_;
   bool imu_info_seen_ = false;
   uint64_t imu_info_refused_ = 0;
+  InputAge ages_;
   DiagnosticsReport core_report_;  ///< the core's last diagnostics()
   std::atomic<uint64_t> imu_malformed_{0};
   std::atomic<uint64_t> vision_malformed_{0};

@@ -4,7 +4,9 @@
 //    metadata = the topic's QoS as discovered (reliability, durability) + the poise QoS profile;
 //  - log_time = reception (log clock, default CLOCK_REALTIME ns); publish_time = Header.stamp_ns
 //    read from the payload (bytes 4-11), or the writer's source timestamp when it has none;
-//  - sequence = the DDS writer's sample sequence number (low 32 bits): gaps reveal losses.
+//  - sequence = the DDS writer's sample sequence number (low 32 bits): gaps reveal losses; a
+//    writer's first sample received tells how many it wrote before the recorder matched it (DDS
+//    sequence numbers start at 1 per writer), counted as `before_match`.
 // Every payload is checked against its IDL type before it is queued (schema::payload_problem):
 // a malformed one from any participant is counted per topic, reported, and not written; the
 // recording goes on.
@@ -45,6 +47,9 @@ struct TopicStats {
   uint64_t lost = 0;      ///< valid samples received but not in the file (write error)
   uint64_t dropped = 0;   ///< dropped because the write queue was full
   uint64_t gaps = 0;      ///< samples missing according to writer sequence numbers
+  /// Samples each writer wrote before the recorder matched it (its first sample's DDS sequence
+  /// number - 1, per writer): never offered to the recorder, not in the file, not in `gaps`.
+  uint64_t before_match = 0;
   uint64_t malformed = 0;  ///< rejected: not a valid payload of `type` (never written)
   std::string first_problem;  ///< why the first malformed payload was rejected
 };
@@ -56,6 +61,7 @@ struct RecorderStats {
   uint64_t lost = 0;     ///< never reached a durable chunk (write error: disk full, ...)
   uint64_t dropped_queue_full = 0;
   uint64_t sequence_gaps = 0;
+  uint64_t before_match = 0;  ///< all topics (see TopicStats::before_match)
   uint64_t malformed = 0;  ///< all topics (see TopicStats::malformed)
   std::vector<std::string> files;
   double elapsed_s = 0.0;
