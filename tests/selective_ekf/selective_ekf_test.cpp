@@ -755,6 +755,7 @@ void expect_same_params(const SelectiveEkfParams& a, const SelectiveEkfParams& b
   EXPECT_EQ(a.aiding_period_s, b.aiding_period_s);
   EXPECT_EQ(a.sigma_heading_rad_sqrt_s, b.sigma_heading_rad_sqrt_s);
   EXPECT_EQ(a.heading_disturbance_weight, b.heading_disturbance_weight);
+  EXPECT_EQ(a.gyro_scale_error, b.gyro_scale_error);
   EXPECT_EQ(a.rest_detection, b.rest_detection);
   EXPECT_EQ(a.rest_gyro_max_rps, b.rest_gyro_max_rps);
   EXPECT_EQ(a.rest_accel_max_mps2, b.rest_accel_max_mps2);
@@ -1193,6 +1194,7 @@ TEST(SelectiveEkfParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorNam
     {"sigma_gyro_rps", [](SelectiveEkfParams& p) { p.sigma_gyro_rps = 0.0; }},
     {"heading_dip_tolerance_deg", [](SelectiveEkfParams& p) { p.heading_dip_tolerance_deg = std::nan(""); }},
     {"imu_delay_s", [](SelectiveEkfParams& p) { p.imu_delay_s = 0.1; }},
+    {"gyro_scale_error", [](SelectiveEkfParams& p) { p.gyro_scale_error = -0.01; }},
     {"limits.max_dt_s", [](SelectiveEkfParams& p) { p.limits.max_dt_s = 0.0; }}
   }, [](const SelectiveEkfParams& p) { SelectiveEkf f(p); });
 }

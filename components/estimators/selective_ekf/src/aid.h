@@ -66,6 +66,10 @@ VisionMeasurement vision_measurement(const SelectiveEkfParams& p, const VisionPo
 void aid_vision_attitude(const AidContext& c, const VisionMeasurement& v, SourceStatus& st);
 void aid_vision_position(const AidContext& c, const VisionMeasurement& v, SourceStatus& st);
 
+/// The factor (>= 1) on the heading row's noise density sigma_heading^2 (split mode): raised as
+/// the field nears the gate's tolerances (heading_disturbance_weight).
+double heading_noise_factor(const SelectiveEkfParams& p, const FieldGate& gate, const FieldGateParams& gp);
+
 /// The selective test (8)-(10) of the magnetometer for one sample, with `up` the up vector the
 /// dip is measured against and `theta_q` the quaternion error (heading: |dpsi|). Updates the
 /// trust state (hold, quaternion-error lock-out) and mag.status; returns whether it is trusted.

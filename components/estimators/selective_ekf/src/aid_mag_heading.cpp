@@ -9,6 +9,15 @@
 
 namespace poise::selective_ekf_aids {
 
+double heading_noise_factor(const SelectiveEkfParams& p, const FieldGate& gate, const FieldGateParams& gp) {
+  if (!(p.heading_disturbance_weight > 0.0) || !std::isfinite(gate.last_norm_ut)) {
+    return 1.0;
+  }
+  const double rn = gate.norm_ratio(gp);
+  const double rd = gate.dip_ratio();
+  return 1.0 + p.heading_disturbance_weight * (rn * rn + rd * rd);
+}
+
 void aid_mag_heading(const AidContext& c, const ImuInput& in, bool anchored, MagTrust& mag, SourceStatus& st) {
   const int64_t now = in.stamp_ns;
   // validate: a magnetometer sample, an interval for the density, a field that is not vertical
@@ -30,11 +39,7 @@ void aid_mag_heading(const AidContext& c, const ImuInput& in, bool anchored, Mag
   Eigen::Matrix<double, 1, SelectiveEkf::kN> h = Eigen::Matrix<double, 1, SelectiveEkf::kN>::Zero();
   h.block<1, 3>(0, SelectiveEkf::kTh) = u.transpose();
   double r = c.p.sigma_heading_rad_sqrt_s * c.p.sigma_heading_rad_sqrt_s / in.dt_s;
-  if (c.p.heading_disturbance_weight > 0.0 && std::isfinite(c.x.field_gate.last_norm_ut)) {
-    const double rn = c.x.field_gate.norm_ratio(mag.gate);
-    const double rd = c.x.field_gate.dip_ratio();
-    r *= 1.0 + c.p.heading_disturbance_weight * (rn * rn + rd * rd);
-  }
+  r *= heading_noise_factor(c.p, c.x.field_gate, mag.gate);
   const Eigen::Matrix<double, 1, 1> innov(dpsi);
   // reject (drop): report the innovation the row would have had, then leave it out
   if (!trusted && c.p.action == ImuQuatAction::kDrop) {

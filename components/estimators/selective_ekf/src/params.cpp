@@ -25,6 +25,7 @@ void validate(const SelectiveEkfParams& p) {
   check.non_negative(p.output_max_correction_dps, "output_max_correction_dps", "deg/s, 0 = off");
   check.require(p.aiding_period_s >= 0.0 && p.aiding_period_s <= 1.0, "aiding_period_s", "in [0, 1] (s)");
   check.positive(p.sigma_heading_rad_sqrt_s, "sigma_heading_rad_sqrt_s", "rad sqrt(s)");
+  check.require(p.gyro_scale_error >= 0.0 && p.gyro_scale_error < 1.0, "gyro_scale_error", "in [0, 1) (relative)");
   check.require(p.heading_disturbance_weight >= 0.0 && p.heading_disturbance_weight <= 1.0e6, "heading_disturbance_weight",
                 "in [0, 1e6] (0 = off; larger would make the heading variance overflow)");
   check.positive(p.rest_gyro_max_rps, "rest_gyro_max_rps", "rad/s");

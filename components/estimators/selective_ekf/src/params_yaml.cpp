@@ -47,6 +47,7 @@ void read(YamlParamReader& r, SelectiveEkfParams& p) {
   r.get("field_reacquire_tol", p.field_reacquire_tol);
   r.get("field_max_reject_s", p.field_max_reject_s);
   r.get("sigma_heading_rad_sqrt_s", p.sigma_heading_rad_sqrt_s);
+  r.get("gyro_scale_error", p.gyro_scale_error);
   r.get("rest_detection", p.rest_detection);
   r.get("rest_gyro_max_rps", p.rest_gyro_max_rps);
   r.get("rest_accel_max_mps2", p.rest_accel_max_mps2);

@@ -216,6 +216,7 @@ void SelectiveEkf::process_imu(const ImuInput& in_raw, bool first_pass) {
   const bool anchored = x_.last_vision_fused_ns >= 0 &&
                         now - x_.last_vision_fused_ns <= seconds_to_ns(p_.vision_anchor_s);
   aids::MagTrust mag{mag_, gp_, ref_angle_rad_, ref_norm_ut_};
+  bool aided = false;
   if (p_.imu_measurement == ImuMeasurement::kQuaternion) {
     aids::aid_imu_quat(c, in, anchored, mag, status_of(SelectiveEkfAid::kImuQuat));
   } else if (x_.last_aiding_ns < 0 || now - x_.last_aiding_ns >= seconds_to_ns(p_.aiding_period_s)) {
@@ -236,7 +237,9 @@ void SelectiveEkf::process_imu(const ImuInput& in_raw, bool first_pass) {
     x_.last_aiding_ns = now;
     aids::aid_accel_tilt(c, in, status_of(SelectiveEkfAid::kAccelTilt));
     aids::aid_mag_heading(c, in, anchored, mag, status_of(SelectiveEkfAid::kMagHeading));
+    aided = true;
   }
+  track_unmodelled(in_raw, aided, in.dt_s);
 }
 
 void SelectiveEkf::process_vision(const VisionPose& v, bool first_pass) {

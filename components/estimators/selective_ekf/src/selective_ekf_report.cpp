@@ -98,10 +98,7 @@ SourceReports selective_ekf_sources(const SelectiveEkf& ekf) {
   return out;
 }
 
-Eigen::Matrix3d attitude_covariance_world(const SelectiveEkf& ekf) {
-  const Eigen::Matrix3d r = ekf.q_world_body().toRotationMatrix();
-  return r * ekf.state().P.block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh) * r.transpose();
-}
+Eigen::Matrix3d attitude_covariance_world(const SelectiveEkf& ekf) { return ekf.attitude_covariance(); }
 
 std::optional<Eigen::Matrix3d> SelectiveEkfFilter::attitude_covariance() const {
   if (!ekf_.initialized()) {

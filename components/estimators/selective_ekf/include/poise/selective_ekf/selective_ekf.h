@@ -218,6 +218,12 @@ struct SelectiveEkfParams {
   /// (vision back after a blackout) is a short glide, not a jump an AR renderer would show; small
   /// ones pass at once. Differences above 30 deg (a reset) are taken at once. 0 = the state.
   double output_max_correction_dps = 20.0;
+  /// Published covariance only (attitude_covariance(); the estimate does not use it): the
+  /// relative gyro scale error it allows for, per axis. A scale error s turns the estimate by s
+  /// times the rotation the corrections have not caught up with yet (the rotation away from the
+  /// attitude low-passed over the tilt's and the heading's correction lags). MPU6050: +-3 %
+  /// uncalibrated; 0.5 % is the residue after a rate-table or turn calibration. 0 = none.
+  double gyro_scale_error = 0.005;
   Eigen::Quaterniond q_body_camera = Eigen::Quaterniond::Identity();  ///< camera -> IMU body
   Eigen::Vector3d p_body_camera_m{0.0, 0.0, 0.0};  ///< camera origin in the body frame, m
 
@@ -343,6 +349,22 @@ struct SelectiveEkfPreState {
   RestDetector rest_detector;           ///< rest detected at the last sample: rest_detector.rest
 };
 
+/// What the published covariance adds to P (attitude_covariance(), src/published_covariance.cpp):
+/// the errors the filter does not model, tracked with the samples (so replays reproduce them).
+struct SelectiveEkfUnmodelled {
+  /// the rotation the tilt's and the heading's corrections have not caught up with yet: the
+  /// world-frame rotation increments R w dt high-passed over each correction lag (rad); a gyro
+  /// scale error s turns the estimate by s times it
+  Eigen::Vector3d rotation_tilt{0.0, 0.0, 0.0};
+  Eigen::Vector3d rotation_heading{0.0, 0.0, 0.0};
+  /// the tilt rows' innovation as a world-frame rotation, low-passed over the tilt's correction
+  /// lag: the accelerometer's disturbance the tilt is still following, rad
+  Eigen::Vector3d tilt_innovation_lp{0.0, 0.0, 0.0};
+  double field_dn_lp = 0.0;    ///< |m| - reference of the fields used, low-passed over the heading lag, uT
+  double field_dv_lp = 0.0;    ///< reference |m| (dip - reference dip), the same, uT
+  double last_dt_s = 0.0;      ///< the last sample interval, s
+};
+
 /// The filter state (inspectable; one snapshot per IMU sample in the history).
 struct SelectiveEkfState {
   Eigen::Vector3d w_rps{0.0, 0.0, 0.0};
@@ -365,6 +387,7 @@ struct SelectiveEkfState {
   SelectiveEkfPreState pre;
   int64_t last_aiding_ns = -1;           ///< last tilt/heading fusion (kSplit)
   FieldGate field_gate;                  ///< kSplit: magnetometer reference and gate
+  SelectiveEkfUnmodelled unmodelled;     ///< the published covariance's own terms
 };
 
 /// Everything the selective EKF carries from one sample to the next besides its parameters: the
@@ -472,8 +495,19 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// outside [0, 0.05] s, std::logic_error once initialized.
   void set_imu_delay_s(double delay_s);
   [[nodiscard]] const GaussNewton& gauss_newton() const { return gn_; }
-  /// Body-frame attitude standard deviations, deg.
+  /// Body-frame attitude standard deviations, deg (of the state's P).
   [[nodiscard]] Eigen::Vector3d attitude_sigma_deg() const;
+  /// The published covariance of q_world_body(): world-frame rotation vector of q_true (x)
+  /// q_est^-1, rad^2 (ENU x, y, z). P's attitude block carried to the output (the delay
+  /// prediction with the rate's covariance, the output blend's remaining correction) plus what
+  /// the filter does not model (src/published_covariance.cpp, ESTIMATORS.md): the gyro bias error
+  /// through the accelerometer low-pass's lag, the accelerometer disturbance the tilt is still
+  /// following, the gyro scale error (gyro_scale_error) against the correction lags, and the field
+  /// disturbance the gate lets through. The estimate itself never uses it.
+  [[nodiscard]] Eigen::Matrix3d attitude_covariance() const;
+  /// The heading's correction time constant now, s: the heading density the filter fuses (rad^2
+  /// s, inflated while untrusted) over P's heading variance; infinite without a heading row.
+  [[nodiscard]] double heading_lag_s() const;
   /// Back to the state of a new filter (parameters kept).
   void reset();
   /// The filter's whole state: two filters with the same parameters and the same full state give
@@ -492,6 +526,9 @@ class SelectiveEkf : private SelectiveEkfFullState {
   void replay_from(size_t snapshot_index);
   void blend_output(const Eigen::Vector3d& gyro_rps, double dt_s);
   void preprocess(ImuInput& in);
+  /// The published covariance's tracked terms after a step (SelectiveEkfUnmodelled); `aided`:
+  /// tilt and heading were fused at this step over `aiding_dt_s`.
+  void track_unmodelled(const ImuInput& in, bool aided, double aiding_dt_s);
   // process_imu / process_vision run the aid sources (one file each: src/aid_*.cpp, shape and
   // declarations in the private header src/aid.h) on the state.
   SourceStatus& status_of(SelectiveEkfAid a);
@@ -522,8 +559,8 @@ class SelectiveEkf : private SelectiveEkfFullState {
 ///     "no_sample" in kQuaternion; zero_rate only at rest).
 SourceReports selective_ekf_sources(const SelectiveEkf& ekf);
 
-/// World-frame attitude covariance (rad^2, small angles about ENU x, y, z): R P_thth R^T of the
-/// body-frame error state, R = R(q_world_body()).
+/// World-frame attitude covariance (rad^2, small angles about ENU x, y, z): the published one,
+/// ekf.attitude_covariance().
 Eigen::Matrix3d attitude_covariance_world(const SelectiveEkf& ekf);
 
 /// The 9x9 covariance [p, v, theta] (m^2, (m/s)^2, rad^2; theta world-frame small angles) of the

@@ -1,0 +1,171 @@
+// The selective EKF's published covariance (issue 31; ESTIMATORS.md "The published covariance"):
+// P's attitude block carried to the output, plus the errors the filter does not model. The
+// estimate never reads it: P keeps its role in the gains and gates, so the estimate is unchanged.
+//
+// Correction lags and shares, from P and the attitude's process noise q (rad^2/s): for an attitude
+// direction held by corrections against a random walk q, the steady state gives the correction
+// time constant tau = P / q (IMU only: the tilt's is accel_lowpass_tau_s by construction of the
+// derived sigma_tilt, the heading's about 19 s with the defaults; with vision both are far
+// shorter). A measurement of noise density r (rad^2 s) contributes P / r of the correction rate
+// 1 / tau, so an error of that measurement that is slower than tau reaches the estimate with the
+// share P^2 / (q r) (1 when it is the only correction: the low-passed accelerometer for tilt
+// without vision, the magnetometer for heading).
+//
+// Terms (world frame):
+//   P          R P_thth R^T at the output: the delay prediction exp(w d) with the rate's
+//              covariance, and the output blend's remaining correction delta delta^T
+//   bias lag   tilt: a bias error b turns the gyro-propagated frame of the accelerometer
+//              low-pass, which then lags gravity by tau_lp b: share^2 tau_lp^2 P_b (world x, y)
+//   following  tilt: the accelerometer's disturbance (external acceleration, its errors) that the
+//              tilt is still following: the tilt rows' innovation as a world-frame rotation,
+//              low-passed over the tilt's lag (what averages out within it is left out, what
+//              persists is what the estimate is being pulled by): share^2 i_lp i_lp^T (x, y)
+//   scale      tilt and heading: a gyro scale error s turns the estimate by s times the rotation
+//              the corrections have not caught up with: the world-frame rotation increments
+//              R w dt high-passed over each lag (X' = R w - X / tau), s^2 X_i^2 per world axis
+//              (x, y over the tilt's lag, z over the heading's)
+//   field      heading: the disturbance of the fields the gate accepted, its norm deviation dn and
+//              dip deviation dv = m (dip - dip_ref) low-passed over the heading's lag; the part
+//              across the horizontal field, which turns the heading, is taken as large as those
+//              two: share^2 (dn^2 + dv^2) / 2 / (m cos dip)^2
+// The gyro's white noise and bias random walk between corrections, the heading's growth while the
+// magnetometer is gated (and its fall when it is trusted again) are P's own.
+#include "aid.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace poise {
+namespace aids = selective_ekf_aids;
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+/// dt / (tau + dt): the low-pass gain over one step (0 for an infinite tau).
+double lowpass_gain(double dt_s, double tau_s) {
+  return std::isfinite(tau_s) ? dt_s / (std::max(tau_s, 0.0) + dt_s) : 0.0;
+}
+
+/// The attitude's process noise density, rad^2/s: the walk plus the gyro's white noise
+/// integrated over the sample interval (the same as the derived tilt density uses).
+double attitude_process_noise(const SelectiveEkfParams& p, double dt_s) {
+  return p.sigma_attitude_walk * p.sigma_attitude_walk + p.sigma_gyro_rps * p.sigma_gyro_rps * std::max(dt_s, 0.0);
+}
+
+}  // namespace
+
+double SelectiveEkf::heading_lag_s() const {
+  const Eigen::Vector3d u = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
+  const double p_h = u.dot(x_.P.block<3, 3>(kTh, kTh) * u);
+  const double q = attitude_process_noise(p_, x_.unmodelled.last_dt_s);
+  return q > 0.0 ? p_h / q : kInf;
+}
+
+void SelectiveEkf::track_unmodelled(const ImuInput& in, bool aided, double aiding_dt_s) {
+  SelectiveEkfUnmodelled& u = x_.unmodelled;
+  if (!(in.dt_s > 0.0)) {
+    u = SelectiveEkfUnmodelled{};
+    return;
+  }
+  u.last_dt_s = in.dt_s;
+  const double q = attitude_process_noise(p_, in.dt_s);
+  const Eigen::Matrix3d r = x_.q_world_body.toRotationMatrix();
+  const Eigen::Matrix3d p_world = r * x_.P.block<3, 3>(kTh, kTh) * r.transpose();
+  const double tau_tilt = q > 0.0 ? 0.5 * (p_world(0, 0) + p_world(1, 1)) / q : kInf;
+  const double tau_heading = heading_lag_s();
+  const Eigen::Vector3d turn = r * (x_.w_rps * in.dt_s);
+  u.rotation_tilt = (1.0 - lowpass_gain(in.dt_s, tau_tilt)) * (u.rotation_tilt + turn);
+  u.rotation_heading = (1.0 - lowpass_gain(in.dt_s, tau_heading)) * (u.rotation_heading + turn);
+  if (p_.imu_measurement == ImuMeasurement::kSplit) {
+    const SourceStatus& tilt = status(SelectiveEkfAid::kAccelTilt);
+    if (aided && tilt.last_stamp_ns == in.stamp_ns) {
+      // the rows are e_i . (z_up x u) = e_i . dth with e_1, e_2 across u (aid_accel_tilt.cpp)
+      const Eigen::Vector3d up = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
+      const Eigen::Vector3d a = std::abs(up.x()) < 0.6 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+      const Eigen::Vector3d e1 = up.cross(a).normalized();
+      const Eigen::Vector3d e2 = up.cross(e1);
+      const Eigen::Vector3d innov_world = r * (e1 * tilt.innovation.x() + e2 * tilt.innovation.y());
+      u.tilt_innovation_lp += lowpass_gain(aiding_dt_s, tau_tilt) * (innov_world - u.tilt_innovation_lp);
+    }
+  }
+  const SourceStatus& heading = status(SelectiveEkfAid::kMagHeading);
+  const FieldGate& g = x_.field_gate;
+  if (aided && heading.last == Decision::kFused && heading.last_stamp_ns == in.stamp_ns && g.learnt &&
+      g.m_ut > 0.0 && std::isfinite(g.last_norm_ut)) {
+    const double k = lowpass_gain(aiding_dt_s, tau_heading);
+    const double dip = std::asin(std::clamp(g.last_sin_dip, -1.0, 1.0));
+    u.field_dn_lp += k * (g.last_norm_ut - g.m_ut - u.field_dn_lp);
+    u.field_dv_lp += k * (g.m_ut * (dip - g.dip_rad) - u.field_dv_lp);
+  }
+}
+
+Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
+  const SelectiveEkfUnmodelled& u = x_.unmodelled;
+  // P at the output: th_out = Exp(w d)^T th + J_r(w d) d w (the delay prediction)
+  const double d = static_cast<double>(imu_delay_ns_) * aids::kNsToS;
+  const Eigen::Vector3d wd = x_.w_rps * d;
+  const Eigen::Matrix3d a = quat_exp(wd).toRotationMatrix().transpose();
+  const Eigen::Matrix3d b = so3_right_jacobian(wd) * d;
+  const Eigen::Matrix3d p_tt = x_.P.block<3, 3>(kTh, kTh);
+  const Eigen::Matrix3d p_tw = x_.P.block<3, 3>(kTh, kW);
+  const Eigen::Matrix3d p_ww = x_.P.block<3, 3>(kW, kW);
+  const Eigen::Matrix3d body = a * p_tt * a.transpose() + a * p_tw * b.transpose() +
+                               b * p_tw.transpose() * a.transpose() + b * p_ww * b.transpose();
+  const Eigen::Quaterniond q_state = state_output();
+  const Eigen::Matrix3d r = q_state.toRotationMatrix();
+  Eigen::Matrix3d cov = r * body * r.transpose();
+  // the output blend's remaining correction (world frame): q_out = exp(delta) q_state
+  const Eigen::Vector3d delta = quat_log(quat_align_sign(q_world_body(), q_state) * q_state.conjugate());
+  cov += delta * delta.transpose();
+
+  const double q = attitude_process_noise(p_, u.last_dt_s);
+  if (!(q > 0.0)) {
+    return cov;
+  }
+  const Eigen::Matrix3d p_world = r * p_tt * r.transpose();
+  const double p_tilt = 0.5 * (p_world(0, 0) + p_world(1, 1));
+  const double p_heading = p_world(2, 2);
+  // gyro scale error: s times the rotation away from the attitude low-passed over each lag
+  if (p_.gyro_scale_error > 0.0) {
+    const double s2 = p_.gyro_scale_error * p_.gyro_scale_error;
+    cov(0, 0) += s2 * u.rotation_tilt.x() * u.rotation_tilt.x();
+    cov(1, 1) += s2 * u.rotation_tilt.y() * u.rotation_tilt.y();
+    cov(2, 2) += s2 * u.rotation_heading.z() * u.rotation_heading.z();
+  }
+  if (p_.imu_measurement != ImuMeasurement::kSplit) {
+    return cov;
+  }
+  // tilt: the low-passed accelerometer's own errors, by its share of the tilt's correction
+  const double tilt_sigma = std::isnan(p_.sigma_tilt_rad_sqrt_s)
+                                ? p_.accel_lowpass_tau_s * std::sqrt(q)
+                                : p_.sigma_tilt_rad_sqrt_s;
+  const double r_tilt = tilt_sigma * tilt_sigma;
+  if (r_tilt > 0.0) {
+    const double share = std::min(1.0, p_tilt * p_tilt / (q * r_tilt));
+    const double tau = p_.accel_lowpass_tau_s;
+    const Eigen::Matrix3d p_b = r * x_.P.block<3, 3>(kB, kB) * r.transpose();
+    cov.topLeftCorner<2, 2>() += share * share * tau * tau * p_b.topLeftCorner<2, 2>();
+    cov.topLeftCorner<2, 2>() += share * share * u.tilt_innovation_lp.head<2>() * u.tilt_innovation_lp.head<2>().transpose();
+  }
+  // heading: the accepted field's disturbance, by the magnetometer's share of the heading's correction
+  const FieldGate& fg = x_.field_gate;
+  const SourceStatus& heading = status(SelectiveEkfAid::kMagHeading);
+  double r_heading = kInf;
+  if (heading.last == Decision::kFused || heading.last == Decision::kFusedInflated) {
+    r_heading = p_.sigma_heading_rad_sqrt_s * p_.sigma_heading_rad_sqrt_s *
+                aids::heading_noise_factor(p_, fg, gp_) *
+                (heading.last == Decision::kFusedInflated ? p_.inflate_factor : 1.0);
+  }
+  const double cos_dip = std::cos(fg.dip_rad);
+  if (std::isfinite(r_heading) && fg.learnt && fg.m_ut > 0.0 && cos_dip > 1e-3) {
+    const double share = std::min(1.0, p_heading * p_heading / (q * r_heading));
+    const double mh = fg.m_ut * cos_dip;
+    const double power = 0.5 * (u.field_dn_lp * u.field_dn_lp + u.field_dv_lp * u.field_dv_lp);
+    cov(2, 2) += share * share * power / (mh * mh);
+  }
+  return cov;
+}
+
+}  // namespace poise
