@@ -161,6 +161,81 @@ TEST(SelectiveEkfConsistency, GivenAMagnetWhenTheMagnetometerIsGatedThenTheHeadi
   EXPECT_LT(after, gated);
 }
 
+TEST(SelectiveEkfHeadingStatus, GivenAMagnetWhenTheMagnetometerIsGatedThenTheHeadingIsUnverifiedUntilTrustedAgain) {
+  // GIVEN a static sensor and a magnet from 15 s (3 s approach, 15 s held, then leaving)
+  constexpr double kHeldFromS = 20.0;  ///< s: inside the hold
+  constexpr double kHeldToS = 32.0;
+  constexpr double kCleanFromS = 40.0;  ///< s: the magnet gone, before the second one (50 s)
+  constexpr double kCleanToS = 49.0;
+  constexpr double kLearningS = 0.5;    ///< s: the field reference being learnt (field_startup_s 1 s)
+  constexpr double kLearntS = 2.0;      ///< s: learnt
+  constexpr double kCleanBeforeToS = 14.0;  ///< s: before the magnet approaches (15 s)
+  sim::SensorSimulator simu(sim::make_scenario("static_magnet", 100.0, 1));
+  SelectiveEkf ekf;
+  SelectiveEkfParams six_axis_params;
+  six_axis_params.use_magnetometer = MagnetometerUse::kOff;
+  SelectiveEkf six_axis(six_axis_params);
+  EXPECT_EQ(ekf.heading_status(), HeadingStatus::kNoReference) << "before the first sample";
+  int verified_clean = 0, clean = 0, unverified_held = 0, held = 0, six_axis_no_reference = 0, samples = 0;
+  HeadingStatus learning = HeadingStatus::kVerified;
+  // WHEN the filters run over it
+  while (!simu.done()) {
+    const sim::SimSample s = simu.next();
+    ekf.update_imu(s.imu);
+    six_axis.update_imu(s.imu);
+    const double t = s.truth.t_s;
+    const HeadingStatus h = ekf.heading_status();
+    if (t <= kLearningS) {
+      learning = h;
+    }
+    if (t >= kLearntS && t < kCleanBeforeToS) {
+      verified_clean += h == HeadingStatus::kVerified;
+      ++clean;
+    } else if (t >= kHeldFromS && t <= kHeldToS) {
+      unverified_held += h == HeadingStatus::kUnverified;
+      ++held;
+    } else if (t >= kCleanFromS && t <= kCleanToS) {
+      verified_clean += h == HeadingStatus::kVerified;
+      ++clean;
+    }
+    six_axis_no_reference += six_axis.heading_status() == HeadingStatus::kNoReference;
+    ++samples;
+  }
+  // THEN the heading is unverified while the field reference is learnt and while the magnet is
+  // held, verified in the clean field before and after it, and a 6-axis filter has no reference
+  EXPECT_EQ(learning, HeadingStatus::kUnverified) << "the reference is still being learnt";
+  EXPECT_EQ(unverified_held, held);
+  EXPECT_EQ(verified_clean, clean);
+  EXPECT_EQ(six_axis_no_reference, samples);
+}
+
+TEST(SelectiveEkfHeadingStatus, GivenVisionWhenTheMagnetometerIsGatedThenTheHeadingIsVerifiedByVision) {
+  // GIVEN the same magnet and the hybrid benchmark's vision without dropouts
+  constexpr double kHeldFromS = 20.0;  ///< s: inside the hold
+  constexpr double kHeldToS = 32.0;
+  sim::SensorSimulator simu(sim::make_scenario("static_magnet", 100.0, 1));
+  SelectiveEkf ekf;
+  VisionSynthParams vp = hybrid_benchmark_vision();
+  vp.dropout_fraction = 0.0;
+  VisionSynthesizer synth(vp);
+  int verified_held = 0, held = 0;
+  // WHEN the filter runs over it with vision
+  while (!simu.done()) {
+    const sim::SimSample s = simu.next();
+    ekf.update_imu(s.imu);
+    synth.push_truth(s.imu.stamp_ns, s.truth.q_world_body, s.truth.p_world_m, true);
+    for (const VisionPose& v : synth.pop_arrived(s.imu.stamp_ns)) {
+      ekf.update_vision(v);
+    }
+    if (s.truth.t_s >= kHeldFromS && s.truth.t_s <= kHeldToS) {
+      verified_held += ekf.heading_status() == HeadingStatus::kVerified;
+      ++held;
+    }
+  }
+  // THEN the tag map verifies the heading all along the hold
+  EXPECT_EQ(verified_held, held);
+}
+
 TEST(SelectiveEkfConsistency, GivenAnyGyroScaleErrorWhenRunThenTheEstimateIsTheSameAndOnlyThePublishedCovarianceDiffers) {
   // GIVEN two filters that differ only in the scale error their published covariance allows for
   SelectiveEkfParams none;

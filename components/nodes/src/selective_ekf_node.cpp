@@ -94,6 +94,7 @@ class SelectiveEkfStep : public AttitudeStep {
     const MagStatus& mag = ekf_.mag_status();
     report.q_world_body = ekf_.q_world_body();
     report.covariance = attitude_covariance_world(ekf_);
+    report.heading_status = ekf_.heading_status();
     const SourceReports sources = selective_ekf_sources(ekf_);
     report.sources_fused = sources_fused_bits(sources);
     // its selective test (eqs. 8-10), not the bit: the heading row is fused inflated while untrusted

@@ -63,6 +63,22 @@ double SelectiveEkf::heading_lag_s() const {
   return q > 0.0 ? p_h / q : kInf;
 }
 
+HeadingStatus SelectiveEkf::heading_status() const {
+  if (!initialized_) {
+    return HeadingStatus::kNoReference;
+  }
+  if (x_.last_vision_fused_ns >= 0 && x_.stamp_ns - x_.last_vision_fused_ns <= aids::seconds_to_ns(p_.vision_anchor_s)) {
+    return HeadingStatus::kVerified;
+  }
+  const bool split = p_.imu_measurement == ImuMeasurement::kSplit;
+  const SourceStatus& heading = status(split ? SelectiveEkfAid::kMagHeading : SelectiveEkfAid::kImuQuat);
+  if (heading.last == Decision::kNone || heading.last == Decision::kRejectedNoMag) {
+    return HeadingStatus::kNoReference;
+  }
+  const bool reference = split ? x_.field_gate.learnt : mag_.reference_ready;
+  return reference && heading.last == Decision::kFused ? HeadingStatus::kVerified : HeadingStatus::kUnverified;
+}
+
 void SelectiveEkf::track_unmodelled(const ImuInput& in, bool aided, double aiding_dt_s) {
   SelectiveEkfUnmodelled& u = x_.unmodelled;
   if (!(in.dt_s > 0.0)) {

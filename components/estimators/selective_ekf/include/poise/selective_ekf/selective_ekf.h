@@ -505,6 +505,15 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// following, the gyro scale error (gyro_scale_error) against the correction lags, and the field
   /// disturbance the gate lets through. The estimate itself never uses it.
   [[nodiscard]] Eigen::Matrix3d attitude_covariance() const;
+  /// Whether the heading is backed by an absolute reference the filter trusts
+  /// (poise/core/heading_status.h): kVerified while vision anchors the attitude (fused within
+  /// vision_anchor_s: the tag map is one) or the magnetometer's heading row was fused trusted at
+  /// its last step against a learnt reference; kNoReference before the first sample and without a
+  /// magnetometer or vision (6-axis: the gyro's heading); kUnverified otherwise: the reference
+  /// still being learnt at the start, the magnetometer gated or distrusted. Meanwhile the heading
+  /// variance of attitude_covariance() grows (P's own, and the gyro scale error over the whole
+  /// rotation) and falls once a field is trusted again.
+  [[nodiscard]] HeadingStatus heading_status() const;
   /// The heading's correction time constant now, s: the heading density the filter fuses (rad^2
   /// s, inflated while untrusted) over P's heading variance; infinite without a heading row.
   [[nodiscard]] double heading_lag_s() const;
@@ -587,6 +596,7 @@ class SelectiveEkfFilter : public AttitudeFilter {
   }
   [[nodiscard]] std::map<std::string, uint64_t> rejections() const override;
   [[nodiscard]] std::optional<Eigen::Matrix3d> attitude_covariance() const override;
+  [[nodiscard]] HeadingStatus heading_status() const override { return ekf_.heading_status(); }
   [[nodiscard]] SelectiveEkf& core() { return ekf_; }
   [[nodiscard]] const SelectiveEkf& core() const { return ekf_; }
 
