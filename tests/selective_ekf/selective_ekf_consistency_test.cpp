@@ -236,6 +236,41 @@ TEST(SelectiveEkfHeadingStatus, GivenVisionWhenTheMagnetometerIsGatedThenTheHead
   EXPECT_EQ(verified_held, held);
 }
 
+TEST(SelectiveEkfConsistency, GivenVisionWhenRunThenThePoseCovarianceCarriesThePublishedAttitudeCovariance) {
+  // GIVEN the filter with the hybrid benchmark's vision in fast motion
+  constexpr double kNearPublished = 0.01;  ///< of the published trace: the part left out (delay, blend rotation)
+  sim::SensorSimulator simu(sim::make_scenario("fast_motion", 200.0, 1));
+  SelectiveEkf ekf;
+  VisionSynthesizer synth(hybrid_benchmark_vision());
+  int checked = 0;
+  // WHEN it runs
+  while (!simu.done()) {
+    const sim::SimSample s = simu.next();
+    ekf.update_imu(s.imu);
+    synth.push_truth(s.imu.stamp_ns, s.truth.q_world_body, s.truth.p_world_m, true);
+    for (const VisionPose& v : synth.pop_arrived(s.imu.stamp_ns)) {
+      ekf.update_vision(v);
+    }
+    if (!ekf.initialized()) {
+      continue;
+    }
+    const Eigen::Matrix<double, 9, 9> pose = pose_covariance_world(ekf);
+    const Eigen::Matrix<double, 9, 9> state = pose_covariance_world(ekf.state(), ekf.q_world_body());
+    const Eigen::Matrix3d published = attitude_covariance_world(ekf);
+    // THEN the pose covariance stays positive semi-definite, its attitude block is never below the
+    // state's and equals the published one but for a sliver
+    using Solver9 = Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 9, 9>>;
+    ASSERT_GE(Solver9(pose).eigenvalues().minCoeff(), -kRoundingRad2);
+    const Eigen::Matrix3d raised = pose.bottomRightCorner<3, 3>() - state.bottomRightCorner<3, 3>();
+    ASSERT_GE(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(raised).eigenvalues().minCoeff(), -kRoundingRad2);
+    const Eigen::Matrix3d left_out = published - pose.bottomRightCorner<3, 3>();
+    ASSERT_LE(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(left_out).eigenvalues().cwiseAbs().maxCoeff(),
+              kNearPublished * published.trace());
+    ++checked;
+  }
+  EXPECT_GT(checked, 0);
+}
+
 TEST(SelectiveEkfConsistency, GivenAnyGyroScaleErrorWhenRunThenTheEstimateIsTheSameAndOnlyThePublishedCovarianceDiffers) {
   // GIVEN two filters that differ only in the scale error their published covariance allows for
   SelectiveEkfParams none;

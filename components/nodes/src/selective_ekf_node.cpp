@@ -115,7 +115,7 @@ class SelectiveEkfStep : public AttitudeStep {
     pose.position_m(dds::to_msg(north().to_true(ekf_.position_m())));
     pose.velocity_mps(dds::to_msg(north().to_true(ekf_.state().v_mps)));
     pose.q_world_body(dds::to_msg(report.q_world_body));
-    dds::to_array(north().rotate_covariance<9>(pose_covariance_world(ekf_.state(), ekf_.q_world_body()), false),
+    dds::to_array(north().rotate_covariance<9>(pose_covariance_world(ekf_), false),
                   pose.covariance());
     pose.sources_fused(report.sources_fused);
     out.pose(pose);

@@ -3,6 +3,8 @@
 // apart from its mathematics in selective_ekf.cpp.
 #include "poise/selective_ekf/selective_ekf.h"
 
+#include <Eigen/Eigenvalues>
+
 #include <cmath>
 
 namespace poise {
@@ -115,6 +117,15 @@ Eigen::Matrix<double, 9, 9> pose_covariance_world(const SelectiveEkfState& x,
   j.block<3, 3>(3, SelectiveEkf::kV).setIdentity();
   j.block<3, 3>(6, SelectiveEkf::kTh) = q_world_body.normalized().toRotationMatrix();
   return j * x.P * j.transpose();
+}
+
+Eigen::Matrix<double, 9, 9> pose_covariance_world(const SelectiveEkf& ekf) {
+  Eigen::Matrix<double, 9, 9> c = pose_covariance_world(ekf.state(), ekf.q_world_body());
+  const Eigen::Matrix3d d = attitude_covariance_world(ekf) - c.bottomRightCorner<3, 3>();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(0.5 * (d + d.transpose()));
+  c.bottomRightCorner<3, 3>() +=
+      eig.eigenvectors() * eig.eigenvalues().cwiseMax(0.0).asDiagonal() * eig.eigenvectors().transpose();
+  return c;
 }
 
 VisionPose to_vision_pose(const CameraPoseMeasurement& m) {

@@ -575,6 +575,11 @@ Eigen::Matrix3d attitude_covariance_world(const SelectiveEkf& ekf);
 /// The 9x9 covariance [p, v, theta] (m^2, (m/s)^2, rad^2; theta world-frame small angles) of the
 /// 15x15 error state [w, theta(body), b, t, v]: blocks reordered, theta rotated by R(q).
 Eigen::Matrix<double, 9, 9> pose_covariance_world(const SelectiveEkfState& x, const Eigen::Quaterniond& q_world_body);
+/// The published pose covariance: pose_covariance_world(state, q_world_body()) with its attitude
+/// block raised to the published attitude covariance (attitude_covariance_world): the difference
+/// is added, its negative part (rounding, the delay prediction's small rotation) left out so that
+/// the matrix stays positive semi-definite.
+Eigen::Matrix<double, 9, 9> pose_covariance_world(const SelectiveEkf& ekf);
 
 /// The filter's vision input from a camera pose measurement: per-axis std from the mean of the
 /// covariance's position and rotation diagonals (NaN when not positive and finite: the params'
