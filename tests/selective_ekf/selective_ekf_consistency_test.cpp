@@ -39,6 +39,16 @@ struct Consistency {
   double rms_deg = 0.0;
 };
 
+/// One simulated sample into the filter, then the vision frames that have arrived by its stamp.
+bool update_with_vision(SelectiveEkf& ekf, VisionSynthesizer& synth, const sim::SimSample& s) {
+  const bool ok = ekf.update_imu(s.imu);
+  synth.push_truth(s.imu.stamp_ns, s.truth.q_world_body, s.truth.p_world_m, true);
+  for (const VisionPose& v : synth.pop_arrived(s.imu.stamp_ns)) {
+    ekf.update_vision(v);
+  }
+  return ok;
+}
+
 /// Runs the filter over a scenario (with vision when `vision` has a rate); NEES of every sample
 /// after kSkipStartS.
 Consistency run(const std::string& scenario, uint64_t seed, const SelectiveEkfParams& p, const VisionSynthParams& vision) {
@@ -54,13 +64,7 @@ Consistency run(const std::string& scenario, uint64_t seed, const SelectiveEkfPa
   double sq = 0.0;
   while (!simu.done()) {
     const sim::SimSample s = simu.next();
-    const bool ok = ekf.update_imu(s.imu);
-    if (synth) {
-      synth->push_truth(s.imu.stamp_ns, s.truth.q_world_body, s.truth.p_world_m, true);
-      for (const VisionPose& v : synth->pop_arrived(s.imu.stamp_ns)) {
-        ekf.update_vision(v);
-      }
-    }
+    const bool ok = synth ? update_with_vision(ekf, *synth, s) : ekf.update_imu(s.imu);
     if (!ok || s.truth.t_s < kSkipStartS) {
       continue;
     }
@@ -222,11 +226,7 @@ TEST(SelectiveEkfHeadingStatus, GivenVisionWhenTheMagnetometerIsGatedThenTheHead
   // WHEN the filter runs over it with vision
   while (!simu.done()) {
     const sim::SimSample s = simu.next();
-    ekf.update_imu(s.imu);
-    synth.push_truth(s.imu.stamp_ns, s.truth.q_world_body, s.truth.p_world_m, true);
-    for (const VisionPose& v : synth.pop_arrived(s.imu.stamp_ns)) {
-      ekf.update_vision(v);
-    }
+    update_with_vision(ekf, synth, s);
     if (s.truth.t_s >= kHeldFromS && s.truth.t_s <= kHeldToS) {
       verified_held += ekf.heading_status() == HeadingStatus::kVerified;
       ++held;
@@ -246,11 +246,7 @@ TEST(SelectiveEkfConsistency, GivenVisionWhenRunThenThePoseCovarianceCarriesTheP
   // WHEN it runs
   while (!simu.done()) {
     const sim::SimSample s = simu.next();
-    ekf.update_imu(s.imu);
-    synth.push_truth(s.imu.stamp_ns, s.truth.q_world_body, s.truth.p_world_m, true);
-    for (const VisionPose& v : synth.pop_arrived(s.imu.stamp_ns)) {
-      ekf.update_vision(v);
-    }
+    update_with_vision(ekf, synth, s);
     if (!ekf.initialized()) {
       continue;
     }
