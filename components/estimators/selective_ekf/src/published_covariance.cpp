@@ -75,7 +75,7 @@ HeadingStatus SelectiveEkf::heading_status() const {
   if (heading.last == Decision::kNone || heading.last == Decision::kRejectedNoMag) {
     return HeadingStatus::kNoReference;
   }
-  const bool reference = split ? x_.field_gate.learnt : mag_.reference_ready;
+  const bool reference = split ? x_.field_gate.learnt && x_.field_gate.verified : mag_.reference_ready;
   return reference && heading.last == Decision::kFused ? HeadingStatus::kVerified : HeadingStatus::kUnverified;
 }
 

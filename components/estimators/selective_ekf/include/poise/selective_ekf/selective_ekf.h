@@ -508,7 +508,8 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// Whether the heading is backed by an absolute reference the filter trusts
   /// (poise/core/heading_status.h): kVerified while vision anchors the attitude (fused within
   /// vision_anchor_s: the tag map is one) or the magnetometer's heading row was fused trusted at
-  /// its last step against a learnt reference; kNoReference before the first sample and without a
+  /// its last step against a verified reference (FieldGate::verified; the selective EKF's gate
+  /// keeps verify_s 0: verified when learnt); kNoReference before the first sample and without a
   /// magnetometer or vision (6-axis: the gyro's heading); kUnverified otherwise: the reference
   /// still being learnt at the start, the magnetometer gated or distrusted. Meanwhile the heading
   /// variance of attitude_covariance() grows (P's own, and the gyro scale error over the whole
