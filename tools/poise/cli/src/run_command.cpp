@@ -128,6 +128,76 @@ void set_param(YAML::Node& params, const std::string& assignment) {
   }
 }
 
+// `poise <component>`: one component type run alone (one process), its parameters from --config,
+// --set and the type's own command options.
+void add_standalone_command(CLI::App& app, const std::string& type_name, const runtime::ComponentType& type) {
+  struct Standalone {
+    RunOptions run;
+    std::string name;
+    std::string config;
+    std::vector<std::string> sets;
+    std::vector<std::string> topics;
+    std::map<std::string, std::string> options;  ///< command option key -> value given
+  };
+  auto s = std::make_shared<Standalone>();
+  CLI::App* sub = app.add_subcommand(type.command.empty() ? dashed(type_name) : type.command,
+                                     type.description + " (runs alone)");
+  sub->add_option("--name", s->name, "Instance name (sensor_id of its outputs; default: " +
+                                          type_name + ")");
+  sub->add_option("--config", s->config, "Parameter file (YAML map)")->check(CLI::ExistingFile);
+  sub->add_option("--set", s->sets,
+                  "KEY=VALUE: parameter override, as in a host file's params (VALUE is YAML; e.g. "
+                  "declination_deg=3.4); repeatable")
+      ->allow_extra_args(false)
+      ->type_name("KEY=VALUE");
+  sub->add_option("--topic", s->topics, "Topic name override key=name, e.g. imu=imu2 (repeatable)");
+  std::vector<std::pair<CLI::Option*, std::string>> key_options;  // the type's command options
+  for (const auto& opt : type.command_options) {
+    key_options.emplace_back(sub->add_option(opt.flag, s->options[opt.key], opt.help + " (= --set " + opt.key + "=VALUE)")
+                                 ->type_name(opt.type_name),
+                             opt.key);
+  }
+  add_run_options(sub, s->run);  // --domain, --dds-profile, ...
+  add_deprecated_alias(sub, "--profile", "--dds-profile", &s->run.profile);
+  const std::string key = type_name;
+  const std::string command = sub->get_name();
+  sub->callback([s, key, command, key_options] {
+    runtime::HostSpec spec;  // the profile: --dds-profile, applied by run_host
+    runtime::ComponentSpec c;
+    c.type = key;
+    c.name = s->name.empty() ? key : s->name;
+    c.origin = "poise " + command;
+    c.params = s->config.empty() ? YAML::Node(YAML::NodeType::Map)
+                                 : runtime::load_param_file(s->config);
+    for (const auto& assignment : s->sets) {
+      set_param(c.params, assignment);
+    }
+    for (const auto& [option, param] : key_options) {
+      if (option->count() == 0) {
+        continue;
+      }
+      for (const auto& assignment : s->sets) {
+        if (assignment.rfind(param + "=", 0) == 0) {
+          throw Error(option->get_name() + " and --set " + assignment + " both set '" + param + "': give one",
+                      kUsageExitCode);
+        }
+      }
+      set_param(c.params, param + "=" + s->options.at(param));
+    }
+    YAML::Node topics(YAML::NodeType::Map);
+    for (const auto& t : s->topics) {
+      const auto eq = t.find('=');
+      if (eq == std::string::npos) {
+        throw Error("--topic expects key=name, got '" + t + "'", kUsageExitCode);
+      }
+      topics[t.substr(0, eq)] = t.substr(eq + 1);
+    }
+    runtime::apply_topic_overrides(topics, c.origin, spec.topics);
+    spec.components.push_back(c);
+    run_host(spec, s->run);
+  });
+}
+
 }  // namespace
 
 void register_run_commands(CLI::App& app) {
@@ -168,74 +238,9 @@ void register_run_commands(CLI::App& app) {
 
   // One `poise <component>` command per component type, to run it alone (one process each).
   for (const auto& [type_name, type] : runtime::ComponentRegistry::instance().types()) {
-    if (!type.standalone_command) {
-      continue;
+    if (type.standalone_command) {
+      add_standalone_command(app, type_name, type);
     }
-    struct Standalone {
-      RunOptions run;
-      std::string name;
-      std::string config;
-      std::vector<std::string> sets;
-      std::vector<std::string> topics;
-      std::map<std::string, std::string> options;  ///< command option key -> value given
-    };
-    auto s = std::make_shared<Standalone>();
-    CLI::App* sub = app.add_subcommand(type.command.empty() ? dashed(type_name) : type.command,
-                                       type.description + " (runs alone)");
-    sub->add_option("--name", s->name, "Instance name (sensor_id of its outputs; default: " +
-                                            type_name + ")");
-    sub->add_option("--config", s->config, "Parameter file (YAML map)")->check(CLI::ExistingFile);
-    sub->add_option("--set", s->sets,
-                    "KEY=VALUE: parameter override, as in a host file's params (VALUE is YAML; e.g. "
-                    "declination_deg=3.4); repeatable")
-        ->allow_extra_args(false)
-        ->type_name("KEY=VALUE");
-    sub->add_option("--topic", s->topics, "Topic name override key=name, e.g. imu=imu2 (repeatable)");
-    std::vector<std::pair<CLI::Option*, std::string>> key_options;  // the type's command options
-    for (const auto& opt : type.command_options) {
-      key_options.emplace_back(sub->add_option(opt.flag, s->options[opt.key], opt.help + " (= --set " + opt.key + "=VALUE)")
-                                   ->type_name(opt.type_name),
-                               opt.key);
-    }
-    add_run_options(sub, s->run);  // --domain, --dds-profile, ...
-    add_deprecated_alias(sub, "--profile", "--dds-profile", &s->run.profile);
-    const std::string key = type_name;
-    const std::string command = sub->get_name();
-    sub->callback([s, key, command, key_options] {
-      runtime::HostSpec spec;  // the profile: --dds-profile, applied by run_host
-      runtime::ComponentSpec c;
-      c.type = key;
-      c.name = s->name.empty() ? key : s->name;
-      c.origin = "poise " + command;
-      c.params = s->config.empty() ? YAML::Node(YAML::NodeType::Map)
-                                   : runtime::load_param_file(s->config);
-      for (const auto& assignment : s->sets) {
-        set_param(c.params, assignment);
-      }
-      for (const auto& [option, param] : key_options) {
-        if (option->count() == 0) {
-          continue;
-        }
-        for (const auto& assignment : s->sets) {
-          if (assignment.rfind(param + "=", 0) == 0) {
-            throw Error(option->get_name() + " and --set " + assignment + " both set '" + param + "': give one",
-                        kUsageExitCode);
-          }
-        }
-        set_param(c.params, param + "=" + s->options.at(param));
-      }
-      YAML::Node topics(YAML::NodeType::Map);
-      for (const auto& t : s->topics) {
-        const auto eq = t.find('=');
-        if (eq == std::string::npos) {
-          throw Error("--topic expects key=name, got '" + t + "'", kUsageExitCode);
-        }
-        topics[t.substr(0, eq)] = t.substr(eq + 1);
-      }
-      runtime::apply_topic_overrides(topics, c.origin, spec.topics);
-      spec.components.push_back(c);
-      run_host(spec, s->run);
-    });
   }
 }
 
