@@ -89,6 +89,9 @@ fi
 verify="$(systemd-analyze verify poise@test.service 2>&1)" || { echo "$verify" >&2; fail "systemd-analyze verify poise@test.service failed"; }
 [[ -z "$verify" ]] || { echo "$verify" >&2; fail "systemd-analyze verify poise@test.service warned"; }
 getent passwd poise >/dev/null || fail "the postinst did not create the system user poise"
+for f in /usr/share/poise/hosts/*.yaml; do  # the example hosts under /etc/poise, from the package
+  cmp -s "$f" "/etc/poise/examples/$(basename "$f")" || fail "/etc/poise/examples/$(basename "$f") is not the shipped $f"
+done
 
 # poise-dev: the example sees /usr only (no build tree, no prefix path)
 cmake -S "$root/examples/embed" -B "$work/embed" -G Ninja -DCMAKE_FIND_USE_PACKAGE_REGISTRY=OFF \
@@ -113,7 +116,7 @@ fi
 
 installed=0
 dpkg --purge poise-dds-dev poise-dev poise >"$work/purge.log" 2>&1 || { cat "$work/purge.log" >&2; fail "dpkg --purge failed"; }
-[[ ! -e /usr/bin/poise && ! -e "$unit" && ! -e /usr/share/poise && ! -e /usr/include/poise && ! -e /usr/lib/cmake/poise ]] \
+[[ ! -e /usr/bin/poise && ! -e "$unit" && ! -e /usr/share/poise && ! -e /usr/include/poise && ! -e /usr/lib/cmake/poise && ! -e /etc/poise/examples ]] \
   || fail "files remain after dpkg --purge"
 ! getent passwd poise >/dev/null || fail "the system user poise remains after dpkg --purge"
 echo "test_deb: poise, poise-dev and poise-dds-dev built, installed, checked from /usr and purged in $((SECONDS - start)) s"
