@@ -323,7 +323,8 @@ TEST(Ros2Bridge, GivenNonFiniteOrUnstampableEstimatesThenNothingNonFiniteReaches
   // covariance is not part of a transform, so those 5 transforms go out).
   EXPECT_EQ(diag["samples_rejected"], 25U);
   EXPECT_EQ(diag["attitude_pkf_non_finite"], 10U);
-  EXPECT_EQ(diag["ros_messages_out"], 3U * kGood) << "attitude 5, tf 5 + 5";
+  // Out: attitude 5, its heading status 5 (only with an estimate that went out), tf 5 + 5.
+  EXPECT_EQ(diag["ros_messages_out"], 4U * kGood) << "attitude 5, heading status 5, tf 5 + 5";
   const std::string status = bridge->status();
   bridge->stop();
   std::lock_guard<std::mutex> lock(mutex);

@@ -377,20 +377,21 @@ class Bridge : public runtime::Component {
 
   /// Writes `m` when it is finite and its stamp is a ROS time; otherwise counts `what`.
   template <class Writer, class Message>
-  void write(Writer* writer, const Message& m, int64_t stamp_ns, const std::string& what) {
+  bool write(Writer* writer, const Message& m, int64_t stamp_ns, const std::string& what) {
     if (writer == nullptr) {
-      return;
+      return false;
     }
     if (!to_ros_time(stamp_ns, offset_ns_)) {
       ++refused_[what + "_bad_stamp"];
-      return;
+      return false;
     }
     if (!all_finite(m)) {
       ++refused_[what + "_non_finite"];
-      return;
+      return false;
     }
     writer->write(m);
     ++written_;
+    return true;
   }
 
   const msg::ImuSample* find_sample(int64_t stamp_ns) const {
@@ -456,12 +457,15 @@ class Bridge : public runtime::Component {
     if (out == attitude_out_.end()) {
       return;
     }
-    write(heading_out_.at(filter).get(), heading_status_to_diagnostics(m, filter, config_.frames, offset_ns_), t,
-          "heading_" + filter);
     ImuWriter* writer = out->second.get();
     with_sample(t, [this, writer, m, filter](const msg::ImuSample* sample) {
-      write(writer, attitude_to_imu(m, sample, config_.frames, offset_ns_), m.header().stamp_ns(),
-            "attitude_" + filter);
+      // The companion heading status goes out only with its estimate: a rejected estimate (NaN,
+      // a stamp ROS cannot hold) is counted once, as attitude_<f>, and says nothing on ROS 2.
+      if (write(writer, attitude_to_imu(m, sample, config_.frames, offset_ns_), m.header().stamp_ns(),
+                "attitude_" + filter)) {
+        write(heading_out_.at(filter).get(), heading_status_to_diagnostics(m, filter, config_.frames, offset_ns_),
+              m.header().stamp_ns(), "heading_" + filter);
+      }
     });
   }
 

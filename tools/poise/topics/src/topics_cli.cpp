@@ -485,11 +485,17 @@ class CarelessType : public eprosima::fastdds::dds::TopicDataType {
   }
 };
 
+// The stamp of valid sample i: 1 s, then one period of --rate per sample, so the stamps advance
+// as the samples are sent (a receiver judging their age sees none grow old).
+std::int64_t malformed_pub_stamp_ns(const TestPubOptions& o, int i) {
+  return 1000000000LL + std::llround(1e9 * static_cast<double>(i) / o.rate_hz);
+}
+
 // The valid sample i of `imu-malformed`: level, facing magnetic north, with pressure (every
 // estimator node can use it).
 std::vector<std::uint8_t> valid_imu_payload(const TestPubOptions& o, int i) {
   poise::msg::ImuSample m;
-  m.header().stamp_ns(1000000000LL + 1000000LL * i);
+  m.header().stamp_ns(malformed_pub_stamp_ns(o, i));
   m.header().seq(static_cast<std::uint32_t>(i));
   m.header().frame_id("body");
   m.sensor_id(o.sensor_id);
@@ -507,7 +513,7 @@ std::vector<std::uint8_t> valid_imu_payload(const TestPubOptions& o, int i) {
 // The valid sample i of `vision-malformed`: a camera 1 m above the world origin, level.
 std::vector<std::uint8_t> valid_vision_payload(const TestPubOptions& o, int i) {
   poise::msg::VisionPose m;
-  const std::int64_t stamp_ns = 1000000000LL + 1000000LL * i;
+  const std::int64_t stamp_ns = malformed_pub_stamp_ns(o, i);
   m.header().stamp_ns(stamp_ns);
   m.header().seq(static_cast<std::uint32_t>(i));
   m.header().frame_id("world");
