@@ -126,6 +126,23 @@ TEST(InputAge, GivenAPublisherClockResetWhenJudgedThenStaleForOneSecondThenANewR
   EXPECT_EQ(r.counters.at("imu_age_reanchored"), 1U);
 }
 
+// GIVEN one sample stamped a day ahead in a steady 100 Hz stream, then a clock that really jumps
+// ahead by 100 s WHEN judged THEN the lone glitch is not adopted (nothing after it is stale) and the
+// jump is adopted at its second sample (nothing after it is stale either). Oracle: the stream.
+TEST(InputAge, GivenOneStampFarAheadThenAClockJumpAheadWhenJudgedThenNeitherMakesLaterSamplesStale) {
+  InputAge age(AgeMethod::kRelative, kDeadline);
+  constexpr int64_t kDay = 86400 * kSecond;
+  constexpr int64_t kJumpAt = 6 * kSecond;
+  for (int64_t t = kSecond; t < 10 * kSecond; t += kPeriod) {
+    int64_t stamp = t < kJumpAt ? t : t + 100 * kSecond;
+    if (t == 3 * kSecond) {
+      stamp += kDay;
+    }
+    EXPECT_FALSE(age.judge("imu", "w", stamp, t + kDelay).stale) << "t = " << t / kMs << " ms";
+  }
+  EXPECT_EQ(age.stale("imu"), 0U);
+}
+
 // GIVEN two publishers, b's clock 3 s behind a's, and a sample repaired 0.8 s late (a reliable
 // resend arriving after newer ones) WHEN judged THEN each has its own reference, and the late one
 // is stale without disturbing the flow after it.

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <stdexcept>
 
 namespace poise::nodes {
@@ -44,10 +45,23 @@ int64_t InputAge::relative_age(const std::string& topic, const std::string& writ
   }
   const double since_s = static_cast<double>(std::max<int64_t>(0, arrival_ns - ref.arrival_ns)) * 1e-9;
   const int64_t bound = ref.offset_ns + static_cast<int64_t>(std::llround(since_s * kDriftAllowance * 1e9));
+  if (offset < bound - max_age_ns_) {
+    // Stamped more than the deadline ahead of every sample before it: one such sample (a glitched
+    // stamp) must not become the reference, or every normal sample after it would look stale for
+    // kReanchorAfterNs. A second one in a row that agrees with it is a clock that really jumped.
+    if (ref.early_pending && std::abs(offset - ref.early_offset_ns) <= max_age_ns_) {
+      ref = Reference{offset, arrival_ns, -1};
+    } else {
+      ref.early_pending = true;
+      ref.early_offset_ns = offset;
+    }
+    return 0;
+  }
   if (offset <= bound) {  // the freshest delivery so far (drift allowed for)
     ref = Reference{offset, arrival_ns, -1};
     return 0;
   }
+  ref.early_pending = false;
   const int64_t age = offset - bound;
   if (age <= max_age_ns_) {
     ref.stale_since_ns = -1;

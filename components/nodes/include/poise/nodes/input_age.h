@@ -77,6 +77,8 @@ class InputAge {
     int64_t offset_ns = 0;        ///< the smallest arrival - stamp, as of arrival_ns
     int64_t arrival_ns = 0;
     int64_t stale_since_ns = -1;  ///< arrival of the first of the current run of stale samples
+    bool early_pending = false;   ///< one sample came more than the deadline "early" (stamp ahead)
+    int64_t early_offset_ns = 0;  ///< its arrival - stamp
   };
   struct Topic {
     uint64_t stale = 0;
