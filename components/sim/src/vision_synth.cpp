@@ -11,14 +11,16 @@ VisionSynthesizer::VisionSynthesizer(const VisionSynthParams& p) : p_(p), rng_(p
   if (!(p_.rate_hz > 0.0) || !(p_.latency_ms >= 0.0) || !(p_.noise_deg >= 0.0) ||
       !(p_.noise_m >= 0.0) || !(p_.dropout_fraction >= 0.0 && p_.dropout_fraction < 1.0) ||
       !(p_.burst_min_s > 0.0 && p_.burst_max_s >= p_.burst_min_s) || !(p_.blackout_s >= 0.0) ||
-      (p_.blackout_s > 0.0 && !(p_.blackout_every_s > p_.blackout_s))) {
+      (p_.blackout_s > 0.0 && !(p_.blackout_every_s > p_.blackout_s)) ||
+      !(std::abs(p_.stamp_offset_ms) <= 1000.0)) {
     throw std::invalid_argument(
         "VisionSynthParams: need rate_hz > 0, latency_ms >= 0, noise >= 0, dropout_fraction in "
         "[0, 1), 0 < burst_min_s <= burst_max_s, blackout_s >= 0 and blackout_every_s > "
-        "blackout_s when blackouts are on");
+        "blackout_s when blackouts are on, |stamp_offset_ms| <= 1000");
   }
   period_ns_ = static_cast<int64_t>(std::llround(1e9 / p_.rate_hz));
   latency_ns_ = static_cast<int64_t>(std::llround(p_.latency_ms * 1e6));
+  stamp_offset_ns_ = static_cast<int64_t>(std::llround(p_.stamp_offset_ms * 1e6));
   p_.q_body_camera.normalize();
 }
 
@@ -73,11 +75,11 @@ void VisionSynthesizer::push_truth(int64_t stamp_ns, const Eigen::Quaterniond& q
   const Eigen::Vector3d n_p(normal_(rng_), normal_(rng_), normal_(rng_));
   const Eigen::Quaterniond q = q_world_body.normalized();
   VisionPose v;
-  v.capture_stamp_ns = stamp_ns;
+  v.capture_stamp_ns = stamp_ns + stamp_offset_ns_;  // the camera's stamp, not the true capture
   v.q_world_camera = q * quat_exp(n_r * (p_.noise_deg * kRadPerDeg)) * p_.q_body_camera;
   v.p_world_camera_m = p_world_body_m + q * p_.p_body_camera_m + n_p * p_.noise_m;
   v.has_position = true;
-  in_flight_.emplace_back(stamp_ns + latency_ns_, v);
+  in_flight_.emplace_back(stamp_ns + latency_ns_, v);  // arrives latency after the true capture
 }
 
 std::vector<VisionPose> VisionSynthesizer::pop_arrived(int64_t now_ns) {

@@ -176,6 +176,12 @@ void register_selective_ekf_cli(CLI::App& app) {
                     "selective: vision delivered this late (stamped at capture), ms")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  broad->add_option("--vision-stamp-offset-ms", vision->stamp_offset_ms,
+                    "selective: the vision frame's stamp = its true capture time + this, ms (a "
+                    "camera clock or stamping point that is off; it still arrives "
+                    "--vision-latency-ms after the true capture), |x| <= 1000")
+      ->check(CLI::Range(-1000.0, 1000.0))
+      ->capture_default_str();
   broad->add_option("--vision-noise-deg", vision->noise_deg,
                     "selective: vision attitude noise, deg per axis (1 sigma)")
       ->check(CLI::NonNegativeNumber)

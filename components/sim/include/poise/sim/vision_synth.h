@@ -6,7 +6,8 @@
 //   at or after each instant, stamped with that sample's stamp);
 //   q_world_camera = q_world_body (x) exp(n_r) (x) q_body_camera, n_r ~ N(0, noise_deg^2 I) (body);
 //   p_world_camera = p + R(q_true) p_body_camera + n_p,  n_p ~ N(0, noise_m^2 I);
-//   delivered at capture + latency (pop_arrived), still stamped at capture;
+//   delivered at capture + latency (pop_arrived), stamped at capture + stamp_offset_ms (0: the
+//   true capture time; else a camera whose clock or stamping point is off, issue 36);
 //   dropouts: alternating visible / hidden periods; hidden lengths uniform in
 //   [burst_min_s, burst_max_s], visible lengths exponential with the mean that makes the hidden
 //   fraction equal dropout_fraction (the tag leaving the view). Truth rows marked invalid (NaN
@@ -31,6 +32,8 @@ namespace poise {
 struct VisionSynthParams {
   double rate_hz = 30.0;
   double latency_ms = 0.0;
+  /// the frame's stamp = true capture time + this, ms (|x| <= 1000; arrival unchanged)
+  double stamp_offset_ms = 0.0;
   double noise_deg = 1.0;
   double noise_m = 0.01;
   double dropout_fraction = 0.0;   ///< [0, 1)
@@ -45,7 +48,8 @@ struct VisionSynthParams {
 
 class VisionSynthesizer {
  public:
-  /// Throws std::invalid_argument for rate <= 0, negative latency/noise or a fraction outside [0, 1).
+  /// Throws std::invalid_argument for rate <= 0, negative latency/noise, a fraction outside [0, 1)
+  /// or a stamp offset not finite or beyond 1 s.
   explicit VisionSynthesizer(const VisionSynthParams& p);
 
   /// Offers the truth at `stamp_ns`; `valid` false for rows without a reference.
@@ -71,6 +75,7 @@ class VisionSynthesizer {
   int64_t next_capture_ns_ = -1;
   int64_t period_ns_ = 0;
   int64_t latency_ns_ = 0;
+  int64_t stamp_offset_ns_ = 0;
   int64_t phase_end_ns_ = -1;
   bool hidden_ = false;
   bool blackout_ = false;
