@@ -63,6 +63,12 @@ struct VisionMeasurement {
   double sigma_m = 0.0;
 };
 VisionMeasurement vision_measurement(const SelectiveEkfParams& p, const VisionPose& v);
+/// src/vision_time_offset.cpp: the estimator's parameters from the filter's; the frame fed to
+/// the offset estimator and moved onto the IMU clock with the offset in use (its variance raised
+/// by (|w| sigma_offset)^2 while the offset is uncertain).
+VisionTimeOffsetParams time_offset_params(const SelectiveEkfParams& p);
+void apply_time_offset(VisionTimeOffsetEstimator& est, const SelectiveEkfParams& p, const Eigen::Vector3d& w_rps,
+                       VisionPose& v);
 void aid_vision_attitude(const AidContext& c, const VisionMeasurement& v, SourceStatus& st);
 void aid_vision_position(const AidContext& c, const VisionMeasurement& v, SourceStatus& st);
 

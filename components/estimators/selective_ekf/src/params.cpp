@@ -53,6 +53,11 @@ void validate(const SelectiveEkfParams& p) {
   check.require(p.vision_reset_after_rejections >= 1, "vision_reset_after_rejections", ">= 1 (samples)");
   check.require(p.history_s > 0.0 && p.history_s <= 5.0, "history_s", "in (0, 5] (s)");
   check.require(std::abs(p.vision_time_offset_s) <= 0.2, "vision_time_offset_s", "in [-0.2, 0.2] (s)");
+  check.require(p.vision_time_offset_sigma_s >= 0.0 && p.vision_time_offset_sigma_s <= 0.2,
+                "vision_time_offset_sigma_s", "in [0, 0.2] (s; 0 = not estimated)");
+  check.require(p.vision_time_offset_walk_s_sqrt_s >= 0.0 && p.vision_time_offset_walk_s_sqrt_s <= 0.01,
+                "vision_time_offset_walk_s_sqrt_s", "in [0, 0.01] (s/sqrt(s))");
+  check.require(p.predict_horizon_s >= 0.0 && p.predict_horizon_s <= 0.2, "predict_horizon_s", "in [0, 0.2] (s)");
   check.require(p.imu_delay_s >= 0.0 && p.imu_delay_s <= 0.05, "imu_delay_s", "in [0, 0.05] (s)");
   check.require(selective_ekf_aids::finite_quat(p.q_body_camera), "q_body_camera", "a finite unit quaternion [w, x, y, z]");
   check.require(p.p_body_camera_m.allFinite(), "p_body_camera_m", "finite (m)");

@@ -61,6 +61,7 @@ SelectiveEkf::SelectiveEkf(const SelectiveEkfParams& params) : p_(params) {
   }
   p_.gauss_newton.limits = p_.limits;
   gn_ = GaussNewton(p_.gauss_newton);
+  time_offset_ = VisionTimeOffsetEstimator(aids::time_offset_params(p_));
   reset();
 }
 
@@ -96,6 +97,7 @@ void SelectiveEkf::reset() {
   vision_log_.clear();
   newest_vision_capture_ns_ = -1;
   health_ = StateHealth{};
+  time_offset_.reset();
 }
 
 void SelectiveEkf::set_imu_delay_s(double delay_s) {
@@ -347,6 +349,7 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
     preprocess(in);  // starts the low-pass and rest detector
     initialized_ = true;
     history_.push_back({in, x_});
+    time_offset_.add_gyro(in.stamp_ns, in.gyro - x_.b_rps);
     return true;
   }
   // Queued (future-stamped) vision strictly before this sample goes first, in stamp order. After a
@@ -361,6 +364,7 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
   predict_to(in.stamp_ns);
   process_imu(in, true);
   history_.push_back({in, x_});
+  time_offset_.add_gyro(in.stamp_ns, in.gyro - x_.b_rps);
   for (; it != vision_log_.end() && it->capture_stamp_ns == in.stamp_ns; ++it) {
     process_vision(*it, true);
   }
@@ -434,7 +438,7 @@ bool SelectiveEkf::update_vision(const VisionPose& v_in) {
   }
   VisionPose v = v_in;
   v.q_world_camera.normalize();
-  v.capture_stamp_ns += seconds_to_ns(p_.vision_time_offset_s);  // onto the IMU clock
+  aids::apply_time_offset(time_offset_, p_, x_.w_rps, v);  // onto the IMU clock
   if (v.capture_stamp_ns < history_.front().input.stamp_ns) {
     ++vc_.too_old;
     aids::record(sa, Decision::kRejectedTooOld, v.capture_stamp_ns, true);

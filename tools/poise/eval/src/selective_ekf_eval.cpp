@@ -16,8 +16,12 @@
 
 namespace poise {
 
-SelectiveEvalFilter::SelectiveEvalFilter(const SelectiveEkfParams& p, const VisionSynthParams& v)
-    : SelectiveEkfFilter(p), vision_(v) {
+SelectiveEvalFilter::SelectiveEvalFilter(const SelectiveEkfParams& p, const VisionSynthParams& v,
+                                         const SelectiveEvalOptions& options)
+    : SelectiveEkfFilter(p), vision_(v), options_(options) {
+  if (!(options_.predict_horizon_ms >= 0.0 && options_.predict_horizon_ms <= 200.0)) {
+    throw std::invalid_argument("--predict-horizon-ms must be in [0, 200] ms");
+  }
   vision_.q_body_camera = p.q_body_camera;
   vision_.p_body_camera_m = p.p_body_camera_m;
   if (vision_.rate_hz < 0.0) {
@@ -29,7 +33,63 @@ SelectiveEvalFilter::SelectiveEvalFilter(const SelectiveEkfParams& p, const Visi
   }
 }
 
-SelectiveEvalFilter::~SelectiveEvalFilter() { say_return_steps(); }
+SelectiveEvalFilter::~SelectiveEvalFilter() {
+  say_return_steps();
+  say_time_offset();
+}
+
+void SelectiveEvalFilter::say_time_offset() const {
+  const VisionTimeOffsetStatus& now = core().vision_time_offset();
+  if (!synth_ || !now.estimating || first_stamp_ns_ < 0) {
+    return;
+  }
+  // the truth: a frame stamped s shows the pose at s - stamp_offset (offset = -stamp_offset)
+  const double truth_ms = -vision_.stamp_offset_ms;
+  std::fprintf(stderr,
+               "selective: %s: time offset (truth %.1f ms): after 10 s of motion %.2f ms (error %.2f, sigma %.2f, "
+               "%s), at the end %.2f ms (error %.2f, sigma %.2f, %s); pairs used %llu, rejected %llu\n",
+               trial_name_.c_str(), truth_ms, offset_at_10s_.offset_s * 1e3,
+               offset_at_10s_.offset_s * 1e3 - truth_ms, offset_at_10s_.sigma_s * 1e3,
+               offset_at_10s_.converged ? "converged" : "not converged", now.offset_s * 1e3,
+               now.offset_s * 1e3 - truth_ms, now.sigma_s * 1e3, now.converged ? "converged" : "not converged",
+               static_cast<unsigned long long>(now.used), static_cast<unsigned long long>(now.rejected));
+}
+
+Eigen::Quaterniond SelectiveEvalFilter::q_world_body() const {
+  if (options_.predict_horizon_ms > 0.0) {
+    return have_scored_ ? scored_.q_world_body : Eigen::Quaterniond::Identity();
+  }
+  return SelectiveEkfFilter::q_world_body();
+}
+
+std::optional<Eigen::Matrix3d> SelectiveEvalFilter::attitude_covariance() const {
+  if (options_.predict_horizon_ms > 0.0) {
+    return have_scored_ ? std::optional<Eigen::Matrix3d>(scored_.covariance) : std::nullopt;
+  }
+  return SelectiveEkfFilter::attitude_covariance();
+}
+
+void SelectiveEvalFilter::track_prediction(int64_t stamp_ns) {
+  // made now for t + horizon (or held), scored at the first later sample at or after it
+  const auto horizon_ns = static_cast<int64_t>(std::llround(options_.predict_horizon_ms * 1e6));
+  PredictedAttitude p = core().predict(stamp_ns + horizon_ns);
+  if (options_.hold) {
+    p = core().predict(stamp_ns);  // the newest output, held
+    p.stamp_ns = stamp_ns + horizon_ns;
+    p.rate_rps.setZero();
+  }
+  predictions_.push_back(p);
+  have_scored_ = false;
+  while (!predictions_.empty() && predictions_.front().stamp_ns <= stamp_ns) {
+    scored_ = predictions_.front();
+    predictions_.pop_front();
+    have_scored_ = true;
+  }
+  if (have_scored_) {  // the last sample's gap (less than one sample) with the same rate
+    const double h = static_cast<double>(stamp_ns - scored_.stamp_ns) * 1e-9;
+    scored_.q_world_body = (scored_.q_world_body * quat_exp(scored_.rate_rps * h)).normalized();
+  }
+}
 
 void SelectiveEvalFilter::say_return_steps() const {
   if (synth_ && steps_.returns > 0) {
@@ -41,28 +101,34 @@ void SelectiveEvalFilter::say_return_steps() const {
   }
 }
 
-void SelectiveEvalFilter::reset() {
+void SelectiveEvalFilter::end_trial() {
   say_return_steps();
-  SelectiveEkfFilter::reset();
-  trial_ = nullptr;
-  synth_.reset();
+  say_time_offset();
   k_ = 0;
   steps_ = VisionReturnSteps{};
   last_frame_ns_ = -1;
   return_until_ns_ = -1;
   prev_stamp_ns_ = -1;
+  predictions_.clear();
+  have_scored_ = false;
+  first_stamp_ns_ = -1;
+  prev_k_stamp_ns_ = -1;
+  motion_ns_ = 0;
+  offset_at_10s_said_ = false;
+  offset_at_10s_ = VisionTimeOffsetStatus{};
+  synth_.reset();
+}
+
+void SelectiveEvalFilter::reset() {
+  end_trial();
+  SelectiveEkfFilter::reset();
+  trial_ = nullptr;
 }
 
 void SelectiveEvalFilter::begin_trial(const eval::BroadTrial& trial) {
-  say_return_steps();
+  end_trial();
   trial_ = &trial;
   trial_name_ = trial.stem;
-  k_ = 0;
-  steps_ = VisionReturnSteps{};
-  last_frame_ns_ = -1;
-  return_until_ns_ = -1;
-  prev_stamp_ns_ = -1;
-  synth_.reset();
   if (vision_.rate_hz > 0.0) {
     synth_ = std::make_unique<VisionSynthesizer>(vision_);
   }
@@ -101,6 +167,22 @@ bool SelectiveEvalFilter::update(const ImuSample& s) {
       prev_stamp_ns_ = s.stamp_ns;
     }
   }
+  // motion time: samples in BROAD's motion phase (the rest before it shows no offset)
+  const bool moving = trial_ != nullptr && k_ < trial_->movement.size() && trial_->movement[k_] != 0;
+  if (moving && prev_k_stamp_ns_ >= 0) {
+    motion_ns_ += s.stamp_ns - prev_k_stamp_ns_;
+  }
+  prev_k_stamp_ns_ = s.stamp_ns;
+  if (first_stamp_ns_ < 0) {
+    first_stamp_ns_ = s.stamp_ns;
+  }
+  if (!offset_at_10s_said_ && motion_ns_ >= static_cast<int64_t>(10e9)) {
+    offset_at_10s_ = core().vision_time_offset();
+    offset_at_10s_said_ = true;
+  }
+  if (options_.predict_horizon_ms > 0.0 && ok) {
+    track_prediction(s.stamp_ns);
+  }
   ++k_;
   return ok;
 }
@@ -126,17 +208,18 @@ namespace cli {
 
 void register_selective_ekf_cli(CLI::App& app) {
   auto vision = std::make_shared<VisionSynthParams>();
+  auto options = std::make_shared<SelectiveEvalOptions>();
   vision->rate_hz = 0.0;  // no vision unless asked for
   vision->noise_deg = 0.0;
   vision->noise_m = 0.0;
-  auto make = [](const std::string& cfg, const VisionSynthParams& v) -> std::unique_ptr<AttitudeFilter> {
+  auto make = [options](const std::string& cfg, const VisionSynthParams& v) -> std::unique_ptr<AttitudeFilter> {
     const SelectiveEkfParams p = cfg.empty() ? SelectiveEkfParams{} : load_selective_ekf_params(cfg);
-    return std::make_unique<SelectiveEvalFilter>(p, v);
+    return std::make_unique<SelectiveEvalFilter>(p, v, *options);
   };
   // On BROAD (`poise eval broad`, `poise bench filters`) without --config: BROAD's IMU delay (a
   // property of the dataset's sensor, like a calibration file), said once on stderr so no figure
   // hides it. `poise process` and other users of the table get the plain defaults.
-  auto make_broad = [](const VisionSynthParams& v) -> std::unique_ptr<AttitudeFilter> {
+  auto make_broad = [options](const VisionSynthParams& v) -> std::unique_ptr<AttitudeFilter> {
     static bool said = false;
     if (!said) {
       said = true;
@@ -146,7 +229,7 @@ void register_selective_ekf_cli(CLI::App& app) {
                    "runs without it\n",
                    kBroadImuDelayS);
     }
-    return std::make_unique<SelectiveEvalFilter>(broad_sensor_params(), v);
+    return std::make_unique<SelectiveEvalFilter>(broad_sensor_params(), v, *options);
   };
   eval::register_filter(
       "selective",
@@ -182,6 +265,14 @@ void register_selective_ekf_cli(CLI::App& app) {
                     "--vision-latency-ms after the true capture), |x| <= 1000")
       ->check(CLI::Range(-1000.0, 1000.0))
       ->capture_default_str();
+  broad->add_option("--predict-horizon-ms", options->predict_horizon_ms,
+                    "selective: score the pose predicted this far ahead (SelectiveEkf::predict) "
+                    "against the truth at the predicted instant, ms in [0, 200] (0 = the output)")
+      ->check(CLI::Range(0.0, 200.0))
+      ->capture_default_str();
+  broad->add_flag("--predict-hold", options->hold,
+                  "selective: with --predict-horizon-ms, score the newest output held instead (the "
+                  "baseline of the prediction)");
   broad->add_option("--vision-noise-deg", vision->noise_deg,
                     "selective: vision attitude noise, deg per axis (1 sigma)")
       ->check(CLI::NonNegativeNumber)

@@ -73,6 +73,7 @@
 #include "poise/core/state_health.h"
 #include "poise/core/types.h"
 #include "poise/gauss_newton/gauss_newton.h"
+#include "poise/selective_ekf/vision_time_offset.h"
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -207,6 +208,16 @@ struct SelectiveEkfParams {
   /// timeshift convention, negative when the camera clock lags). Calibrated, e.g. by matching
   /// gyro-integrated rotation to the camera's rotation (docs/SELECTIVE_EKF.md). 0 = in sync.
   double vision_time_offset_s = 0.0;
+  /// The offset's prior 1-sigma, s: > 0 estimates it online from the gyro and the camera's
+  /// rotation (vision_time_offset.h, docs/SELECTIVE_EKF.md "Camera time offset"), starting from
+  /// vision_time_offset_s; the vision attitude's variance is raised by (|w| sigma_offset)^2 while
+  /// it is uncertain. 0 (default) = vision_time_offset_s is exact, nothing estimated.
+  double vision_time_offset_sigma_s = 0.0;
+  /// How fast the estimated offset may change: random walk, s/sqrt(s).
+  double vision_time_offset_walk_s_sqrt_s = 1.0e-4;
+  /// Prediction horizon of predict_horizon(), s (the renderer's display time after the newest IMU
+  /// sample; 0 = the pose at the newest sample, as q_world_body()), in [0, 0.2].
+  double predict_horizon_s = 0.0;
   /// IMU group delay, s: the IMU's measurements describe the motion this long before their stamp
   /// (the sensor's internal low-pass filter; MPU6050 DLPF_CFG 3: ~4.8 ms; calibrated with
   /// `poise calibrate imu-delay` against a reference). The filter runs at stamp - delay, fuses
@@ -365,6 +376,15 @@ struct SelectiveEkfUnmodelled {
   double last_dt_s = 0.0;      ///< the last sample interval, s
 };
 
+/// The attitude predicted to a requested time (SelectiveEkf::predict).
+struct PredictedAttitude {
+  int64_t stamp_ns = -1;        ///< the instant it is predicted to (IMU clock)
+  double horizon_s = 0.0;       ///< beyond the newest IMU sample's stamp, s
+  Eigen::Quaterniond q_world_body = Eigen::Quaterniond::Identity();
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();  ///< world-frame rotation vector, rad^2
+  Eigen::Vector3d rate_rps{0.0, 0.0, 0.0};  ///< the body rate it was turned with (the state's w)
+};
+
 /// The filter state (inspectable; one snapshot per IMU sample in the history).
 struct SelectiveEkfState {
   Eigen::Vector3d w_rps{0.0, 0.0, 0.0};
@@ -446,6 +466,7 @@ class SelectiveEkfFullState {
   std::deque<VisionPose> vision_log_;    ///< applied or queued, sorted by capture stamp
   int64_t newest_vision_capture_ns_ = -1;
   StateHealth health_;  ///< resets after an unhealthy update (poise/core/state_health.h)
+  VisionTimeOffsetEstimator time_offset_;  ///< the camera-IMU time offset (fed first-pass only)
 };
 
 class SelectiveEkf : private SelectiveEkfFullState {
@@ -518,6 +539,17 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// The heading's correction time constant now, s: the heading density the filter fuses (rad^2
   /// s, inflated while untrusted) over P's heading variance; infinite without a heading row.
   [[nodiscard]] double heading_lag_s() const;
+  /// The camera-IMU time offset in use (vision_time_offset_s, or its online estimate), its
+  /// sigma, convergence and per-frame decisions (vision_time_offset.h).
+  [[nodiscard]] const VisionTimeOffsetStatus& vision_time_offset() const { return time_offset_.status(); }
+  /// The attitude predicted to t_ns (IMU clock, at or after the newest sample's stamp) with the
+  /// estimated rate from q_world_body(), and its published covariance grown over the horizon
+  /// (src/predict.cpp): the rate's covariance (gyro noise and bias uncertainty through the gyro
+  /// row) and the angular-acceleration and attitude process noise. An earlier t_ns gives the
+  /// newest output (horizon 0).
+  [[nodiscard]] PredictedAttitude predict(int64_t t_ns) const;
+  /// predict() at the newest sample's stamp + predict_horizon_s.
+  [[nodiscard]] PredictedAttitude predict_horizon() const;
   /// Back to the state of a new filter (parameters kept).
   void reset();
   /// The filter's whole state: two filters with the same parameters and the same full state give

@@ -9,7 +9,9 @@
 #include "poise/selective_ekf/selective_ekf.h"
 #include "poise/sim/vision_synth.h"
 
+#include <deque>
 #include <memory>
+#include <optional>
 #include <string>
 
 namespace CLI {
@@ -30,10 +32,23 @@ struct VisionReturnSteps {
   double max_gap_s = 0.0;        ///< longest gap seen
 };
 
+/// Issue 36 options of `poise eval broad`: the scored output is the pose predicted (or held)
+/// predict_horizon_ms ahead, and the time offset estimate is said on stderr.
+struct SelectiveEvalOptions {
+  /// > 0: the output scored at sample k is the one the filter gave for t_k at the newest sample j
+  /// with t_j <= t_k - horizon: predict(t_j + horizon) turned on to t_k with its rate (less than
+  /// one sample), or with `hold` the output at j itself; its covariance goes with it. ms
+  double predict_horizon_ms = 0.0;
+  bool hold = false;
+};
+
 class SelectiveEvalFilter : public SelectiveEkfFilter, public eval::TrialInputs {
  public:
   /// `vision.rate_hz` 0 = IMU only. Throws std::invalid_argument for bad vision options.
-  SelectiveEvalFilter(const SelectiveEkfParams& p, const VisionSynthParams& vision);
+  SelectiveEvalFilter(const SelectiveEkfParams& p, const VisionSynthParams& vision,
+                      const SelectiveEvalOptions& options = {});
+  [[nodiscard]] Eigen::Quaterniond q_world_body() const override;
+  [[nodiscard]] std::optional<Eigen::Matrix3d> attitude_covariance() const override;
   ~SelectiveEvalFilter() override;
   bool update(const ImuSample& s) override;
   void reset() override;
@@ -43,6 +58,9 @@ class SelectiveEvalFilter : public SelectiveEkfFilter, public eval::TrialInputs 
 
  private:
   void say_return_steps() const;
+  void say_time_offset() const;
+  void end_trial();  ///< says the trial's figures on stderr and clears its bookkeeping
+  void track_prediction(int64_t stamp_ns);
 
   VisionSynthParams vision_;
   const eval::BroadTrial* trial_ = nullptr;
@@ -54,6 +72,15 @@ class SelectiveEvalFilter : public SelectiveEkfFilter, public eval::TrialInputs 
   int64_t return_until_ns_ = -1;    ///< inside a return window until
   int64_t prev_stamp_ns_ = -1;
   Eigen::Quaterniond prev_q_ = Eigen::Quaterniond::Identity();
+  SelectiveEvalOptions options_;
+  std::deque<PredictedAttitude> predictions_;  ///< made at earlier samples, oldest first
+  bool have_scored_ = false;
+  PredictedAttitude scored_;                    ///< the output scored at this sample
+  int64_t first_stamp_ns_ = -1;
+  int64_t prev_k_stamp_ns_ = -1;
+  int64_t motion_ns_ = 0;                       ///< time in BROAD's motion phase so far
+  bool offset_at_10s_said_ = false;
+  VisionTimeOffsetStatus offset_at_10s_;
 };
 
 /// 30 Hz, 50 ms, 1 deg, 1 cm, 30 % dropout, seed 1.
