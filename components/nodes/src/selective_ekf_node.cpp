@@ -5,9 +5,18 @@
 //           p_body_camera_m [x,y,z] (camera-to-IMU extrinsic; override the file), imu_delay_s
 //           (the IMU's group delay, s; overrides the file; without it here or in the file, the
 //           delay the IMU's driver publishes on `imu_info`: poise/nodes/imu_delay.h; one that
-//           arrives after the first sample restarts the EKF with it), node keys (NodeParams), north
+//           arrives after the first sample restarts the EKF with it), vision_time_offset_s,
+//           vision_time_offset_sigma_s (the camera-IMU time offset's prior and its sigma, s; sigma
+//           > 0 estimates it online) and predict_horizon_s (override the file; see below), node
+//           keys (NodeParams), north
 //           (declination_deg | location + date: estimator_step.h north_keys(); vision poses are
 //           then taken as true ENU and turned into the filter's magnetic ENU)
+// predict_horizon_s > 0 (issue 36, an AR renderer's display time): attitude/<name> and
+// pose/<name> carry the pose predicted to the IMU sample's stamp + the horizon (SelectiveEkf::
+// predict), stamped with that instant, covariance grown over the horizon; 0 (default) = the pose
+// at the sample's stamp. Diagnostics: the time offset in use, its sigma and convergence (metrics
+// vision_time_offset, vision_time_offset_sigma, vision_time_offset_converged) and the pairs'
+// decisions (counters time_offset_<decision>).
 // The EKF applies its own camera-to-body extrinsic to the camera pose (the message's body pose is
 // not used), so the extrinsic is configured in one place for the filter.
 #include "poise/dds/convert.h"
@@ -28,7 +37,8 @@ namespace {
 SelectiveEkfParams load_params(const runtime::ComponentSpec& spec, const NorthReference& north) {
   std::vector<std::string> known = NodeParams::keys();
   known.insert(known.end(), north_keys().begin(), north_keys().end());
-  known.insert(known.end(), {"filter_file", "q_body_camera", "p_body_camera_m", "imu_delay_s"});
+  known.insert(known.end(), {"filter_file", "q_body_camera", "p_body_camera_m", "imu_delay_s", "vision_time_offset_s",
+                             "vision_time_offset_sigma_s", "predict_horizon_s"});
   runtime::check_known_params(spec, known);
   SelectiveEkfParams p;
   const auto file = runtime::param<std::string>(spec, "filter_file", "");
@@ -51,12 +61,21 @@ SelectiveEkfParams load_params(const runtime::ComponentSpec& spec, const NorthRe
       p.p_body_camera_m = Eigen::Vector3d(t[0], t[1], t[2]);
     }
     p.imu_delay_s = runtime::param<double>(spec, "imu_delay_s", p.imu_delay_s);
+    p.vision_time_offset_s = runtime::param<double>(spec, "vision_time_offset_s", p.vision_time_offset_s);
+    p.vision_time_offset_sigma_s =
+        runtime::param<double>(spec, "vision_time_offset_sigma_s", p.vision_time_offset_sigma_s);
+    p.predict_horizon_s = runtime::param<double>(spec, "predict_horizon_s", p.predict_horizon_s);
     seed_field_reference(north, p.field_magnitude_ut, p.dip_deg);
     validate(p);
   } catch (const std::exception& e) {
     throw runtime::ConfigError(spec.origin + ": " + e.what());
   }
   return p;
+}
+
+/// The prediction horizon in ns (predict_horizon_s; 0 when the core has no sample yet).
+int64_t selective_ekf_predict_ns(const SelectiveEkf& ekf) {
+  return static_cast<int64_t>(std::llround(ekf.params().predict_horizon_s * 1e9));
 }
 
 class SelectiveEkfStep : public AttitudeStep {
@@ -92,8 +111,9 @@ class SelectiveEkfStep : public AttitudeStep {
       return false;
     }
     const MagStatus& mag = ekf_.mag_status();
-    report.q_world_body = ekf_.q_world_body();
-    report.covariance = attitude_covariance_world(ekf_);
+    const PredictedAttitude predicted = ekf_.predict_horizon();  // horizon 0: the output itself
+    report.q_world_body = predicted.q_world_body;
+    report.covariance = predicted.covariance;
     report.heading_status = ekf_.heading_status();
     const SourceReports sources = selective_ekf_sources(ekf_);
     report.sources_fused = sources_fused_bits(sources);
@@ -103,20 +123,26 @@ class SelectiveEkfStep : public AttitudeStep {
     report.gyro_bias_rps = ekf_.state().b_rps;
     return true;
   }
-  bool estimate(const ImuSample& sample, StepOutputs& out) override {
+  bool estimate(const ImuSample& sample_in, StepOutputs& out) override {
+    ImuSample sample = sample_in;  // stamped with the instant the (predicted) pose is for
+    sample.stamp_ns += selective_ekf_predict_ns(ekf_);
     if (!AttitudeStep::estimate(sample, out)) {
       return false;
     }
+    const double horizon_s = static_cast<double>(sample.stamp_ns - sample_in.stamp_ns) * 1e-9;
     const AttitudeReport& report = last_report();
     msg::PoseEstimate pose;
     pose.header(dds::make_header(sample.stamp_ns, sample.seq, report.frame_id));
     pose.sensor_id(sensor_id());
     pose.filter_id(component());
-    pose.position_m(dds::to_msg(north().to_true(ekf_.position_m())));
+    pose.position_m(dds::to_msg(north().to_true(Eigen::Vector3d(ekf_.position_m() + ekf_.state().v_mps * horizon_s))));
     pose.velocity_mps(dds::to_msg(north().to_true(ekf_.state().v_mps)));
     pose.q_world_body(dds::to_msg(report.q_world_body));
-    dds::to_array(north().rotate_covariance<9>(pose_covariance_world(ekf_), false),
-                  pose.covariance());
+    Eigen::Matrix<double, 9, 9> cov = pose_covariance_world(ekf_);
+    if (horizon_s > 0.0) {  // the attitude block grown over the horizon (magnetic ENU as the core's)
+      cov.bottomRightCorner<3, 3>() += ekf_.predict_horizon().covariance - attitude_covariance_world(ekf_);
+    }
+    dds::to_array(north().rotate_covariance<9>(cov, false), pose.covariance());
     pose.sources_fused(report.sources_fused);
     out.pose(pose);
     return true;
@@ -136,6 +162,15 @@ class SelectiveEkfStep : public AttitudeStep {
     diag.metrics = {{"disturbance_angle", mag.disturbance_angle_deg * kRadPerDeg, "rad"},
                     {"reference_angle", mag.reference_angle_deg * kRadPerDeg, "rad"},
                     {"quat_error", mag.quat_error_deg * kRadPerDeg, "rad"}};
+    const VisionTimeOffsetStatus& to = ekf_.vision_time_offset();
+    if (to.estimating) {
+      diag.metrics.push_back({"vision_time_offset", to.offset_s, "s"});
+      diag.metrics.push_back({"vision_time_offset_sigma", to.sigma_s, "s"});
+      diag.metrics.push_back({"vision_time_offset_converged", to.converged ? 1.0 : 0.0, ""});
+      for (size_t d = 1; d < static_cast<size_t>(TimeOffsetDecision::kCount); ++d) {
+        diag.counters[std::string("time_offset_") + to_string(static_cast<TimeOffsetDecision>(d))] = to.by_decision[d];
+      }
+    }
   }
 
  private:
