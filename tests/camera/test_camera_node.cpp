@@ -131,6 +131,30 @@ TEST(CameraNodeParams, MissingAndUnknownParametersAreClearErrors) {
   EXPECT_THROW((void)camera_node_options(spec), runtime::ConfigError);
 }
 
+// GIVEN camera parameters with a capture delay (issue 36: the camera's prior of its time offset)
+// WHEN they are parsed
+// THEN a delay in [0, 1000) ms is taken, NaN, negative or a second and more are refused naming the
+// key, and without the key the config's capture.delay_ms stays (marked -1).
+TEST(CameraNode, GivenACaptureDelayParameterWhenParsedThenInRangeIsTakenAndHostileIsRefused) {
+  runtime::ComponentSpec spec;
+  spec.type = "camera";
+  spec.name = "camera";
+  spec.origin = "host.yaml";
+  spec.params = YAML::Load("{source: s, intrinsics_file: i, tags_file: t, capture_delay_ms: 12.5}");
+  EXPECT_DOUBLE_EQ(camera_node_options(spec).capture_delay_ms, 12.5);
+  spec.params = YAML::Load("{source: s, intrinsics_file: i, tags_file: t}");
+  EXPECT_DOUBLE_EQ(camera_node_options(spec).capture_delay_ms, -1.0);
+  for (const char* bad : {".nan", "-1", "1000", "1e300", ".inf"}) {
+    spec.params = YAML::Load(std::string("{source: s, intrinsics_file: i, tags_file: t, capture_delay_ms: ") + bad + "}");
+    try {
+      (void)camera_node_options(spec);
+      ADD_FAILURE() << bad << " accepted";
+    } catch (const runtime::ConfigError& e) {
+      EXPECT_NE(std::string(e.what()).find("capture_delay_ms"), std::string::npos) << e.what();
+    }
+  }
+}
+
 // GIVEN a host running the camera component on the synthetic source over the example map
 // WHEN it renders and processes 12 frames
 // THEN 12 TagDetections arrive (4 mapped tags each) and vision poses lie on the synthetic orbit

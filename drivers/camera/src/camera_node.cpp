@@ -23,7 +23,8 @@ std::string required(const runtime::ComponentSpec& spec, const char* key, const 
 }  // namespace
 
 CameraNodeOptions camera_node_options(const runtime::ComponentSpec& spec) {
-  runtime::check_known_params(spec, {"source", "intrinsics_file", "tags_file", "config_file", "diagnostics_period_s", "pace"});
+  runtime::check_known_params(spec, {"source", "intrinsics_file", "tags_file", "config_file", "diagnostics_period_s", "pace",
+                                     "capture_delay_ms"});
   CameraNodeOptions o;
   o.source = required(spec, "source", "/dev/videoN, a video, images or synthetic");
   o.intrinsics_file = required(spec, "intrinsics_file", "OpenCV or ROS camera_info YAML");
@@ -34,6 +35,12 @@ CameraNodeOptions camera_node_options(const runtime::ComponentSpec& spec) {
     throw runtime::ConfigError(spec.origin + ": diagnostics_period_s must be in (0, 3600]");
   }
   o.pace = runtime::param<bool>(spec, "pace", o.pace);
+  if (spec.params && spec.params["capture_delay_ms"]) {
+    o.capture_delay_ms = runtime::param<double>(spec, "capture_delay_ms", 0.0);
+    if (!(o.capture_delay_ms >= 0.0 && o.capture_delay_ms < 1000.0)) {
+      throw runtime::ConfigError(spec.origin + ": capture_delay_ms must be in [0, 1000) (ms)");
+    }
+  }
   return o;
 }
 
@@ -67,6 +74,9 @@ CameraNode::CameraNode(const CameraNodeOptions& options, const std::string& inst
       diag_writer_(host.participant, host.topics.diagnostics) {
   Loaded l = load_all(options);
   config_ = l.config;
+  if (options.capture_delay_ms >= 0.0) {
+    config_.capture_delay_s = options.capture_delay_ms * 1e-3;
+  }
   sensor_id_ = dds::checked_sensor_id(
       (instance_name.empty() || instance_name == "camera") ? config_.sensor_id : instance_name, "camera");
   try {

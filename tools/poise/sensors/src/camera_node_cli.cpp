@@ -24,6 +24,7 @@ struct CameraCliOptions {
   int domain = 0;
   double duration_s = 0.0;
   double status_period_s = 2.0;
+  double capture_delay_ms = -1.0;
   bool fast = false;
   bool quiet = false;
 };
@@ -42,6 +43,9 @@ void run_camera(const CameraCliOptions& o) {
   }
   spec.params["pace"] = !o.fast;
   spec.params["diagnostics_period_s"] = o.status_period_s;
+  if (o.capture_delay_ms >= 0.0) {
+    spec.params["capture_delay_ms"] = o.capture_delay_ms;
+  }
   install_stop_handlers();
   std::unique_ptr<dds::Participant> participant;
   std::unique_ptr<runtime::HostContext> context;
@@ -125,6 +129,11 @@ void register_camera_node_cli(CLI::App& app) {
   cmd->add_option("--status-period", o->status_period_s, "Seconds between status lines")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  cmd->add_option("--capture-delay-ms", o->capture_delay_ms,
+                  "Stamp frames this long before their grab (exposure + transfer; overrides the "
+                  "config's capture.delay_ms): the camera's prior of its time offset to the IMU, the "
+                  "selective EKF estimates what is left (vision_time_offset_sigma_s), ms in [0, 1000)")
+      ->check(CLI::Range(0.0, 999.999));
   cmd->add_flag("--fast", o->fast, "Synthetic source: render as fast as possible (no pacing)");
   cmd->add_flag("--quiet", o->quiet, "No status output");
   cmd->callback([o] { run_camera(*o); });

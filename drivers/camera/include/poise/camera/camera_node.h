@@ -10,6 +10,9 @@
 //   config_file: camera.yaml       (optional; config/camera/camera.yaml format)
 //   diagnostics_period_s: 1.0
 //   pace: true                     (synthetic source: hold its fps in real time)
+//   capture_delay_ms: 12.5         (optional; overrides the config's capture.delay_ms: the stamp is
+//                                   the grab time minus this, the prior of the camera-IMU time
+//                                   offset; the selective EKF estimates what is left, issue 36)
 #pragma once
 
 #include "poise/camera/capture.h"
@@ -35,6 +38,7 @@ struct CameraNodeOptions {
   std::string config_file;
   double diagnostics_period_s = 1.0;
   bool pace = true;
+  double capture_delay_ms = -1.0;  ///< < 0: the config's capture.delay_ms
   bool log_to_stderr = true;
 };
 
