@@ -211,8 +211,10 @@ struct SelectiveEkfParams {
   /// The offset's prior 1-sigma, s: > 0 estimates it online from the gyro and the camera's
   /// rotation (vision_time_offset.h, docs/SELECTIVE_EKF.md "Camera time offset"), starting from
   /// vision_time_offset_s; the vision attitude's variance is raised by (|w| sigma_offset)^2 while
-  /// it is uncertain. 0 (default) = vision_time_offset_s is exact, nothing estimated.
-  double vision_time_offset_sigma_s = 0.0;
+  /// it is uncertain. 0 = vision_time_offset_s is exact, nothing estimated. Default 50 ms: a
+  /// camera's stamp is seldom its exposure time (arrival, end of readout, its own clock: 10-50 ms
+  /// off is common and unknown to its user), and estimating costs nothing when it is exact.
+  double vision_time_offset_sigma_s = 0.05;
   /// How fast the estimated offset may change: random walk, s/sqrt(s).
   double vision_time_offset_walk_s_sqrt_s = 1.0e-4;
   /// Prediction horizon of predict_horizon(), s (the renderer's display time after the newest IMU
