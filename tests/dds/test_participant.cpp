@@ -12,11 +12,58 @@
 
 #include <chrono>
 #include <mutex>
+#include <set>
 #include <thread>
 #include <vector>
 
 namespace poise::dds {
 namespace {
+
+// Issue 37 (fleet): Fast DDS keeps 10 instances per endpoint by default, and every poise topic is
+// keyed by sensor_id, so a reader of the estimates of 20 robots received those of 10 and silently
+// dropped the rest. GIVEN 20 instances (sensor_ids) on one keyed topic, written by one writer and
+// THEN read by one reader: every instance's samples arrive (oracle: the set of names written).
+TEST(Participant, GivenTwentyInstancesOnOneKeyedTopicWhenWrittenAndReadThenEveryInstanceArrives) {
+  testing::DomainLease domain;
+  constexpr auto kDiscovery = std::chrono::seconds(10);  // bounded wait for discovery
+  constexpr int kInstances = 20;                         // twice Fast DDS's default limit
+  constexpr int kRounds = 3;
+  Participant writer_side({domain.id(), "poise_loopback", "", "fleet_writer"});
+  Participant reader_side({domain.id(), "poise_loopback", "", "fleet_reader"});
+  std::mutex mutex;
+  std::set<std::string> received;
+  int samples = 0;
+  Reader<msg::AttitudeEstimatePubSubType> reader(
+      reader_side, "attitude/parallel_kf", [&](const msg::AttitudeEstimate& m, const auto&) {
+        std::lock_guard<std::mutex> lock(mutex);
+        received.insert(m.sensor_id().to_string());
+        ++samples;
+      });
+  Writer<msg::AttitudeEstimatePubSubType> writer(writer_side, "attitude/parallel_kf");
+  ASSERT_TRUE(writer.wait_for_readers(1, kDiscovery));
+  std::set<std::string> written;
+  int refused = 0;
+  for (int round = 0; round < kRounds; ++round) {
+    for (int i = 0; i < kInstances; ++i) {
+      msg::AttitudeEstimate m;
+      m.sensor_id("robot" + std::to_string(i));
+      m.header().seq(static_cast<uint32_t>(round));
+      m.q_world_body().w(1.0);
+      refused += writer.write(m) ? 0 : 1;
+      written.insert(m.sensor_id().to_string());
+    }
+  }
+  EXPECT_EQ(refused, 0) << "the writer refused samples of new instances";
+  ASSERT_TRUE(testing::wait_until(
+      [&] {
+        std::lock_guard<std::mutex> lock(mutex);
+        return samples >= kInstances * kRounds;
+      },
+      kDiscovery));
+  std::lock_guard<std::mutex> lock(mutex);
+  EXPECT_EQ(received, written);
+  EXPECT_EQ(samples, kInstances * kRounds);
+}
 
 TEST(Participant, UnknownProfileIsAClearError) {
   testing::DomainLease domain;

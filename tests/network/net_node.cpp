@@ -418,9 +418,11 @@ int run_watch(const Common& c, const std::string& type) {
   return 0;
 }
 
-/// Counts packets on `iface` (AF_PACKET, needs root): UDP ones, RTPS ones, and any containing
-/// `marker` anywhere in the packet.
-int run_capture(const std::string& iface, double duration_s, const std::string& marker) {
+/// Counts packets on `iface` (AF_PACKET, needs root; both directions): UDP ones, RTPS ones, and per
+/// marker those containing it anywhere (also across the boundary with the previous packet, so a
+/// string split between two IP fragments of one datagram is still found). The first marker's
+/// counts go in @capture (marker, rtps_marker); every marker's in "@seen index=I packets=N".
+int run_capture(const std::string& iface, double duration_s, const std::vector<std::string>& markers) {
   const int fd = ::socket(AF_PACKET, SOCK_DGRAM, htons(ETH_P_ALL));
   if (fd < 0) {
     std::fprintf(stderr, "capture: socket(AF_PACKET) failed: %s (needs root)\n", std::strerror(errno));
@@ -442,6 +444,9 @@ int run_capture(const std::string& iface, double duration_s, const std::string& 
   event("@start role=capture pid=%d t_ns=%lld\n", static_cast<int>(::getpid()),
         static_cast<long long>(now_ns()));
   uint64_t packets = 0, udp = 0, rtps = 0, with_marker = 0, rtps_with_marker = 0;
+  std::vector<uint64_t> seen(markers.size(), 0);
+  constexpr size_t kCarry = 256;  // longer than any marker
+  std::string previous_tail;
   std::string buffer(65536, '\0');
   const int64_t end = now_ns() + static_cast<int64_t>(duration_s * 1e9);
   while (!g_stop.load() && now_ns() < end) {
@@ -451,7 +456,12 @@ int run_capture(const std::string& iface, double duration_s, const std::string& 
     }
     ++packets;
     const std::string_view packet(buffer.data(), static_cast<size_t>(n));
-    const bool has_marker = packet.find(marker) != std::string_view::npos;
+    const std::string joined = previous_tail + std::string(packet);
+    previous_tail = joined.substr(joined.size() > kCarry ? joined.size() - kCarry : 0);
+    for (size_t i = 0; i < markers.size(); ++i) {
+      seen[i] += joined.find(markers[i]) != std::string::npos ? 1U : 0U;
+    }
+    const bool has_marker = !markers.empty() && packet.find(markers[0]) != std::string_view::npos;
     with_marker += has_marker ? 1U : 0U;
     if (packet.size() < sizeof(iphdr)) {
       continue;
@@ -475,6 +485,9 @@ int run_capture(const std::string& iface, double duration_s, const std::string& 
         static_cast<unsigned long long>(udp), static_cast<unsigned long long>(rtps),
         static_cast<unsigned long long>(with_marker),
         static_cast<unsigned long long>(rtps_with_marker));
+  for (size_t i = 0; i < markers.size(); ++i) {
+    event("@seen index=%zu packets=%llu\n", i, static_cast<unsigned long long>(seen[i]));
+  }
   return 0;
 }
 
@@ -489,7 +502,7 @@ int main(int argc, char** argv) {
   std::string filter_id = "tilt";
   std::string type = "imu";
   std::string iface = "eth0";
-  std::string marker = nt::kMarkerSensorId;
+  std::vector<std::string> markers{nt::kMarkerSensorId};
   auto add_common = [&](CLI::App* sub) {
     sub->add_option("--domain", c.domain, "DDS domain id")->check(CLI::Range(0, 232));
     sub->add_option("--duration-s", c.duration_s, "stop after this many seconds (0: until signal)");
@@ -519,7 +532,8 @@ int main(int argc, char** argv) {
   auto* capture = app.add_subcommand("capture", "count packets carrying a marker (root)");
   capture->add_option("--iface", iface, "interface");
   capture->add_option("--duration-s", c.duration_s, "capture time")->required();
-  capture->add_option("--marker", marker, "byte string to look for");
+  capture->add_option("--marker", markers, "byte strings to look for (repeatable; default the "
+                                           "IMU sensor_id marker)");
   c.rate_hz = 200.0;
   CLI11_PARSE(app, argc, argv);
   if (camera->parsed() && c.sensor_id == "imu0") {
@@ -541,7 +555,7 @@ int main(int argc, char** argv) {
     if (watch->parsed()) {
       return run_watch(c, type);
     }
-    return run_capture(iface, c.duration_s, marker);
+    return run_capture(iface, c.duration_s, markers);
   } catch (const std::exception& e) {
     event("@error what=\"%s\"\n", e.what());
     std::fprintf(stderr, "poise_net_node: error: %s\n", e.what());

@@ -203,6 +203,12 @@ void NetLab::set_link(const std::string& host, bool up) const {
   throw std::invalid_argument("NetLab: no host " + host);
 }
 
+TempDir::TempDir(const std::string& prefix)
+    : path("/tmp/" + prefix + "-" + std::to_string(::getpid())),
+      ok(testing::run({"/bin/mkdir", "-p", path}, kCommandTimeout).exit_code == 0) {}
+
+TempDir::~TempDir() { testing::run({"/bin/rm", "-rf", path}, kCommandTimeout); }
+
 RemoveOnExit::~RemoveOnExit() {
   if (!path.empty()) {
     ::unlink(path.c_str());

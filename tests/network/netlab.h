@@ -99,6 +99,17 @@ struct RemoveOnExit {
   ~RemoveOnExit();
 };
 
+/// A fresh directory /tmp/<prefix>-<pid> (created by the constructor, `ok` false when that failed),
+/// removed with its content when it goes out of scope.
+struct TempDir {
+  explicit TempDir(const std::string& prefix);
+  ~TempDir();
+  TempDir(const TempDir&) = delete;
+  TempDir& operator=(const TempDir&) = delete;
+  std::string path;
+  bool ok = false;
+};
+
 /// A copy of config/qos/discovery_server_client.xml pointing at `server_ip` (port 11811), in /tmp;
 /// returns its path (remove it with RemoveOnExit).
 std::string write_discovery_client_xml(const std::string& server_ip);

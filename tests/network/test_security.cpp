@@ -45,7 +45,7 @@ constexpr int kIntrusionWindowMs = 3000;
 class SecurityTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    for (const char* d : {"good", "rogue"}) {
+    for (const char* d : {"good", "rogue", "opaque"}) {
       if (!fs::exists(dir(d) + "/governance.p7s")) {
         GTEST_FAIL() << dir(d) << " is missing: build the target poise_network_security_material "
                                   "(runs tools/security/make_security.sh)";
@@ -96,6 +96,33 @@ TEST_F(SecurityTest, ScriptWritesSignedGovernanceAndPerTopicPermissions) {
   EXPECT_NE(p7s.find("<topic>imu</topic>"), std::string::npos);
   const std::string camera = testing::read_file(dir("good") + "/camera/permissions.xml");
   EXPECT_EQ(camera.find("<topic>imu</topic>"), std::string::npos) << "camera may not publish imu";
+}
+
+// POISE_SEC_GRANTS=opaque: the same directions per host, but no topic name in any permissions.
+TEST_F(SecurityTest, ScriptWithOpaqueGrantsNamesNoTopicInAnyPermissions) {
+  const auto count = [](const std::string& text, const std::string& what) {
+    size_t n = 0;
+    for (size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) {
+      ++n;
+    }
+    return n;
+  };
+  for (const char* host : {"imu", "camera", "fusion", "recorder"}) {
+    const std::string xml = testing::read_file(dir("opaque") + "/" + host + "/permissions.xml");
+    ASSERT_FALSE(xml.empty()) << host;
+    EXPECT_EQ(count(xml, "<topic>"), count(xml, "<topic>*</topic>")) << host << ":\n" << xml;
+    for (const char* topic : {"imu<", "vehicle_input", "attitude", "vision_pose", "diagnostics"}) {
+      EXPECT_EQ(xml.find(topic), std::string::npos) << host << " names " << topic;
+    }
+  }
+  const auto rules = [&](const char* host) {
+    const std::string xml = testing::read_file(dir("opaque") + "/" + host + "/permissions.xml");
+    return std::make_pair(count(xml, "<publish>"), count(xml, "<subscribe>"));
+  };
+  EXPECT_EQ(rules("imu"), std::make_pair(size_t{1}, size_t{0})) << "imu only publishes";
+  EXPECT_EQ(rules("camera"), std::make_pair(size_t{1}, size_t{0})) << "camera only publishes";
+  EXPECT_EQ(rules("fusion"), std::make_pair(size_t{1}, size_t{1}));
+  EXPECT_EQ(rules("recorder"), std::make_pair(size_t{0}, size_t{1})) << "recorder only reads";
 }
 
 TEST_F(SecurityTest, PropertiesNameEveryBuiltinPluginAndFile) {
@@ -288,6 +315,105 @@ TEST_F(SecurityTest, IntrudersCannotInjectOrReadImuSamples) {
   EXPECT_FALSE(find_events(plain->output(), "start").empty());
   EXPECT_FALSE(find_events(rogue->output(), "start").empty()) << rogue->output();
 }
+
+/// What a passive listener looks for on the wire, and where each string would come from.
+struct WireString {
+  const char* text;
+  const char* what;
+};
+constexpr WireString kWireStrings[] = {
+    {kMarkerSensorId, "sample data (the IMU sensor_id)"},
+    {"attitude/tilt", "a topic in use (endpoint discovery)"},
+    {"vehicle_input", "a topic only granted (permissions of imu and fusion)"},
+    {"tag_detections", "a topic only granted (permissions of fusion)"},
+    {"<topic>", "a grant (permissions document)"},
+    {"CN=fusion", "the fusion host's certificate subject"},
+    {"poise_net_fusion", "the fusion participant's name"},
+};
+enum WireIndex { kData, kTopicInUse, kGrantedImu, kGrantedFusion, kGrant, kSubject, kName };
+
+/// The permissions kind under test: "per_topic" (the default of make_security.sh) or "opaque"
+/// (POISE_SEC_GRANTS=opaque).
+class SecurityWire : public SecurityTest, public ::testing::WithParamInterface<std::string> {};
+
+// GIVEN secure imu and fusion hosts (permissions per topic, or opaque) and an intruder with an
+// identity from another CA, every interface captured from before the first participant starts
+// WHEN they discover each other and IMU -> fusion flows
+// THEN no sample data and no topic in use is in clear; the participant name and the certificate
+// subject are; the permissions document is (it travels in the authentication handshake), with
+// every granted topic name when per topic and none when opaque.
+TEST_P(SecurityWire, HandshakeShowsExactlyWhatTravelsInClear) {
+  POISE_REQUIRE_NETLAB();
+  const bool opaque = GetParam() == "opaque";
+  const std::string material = opaque ? "opaque" : "good";
+  testing::DomainLease lease;
+  const std::string domain = std::to_string(lease.id());
+  NetLab lab({"imu", "fusion", "intruder"});
+  std::vector<std::string> capture_args{"capture", "--iface", "eth0", "--duration-s", "120"};
+  for (const WireString& w : kWireStrings) {
+    capture_args.insert(capture_args.end(), {"--marker", w.text});
+  }
+  auto at_fusion = lab.node("fusion", capture_args);
+  auto at_intruder = lab.node("intruder", capture_args);
+  for (auto* c : {at_fusion.get(), at_intruder.get()}) {
+    ASSERT_TRUE(wait_event(*c, "start", {}, 10s)) << c->output();
+  }
+  auto fusion = lab.node("fusion", {"fusion", "--domain", domain}, secure(material, "fusion"));
+  auto imu = lab.node("imu", {"imu", "--domain", domain, "--rate-hz", "50", "--sensor-id",
+                              kMarkerSensorId},
+                      secure(material, "imu"));
+  auto intruder = lab.node("intruder", {"watch", "--domain", domain, "--type", "imu"},
+                           secure("rogue", "recorder"));
+  const auto deadline = std::chrono::steady_clock::now() + kSecureDiscoveryBound;
+  ASSERT_TRUE(wait_event(*fusion, "first", {{"topic", "imu"}}, left(deadline)))
+      << fusion->output() << imu->output();
+  testing::sleep_ms(kIntrusionWindowMs);  // the intruder's handshake attempts go on meanwhile
+  stop(*at_fusion);
+  stop(*at_intruder);
+  stop(*intruder);
+
+  const auto seen = [](const testing::Child& capture) {
+    std::vector<double> n(std::size(kWireStrings), -1.0);
+    for (const Event& e : find_events(capture.output(), "seen")) {
+      n.at(static_cast<size_t>(e.num("index"))) = e.num("packets");
+    }
+    return n;
+  };
+  const std::vector<double> fusion_seen = seen(*at_fusion);
+  const std::vector<double> intruder_seen = seen(*at_intruder);
+  ASSERT_EQ(find_events(at_fusion->output(), "capture").size(), 1U) << at_fusion->output();
+  ASSERT_EQ(find_events(at_intruder->output(), "capture").size(), 1U) << at_intruder->output();
+  for (size_t i = 0; i < std::size(kWireStrings); ++i) {
+    std::printf("[figure] wire (%s grants): \"%s\" (%s): %.0f packets at the fusion host, %.0f at "
+                "the intruder\n",
+                GetParam().c_str(), kWireStrings[i].text, kWireStrings[i].what, fusion_seen[i],
+                intruder_seen[i]);
+  }
+  EXPECT_TRUE(find_events(intruder->output(), "first").empty()) << intruder->output();
+  for (const auto* n : {&fusion_seen, &intruder_seen}) {
+    EXPECT_EQ((*n)[kData], 0.0) << "sample data in clear";
+    EXPECT_EQ((*n)[kTopicInUse], 0.0) << "endpoint discovery in clear";
+  }
+  // In clear by design of DDS Security 1.1 (Fast DDS 2.9): participant discovery and the
+  // handshake's identity, so the listener on the LAN sees the subject and the name.
+  EXPECT_GT(fusion_seen[kSubject], 0.0);
+  EXPECT_GT(fusion_seen[kName], 0.0);
+  EXPECT_GT(intruder_seen[kName], 0.0) << "participant announcements reach every host";
+  // The permissions document travels in the handshake (the control that the capture saw it).
+  EXPECT_GT(fusion_seen[kGrant], 0.0);
+  if (opaque) {
+    for (const auto* n : {&fusion_seen, &intruder_seen}) {
+      EXPECT_EQ((*n)[kGrantedImu], 0.0) << "opaque grants name no topic";
+      EXPECT_EQ((*n)[kGrantedFusion], 0.0) << "opaque grants name no topic";
+    }
+  } else {
+    EXPECT_GT(fusion_seen[kGrantedImu], 0.0) << "per-topic grants: topic names in clear";
+    EXPECT_GT(fusion_seen[kGrantedFusion], 0.0) << "per-topic grants: topic names in clear";
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Grants, SecurityWire, ::testing::Values("per_topic", "opaque"),
+                         [](const auto& param_info) { return param_info.param; });
 
 }  // namespace
 }  // namespace poise::nettest

@@ -10,6 +10,12 @@
 #   POISE_SEC_ORG      organisation in the subject names (default "poise")
 #   POISE_SEC_DOMAINS  domain id range "MIN-MAX" the rules apply to (default 0-232)
 #   POISE_SEC_DAYS     certificate validity in days (default 3650)
+#   POISE_SEC_GRANTS   "per-topic" (default): each host's permissions list its topics (below);
+#                      "opaque": the permissions name no topic (publish and/or subscribe "*"), so
+#                      the permissions document every host sends in clear in the authentication
+#                      handshake reveals no topic name. Cost: access control no longer limits
+#                      which topics a host of this CA may use (the camera host could publish imu);
+#                      strangers are still kept out by authentication and encryption.
 #
 # Layout written (what poise_dds reads with POISE_SECURITY_DIR=OUT_DIR POISE_SECURITY_IDENTITY=HOST):
 #   OUT_DIR/ca.pem ca.key            the CA (identity CA and permissions CA); keep ca.key offline
@@ -18,16 +24,18 @@
 #   OUT_DIR/HOST/permissions.xml .p7s  the host's grant, signed by the CA
 # Copy to each machine only ca.pem, governance.p7s and that machine's HOST/ directory.
 #
-# Topic rules (default DENY for everything not listed):
+# Topic rules, per-topic grants (default DENY for everything not listed):
 #   imu       publish imu, vehicle_input, diagnostics
 #   camera    publish tag_detections, vision_pose, diagnostics
 #   fusion    subscribe imu, vehicle_input, tag_detections, vision_pose;
 #             publish attitude/*, pose/*, altitude, diagnostics
 #   recorder  subscribe * (everything)
+# Opaque grants: imu, camera publish *; fusion publish and subscribe *; recorder subscribe *.
+# Any other host name: no topic, with either kind.
 set -euo pipefail
 
 if [[ $# -lt 1 || "$1" == "-h" || "$1" == "--help" ]]; then
-  sed -n '2,27p' "$0" | sed 's/^# \{0,1\}//'
+  sed -n '2,34p' "$0" | sed 's/^# \{0,1\}//'
   [[ $# -lt 1 ]] && exit 2 || exit 0
 fi
 command -v openssl >/dev/null || { echo "make_security.sh: openssl not found (apt-get install openssl)" >&2; exit 1; }
@@ -39,6 +47,11 @@ hosts=("$@")
 org=${POISE_SEC_ORG:-poise}
 domains=${POISE_SEC_DOMAINS:-0-232}
 days=${POISE_SEC_DAYS:-3650}
+grants=${POISE_SEC_GRANTS:-per-topic}
+if [[ $grants != per-topic && $grants != opaque ]]; then
+  echo "make_security.sh: POISE_SEC_GRANTS must be per-topic or opaque, got '$grants'" >&2
+  exit 2
+fi
 dmin=${domains%-*}
 dmax=${domains#*-}
 if ! [[ $dmin =~ ^[0-9]+$ && $dmax =~ ^[0-9]+$ ]] || (( dmin > dmax || dmax > 232 )); then
@@ -132,6 +145,10 @@ for h in "${hosts[@]}"; do
     recorder) pub=(); sub=('*') ;;
     *) pub=(); sub=() ;;
   esac
+  if [[ $grants == opaque ]]; then  # the same directions, no topic names
+    if (( ${#pub[@]} > 0 )); then pub=('*'); fi
+    if (( ${#sub[@]} > 0 )); then sub=('*'); fi
+  fi
   {
     cat <<XML
 <?xml version="1.0" encoding="UTF-8"?>
