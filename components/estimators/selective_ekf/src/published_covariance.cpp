@@ -28,6 +28,9 @@
 //              dip deviation dv = m (dip - dip_ref) low-passed over the heading's lag; the part
 //              across the horizontal field, which turns the heading, is taken as large as those
 //              two: share^2 (dn^2 + dv^2) / 2 / (m cos dip)^2
+//   unknown    heading: pi^2 / 3 (a heading uniform over +-180 deg) while heading_unknown(): a
+//              field reference still learnt or provisional (field_verify_s), or a heading started
+//              on a gated field; nothing bounds the heading then (a start next to a magnet)
 // The gyro's white noise and bias random walk between corrections, the heading's growth while the
 // magnetometer is gated (and its fall when it is trusted again) are P's own.
 #include "aid.h"
@@ -63,11 +66,16 @@ double SelectiveEkf::heading_lag_s() const {
   return q > 0.0 ? p_h / q : kInf;
 }
 
+bool SelectiveEkf::vision_anchors() const {
+  return x_.last_vision_fused_ns >= 0 &&
+         x_.stamp_ns - x_.last_vision_fused_ns <= aids::seconds_to_ns(p_.vision_anchor_s);
+}
+
 HeadingStatus SelectiveEkf::heading_status() const {
   if (!initialized_) {
     return HeadingStatus::kNoReference;
   }
-  if (x_.last_vision_fused_ns >= 0 && x_.stamp_ns - x_.last_vision_fused_ns <= aids::seconds_to_ns(p_.vision_anchor_s)) {
+  if (vision_anchors()) {
     return HeadingStatus::kVerified;
   }
   const bool split = p_.imu_measurement == ImuMeasurement::kSplit;
@@ -75,8 +83,20 @@ HeadingStatus SelectiveEkf::heading_status() const {
   if (heading.last == Decision::kNone || heading.last == Decision::kRejectedNoMag) {
     return HeadingStatus::kNoReference;
   }
-  const bool reference = split ? x_.field_gate.learnt && x_.field_gate.verified : mag_.reference_ready;
+  const bool reference = split ? x_.field_gate.learnt && x_.field_gate.verified && !heading_unknown()
+                               : mag_.reference_ready;
   return reference && heading.last == Decision::kFused ? HeadingStatus::kVerified : HeadingStatus::kUnverified;
+}
+
+bool SelectiveEkf::heading_unknown() const {
+  if (!initialized_ || p_.imu_measurement != ImuMeasurement::kSplit || !(gp_.verify_s > 0.0) || vision_anchors()) {
+    return false;
+  }
+  const SourceStatus& heading = status(SelectiveEkfAid::kMagHeading);
+  if (heading.last == Decision::kNone || heading.last == Decision::kRejectedNoMag) {
+    return false;  // no field yet (6-axis: the gyro's heading, P's own variance)
+  }
+  return !x_.field_gate.verified || !x_.heading_anchored;
 }
 
 void SelectiveEkf::track_unmodelled(const ImuInput& in, bool aided, double aiding_dt_s) {
@@ -136,6 +156,9 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const Eigen::Vector3d delta = quat_log(quat_align_sign(q_world_body(), q_state) * q_state.conjugate());
   cov += delta * delta.transpose();
 
+  if (heading_unknown()) {
+    cov(2, 2) += kUnknownHeadingVarRad2;
+  }
   const double q = attitude_process_noise(p_, u.last_dt_s);
   if (!(q > 0.0)) {
     return cov;

@@ -217,7 +217,7 @@ void SelectiveEkf::process_imu(const ImuInput& in_raw, bool first_pass) {
   // would keep the test failing (self-locking), so the raw accelerometer is used there.
   const bool anchored = x_.last_vision_fused_ns >= 0 &&
                         now - x_.last_vision_fused_ns <= seconds_to_ns(p_.vision_anchor_s);
-  aids::MagTrust mag{mag_, gp_, ref_angle_rad_, ref_norm_ut_};
+  aids::MagTrust mag{mag_, gp_, ref_angle_rad_, ref_norm_ut_, FieldVerdict::kAccepted};
   bool aided = false;
   if (p_.imu_measurement == ImuMeasurement::kQuaternion) {
     aids::aid_imu_quat(c, in, anchored, mag, status_of(SelectiveEkfAid::kImuQuat));
