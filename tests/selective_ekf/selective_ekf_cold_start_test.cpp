@@ -21,13 +21,12 @@ using testing::kTourColdStartS;
 using testing::kTourMagnetGoneS;
 using testing::kTourSettleS;
 constexpr double kMaxHeadingRmsDeg = 2.0;  // the target, deg (the clean start)
-// Started in motion, the filter has not seen rest: its gyro bias is unlearnt, its tilt errs by
-// about bias * (accel_lowpass_tau_s + the tilt's lag) = 0.3 deg/s * 6 s ~ 2 deg, and the heading
-// the field gives by tan(60 deg) = 1.7 times that: the 2 deg is not reached (measured
-// 4.5 deg RMS); the heading must leave the magnet's 41 deg for this bound, deg. The published
-// heading sigma leaves that tilt-through-dip error out once verified (1.3 deg against 5 deg: the
-// heading row's H has no tilt part), so coverage is asserted until the reference is verified.
-constexpr double kMaxColdHeadingRmsDeg = 6.0;
+// Started in motion, the filter's first sample carries external acceleration, in its attitude and
+// in its accelerometer low-pass alike; the bias is a consider state of the tilt rows while the
+// low-pass forgets it (aid_accel_tilt.cpp), so it is not learnt from that transient (it was: 4.5 deg
+// RMS, bias 1 deg/s off). The bound holds for a start in the magnet too, deg. The published
+// heading sigma once verified is asserted by the NEES over the demo's cut (docs), not here.
+constexpr double kMaxColdHeadingRmsDeg = 2.0;
 // The heading error may never exceed what the published heading sigma admits at 99.7 % for one
 // degree of freedom (3 sigma): the filter must not claim to know a heading it has not verified.
 constexpr double kCoverSigmas = 3.0;
@@ -108,6 +107,38 @@ TEST(SelectiveEkfColdStart, GivenACleanStartWhenAMagnetComesBeforeTheReferenceIs
   EXPECT_EQ(ekf.state().field_gate.relearnt, 0U);
   EXPECT_LT(rms_deg, kMaxHeadingRmsDeg);
   EXPECT_EQ(ekf.heading_status(), HeadingStatus::kVerified);
+}
+
+}  // namespace
+}  // namespace poise
+
+namespace poise {
+namespace {
+
+// The mechanism alone: started in motion (the tour 7 s in, handheld, up to 1.5 m/s^2 of external
+// acceleration in the first sample), the accelerometer low-pass forgets its first sample over
+// accel_lowpass_tau_s; the innovation ramps meanwhile. The bias must not learn that ramp: its error
+// may not grow beyond the start's (the filter starts at zero bias; the simulator's is
+// (0.3, -0.2, 0.25) deg/s). Before the consider update it reached 1.0 deg/s by 10 s.
+TEST(SelectiveEkfColdStart, GivenAStartInMotionWhenTheLowPassForgetsItsFirstSampleThenTheBiasDoesNotLearnTheRamp) {
+  constexpr double kBiasGrowthTolDps = 0.05;  // deg/s above the start's bias error
+  SelectiveEkf ekf;
+  double start_err_dps = -1.0;
+  double max_err_dps = 0.0;
+  const double until_s = testing::kTourColdStartS + SelectiveEkfParams{}.accel_lowpass_tau_s;
+  testing::run_tour_until_attached_magnet(testing::kTourColdStartS, [&](const sim::SimSample& s) {
+    if (!ekf.update_imu(s.imu) || s.truth.t_s > until_s) {
+      return;
+    }
+    const double err = (ekf.state().b_rps - s.truth.gyro_bias_rps).norm() * kDegPerRad;
+    if (start_err_dps < 0.0) {
+      start_err_dps = err;
+    }
+    max_err_dps = std::max(max_err_dps, err);
+  });
+  std::printf("start in motion: bias error %.3f deg/s at the start, at most %.3f deg/s until %.1f s\n", start_err_dps,
+              max_err_dps, until_s);
+  EXPECT_LE(max_err_dps, start_err_dps + kBiasGrowthTolDps);
 }
 
 }  // namespace

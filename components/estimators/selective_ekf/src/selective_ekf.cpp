@@ -277,6 +277,8 @@ void SelectiveEkf::preprocess(ImuInput& in) {
   if (!(dt_s > 0.0)) {
     pre = SelectiveEkfPreState{};
     pre.lp_accel_i = in.accel;
+    pre.moving_start = in.gyro.norm() > p_.rest_gyro_max_rps ||
+                       std::abs(in.accel.norm() - p_.gravity_mps2) > p_.rest_accel_max_mps2;
     pre.rest_detector.start(in.gyro, in.accel);
     in.up_meas = in.accel.normalized();
     return;
@@ -284,6 +286,7 @@ void SelectiveEkf::preprocess(ImuInput& in) {
   // Accelerometer low-pass in the gyro-propagated (bias-corrected) frame: gravity does not move
   // there, external accelerations average out.
   pre.q_ib = (pre.q_ib * quat_exp((in.gyro - x_.b_rps) * dt_s)).normalized();
+  pre.since_start_s += dt_s;
   const double k = p_.accel_lowpass_tau_s > 0.0 ? dt_s / (p_.accel_lowpass_tau_s + dt_s) : 1.0;
   pre.lp_accel_i += k * (pre.q_ib * in.accel - pre.lp_accel_i);
   Eigen::Vector3d up;

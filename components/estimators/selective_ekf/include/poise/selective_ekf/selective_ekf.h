@@ -364,6 +364,10 @@ struct SelectiveEkfPreState {
   Eigen::Quaterniond q_ib = Eigen::Quaterniond::Identity();  ///< body -> almost inertial frame
   Eigen::Vector3d lp_accel_i{0, 0, 0};  ///< low-passed accelerometer in that frame, m/s^2
   double ext_accel_ms = 0.0;            ///< low-passed (|a| - g)^2, (m/s^2)^2
+  /// the first sample was not at rest (the rest detector's thresholds): the low-pass carries its
+  /// external acceleration, as the initial attitude does (a start in motion)
+  bool moving_start = false;
+  double since_start_s = 0.0;           ///< time since the first sample, s
   RestDetector rest_detector;           ///< rest detected at the last sample: rest_detector.rest
 };
 
