@@ -149,6 +149,8 @@ TEST(GaussNewtonParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorName
     {"max_iterations", [](GaussNewtonParams& p) { p.max_iterations = 0; }},
     {"mag_weight", [](GaussNewtonParams& p) { p.mag_weight = -1.0; }},
     {"dip_deg", [](GaussNewtonParams& p) { p.dip_deg = 91.0; }},
+    {"field_magnitude_ut", [](GaussNewtonParams& p) { p.field_magnitude_ut = -1.0; }},
+    {"field_verify_s", [](GaussNewtonParams& p) { p.field_verify_s = -1.0; }},
     {"limits.max_gyro_rps", [](GaussNewtonParams& p) { p.limits.max_gyro_rps = std::numeric_limits<double>::infinity(); }}
   }, [](const GaussNewtonParams& p) { GaussNewton f(p); });
 }

@@ -172,7 +172,9 @@ TEST(SelectiveEkfHeadingStatus, GivenAMagnetWhenTheMagnetometerIsGatedThenTheHea
   constexpr double kCleanFromS = 40.0;  ///< s: the magnet gone, before the second one (50 s)
   constexpr double kCleanToS = 49.0;
   constexpr double kLearningS = 0.5;    ///< s: the field reference being learnt (field_startup_s 1 s)
-  constexpr double kLearntS = 2.0;      ///< s: learnt
+  // s: learnt over field_startup_s (1 s), then accepted for field_verify_s (5 s) against it, with
+  // a margin of one aiding step
+  const double kLearntS = 1.0 + SelectiveEkfParams{}.field_verify_s + 0.1;
   constexpr double kCleanBeforeToS = 14.0;  ///< s: before the magnet approaches (15 s)
   sim::SensorSimulator simu(sim::make_scenario("static_magnet", 100.0, 1));
   SelectiveEkf ekf;

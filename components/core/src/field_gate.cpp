@@ -61,6 +61,10 @@ FieldVerdict FieldGate::step(const FieldGateParams& p, const Eigen::Vector3d& ma
     return FieldVerdict::kLearning;
   }
   if (!p.enabled) {
+    if (!verified) {  // every field is accepted: a provisional reference is verified all the same
+      consistent_s += dt_s;
+      verified = consistent_s >= p.verify_s;
+    }
     return FieldVerdict::kAccepted;
   }
   const double norm = mag.norm();

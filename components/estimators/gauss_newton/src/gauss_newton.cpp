@@ -15,6 +15,9 @@ void GaussNewtonParams::validate(const char* filter) const {
   check.positive(mag_weight, "mag_weight", "relative to the accelerometer rows");
   check.require(std::isnan(dip_deg) || std::abs(dip_deg) <= 90.0, "dip_deg", "in [-90, 90] (deg) or null");
   check.require(startup_samples >= 1, "startup_samples", ">= 1 (samples)");
+  check.require(std::isnan(field_magnitude_ut) || (std::isfinite(field_magnitude_ut) && field_magnitude_ut > 0.0),
+                "field_magnitude_ut", "> 0 (uT) or null");
+  check.non_negative(field_verify_s, "field_verify_s", "s, 0 = verified when learnt");
   check.require(use_magnetometer != MagnetometerUse::kOff, "use_magnetometer",
                 "auto or true (Gauss-Newton needs the magnetometer in every sample; for 6-axis input "
                 "use parallel_kf or selective_ekf)");
@@ -23,12 +26,21 @@ void GaussNewtonParams::validate(const char* filter) const {
 
 GaussNewton::GaussNewton(const GaussNewtonParams& params) : p_(params) {
   p_.validate();
+  // the cold-start gate: the default tolerances and start-up, a fixed reference (it only judges
+  // whether the start-up field holds), never re-acquired or forced
+  gp_.field_magnitude_ut = p_.field_magnitude_ut;
+  gp_.dip_deg = p_.dip_deg;
+  gp_.reference_tau_s = 0.0;
+  gp_.reacquire_s = 0.0;
+  gp_.max_reject_s = 0.0;
+  gp_.verify_s = p_.field_verify_s;
   reset();
 }
 
 void GaussNewton::reset() {
   s_ = GaussNewtonState{};
   s_.dip_rad = std::isfinite(p_.dip_deg) ? p_.dip_deg * kRadPerDeg : 0.0;
+  s_.gate.reset(gp_);
 }
 
 GaussNewtonResult GaussNewton::solve(const Eigen::Vector3d& accel, const Eigen::Vector3d& mag,
@@ -99,6 +111,11 @@ bool GaussNewton::update(const ImuSample& s) {
     ++s_.dip_n;
     s_.dip_rad = s_.dip_sum_rad / s_.dip_n;
   }
+  const double dt = s_.initialized && c.dt_s > 0.0 ? c.dt_s : 0.0;
+  if (gp_.verify_s > 0.0 && !s_.gate.verified &&
+      s_.gate.step(gp_, s.mag_ut, s.accel_mps2, dt) == FieldVerdict::kRelearnt && !std::isfinite(p_.dip_deg)) {
+    s_.dip_rad = s_.gate.dip_rad;  // a provisional reference gave way to a consistent field: its dip
+  }
   Eigen::Quaterniond start = s_.result.q_world_body;
   if (!s_.initialized) {
     // Closed-form start (TRIAD): body axes of world up and horizontal north.
@@ -108,7 +125,6 @@ bool GaussNewton::update(const ImuSample& s) {
       start = quat_enu_nwu() * Eigen::Quaterniond(Eigen::Matrix3d(r_body_world.transpose()));
     }
   }
-  const double dt = s_.initialized && c.dt_s > 0.0 ? c.dt_s : 0.0;
   s_.result = solve(s.accel_mps2, s.mag_ut, start, s_.dip_rad);
   // Residual variance per unit-vector component: two unit vectors give four constraints on three
   // angles, so the residual has one degree of freedom (the angle between them against the dip):
@@ -132,8 +148,12 @@ Eigen::Matrix3d GaussNewton::attitude_covariance() const {
   // kMinResidualVar floor, so P is positive definite.
   const double var = std::max(s_.residual2_lp, kMinResidualVar);
   const Eigen::Matrix3d r = s_.result.q_world_body.toRotationMatrix();
-  const Eigen::Matrix3d p = r * (var * s_.result.information_body.inverse()) * r.transpose();
-  return 0.5 * (p + p.transpose());
+  Eigen::Matrix3d p = r * (var * s_.result.information_body.inverse()) * r.transpose();
+  p = 0.5 * (p + p.transpose());
+  if (heading_unknown()) {
+    p(2, 2) += kUnknownHeadingVarRad2;
+  }
+  return p;
 }
 
 bool GaussNewton::healthy() const {

@@ -12,8 +12,7 @@ namespace {
 constexpr double kInitVarDirection = 1e-2;  // P11 / P21 at (re)initialisation, unit-vector comps^2
 constexpr double kInitVarDisturbanceUt2 = 4.0;  // P22 of KF2 at initialisation, uT^2
 constexpr double kMinCos2Dip = 0.05;        // guard for the heading part of the KF2 correction
-constexpr double kBiasPeriodS = 0.04;
-constexpr double kUnknownHeadingVar = kPi * kPi / 3.0;  // a heading uniform over +-180 deg, rad^2  // the bias filter runs once per window of this length, s (25 Hz)
+constexpr double kBiasPeriodS = 0.04;  // the bias filter runs once per window of this length, s (25 Hz)
 
 }  // namespace
 
@@ -575,7 +574,7 @@ Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) con
     cov(2, 2) += power / (m * m * c * c);
   }
   if (heading_unknown()) {
-    cov(2, 2) += kUnknownHeadingVar;
+    cov(2, 2) += kUnknownHeadingVarRad2;
   }
   return cov;
 }

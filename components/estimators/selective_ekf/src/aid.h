@@ -43,6 +43,8 @@ struct MagTrust {
   const FieldGateParams& gate;  ///< split mode: the field gate in the state (x.field_gate)
   double ref_angle_rad;         ///< quaternion mode: theta_ref = 90 deg + dip (8)
   double ref_norm_ut;           ///< quaternion mode: |m| reference, 0 = not learnt
+  /// split mode: what the field gate decided for the last sample (set by mag_trusted)
+  FieldVerdict verdict = FieldVerdict::kAccepted;
 };
 
 void aid_gyro(const AidContext& c, const ImuInput& in, SourceStatus& st);
@@ -71,6 +73,12 @@ void apply_time_offset(VisionTimeOffsetEstimator& est, const SelectiveEkfParams&
                        VisionPose& v);
 void aid_vision_attitude(const AidContext& c, const VisionMeasurement& v, SourceStatus& st);
 void aid_vision_position(const AidContext& c, const VisionMeasurement& v, SourceStatus& st);
+
+/// Restarts the heading on the field (split mode, a relearnt field reference or the first field
+/// the gate accepts after a start on a gated one): the attitude turned about world up by `dpsi`
+/// (the field's heading innovation), P's heading direction (body `up`) decorrelated from the
+/// rest and given the initial attitude variance, as at a start.
+void restart_heading(const AidContext& c, const Eigen::Vector3d& up, double dpsi);
 
 /// The factor (>= 1) on the heading row's noise density sigma_heading^2 (split mode): raised as
 /// the field nears the gate's tolerances (heading_disturbance_weight).

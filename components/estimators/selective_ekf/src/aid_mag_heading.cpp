@@ -18,6 +18,23 @@ double heading_noise_factor(const SelectiveEkfParams& p, const FieldGate& gate, 
   return 1.0 + p.heading_disturbance_weight * (rn * rn + rd * rd);
 }
 
+void restart_heading(const AidContext& c, const Eigen::Vector3d& up, double dpsi) {
+  SelectiveEkfState& x = c.x;
+  // world-frame turn about e_z = body-frame turn about up: q exp(dpsi up) = exp(dpsi e_z) q
+  x.q_world_body = (x.q_world_body * quat_exp(dpsi * up)).normalized();
+  // P <- T P T^T with T the identity but (I - up up^T) on the attitude block: the heading
+  // direction's variance and correlations dropped (positive semi-definite kept), then its start
+  SelectiveEkf::Mat t = SelectiveEkf::Mat::Identity();
+  t.block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh) -= up * up.transpose();
+  x.P = t * x.P * t.transpose();
+  const double s0 = c.p.init_sigma_attitude_deg * kRadPerDeg;
+  x.P.block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh) += s0 * s0 * up * up.transpose();
+  // the published covariance's field and rotation terms belonged to the old heading
+  x.unmodelled.field_dn_lp = 0.0;
+  x.unmodelled.field_dv_lp = 0.0;
+  x.unmodelled.rotation_heading.setZero();
+}
+
 void aid_mag_heading(const AidContext& c, const ImuInput& in, bool anchored, MagTrust& mag, SourceStatus& st) {
   const int64_t now = in.stamp_ns;
   // validate: a magnetometer sample, an interval for the density, a field that is not vertical
@@ -36,6 +53,22 @@ void aid_mag_heading(const AidContext& c, const ImuInput& in, bool anchored, Mag
   const Eigen::Vector3d u = c.x.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
   // gate: the selective test, against the filter's up axis and |dpsi| as the quaternion error
   const bool trusted = mag_trusted(c, mag, in, u, std::abs(dpsi), anchored);
+  // cold start (field_verify_s): the heading restarts on a relearnt reference's field, and after
+  // a start on a field the gate gated, on the first one it accepts; vision, when it anchors the
+  // attitude, holds the heading instead
+  const FieldVerdict v = mag.verdict;
+  if (!c.x.heading_checked) {
+    c.x.heading_checked = true;
+    c.x.heading_anchored = v != FieldVerdict::kGated || !(mag.gate.verify_s > 0.0);
+  }
+  if (v == FieldVerdict::kRelearnt || (v == FieldVerdict::kAccepted && !c.x.heading_anchored)) {
+    c.x.heading_anchored = true;
+    if (!anchored) {
+      restart_heading(c, u, dpsi);
+      record(st, Decision::kReset, now, c.first_pass);
+      return;
+    }
+  }
   Eigen::Matrix<double, 1, SelectiveEkf::kN> h = Eigen::Matrix<double, 1, SelectiveEkf::kN>::Zero();
   h.block<1, 3>(0, SelectiveEkf::kTh) = u.transpose();
   double r = c.p.sigma_heading_rad_sqrt_s * c.p.sigma_heading_rad_sqrt_s / in.dt_s;

@@ -27,6 +27,7 @@ bool mag_trusted(const AidContext& c, MagTrust& mag, const ImuInput& in, const E
     FieldGate& g = x.field_gate;
     const FieldVerdict v = g.step(mag.gate, in.mag, up, in.dt_s);
     g.tick(mag.gate, in.dt_s);
+    mag.verdict = v;
     field_disturbed = v == FieldVerdict::kGated;
     m.reference_ready = g.learnt;
     m.dip_deg = g.dip_rad * kDegPerRad;

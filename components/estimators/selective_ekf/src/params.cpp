@@ -42,7 +42,7 @@ void validate(const SelectiveEkfParams& p) {
   check.positive(p.mag_norm_threshold, "mag_norm_threshold", "relative");
   heading_field_gate(p).validate(check, {"field_magnitude_ut", "dip_deg", "field_startup_s", "heading_norm_tolerance",
                                           "heading_dip_tolerance_deg", "field_reference_tau_s", "field_reacquire_s",
-                                          "field_reacquire_tol", "field_max_reject_s"});
+                                          "field_reacquire_tol", "field_max_reject_s", "field_verify_s"});
   check.require(p.quat_error_threshold_deg > 0.0 && p.quat_error_threshold_deg <= 180.0,
                 "quat_error_threshold_deg", "in (0, 180] (deg)");
   check.require(std::isfinite(p.inflate_factor) && p.inflate_factor >= 1.0, "inflate_factor", "finite and >= 1");
@@ -81,6 +81,7 @@ FieldGateParams heading_field_gate(const SelectiveEkfParams& p) {
   g.reacquire_s = p.field_reacquire_s;
   g.reacquire_tol = p.field_reacquire_tol;
   g.max_reject_s = p.field_max_reject_s;
+  g.verify_s = p.field_verify_s;
   return g;
 }
 

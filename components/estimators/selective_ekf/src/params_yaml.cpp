@@ -46,6 +46,7 @@ void read(YamlParamReader& r, SelectiveEkfParams& p) {
   r.get("field_reacquire_s", p.field_reacquire_s);
   r.get("field_reacquire_tol", p.field_reacquire_tol);
   r.get("field_max_reject_s", p.field_max_reject_s);
+  r.get("field_verify_s", p.field_verify_s);
   r.get("sigma_heading_rad_sqrt_s", p.sigma_heading_rad_sqrt_s);
   r.get("gyro_scale_error", p.gyro_scale_error);
   r.get("rest_detection", p.rest_detection);

@@ -28,6 +28,11 @@
 //              dip deviation dv = m (dip - dip_ref) low-passed over the heading's lag; the part
 //              across the horizontal field, which turns the heading, is taken as large as those
 //              two: share^2 (dn^2 + dv^2) / 2 / (m cos dip)^2
+//   dip        heading: the tilt's error through the dip, tan(dip) times the error about north
+//              (below, where it is added)
+//   unknown    heading: pi^2 / 3 (a heading uniform over +-180 deg) while heading_unknown(): a
+//              field reference still learnt or provisional (field_verify_s), or a heading started
+//              on a gated field; nothing bounds the heading then (a start next to a magnet)
 // The gyro's white noise and bias random walk between corrections, the heading's growth while the
 // magnetometer is gated (and its fall when it is trusted again) are P's own.
 #include "aid.h"
@@ -63,11 +68,16 @@ double SelectiveEkf::heading_lag_s() const {
   return q > 0.0 ? p_h / q : kInf;
 }
 
+bool SelectiveEkf::vision_anchors() const {
+  return x_.last_vision_fused_ns >= 0 &&
+         x_.stamp_ns - x_.last_vision_fused_ns <= aids::seconds_to_ns(p_.vision_anchor_s);
+}
+
 HeadingStatus SelectiveEkf::heading_status() const {
   if (!initialized_) {
     return HeadingStatus::kNoReference;
   }
-  if (x_.last_vision_fused_ns >= 0 && x_.stamp_ns - x_.last_vision_fused_ns <= aids::seconds_to_ns(p_.vision_anchor_s)) {
+  if (vision_anchors()) {
     return HeadingStatus::kVerified;
   }
   const bool split = p_.imu_measurement == ImuMeasurement::kSplit;
@@ -75,8 +85,20 @@ HeadingStatus SelectiveEkf::heading_status() const {
   if (heading.last == Decision::kNone || heading.last == Decision::kRejectedNoMag) {
     return HeadingStatus::kNoReference;
   }
-  const bool reference = split ? x_.field_gate.learnt && x_.field_gate.verified : mag_.reference_ready;
+  const bool reference = split ? x_.field_gate.learnt && x_.field_gate.verified && !heading_unknown()
+                               : mag_.reference_ready;
   return reference && heading.last == Decision::kFused ? HeadingStatus::kVerified : HeadingStatus::kUnverified;
+}
+
+bool SelectiveEkf::heading_unknown() const {
+  if (!initialized_ || p_.imu_measurement != ImuMeasurement::kSplit || !(gp_.verify_s > 0.0) || vision_anchors()) {
+    return false;
+  }
+  const SourceStatus& heading = status(SelectiveEkfAid::kMagHeading);
+  if (heading.last == Decision::kNone || heading.last == Decision::kRejectedNoMag) {
+    return false;  // no field yet (6-axis: the gyro's heading, P's own variance)
+  }
+  return !x_.field_gate.verified || !x_.heading_anchored;
 }
 
 void SelectiveEkf::track_unmodelled(const ImuInput& in, bool aided, double aiding_dt_s) {
@@ -136,6 +158,9 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const Eigen::Vector3d delta = quat_log(quat_align_sign(q_world_body(), q_state) * q_state.conjugate());
   cov += delta * delta.transpose();
 
+  if (heading_unknown()) {
+    cov(2, 2) += kUnknownHeadingVarRad2;
+  }
   const double q = attitude_process_noise(p_, u.last_dt_s);
   if (!(q > 0.0)) {
     return cov;
@@ -144,14 +169,17 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const double p_tilt = 0.5 * (p_world(0, 0) + p_world(1, 1));
   const double p_heading = p_world(2, 2);
   // gyro scale error: s times the rotation away from the attitude low-passed over each lag
+  // (the tilt's unmodelled errors are collected in tilt_slow too: the heading follows them through
+  // the dip, below)
+  Eigen::Matrix3d tilt_slow = Eigen::Matrix3d::Zero();
   if (p_.gyro_scale_error > 0.0) {
     const double s2 = p_.gyro_scale_error * p_.gyro_scale_error;
-    cov(0, 0) += s2 * u.rotation_tilt.x() * u.rotation_tilt.x();
-    cov(1, 1) += s2 * u.rotation_tilt.y() * u.rotation_tilt.y();
+    tilt_slow(0, 0) += s2 * u.rotation_tilt.x() * u.rotation_tilt.x();
+    tilt_slow(1, 1) += s2 * u.rotation_tilt.y() * u.rotation_tilt.y();
     cov(2, 2) += s2 * u.rotation_heading.z() * u.rotation_heading.z();
   }
   if (p_.imu_measurement != ImuMeasurement::kSplit) {
-    return cov;
+    return cov + tilt_slow;
   }
   // tilt: the low-passed accelerometer's own errors, by its share of the tilt's correction
   const double tilt_sigma = std::isnan(p_.sigma_tilt_rad_sqrt_s)
@@ -162,8 +190,9 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
     const double share = std::min(1.0, p_tilt * p_tilt / (q * r_tilt));
     const double tau = p_.accel_lowpass_tau_s;
     const Eigen::Matrix3d p_b = r * x_.P.block<3, 3>(kB, kB) * r.transpose();
-    cov.topLeftCorner<2, 2>() += share * share * tau * tau * p_b.topLeftCorner<2, 2>();
-    cov.topLeftCorner<2, 2>() += share * share * u.tilt_innovation_lp.head<2>() * u.tilt_innovation_lp.head<2>().transpose();
+    tilt_slow.topLeftCorner<2, 2>() += share * share * tau * tau * p_b.topLeftCorner<2, 2>();
+    tilt_slow.topLeftCorner<2, 2>() +=
+        share * share * u.tilt_innovation_lp.head<2>() * u.tilt_innovation_lp.head<2>().transpose();
   }
   // heading: the accepted field's disturbance, by the magnetometer's share of the heading's correction
   const FieldGate& fg = x_.field_gate;
@@ -181,7 +210,30 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
     const double power = 0.5 * (u.field_dn_lp * u.field_dn_lp + u.field_dv_lp * u.field_dv_lp);
     cov(2, 2) += share * share * power / (mh * mh);
   }
-  return cov;
+  // heading: the tilt's error through the dip. The row's innovation is
+  //   dpsi = dth_z + tan(dip) dth_n
+  // with dth_n the world-frame error about magnetic north (+y, the reference's horizontal
+  // direction): a tilted estimate turns the field's horizontal projection (mw = exp(-dth) m_true
+  // differentiated through atan2). The row's H has the first term only, so the heading settles
+  // where the two cancel: e_z = g e_y with g = -share tan(dip), the tilt error low-passed over the
+  // heading's lag. A tilt error slower than that lag (tilt_slow) is followed whole: it enters as
+  // A tilt_slow A^T with A = I + g e_z e_y^T (its heading part correlated with the tilt). P's own
+  // tilt error decorrelates within the tilt's lag tau_t; low-passed over the heading's tau_h it
+  // keeps f = tau_t / (tau_t + tau_h) of its variance (a first-order Gauss-Markov error through a
+  // first-order lag): g^2 f P_yy on the heading (its correlation with the present tilt, f P_yy,
+  // is left out: what is added to P stays positive semi-definite, so the pose covariance carries it).
+  if (std::isfinite(r_heading) && fg.learnt && cos_dip > 1e-3) {
+    const double share = std::min(1.0, p_heading * p_heading / (q * r_heading));
+    const double g = -share * std::tan(fg.dip_rad);
+    const double tau_t = p_tilt / q;
+    const double tau_h = p_heading / q;
+    const double f = tau_t + tau_h > 0.0 ? tau_t / (tau_t + tau_h) : 0.0;
+    Eigen::Matrix3d follow = Eigen::Matrix3d::Identity();
+    follow(2, 1) = g;
+    tilt_slow = follow * tilt_slow * follow.transpose();
+    cov(2, 2) += g * g * f * p_world(1, 1);
+  }
+  return cov + tilt_slow;
 }
 
 }  // namespace poise

@@ -217,7 +217,7 @@ void SelectiveEkf::process_imu(const ImuInput& in_raw, bool first_pass) {
   // would keep the test failing (self-locking), so the raw accelerometer is used there.
   const bool anchored = x_.last_vision_fused_ns >= 0 &&
                         now - x_.last_vision_fused_ns <= seconds_to_ns(p_.vision_anchor_s);
-  aids::MagTrust mag{mag_, gp_, ref_angle_rad_, ref_norm_ut_};
+  aids::MagTrust mag{mag_, gp_, ref_angle_rad_, ref_norm_ut_, FieldVerdict::kAccepted};
   bool aided = false;
   if (p_.imu_measurement == ImuMeasurement::kQuaternion) {
     aids::aid_imu_quat(c, in, anchored, mag, status_of(SelectiveEkfAid::kImuQuat));
@@ -277,6 +277,8 @@ void SelectiveEkf::preprocess(ImuInput& in) {
   if (!(dt_s > 0.0)) {
     pre = SelectiveEkfPreState{};
     pre.lp_accel_i = in.accel;
+    pre.moving_start = in.gyro.norm() > p_.rest_gyro_max_rps ||
+                       std::abs(in.accel.norm() - p_.gravity_mps2) > p_.rest_accel_max_mps2;
     pre.rest_detector.start(in.gyro, in.accel);
     in.up_meas = in.accel.normalized();
     return;
@@ -284,6 +286,7 @@ void SelectiveEkf::preprocess(ImuInput& in) {
   // Accelerometer low-pass in the gyro-propagated (bias-corrected) frame: gravity does not move
   // there, external accelerations average out.
   pre.q_ib = (pre.q_ib * quat_exp((in.gyro - x_.b_rps) * dt_s)).normalized();
+  pre.since_start_s += dt_s;
   const double k = p_.accel_lowpass_tau_s > 0.0 ? dt_s / (p_.accel_lowpass_tau_s + dt_s) : 1.0;
   pre.lp_accel_i += k * (pre.q_ib * in.accel - pre.lp_accel_i);
   Eigen::Vector3d up;

@@ -22,6 +22,11 @@ enum class HeadingStatus : std::uint8_t {
   kUnverified = 2,
 };
 
+/// The variance of a heading uniform over +-180 deg, pi^2 / 3 rad^2 (sigma 104 deg): what a filter
+/// adds to its published heading variance while nothing bounds the heading (a field reference not
+/// yet verified: a start next to a magnet).
+inline constexpr double kUnknownHeadingVarRad2 = 3.14159265358979323846 * 3.14159265358979323846 / 3.0;
+
 /// "no_reference", "verified", "unverified" (the IDL's enumerators in lower case, without HEADING_).
 const char* to_string(HeadingStatus status);
 

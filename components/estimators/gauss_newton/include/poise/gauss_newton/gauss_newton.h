@@ -13,10 +13,18 @@
 // Iterations start from the previous estimate and stop after max_iterations or when |delta| <
 // tolerance_rad. No disturbance compensation (that is why it is the baseline).
 // The dip is configured or learnt as the mean measured angle over the first startup_samples.
+// Cold start (issue 31; field_verify_s): a field gate (poise/core/field_gate.h, fixed reference,
+// no re-acquisition) judges the field against the start-up one, with the accelerometer as up.
+// Until it has accepted the field for field_verify_s the reference is provisional: the heading is
+// unverified, its published variance that of a heading uniform over +-180 deg, and a gated field
+// that stays consistent (an Earth-sized one, see FieldGate) replaces the learnt dip (a start next
+// to a magnet learns the magnet's dip, which tilts and turns every later solution). A configured
+// dip and field magnitude (or the World Magnetic Model's, seed_field) are verified from the start.
 #pragma once
 
 #include "poise/core/attitude.h"
 #include "poise/core/attitude_filter.h"
+#include "poise/core/field_gate.h"
 #include "poise/core/north.h"
 #include "poise/core/sample_check.h"
 #include "poise/core/source_report.h"
@@ -36,6 +44,12 @@ struct GaussNewtonParams {
   double mag_weight = 1.0;         ///< w_m: weight of the magnetometer rows (1 = paper)
   double dip_deg = std::nan("");   ///< NaN: learn at start-up; else the configured dip, deg
   int startup_samples = 50;        ///< samples averaged to learn the dip
+  /// |m| reference of the cold-start gate, uT; NaN = learnt over its first second. With dip_deg
+  /// (both from the World Magnetic Model when a location is known) the reference is verified.
+  double field_magnitude_ut = std::nan("");
+  /// A learnt field reference is provisional until the gate has accepted the field for this long,
+  /// s (the parallel KF's mag_verify_s); 0 = verified when learnt, no re-learning (before).
+  double field_verify_s = 5.0;
   SampleLimits limits;             ///< input validation
   /// `use_magnetometer`: auto (default) or true. The solution needs the field in every sample, so
   /// a sample without a magnetometer is refused either way: auto reports its accelerometer rejected
@@ -55,6 +69,8 @@ struct GaussNewtonParams {
     r.get("mag_weight", mag_weight);
     r.get_nullable("dip_deg", dip_deg);
     r.get("startup_samples", startup_samples);
+    r.get_nullable("field_magnitude_ut", field_magnitude_ut);
+    r.get("field_verify_s", field_verify_s);
   }
 };
 
@@ -86,6 +102,7 @@ struct GaussNewtonState {
   double dip_rad = 0.0;
   double dip_sum_rad = 0.0;  ///< start-up dip learning: sum and count of measured dips
   int dip_n = 0;
+  FieldGate gate;  ///< the cold-start gate (field_verify_s): a provisional reference relearnt
   double residual2_lp = 0.0;  ///< |e|^2 low-passed over kResidualTauS (unit-vector units^2)
   int64_t last_stamp_ns = -1;
   StampAnchor anchor;  ///< time restarts after a stamp jump only when two samples agree
@@ -116,14 +133,25 @@ class GaussNewton {
   /// variance per unit-vector component low-passed over kResidualTauS. The residual has one degree
   /// of freedom (the angle between the two vectors against the dip); the errors it cannot see
   /// (an external acceleration or a disturbance that keeps that angle) are taken as large as the
-  /// one it sees.
+  /// one it sees. Plus pi^2 / 3 on the heading while heading_unknown().
   [[nodiscard]] Eigen::Matrix3d attitude_covariance() const;
+  /// True while the field reference is learnt or provisional (field_verify_s > 0): a start next to
+  /// a magnet solves every heading from the magnet's field, and nothing tells that yet.
+  [[nodiscard]] bool heading_unknown() const {
+    return s_.initialized && gp_.verify_s > 0.0 && !s_.gate.verified;
+  }
+  /// Provisional references replaced by a consistent field (the dip relearnt).
+  [[nodiscard]] uint64_t field_relearnt_count() const { return s_.gate.relearnt; }
   [[nodiscard]] bool initialized() const { return s_.initialized; }
-  /// kVerified whenever an estimate exists: every estimate is solved from the sample's own
-  /// magnetometer (no gate, no memory of the field), so its heading is the field's, disturbed or
-  /// not; the covariance (from the residual) is what tells a disturbance. kNoReference before.
+  /// kVerified once the field reference is verified (configured, or accepted for field_verify_s):
+  /// every estimate is then solved from the sample's own magnetometer (no memory of the field), so
+  /// its heading is the field's, disturbed or not; the covariance (from the residual) is what
+  /// tells a disturbance. kUnverified while heading_unknown(); kNoReference before an estimate.
   [[nodiscard]] HeadingStatus heading_status() const {
-    return s_.initialized ? HeadingStatus::kVerified : HeadingStatus::kNoReference;
+    if (!s_.initialized) {
+      return HeadingStatus::kNoReference;
+    }
+    return heading_unknown() ? HeadingStatus::kUnverified : HeadingStatus::kVerified;
   }
   [[nodiscard]] double dip_rad() const { return s_.dip_rad; }
   [[nodiscard]] const RejectCounters& rejections() const { return s_.rejections; }
@@ -143,6 +171,7 @@ class GaussNewton {
   void reset_unhealthy();  ///< reset() keeping the counters, one reset counted
 
   GaussNewtonParams p_;
+  FieldGateParams gp_;  ///< the cold-start gate's parameters (from p_)
   GaussNewtonState s_;
 };
 
@@ -156,8 +185,7 @@ class GaussNewtonFilter : public AttitudeFilter {
   void reset() override { gn_.reset(); }
   void seed_field(double field_ut, double dip_deg) override {
     GaussNewtonParams p = gn_.params();
-    double unused_magnitude_ut = 0.0;  // the baseline has no magnitude reference
-    seed_field_reference(field_ut, dip_deg, unused_magnitude_ut, p.dip_deg);
+    seed_field_reference(field_ut, dip_deg, p.field_magnitude_ut, p.dip_deg);
     gn_ = GaussNewton(p);
   }
   [[nodiscard]] std::map<std::string, uint64_t> rejections() const override {

@@ -159,6 +159,13 @@ struct SelectiveEkfParams {
   double field_reacquire_s = 20.0;           ///< s, 0 = never
   double field_reacquire_tol = 0.05;         ///< relative
   double field_max_reject_s = 60.0;          ///< s, 0 = never
+  /// kSplit: a field reference learnt at start-up is provisional until the gate has accepted the
+  /// field against it for this long, s (FieldGateParams::verify_s; the parallel KF's
+  /// mag_verify_s). While provisional (and without vision anchoring the attitude) the heading is
+  /// unverified and its published variance that of a heading uniform over +-180 deg, and a gated
+  /// field that stays consistent for field_startup_s replaces the reference and restarts the
+  /// heading on it (a cold start next to a magnet). 0 = verified when learnt (before).
+  double field_verify_s = 5.0;
   /// kSplit: tilt and heading are fused every aiding_period_s (variance of the elapsed interval),
   /// not every sample: their information is in a seconds-long low-pass. 0 = every sample.
   double aiding_period_s = 0.02;
@@ -359,6 +366,10 @@ struct SelectiveEkfPreState {
   Eigen::Quaterniond q_ib = Eigen::Quaterniond::Identity();  ///< body -> almost inertial frame
   Eigen::Vector3d lp_accel_i{0, 0, 0};  ///< low-passed accelerometer in that frame, m/s^2
   double ext_accel_ms = 0.0;            ///< low-passed (|a| - g)^2, (m/s^2)^2
+  /// the first sample was not at rest (the rest detector's thresholds): the low-pass carries its
+  /// external acceleration, as the initial attitude does (a start in motion)
+  bool moving_start = false;
+  double since_start_s = 0.0;           ///< time since the first sample, s
   RestDetector rest_detector;           ///< rest detected at the last sample: rest_detector.rest
 };
 
@@ -409,6 +420,12 @@ struct SelectiveEkfState {
   SelectiveEkfPreState pre;
   int64_t last_aiding_ns = -1;           ///< last tilt/heading fusion (kSplit)
   FieldGate field_gate;                  ///< kSplit: magnetometer reference and gate
+  /// kSplit: the heading was started (or restarted) on a field the gate did not gate (learning,
+  /// accepted or relearnt); false after a start on a gated field (a configured reference next to
+  /// a magnet): the first accepted field then restarts it. heading_checked: the gate has judged
+  /// the field the heading was started on.
+  bool heading_anchored = false;
+  bool heading_checked = false;
   SelectiveEkfUnmodelled unmodelled;     ///< the published covariance's own terms
 };
 
@@ -526,15 +543,21 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// the filter does not model (src/published_covariance.cpp, ESTIMATORS.md): the gyro bias error
   /// through the accelerometer low-pass's lag, the accelerometer disturbance the tilt is still
   /// following, the gyro scale error (gyro_scale_error) against the correction lags, and the field
-  /// disturbance the gate lets through. The estimate itself never uses it.
+  /// disturbance the gate lets through; and pi^2 / 3 on the heading (a heading uniform over
+  /// +-180 deg) while heading_unknown(). The estimate itself never uses it.
   [[nodiscard]] Eigen::Matrix3d attitude_covariance() const;
+  /// True while nothing bounds the heading (kSplit, field_verify_s > 0, no vision anchoring the
+  /// attitude): the field reference is being learnt or is provisional, or the heading was started
+  /// on a field the gate gated and no accepted field has restarted it yet.
+  [[nodiscard]] bool heading_unknown() const;
   /// Whether the heading is backed by an absolute reference the filter trusts
   /// (poise/core/heading_status.h): kVerified while vision anchors the attitude (fused within
   /// vision_anchor_s: the tag map is one) or the magnetometer's heading row was fused trusted at
-  /// its last step against a verified reference (FieldGate::verified; the selective EKF's gate
-  /// keeps verify_s 0: verified when learnt); kNoReference before the first sample and without a
-  /// magnetometer or vision (6-axis: the gyro's heading); kUnverified otherwise: the reference
-  /// still being learnt at the start, the magnetometer gated or distrusted. Meanwhile the heading
+  /// its last step against a verified reference (FieldGate::verified: configured, or accepted for
+  /// field_verify_s) with a heading that was not started on a gated field; kNoReference before the
+  /// first sample and without a magnetometer or vision (6-axis: the gyro's heading); kUnverified
+  /// otherwise: the reference still being learnt or provisional, the heading just restarted on a
+  /// relearnt field, the magnetometer gated or distrusted. Meanwhile the heading
   /// variance of attitude_covariance() grows (P's own, and the gyro scale error over the whole
   /// rotation) and falls once a field is trusted again.
   [[nodiscard]] HeadingStatus heading_status() const;
@@ -578,6 +601,8 @@ class SelectiveEkf : private SelectiveEkfFullState {
   SourceStatus& status_of(SelectiveEkfAid a);
   [[nodiscard]] bool healthy();
   void reset_unhealthy(int64_t stamp_ns);  ///< reset() keeping the counters, one reset counted
+  /// Vision fused within vision_anchor_s of the state's time: the tag map anchors the attitude.
+  [[nodiscard]] bool vision_anchors() const;
 
   SelectiveEkfParams p_;
   FieldGateParams gp_;  ///< heading_field_gate(p_)
