@@ -398,7 +398,11 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a,
   s_.kf2.correct(mag, s_.gate.m_ut, s_.mag_extra_var);  // (10b), (11f)-(11h)
   s_.mag_extra_var = 0.0;
   s_.mag_used = true;
-  s_.since_mag_s = 0.0;
+  // One accepted field removes the share g = dt / lag of the heading error the gyro accumulated
+  // since the heading was last held by fields (KF2's gain about the vertical), not all of it: a
+  // field accepted now and then amid gated ones leaves most of it. Continuously accepted, this
+  // settles at about KF2's lag.
+  s_.since_mag_s *= 1.0 - std::min(1.0, dt / std::max(heading_lag_s(dt), dt));
   if (s_.gate.learnt && s_.gate.m_ut > 0.0) {
     // The heading follows the field with KF2's lag, so what moves it is the disturbance averaged
     // over that lag: its part along the reference (norm) and across it in the vertical plane
@@ -576,7 +580,7 @@ Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) con
   }
   if (s_.heading_initialized) {
     const double m = s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0;
-    const double t = s_.since_mag_s + heading_lag_s(s_.last_dt_s);
+    const double t = s_.since_mag_s;  // includes KF2's lag (heading_step)
     cov(2, 2) += p_bias(2, 2) * t * t;
     const double power = 0.5 * (s_.field_dn_lp * s_.field_dn_lp + s_.field_dv_lp * s_.field_dv_lp);
     cov(2, 2) += power / (m * m * c * c);

@@ -307,7 +307,7 @@ struct ParallelKfState {
   double accel_dev2_lp = 0.0;  ///< (|low-passed s_A| - g)^2, low-passed over accel_lowpass_tau_s, (m/s^2)^2
   double field_dn_lp = 0.0;    ///< |s_M| - m of the fields used for heading, low-passed over KF2's lag, uT
   double field_dv_lp = 0.0;    ///< m (dip - alpha) of the same, low-passed the same way, uT
-  double since_mag_s = 0.0;    ///< time since a field last corrected the heading, s
+  double since_mag_s = 0.0;    ///< time since fields last held the heading (each accepted one removes dt / KF2's lag of it), s
   double last_dt_s = 0.0;      ///< the last step, s
   /// KF2's direction was (re)started from a field the gate did not gate (learning, accepted or
   /// relearnt); false after a start on a gated field (a configured reference next to a magnet):
@@ -352,8 +352,11 @@ class ParallelKf {
   ///           + s^2 dtheta_i^2 about each body axis i (world x, y part): a gyro scale error s
   ///             (motion_gyro_scale_error) turns the attitude by s times the rotation dtheta away
   ///             from the attitude low-passed over tau, which the tilt has not caught up with;
-  ///   heading + P_b,z (t + tau_2)^2: the vertical bias error integrated since a field last
-  ///             corrected the heading (t) and over KF2's correction lag tau_2;
+  ///   heading + P_b,z t^2: the vertical bias error integrated over t, the time since the heading
+  ///             was last held by fields: t grows with time and each accepted field removes the
+  ///             share of it that KF2's correction removes, dt / tau_2 (tau_2 KF2's lag about the
+  ///             vertical), so continuously accepted fields hold t at about tau_2, and a field
+  ///             accepted now and then amid gated ones leaves most of a gated stretch in it;
   ///           + the scale error's part about the vertical, with the attitude low-passed over tau_2;
   ///           + the disturbance of the fields used, averaged over KF2's lag (the norm and dip
   ///             deviations from the reference, low-passed), over (m cos(dip))^2: its horizontal
