@@ -806,3 +806,33 @@ TEST(ParallelKf, GivenNoDelayKnownWhenASensorIsHalfASampleLateThenTheDefaultOutp
 
 }  // namespace
 }  // namespace poise
+
+namespace poise {
+namespace {
+
+TEST(ParallelKfFilter, GivenNoConfiguredDelayWhenTheDriverPublishesOneThenItIsTakenElseTheConfiguredOneWins) {
+  constexpr double kPublishedS = 0.0048;  // oracle: the delay offered
+  // GIVEN the default (no delay known) and a filter configured with 0 and 2 ms
+  ParallelKfFilter unknown;
+  ParallelKfParams zero = ParallelKfParams::defaults();
+  zero.imu_delay_s = 0.0;
+  ParallelKfParams two = ParallelKfParams::defaults();
+  two.imu_delay_s = 0.002;
+  ParallelKfFilter configured_zero(zero);
+  ParallelKfFilter configured_two(two);
+  // WHEN the driver's delay is offered
+  // THEN only the filter without a configured delay takes it
+  EXPECT_TRUE(unknown.take_published_imu_delay(kPublishedS));
+  EXPECT_DOUBLE_EQ(unknown.core().params().imu_delay_s, kPublishedS);
+  EXPECT_TRUE(unknown.take_published_imu_delay(0.003));  // a later one replaces it (not configured)
+  EXPECT_DOUBLE_EQ(unknown.core().params().imu_delay_s, 0.003);
+  EXPECT_FALSE(configured_zero.take_published_imu_delay(kPublishedS));
+  EXPECT_DOUBLE_EQ(configured_zero.core().params().imu_delay_s, 0.0);
+  EXPECT_FALSE(configured_two.take_published_imu_delay(kPublishedS));
+  EXPECT_DOUBLE_EQ(configured_two.core().params().imu_delay_s, 0.002);
+  // and a hostile one is refused with a message
+  EXPECT_THROW(unknown.take_published_imu_delay(0.2), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace poise

@@ -450,7 +450,7 @@ class ParallelKf {
 /// AttitudeFilter adapter.
 class ParallelKfFilter : public AttitudeFilter {
  public:
-  explicit ParallelKfFilter(const ParallelKfParams& p = {}) : kf_(p) {}
+  explicit ParallelKfFilter(const ParallelKfParams& p = {}) : kf_(p), delay_configured_(!std::isnan(p.imu_delay_s)) {}
   bool update(const ImuSample& s) override { return kf_.update(s); }
   [[nodiscard]] Eigen::Quaterniond q_world_body() const override { return kf_.q_world_body(); }
   [[nodiscard]] bool initialized() const override { return kf_.initialized(); }
@@ -477,10 +477,20 @@ class ParallelKfFilter : public AttitudeFilter {
     return kf_.attitude_covariance(kf_.output());
   }
   [[nodiscard]] HeadingStatus heading_status() const override { return kf_.heading_status(); }
+  /// Used unless imu_delay_s was configured (not NaN); throws std::invalid_argument outside
+  /// [0, 0.05] s (set_imu_delay_s).
+  bool take_published_imu_delay(double delay_s) override {
+    if (delay_configured_) {
+      return false;
+    }
+    kf_.set_imu_delay_s(delay_s);
+    return true;
+  }
   [[nodiscard]] const ParallelKf& core() const { return kf_; }
 
  private:
   ParallelKf kf_;
+  bool delay_configured_ = false;  ///< imu_delay_s was set by the parameters (a published one is ignored)
 };
 
 }  // namespace poise
