@@ -764,11 +764,13 @@ DelayRun run_delayed_sensor(const ParallelKfParams& params, double delay_s) {
 TEST(ParallelKf, GivenASensorWithAGroupDelayWhenTheDelayIsConfiguredThenTheOutputIsTheAttitudeAtTheStamp) {
   constexpr double kDelayS = 0.005;                 // MPU6050 DLPF_CFG 3: ~4.8 ms
   constexpr double kCompensatedTolDeg = 0.05;       // deg: prediction error 0.005 + filter error
-  // GIVEN a sensor 5 ms late, and the default filter without and with imu_delay_s
+  // GIVEN a sensor 5 ms late, and the default filter with imu_delay_s 0 and 5 ms
   ParallelKfParams with = ParallelKfParams::defaults();
   with.imu_delay_s = kDelayS;
+  ParallelKfParams none = ParallelKfParams::defaults();
+  none.imu_delay_s = 0.0;
   // WHEN it moves (yaw 40 deg at 0.5 Hz, roll 20 deg at 0.7 Hz: ~110 deg/s RMS)
-  const delay_test::DelayRun without_run = delay_test::run_delayed_sensor(ParallelKfParams::defaults(), kDelayS);
+  const delay_test::DelayRun without_run = delay_test::run_delayed_sensor(none, kDelayS);
   const delay_test::DelayRun with_run = delay_test::run_delayed_sensor(with, kDelayS);
   const double lag_deg = without_run.rms_rate_dps * kDelayS;  // the lag's error, |w| d
   std::printf("group delay 5 ms: RMS error %.3f deg uncompensated (|w| d = %.3f deg), %.4f deg compensated\n",
@@ -776,8 +778,60 @@ TEST(ParallelKf, GivenASensorWithAGroupDelayWhenTheDelayIsConfiguredThenTheOutpu
   // THEN without compensation the output lags by the delay, and with it the lag is gone
   EXPECT_NEAR(without_run.rms_err_deg, lag_deg, 0.2 * lag_deg);
   EXPECT_LT(with_run.rms_err_deg, kCompensatedTolDeg);
-  // and a sensor without delay is not made worse by the default (no compensation)
-  EXPECT_LT(delay_test::run_delayed_sensor(ParallelKfParams::defaults(), 0.0).rms_err_deg, kCompensatedTolDeg);
+  // and a sensor without delay is not made worse by imu_delay_s 0 (no compensation)
+  EXPECT_LT(delay_test::run_delayed_sensor(none, 0.0).rms_err_deg, kCompensatedTolDeg);
+}
+
+TEST(ParallelKf, GivenNoDelayKnownWhenASensorIsHalfASampleLateThenTheDefaultOutputIsTheAttitudeAtTheStamp) {
+  constexpr double kSampleS = 1.0 / 200.0;         // run_delayed_sensor's rate
+  constexpr double kHalfSampleS = 0.5 * kSampleS;  // a sample that is the mean over its interval
+  constexpr double kCompensatedTolDeg = 0.05;      // deg: as above
+  // GIVEN the default (imu_delay_s not known) and imu_delay_s 0
+  const ParallelKfParams unknown = ParallelKfParams::defaults();
+  ASSERT_TRUE(std::isnan(unknown.imu_delay_s));
+  ParallelKfParams none = ParallelKfParams::defaults();
+  none.imu_delay_s = 0.0;
+  // WHEN a sensor describes the motion half a sample before its stamp
+  const delay_test::DelayRun unknown_run = delay_test::run_delayed_sensor(unknown, kHalfSampleS);
+  const delay_test::DelayRun none_run = delay_test::run_delayed_sensor(none, kHalfSampleS);
+  const double lag_deg = none_run.rms_rate_dps * kHalfSampleS;  // oracle: |w| d
+  std::printf("half a sample late: RMS error %.4f deg with imu_delay_s 0 (|w| d = %.4f deg), %.4f deg unknown\n",
+              none_run.rms_err_deg, lag_deg, unknown_run.rms_err_deg);
+  // THEN imu_delay_s 0 lags by it, and the default predicts over it
+  EXPECT_NEAR(none_run.rms_err_deg, lag_deg, 0.2 * lag_deg);
+  EXPECT_LT(unknown_run.rms_err_deg, kCompensatedTolDeg);
+  // and the paper configuration predicts nothing
+  EXPECT_EQ(ParallelKfParams::paper().imu_delay_s, 0.0);
+}
+
+}  // namespace
+}  // namespace poise
+
+namespace poise {
+namespace {
+
+TEST(ParallelKfFilter, GivenNoConfiguredDelayWhenTheDriverPublishesOneThenItIsTakenElseTheConfiguredOneWins) {
+  constexpr double kPublishedS = 0.0048;  // oracle: the delay offered
+  // GIVEN the default (no delay known) and a filter configured with 0 and 2 ms
+  ParallelKfFilter unknown;
+  ParallelKfParams zero = ParallelKfParams::defaults();
+  zero.imu_delay_s = 0.0;
+  ParallelKfParams two = ParallelKfParams::defaults();
+  two.imu_delay_s = 0.002;
+  ParallelKfFilter configured_zero(zero);
+  ParallelKfFilter configured_two(two);
+  // WHEN the driver's delay is offered
+  // THEN only the filter without a configured delay takes it
+  EXPECT_TRUE(unknown.take_published_imu_delay(kPublishedS));
+  EXPECT_DOUBLE_EQ(unknown.core().params().imu_delay_s, kPublishedS);
+  EXPECT_TRUE(unknown.take_published_imu_delay(0.003));  // a later one replaces it (not configured)
+  EXPECT_DOUBLE_EQ(unknown.core().params().imu_delay_s, 0.003);
+  EXPECT_FALSE(configured_zero.take_published_imu_delay(kPublishedS));
+  EXPECT_DOUBLE_EQ(configured_zero.core().params().imu_delay_s, 0.0);
+  EXPECT_FALSE(configured_two.take_published_imu_delay(kPublishedS));
+  EXPECT_DOUBLE_EQ(configured_two.core().params().imu_delay_s, 0.002);
+  // and a hostile one is refused with a message
+  EXPECT_THROW(unknown.take_published_imu_delay(0.2), std::invalid_argument);
 }
 
 }  // namespace

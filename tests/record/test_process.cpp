@@ -2,6 +2,8 @@
 // for the same input), input copied through, one estimate per accepted sample, bad payloads
 // rejected and counted.
 #include "poise/core/attitude.h"
+
+#include <poise/msg/sensor_infoPubSubTypes.h>
 #include "poise/process/compare.h"
 #include "poise/record/idl_schema.h"
 #include "poise/record/mcap.h"
@@ -67,6 +69,26 @@ std::vector<uint8_t> read_bytes(const std::string& path) {
   return std::vector<uint8_t>(std::istreambuf_iterator<char>(in), {});
 }
 
+/// The schema of message type `type` (e.g. "poise::msg::ImuSample"), its IDL flattened.
+uint16_t add_idl_schema(McapWriter& w, const char* type) {
+  const auto idl = *flattened_idl(type);
+  return w.add_schema(type, "omgidl", {idl.begin(), idl.end()});
+}
+
+/// A recording being written whose chunk clock is `clock` (set it to each message's time).
+struct ClockedRecording {
+  explicit ClockedRecording(const std::string& path) : writer(open_file_sink(path), options()) {}
+  int64_t clock = 0;
+  McapWriter writer;
+
+ private:
+  WriterOptions options() {
+    WriterOptions o;
+    o.clock = [this] { return clock; };
+    return o;
+  }
+};
+
 /// A recording with kImu stationary IMU samples at 100 Hz, attitude messages, one garbage payload
 /// at the end (and with `garbage_mid`, one more in the middle).
 void write_input(const std::string& path, bool garbage_mid = false, int empty_channels = 0) {
@@ -74,10 +96,8 @@ void write_input(const std::string& path, bool garbage_mid = false, int empty_ch
   WriterOptions opt;
   opt.clock = [&clock] { return clock; };
   McapWriter w(open_file_sink(path), opt);
-  const auto idl = *flattened_idl("poise::msg::ImuSample");
-  const auto aidl = *flattened_idl("poise::msg::AttitudeEstimate");
-  const uint16_t s = w.add_schema("poise::msg::ImuSample", "omgidl", {idl.begin(), idl.end()});
-  const uint16_t a = w.add_schema("poise::msg::AttitudeEstimate", "omgidl", {aidl.begin(), aidl.end()});
+  const uint16_t s = add_idl_schema(w, "poise::msg::ImuSample");
+  const uint16_t a = add_idl_schema(w, "poise::msg::AttitudeEstimate");
   const uint16_t imu = w.add_channel(s, "imu", "cdr", {{"qos_profile", "sensor"}});
   const uint16_t att = w.add_channel(a, "attitude/live", "cdr", {});
   for (int i = 0; i < empty_channels; ++i) {  // declared, never written
@@ -787,6 +807,78 @@ TEST(Process, GivenAFifoAsTheRecordingThenInfoProcessAndReplayRefuseItAtOnce) {
     EXPECT_NE(r.exit_code, 0) << r.output;
     EXPECT_NE(r.output.find("is not a regular file (a FIFO)"), std::string::npos) << argv[1] << ": " << r.output;
   }
+}
+
+}  // namespace
+}  // namespace poise::record
+
+namespace poise::record {
+namespace {
+
+/// Remembers the published delays it was offered; takes them like a filter without a configured delay.
+class DelaySpyFilter : public AttitudeFilter {
+ public:
+  explicit DelaySpyFilter(std::vector<double>* offered) : offered_(offered) {}
+  bool update(const ImuSample& /*s*/) override { return true; }
+  [[nodiscard]] Eigen::Quaterniond q_world_body() const override { return Eigen::Quaterniond::Identity(); }
+  [[nodiscard]] bool initialized() const override { return true; }
+  void reset() override {}
+  bool take_published_imu_delay(double delay_s) override {
+    offered_->push_back(delay_s);
+    return true;
+  }
+
+ private:
+  std::vector<double>* offered_;
+};
+
+/// `poise process INPUT -o OUTPUT --filter NAME` with `filter` as NAME.
+ProcessStats process_alone(const std::string& input, const std::string& output, const std::string& name,
+                           std::unique_ptr<AttitudeFilter> filter) {
+  std::vector<ProcessFilter> filters;
+  filters.push_back({name, std::move(filter), {}});
+  ProcessOptions o;
+  o.input = input;
+  o.output = output;
+  return process_recording(o, filters);
+}
+
+TEST(Process, GivenARecordingWithImuInfoWhenAFilterRunsAloneThenItIsOfferedTheRecordedDelay) {
+  constexpr double kRecordedDelayS = 0.0048;  // oracle: the delay written on imu_info (MPU6050 DLPF_CFG 3)
+  // GIVEN a recording: the IMU's info (sensor imu0, gyro 4.8 ms) and 20 samples of imu0
+  const std::string dir = testing::cases_dir("process_imu_info");
+  const std::string input = dir + "/input.mcap";
+  {
+    ClockedRecording rec(input);
+    McapWriter& w = rec.writer;
+    const uint16_t info_ch = w.add_channel(add_idl_schema(w, "poise::msg::ImuSensorInfo"), "imu_info", "cdr", {});
+    const uint16_t imu = w.add_channel(add_idl_schema(w, "poise::msg::ImuSample"), "imu", "cdr", {{"qos_profile", "sensor"}});
+    msg::ImuSensorInfo info;
+    info.sensor_id("imu0");
+    info.chip("MPU6050");
+    info.filter_setting(3);
+    info.accel_delay_s(0.0049);
+    info.gyro_delay_s(kRecordedDelayS);
+    info.origin("table");
+    const auto ib = testing::serialize<msg::ImuSensorInfoPubSubType>(info);
+    const int64_t t0 = 5'000'000'000LL;
+    w.write(info_ch, 0, static_cast<uint64_t>(t0), static_cast<uint64_t>(t0), ib.data(), ib.size());
+    for (int i = 0; i < 20; ++i) {
+      const int64_t stamp = t0 + i * 10'000'000LL;
+      rec.clock = stamp;
+      const auto bytes = testing::serialize<msg::ImuSamplePubSubType>(testing::make_imu(static_cast<uint32_t>(i), stamp));
+      w.write(imu, static_cast<uint32_t>(i), static_cast<uint64_t>(stamp + 1000), static_cast<uint64_t>(stamp),
+              bytes.data(), bytes.size());
+    }
+    w.close();
+  }
+  // WHEN a filter runs alone on it (`poise process --filter`, no host file)
+  std::vector<double> offered;
+  const ProcessStats stats = process_alone(input, dir + "/out.mcap", "spy", std::make_unique<DelaySpyFilter>(&offered));
+  // THEN it was offered the recorded gyro delay, once (before its first sample of imu0)
+  EXPECT_EQ(stats.imu_infos, 1u);
+  ASSERT_EQ(offered.size(), 1u);
+  EXPECT_DOUBLE_EQ(offered[0], kRecordedDelayS);
 }
 
 }  // namespace

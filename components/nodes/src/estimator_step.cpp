@@ -3,6 +3,7 @@
 #include "poise/core/north_yaml.h"
 #include "poise/runtime/utc_date.h"
 
+#include <cmath>
 #include <cstdio>
 #include <sstream>
 
@@ -206,7 +207,9 @@ void StepRunner::publish_diagnostics(int64_t stamp_ns, uint32_t seq, int64_t now
   if (imu_info_seen_ || imu_info_refused_ > 0) {  // only with an IMU that publishes its delay
     diag.counters["imu_info_refused"] = imu_info_refused_;
     if (const ImuDelayChoice* d = step_->imu_delay()) {
-      diag.metrics.push_back({"imu_delay", d->in_use_s(), "s"});
+      if (std::isfinite(d->in_use_s())) {  // NaN: not known (the filter assumes half a sample)
+        diag.metrics.push_back({"imu_delay", d->in_use_s(), "s"});
+      }
       diag.counters["imu_delay_published"] = d->published_in_use() ? 1 : 0;
     }
   }

@@ -2,6 +2,7 @@
 
 #include "poise/core/yaml_params.h"
 
+#include <cmath>
 #include <cstdio>
 
 namespace poise::nodes {
@@ -19,7 +20,11 @@ bool ImuDelayChoice::offer(double delay_s, const std::string& what) {
 
 std::string ImuDelayChoice::describe() const {
   char buf[64];
-  std::snprintf(buf, sizeof buf, "imu_delay_s %.6f s", in_use_s_);
+  if (std::isnan(in_use_s_)) {  // the filter's own default for an unknown delay
+    std::snprintf(buf, sizeof buf, "imu_delay_s not known (half a sample assumed)");
+  } else {
+    std::snprintf(buf, sizeof buf, "imu_delay_s %.6f s", in_use_s_);
+  }
   std::string s = buf;
   if (explicit_) {
     return s + " (configured; a published delay is ignored)";

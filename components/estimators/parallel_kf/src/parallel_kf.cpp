@@ -35,6 +35,7 @@ ParallelKfParams ParallelKfParams::paper() {
   p.share_tilt_correction = false;
   p.mag_reference_tau_s = 0.0;
   p.mag_verify_s = 0.0;
+  p.imu_delay_s = 0.0;  // the paper predicts nothing
   return p;
 }
 
@@ -71,7 +72,8 @@ void ParallelKfParams::validate() const {
   check.require(motion_gyro_scale_error >= 0.0 && motion_gyro_scale_error < 1.0, "motion_gyro_scale_error", "in [0, 1)");
   check.positive(max_bias_rps, "max_bias_rps", "rad/s");
   check.require(gyro_current_weight >= 0.0 && gyro_current_weight <= 1.0, "gyro_current_weight", "in [0, 1]");
-  check.require(imu_delay_s >= 0.0 && imu_delay_s <= 0.05, "imu_delay_s", "in [0, 0.05] (s)");
+  check.require(std::isnan(imu_delay_s) || (imu_delay_s >= 0.0 && imu_delay_s <= 0.05), "imu_delay_s",
+                "in [0, 0.05] (s), or null (not known: half a sample)");
   check.non_negative(accel_lowpass_tau_s, "accel_lowpass_tau_s", "s, 0 = off");
   check.require(accel_lowpass_order == 1 || accel_lowpass_order == 2, "accel_lowpass_order", "1 or 2");
   check.require(!share_tilt_correction || (tilt.renormalize && tilt.exact_rotation), "share_tilt_correction",
@@ -395,7 +397,11 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a,
   s_.kf2.correct(mag, s_.gate.m_ut, s_.mag_extra_var);  // (10b), (11f)-(11h)
   s_.mag_extra_var = 0.0;
   s_.mag_used = true;
-  s_.since_mag_s = 0.0;
+  // One accepted field removes the share g = dt / lag of the heading error the gyro accumulated
+  // since the heading was last held by fields (KF2's gain about the vertical), not all of it: a
+  // field accepted now and then amid gated ones leaves most of it. Continuously accepted, this
+  // settles at about KF2's lag.
+  s_.since_mag_s *= 1.0 - std::min(1.0, dt / std::max(heading_lag_s(dt), dt));
   if (s_.gate.learnt && s_.gate.m_ut > 0.0) {
     // The heading follows the field with KF2's lag, so what moves it is the disturbance averaged
     // over that lag: its part along the reference (norm) and across it in the vertical plane
@@ -461,12 +467,13 @@ void ParallelKf::update_attitude() {
   r_enu_body.row(1) = y.cross(z).transpose();
   r_enu_body.row(2) = z.transpose();
   Eigen::Quaterniond q(r_enu_body);
-  if (p_.imu_delay_s > 0.0) {
+  const double delay_s = output_delay_s();
+  if (delay_s > 0.0) {
     // predicted over the sensor's group delay (state untouched): q (x) exp(w d), to first order
     // [1, w d / 2] normalised (angle error (|w| d)^3 / 12: 1e-5 deg at 10 rad/s and 5 ms). q is
     // unit, so the product's norm is |[1, w d / 2]|: computed from the gyro alone, off the chain
     // of the filter's arithmetic.
-    const Eigen::Vector3d half = 0.5 * p_.imu_delay_s * s_.prev_gyro;
+    const Eigen::Vector3d half = 0.5 * delay_s * s_.prev_gyro;
     const double scale = 1.0 / std::sqrt(1.0 + half.squaredNorm());
     q = q * Eigen::Quaterniond(scale, scale * half.x(), scale * half.y(), scale * half.z());
   }
@@ -474,6 +481,10 @@ void ParallelKf::update_attitude() {
     q.coeffs() = -q.coeffs();
   }
   s_.q_world_body = q;
+}
+
+double ParallelKf::output_delay_s() const {
+  return std::isnan(p_.imu_delay_s) ? 0.5 * s_.last_dt_s : p_.imu_delay_s;
 }
 
 void ParallelKf::set_imu_delay_s(double delay_s) {
@@ -568,10 +579,16 @@ Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) con
   }
   if (s_.heading_initialized) {
     const double m = s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0;
-    const double t = s_.since_mag_s + heading_lag_s(s_.last_dt_s);
+    const double t = s_.since_mag_s;  // includes KF2's lag (heading_step)
     cov(2, 2) += p_bias(2, 2) * t * t;
     const double power = 0.5 * (s_.field_dn_lp * s_.field_dn_lp + s_.field_dv_lp * s_.field_dv_lp);
     cov(2, 2) += power / (m * m * c * c);
+  }
+  if (std::isnan(p_.imu_delay_s)) {
+    // the delay not known: predicted over half a sample, the true one taken as uniform over
+    // none to one sample (variance dt^2 / 12); its error turns the output about the rate axis
+    const Eigen::Vector3d w_world = r * s_.prev_gyro;
+    cov += (s_.last_dt_s * s_.last_dt_s / 12.0) * (w_world * w_world.transpose());
   }
   if (heading_unknown()) {
     cov(2, 2) += kUnknownHeadingVarRad2;

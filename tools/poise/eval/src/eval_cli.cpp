@@ -73,14 +73,15 @@ void add_north_set_option(CLI::App* sub, std::vector<std::string>* sets) {
       ->type_name("KEY=VALUE");
 }
 
-std::vector<eval::BroadTrial> load_trials(const std::vector<std::string>& files) {
+/// EVERY > 1: every EVERY-th row as recorded (eval::decimate_trial), a lower-rate sensor.
+std::vector<eval::BroadTrial> load_trials(const std::vector<std::string>& files, size_t every = 1) {
   std::vector<eval::BroadTrial> trials;
   for (size_t i = 0; i < files.size(); ++i) {
     if (stop_requested()) {
       throw Error("interrupted");
     }
     try {
-      trials.push_back(eval::load_broad(files[i]));
+      trials.push_back(every == 1 ? eval::load_broad(files[i]) : eval::decimate_trial(eval::load_broad(files[i]), every));
     } catch (const std::exception& e) {
       throw Error(std::string(e.what()) + " (pass BROAD-layout .hdf5 files, e.g. ../shared/broad/*.hdf5)");
     }
@@ -115,7 +116,7 @@ void make_dir(const std::string& dir) {
 }
 
 void run_eval(const std::string& filter_name, const std::string& config, const std::string& out_dir,
-              const std::vector<std::string>& files, const NorthReference& north) {
+              const std::vector<std::string>& files, const NorthReference& north, size_t every) {
   make_dir(out_dir);
   auto filter = make_or_throw(filter_name, config, north);
   std::vector<eval::TrialResult> results;
@@ -124,7 +125,7 @@ void run_eval(const std::string& filter_name, const std::string& config, const s
   Progress progress("poise eval broad", files.size());
   for (size_t i = 0; i < files.size(); ++i) {
     progress.update(i, files[i]);
-    const eval::BroadTrial trial = load_trials({files[i]}).front();
+    const eval::BroadTrial trial = load_trials({files[i]}, every).front();
     size_t estimated = 0;
     const eval::TrialEstimates est = eval::run_filter_estimates(*filter, trial, &estimated);
     const std::string csv = (std::filesystem::path(out_dir) / (trial.stem + ".csv")).string();
@@ -155,6 +156,7 @@ void run_eval(const std::string& filter_name, const std::string& config, const s
 struct GridOptions {
   std::vector<std::string> grid;
   int folds = 0;  ///< 0 = leave one trial out
+  size_t every = 1;  ///< every N-th row of each trial (1 = all)
 };
 
 /// Runs every grid candidate on every trial, prints the in-sample and cross-validated figures,
@@ -189,7 +191,7 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
                 "); 0 = leave one trial out");
   }
   std::cerr << "loading " << files.size() << " trial(s) ...\n";
-  const std::vector<eval::BroadTrial> trials = load_trials(files);
+  const std::vector<eval::BroadTrial> trials = load_trials(files, g.every);
   const std::string cand_dir = (std::filesystem::path(out_dir) / "candidates").string();
   make_dir(cand_dir);
   const std::string table_path = (std::filesystem::path(out_dir) / "grid_results.csv").string();
@@ -460,6 +462,11 @@ void register_eval_cli(CLI::App& app) {
                     "Cross-validation folds for --grid (trial i is in fold i mod K; 0 = leave one trial out)")
       ->check(CLI::Range(0, 1000))
       ->capture_default_str();
+  broad->add_option("--every", grid->every,
+                    "Use every N-th sample of each trial as recorded (a lower-rate sensor: 3 = 95.2 Hz, 7 = 40.8 Hz "
+                    "from BROAD's 285.7 Hz)")
+      ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
   auto sets = std::make_shared<std::vector<std::string>>();
   add_north_set_option(broad, sets.get());
   broad->callback([=]() {
@@ -470,7 +477,7 @@ void register_eval_cli(CLI::App& app) {
         std::cerr << "poise eval broad: --folds without --grid: no parameter is chosen, so the in-sample "
                      "figure below is also the cross-validated one\n";
       }
-      run_eval(*filter, *config, *out, *files, north);
+      run_eval(*filter, *config, *out, *files, north, grid->every);
       return;
     }
     run_grid(*filter, *config, *out, *files, *grid, true, north);

@@ -57,6 +57,10 @@ class FilterStep : public nodes::AttitudeStep {
     return true;
   }
   void diagnostics(nodes::DiagnosticsReport& /*diag*/) const override {}
+  /// A delay recorded on `imu_info`: the filter takes it unless its configuration set one.
+  bool published_imu_delay(double delay_s, const std::string& /*what*/) override {
+    return filter_->take_published_imu_delay(delay_s);
+  }
 
  private:
   std::unique_ptr<AttitudeFilter> filter_;

@@ -43,6 +43,10 @@ class AttitudeFilter {
   /// stretch (the heading part of attitude_covariance() then says how far it may be off),
   /// kNoReference for filters without an absolute heading (the default).
   [[nodiscard]] virtual HeadingStatus heading_status() const { return HeadingStatus::kNoReference; }
+  /// The group delay the IMU's driver published for the samples (`imu_info`), s: a filter whose
+  /// configuration did not set its delay uses it from the next sample on. True when it does;
+  /// false when the filter has no delay model or its configuration set the delay (it wins).
+  virtual bool take_published_imu_delay(double /*delay_s*/) { return false; }
 };
 
 }  // namespace poise

@@ -41,8 +41,8 @@
 // Measured on the 19 BROAD trials in ../shared/broad (mean total RMSE, undisturbed / disturbed):
 //   paper 11.6 / 16.0 deg (first-order propagation lets |sZ| grow without bound at ~1000 deg/s),
 //   default with BROAD's calibrated IMU delay (imu_delay_s 4.18 ms) 1.151 / 1.865 deg in-sample,
-//   1.207 / 1.865 deg leave-one-trial-out cross-validated; without the delay 1.374 / 2.121
-//   (docs/ESTIMATORS.md). The Gauss-Newton baseline: 34.4 / 62.4 deg.
+//   1.207 / 1.865 deg leave-one-trial-out cross-validated; with no delay known (half a sample
+//   assumed) 1.241 / 1.953, with imu_delay_s 0 1.374 / 2.121 (docs/ESTIMATORS.md). The Gauss-Newton baseline: 34.4 / 62.4 deg.
 // Bad input (NaN, zero vectors, non-monotonic stamps, gaps) is rejected and counted; the state is
 // untouched (a gap re-anchors time).
 // 6-axis input (ImuSample::has_mag false, the default: a sample has a magnetometer only when its
@@ -118,8 +118,12 @@ struct ParallelKfParams {
   /// IMU group delay, s: the sensor's samples describe the motion this long before their stamp
   /// (its internal low-pass; MPU6050 DLPF_CFG 3: about 4.8 ms). The output is predicted over it
   /// with the bias-corrected gyro, q_world_body = q (x) exp(w delay); the filter state is not
-  /// touched. Calibrated per sensor (`poise calibrate imu-delay` against a reference). 0 = none.
-  double imu_delay_s = 0.0;
+  /// touched. Calibrated per sensor (`poise calibrate imu-delay` against a reference), or
+  /// published by the IMU's driver (`imu_info`). 0 = none. NaN (the default; `null` in YAML) = not
+  /// known: half the sample interval, the least delay a sampled sensor has (a sample is at best
+  /// the mean over the interval that ends at its stamp, centred half an interval before it; the
+  /// current-sample propagation before the trapezoid assumed exactly this without saying so).
+  double imu_delay_s = std::nan("");
 
   // --- accelerometer low-pass in an almost inertial frame (extension)
   /// > 0: KF1 is corrected with the accelerometer low-passed with this time constant (s) in a
@@ -303,7 +307,7 @@ struct ParallelKfState {
   double accel_dev2_lp = 0.0;  ///< (|low-passed s_A| - g)^2, low-passed over accel_lowpass_tau_s, (m/s^2)^2
   double field_dn_lp = 0.0;    ///< |s_M| - m of the fields used for heading, low-passed over KF2's lag, uT
   double field_dv_lp = 0.0;    ///< m (dip - alpha) of the same, low-passed the same way, uT
-  double since_mag_s = 0.0;    ///< time since a field last corrected the heading, s
+  double since_mag_s = 0.0;    ///< time since fields last held the heading (each accepted one removes dt / KF2's lag of it), s
   double last_dt_s = 0.0;      ///< the last step, s
   /// KF2's direction was (re)started from a field the gate did not gate (learning, accepted or
   /// relearnt); false after a start on a gated field (a configured reference next to a magnet):
@@ -348,14 +352,20 @@ class ParallelKf {
   ///           + s^2 dtheta_i^2 about each body axis i (world x, y part): a gyro scale error s
   ///             (motion_gyro_scale_error) turns the attitude by s times the rotation dtheta away
   ///             from the attitude low-passed over tau, which the tilt has not caught up with;
-  ///   heading + P_b,z (t + tau_2)^2: the vertical bias error integrated since a field last
-  ///             corrected the heading (t) and over KF2's correction lag tau_2;
+  ///   heading + P_b,z t^2: the vertical bias error integrated over t, the time since the heading
+  ///             was last held by fields: t grows with time and each accepted field removes the
+  ///             share of it that KF2's correction removes, dt / tau_2 (tau_2 KF2's lag about the
+  ///             vertical), so continuously accepted fields hold t at about tau_2, and a field
+  ///             accepted now and then amid gated ones leaves most of a gated stretch in it;
   ///           + the scale error's part about the vertical, with the attitude low-passed over tau_2;
   ///           + the disturbance of the fields used, averaged over KF2's lag (the norm and dip
   ///             deviations from the reference, low-passed), over (m cos(dip))^2: its horizontal
   ///             part across the field, which moves the heading, is taken as large as the two the
   ///             gate can see (the mean of their squares);
-  ///           + pi^2 / 3 (a heading uniform over +-180 deg) while the field reference is not
+  ///   both    + (dt^2 / 12) (R w)(R w)^T while imu_delay_s is not known (NaN): the output is
+  ///             predicted over half a sample, the true delay taken as uniform over none to one
+  ///             sample; its error turns the attitude about the rate axis w;
+  ///   heading + pi^2 / 3 (a heading uniform over +-180 deg) while the field reference is not
   ///             verified or the heading was started on a gated field: nothing bounds it then.
   /// Not coupled between tilt and heading (the two KFs are independent by design).
   [[nodiscard]] Eigen::Matrix3d attitude_covariance(const ParallelKfOutput& out) const;
@@ -387,7 +397,7 @@ class ParallelKf {
   [[nodiscard]] const ParallelKfParams& params() const { return p_; }
   /// Sets imu_delay_s (e.g. the delay the IMU's driver publishes), any time: only the output's
   /// prediction over the delay uses it, from the next update on. Throws std::invalid_argument
-  /// outside [0, 0.05] s (the range validate() checks).
+  /// outside [0, 0.05] s (the range validate() checks); NaN = not known (half a sample).
   void set_imu_delay_s(double delay_s);
   /// Per source for the last sample (parallel_kf_report.cpp), in this order:
   ///   gyro   fused when it propagated both KFs (not available on the first sample / after a gap);
@@ -420,7 +430,9 @@ class ParallelKf {
   /// start on a gated one): the heading jumps to it, as at a start
   void restart_heading(const Eigen::Vector3d& mag);
 
-  /// s_.q_world_body from sZ and sX' (2), predicted over imu_delay_s; kept when they are
+  /// The delay the output is predicted over, s: imu_delay_s, or half the last step when not known.
+  [[nodiscard]] double output_delay_s() const;
+  /// s_.q_world_body from sZ and sX' (2), predicted over output_delay_s(); kept when they are
   /// (anti)parallel or sZ is not a direction.
   void update_attitude();
 
@@ -438,7 +450,7 @@ class ParallelKf {
 /// AttitudeFilter adapter.
 class ParallelKfFilter : public AttitudeFilter {
  public:
-  explicit ParallelKfFilter(const ParallelKfParams& p = {}) : kf_(p) {}
+  explicit ParallelKfFilter(const ParallelKfParams& p = {}) : kf_(p), delay_configured_(!std::isnan(p.imu_delay_s)) {}
   bool update(const ImuSample& s) override { return kf_.update(s); }
   [[nodiscard]] Eigen::Quaterniond q_world_body() const override { return kf_.q_world_body(); }
   [[nodiscard]] bool initialized() const override { return kf_.initialized(); }
@@ -465,10 +477,20 @@ class ParallelKfFilter : public AttitudeFilter {
     return kf_.attitude_covariance(kf_.output());
   }
   [[nodiscard]] HeadingStatus heading_status() const override { return kf_.heading_status(); }
+  /// Used unless imu_delay_s was configured (not NaN); throws std::invalid_argument outside
+  /// [0, 0.05] s (set_imu_delay_s).
+  bool take_published_imu_delay(double delay_s) override {
+    if (delay_configured_) {
+      return false;
+    }
+    kf_.set_imu_delay_s(delay_s);
+    return true;
+  }
   [[nodiscard]] const ParallelKf& core() const { return kf_; }
 
  private:
   ParallelKf kf_;
+  bool delay_configured_ = false;  ///< imu_delay_s was set by the parameters (a published one is ignored)
 };
 
 }  // namespace poise
