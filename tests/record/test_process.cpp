@@ -743,6 +743,48 @@ TEST(Replay, GivenAFileDeclaringManyChannelsWhenReplayedThenOnlyChannelsWithMess
       << log.str();
 }
 
+// A fleet's recording (issue 37): every poise topic is keyed by sensor_id and the QoS profiles keep
+// 256 instances per endpoint, but the replayer's reliable writers kept 8, so a recording of 20
+// robots on one reliable topic lost 12 robots' messages on replay. Oracle: the file's own content
+// (20 sensor_ids x 5 messages); nothing may be refused.
+TEST(Replay, GivenTwentySensorIdsOnOneReliableTopicWhenReplayedThenEveryMessageIsWritten) {
+  constexpr int kRobots = 20;
+  constexpr int kEach = 5;
+  const std::string dir = testing::cases_dir("replay-fleet");
+  const std::string input = dir + "/fleet.mcap";
+  {
+    ClockedRecording rec(input);
+    const uint16_t a = add_idl_schema(rec.writer, "poise::msg::AttitudeEstimate");
+    const uint16_t ch = rec.writer.add_channel(a, "attitude/fleet", "cdr", {{"reliability", "RELIABLE"}});
+    const int64_t t0 = 5'000'000'000LL;
+    uint32_t seq = 0;
+    for (int k = 0; k < kEach; ++k) {
+      for (int r = 0; r < kRobots; ++r) {
+        const int64_t stamp = t0 + (k * kRobots + r) * 1'000'000LL;
+        rec.clock = stamp;
+        auto e = testing::make_attitude(static_cast<uint32_t>(k), stamp);
+        e.sensor_id("robot" + std::to_string(r));
+        const auto bytes = testing::serialize<msg::AttitudeEstimatePubSubType>(e);
+        rec.writer.write(ch, seq++, static_cast<uint64_t>(stamp), static_cast<uint64_t>(stamp),
+                         bytes.data(), bytes.size());
+      }
+    }
+    rec.writer.close();
+  }
+  poise::testing::DomainLease lease;
+  ReplayOptions o;
+  o.input = input;
+  o.domain = lease.id();
+  o.participant_profile = "poise_loopback";
+  o.wait_for_subscribers_s = 0.0;
+  o.schedule.as_fast_as_possible = true;
+  std::ostringstream log;
+  o.log = &log;
+  const ReplayStats st = replay(o);
+  EXPECT_EQ(st.write_failures, 0u) << log.str();
+  EXPECT_EQ(st.schedule.delivered, static_cast<uint64_t>(kRobots * kEach)) << log.str();
+}
+
 // Outputs never open an input (issue 33, "data destroyed"): `-o` naming the input itself, or a
 // symbolic link to it, is refused before anything is written; the input's bytes are the oracle.
 TEST(Process, GivenTheOutputIsTheInputOrALinkToItThenItIsRefusedAndTheInputIsUnchanged) {

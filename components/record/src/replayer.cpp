@@ -106,9 +106,15 @@ ReplayStats replay(const ReplayOptions& options) {
     if (qos.reliability().kind == fdds::RELIABLE_RELIABILITY_QOS) {
       // Reliable topics are replayed without loss: a slow reader slows the replay down.
       qos.history().kind = fdds::KEEP_ALL_HISTORY_QOS;
-      qos.resource_limits().max_samples = 4096;
-      qos.resource_limits().max_instances = 8;
-      qos.resource_limits().max_samples_per_instance = 512;
+      // One instance per sensor_id, as many as the QoS profiles keep (a fleet's recording holds
+      // one per robot: 8 here refused every sample of the 9th robot on), each holding up to 512
+      // unacknowledged samples; Fast DDS requires the total to cover instances x per instance
+      // (history memory grows on demand: the bound is reached only by that many stalled robots).
+      constexpr int32_t kInstances = 256;
+      constexpr int32_t kPerInstance = 512;
+      qos.resource_limits().max_instances = kInstances;
+      qos.resource_limits().max_samples_per_instance = kPerInstance;
+      qos.resource_limits().max_samples = kInstances * kPerInstance;
       qos.reliability().max_blocking_time = eprosima::fastrtps::Duration_t(5, 0);
     }
     if (meta(channel, "durability") == "TRANSIENT_LOCAL") {
