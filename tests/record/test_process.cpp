@@ -714,6 +714,19 @@ TEST(Process, GivenARecordingCutShortWhenProcessedOrReplayedThenExit3UnlessDamag
   EXPECT_EQ(poise::testing::run(replay_allowed, 60s, env).exit_code, 0);
 }
 
+/// Replay options for `input` on `domain` (loopback), as fast as possible, not waiting for
+/// subscribers, logging to `log`.
+ReplayOptions fast_replay(const std::string& input, int domain, std::ostringstream& log) {
+  ReplayOptions o;
+  o.input = input;
+  o.domain = domain;
+  o.participant_profile = "poise_loopback";
+  o.wait_for_subscribers_s = 0.0;
+  o.schedule.as_fast_as_possible = true;
+  o.log = &log;
+  return o;
+}
+
 // Issue 33: `replay` made a DDS writer (~90 KB) for every declared channel, so a file declaring
 // 65535 channels ended in std::bad_alloc. Writers are made for channels that carry messages and at
 // most max_writers of them; the messages beyond are counted. Oracle: the file's own layout (2
@@ -723,14 +736,8 @@ TEST(Replay, GivenAFileDeclaringManyChannelsWhenReplayedThenOnlyChannelsWithMess
   const std::string input = dir + "/input.mcap";
   write_input(input, false, 2000);
   poise::testing::DomainLease lease;
-  ReplayOptions o;
-  o.input = input;
-  o.domain = lease.id();
-  o.participant_profile = "poise_loopback";
-  o.wait_for_subscribers_s = 0.0;
-  o.schedule.as_fast_as_possible = true;
   std::ostringstream log;
-  o.log = &log;
+  ReplayOptions o = fast_replay(input, lease.id(), log);
   const ReplayStats all = replay(o);
   EXPECT_EQ(all.writers, 2u) << log.str();
   EXPECT_EQ(all.channels_over_limit, 0u);
@@ -772,14 +779,8 @@ TEST(Replay, GivenTwentySensorIdsOnOneReliableTopicWhenReplayedThenEveryMessageI
     rec.writer.close();
   }
   poise::testing::DomainLease lease;
-  ReplayOptions o;
-  o.input = input;
-  o.domain = lease.id();
-  o.participant_profile = "poise_loopback";
-  o.wait_for_subscribers_s = 0.0;
-  o.schedule.as_fast_as_possible = true;
   std::ostringstream log;
-  o.log = &log;
+  ReplayOptions o = fast_replay(input, lease.id(), log);
   const ReplayStats st = replay(o);
   EXPECT_EQ(st.write_failures, 0u) << log.str();
   EXPECT_EQ(st.schedule.delivered, static_cast<uint64_t>(kRobots * kEach)) << log.str();
