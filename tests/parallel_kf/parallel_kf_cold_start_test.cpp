@@ -6,7 +6,7 @@
 #include "poise/core/attitude.h"
 #include "poise/core/consistency.h"
 #include "poise/parallel_kf/parallel_kf.h"
-#include "poise/sim/sensor_simulator.h"
+#include "poise/testing/cold_start_tour.h"
 
 #include <gtest/gtest.h>
 
@@ -16,10 +16,9 @@
 namespace poise {
 namespace {
 
-constexpr double kStartS = 7.0;          // the filter's first sample, s into the tour
-constexpr double kMagnetGoneS = 12.0;    // the tour's first magnet: 5 s + 1.5 s ramp + 4 s + 1.5 s
-constexpr double kSettleS = 2.0;         // "2 s after the magnet has left"
-constexpr double kAttachedMagnetS = 22.0;  // the tour's attached magnet starts
+using testing::kTourColdStartS;
+using testing::kTourMagnetGoneS;
+using testing::kTourSettleS;
 constexpr double kMaxHeadingRmsDeg = 2.0;  // the target, deg
 // The heading error may never exceed what the published heading sigma admits at 99.7 % for one
 // degree of freedom (3 sigma): the filter must not claim to know a heading it has not verified.
@@ -27,7 +26,6 @@ constexpr double kCoverSigmas = 3.0;
 constexpr double kMinStartErrorDeg = 20.0;  // the start must really be off (else nothing is tested)
 
 TEST(ParallelKfColdStart, GivenAStartInsideAMagnetsFieldWhenTheFieldIsCleanThenTheHeadingConvergesAndItsSigmaCoveredTheErrorAllAlong) {
-  sim::SensorSimulator simu(sim::make_scenario("tour", 200.0, 1));
   ParallelKf kf;
   double max_start_err_deg = 0.0;
   double sq = 0.0;
@@ -36,17 +34,10 @@ TEST(ParallelKfColdStart, GivenAStartInsideAMagnetsFieldWhenTheFieldIsCleanThenT
   int samples = 0;
   bool unverified_in_magnet = true;
   bool verified_at_end = false;
-  while (!simu.done()) {
-    const sim::SimSample s = simu.next();
+  testing::run_tour_until_attached_magnet(kTourColdStartS, [&](const sim::SimSample& s) {
     const double t = s.truth.t_s;
-    if (t < kStartS) {
-      continue;
-    }
-    if (t >= kAttachedMagnetS) {
-      break;
-    }
     if (!kf.update(s.imu)) {
-      continue;
+      return;
     }
     const ParallelKfOutput out = kf.output();
     const Eigen::Vector3d e = world_attitude_error(out.q_world_body, s.truth.q_world_body);
@@ -54,22 +45,22 @@ TEST(ParallelKfColdStart, GivenAStartInsideAMagnetsFieldWhenTheFieldIsCleanThenT
     const double sigma = std::sqrt(kf.attitude_covariance(out)(2, 2));
     ++samples;
     uncovered += heading_err > kCoverSigmas * sigma ? 1 : 0;
-    if (t < kStartS + 1.0) {
+    if (t < kTourColdStartS + 1.0) {
       max_start_err_deg = std::max(max_start_err_deg, heading_err * kDegPerRad);
     }
-    if (t < kMagnetGoneS) {
+    if (t < kTourMagnetGoneS) {
       unverified_in_magnet = unverified_in_magnet && kf.heading_status() != HeadingStatus::kVerified;
     }
-    if (t >= kMagnetGoneS + kSettleS) {
+    if (t >= kTourMagnetGoneS + kTourSettleS) {
       sq += e.z() * e.z();
       ++n_after;
     }
     verified_at_end = kf.heading_status() == HeadingStatus::kVerified;
-  }
+  });
   const double rms_deg = std::sqrt(sq / std::max(1, n_after)) * kDegPerRad;
   std::printf("cold start: first-second heading error up to %.1f deg; heading RMS %.3f deg over %d samples from "
               "%.0f s; %d of %d samples outside %.0f sigma; relearnt %llu\n",
-              max_start_err_deg, rms_deg, n_after, kMagnetGoneS + kSettleS, uncovered, samples, kCoverSigmas,
+              max_start_err_deg, rms_deg, n_after, kTourMagnetGoneS + kTourSettleS, uncovered, samples, kCoverSigmas,
               static_cast<unsigned long long>(kf.field_relearnt_count()));
   EXPECT_GT(max_start_err_deg, kMinStartErrorDeg) << "the start is inside the disturbance";
   EXPECT_TRUE(unverified_in_magnet) << "never verified while the magnet's field was the reference";
@@ -83,22 +74,17 @@ TEST(ParallelKfColdStart, GivenAStartInsideAMagnetsFieldWhenTheFieldIsCleanThenT
 // the magnet comes near at 5 s (accepted for 4 s of the 5 s), yet the magnet's field (78 uT, more
 // than the Earth's field anywhere) must not replace it.
 TEST(ParallelKfColdStart, GivenACleanStartWhenAMagnetComesBeforeTheReferenceIsVerifiedThenItIsNotLearnt) {
-  sim::SensorSimulator simu(sim::make_scenario("tour", 200.0, 1));
   ParallelKf kf;
   double sq = 0.0;
   int n = 0;
-  while (!simu.done()) {
-    const sim::SimSample s = simu.next();
-    if (s.truth.t_s >= kAttachedMagnetS) {
-      break;
-    }
+  testing::run_tour_until_attached_magnet(0.0, [&](const sim::SimSample& s) {
     if (!kf.update(s.imu) || s.truth.t_s < 1.0) {
-      continue;
+      return;
     }
     const Eigen::Vector3d e = world_attitude_error(kf.output().q_world_body, s.truth.q_world_body);
     sq += e.z() * e.z();
     ++n;
-  }
+  });
   const double rms_deg = std::sqrt(sq / std::max(1, n)) * kDegPerRad;
   std::printf("clean start: heading RMS %.3f deg over %d samples, relearnt %llu\n", rms_deg, n,
               static_cast<unsigned long long>(kf.field_relearnt_count()));
