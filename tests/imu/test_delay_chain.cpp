@@ -243,5 +243,45 @@ TEST(ImuDelayChoice, GivenAHostilePublishedDelayThenItIsRefusedWithAMessageAndTh
   }
 }
 
+// A writer inventing sensor_ids on imu_info (never followed by samples of them) may not grow the
+// node's memory: beyond 256 waiting sensors a new id is refused with a message. The real IMU's
+// info came first; sent again after the flood it replaces its own entry, and the IMU's next sample
+// takes it. Oracle: the documented bound (256): 1 real + 255 invented kept, 745 refused.
+TEST(ImuDelayChoice, GivenImuInfoForThousandsOfInventedSensorsThenBeyond256TheyAreRefusedAndTheRealOneStillCounts) {
+  constexpr int kInvented = 1000;
+  constexpr size_t kBound = 256;
+  runtime::ComponentSpec spec;
+  spec.type = "parallel_kf";
+  spec.name = "parallel_kf";
+  spec.origin = "test";
+  nodes::StepRunner runner(nodes::make_parallel_kf_step(spec), nodes::NodeParams{}, dds::TopicNames{},
+                           [] { return int64_t{0}; });
+  // the real IMU's info first, then the flood
+  EXPECT_EQ(runner.imu_info(published(4.8e-3)), "");
+  size_t refused = 0;
+  for (int i = 0; i < kInvented; ++i) {
+    msg::ImuSensorInfo fake = published(1e-3);
+    fake.sensor_id("fake" + std::to_string(i));
+    const std::string r = runner.imu_info(fake);
+    if (!r.empty()) {
+      ++refused;
+      EXPECT_NE(r.find("256 sensors' info waiting"), std::string::npos) << r;
+    }
+  }
+  EXPECT_EQ(refused, static_cast<size_t>(kInvented) - (kBound - 1));
+  // the real IMU's info, already waiting, may still be replaced, and its next sample takes it
+  EXPECT_EQ(runner.imu_info(published(4.8e-3)), "");
+  Capture out;
+  sim::SimConfig cfg = sim::make_scenario("random_motion", kRateHz, 1);
+  cfg.duration_s = 0.2;
+  sim::SensorSimulator simulator(cfg);
+  while (!simulator.done()) {
+    runner.imu(simulator.next().imu, "imu0", "driver", out);
+  }
+  const nodes::ImuDelayChoice* d = runner.step().imu_delay();
+  ASSERT_NE(d, nullptr);
+  EXPECT_DOUBLE_EQ(d->in_use_s(), 4.8e-3);
+}
+
 }  // namespace
 }  // namespace poise

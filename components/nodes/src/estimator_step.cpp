@@ -171,8 +171,16 @@ std::string StepRunner::imu_info(const msg::ImuSensorInfo& m) {
     return "refused imu_info of '" + m.sensor_id().to_string() + "': gyro_delay_s " +
            std::to_string(m.gyro_delay_s()) + " is not in [0, 0.05] s";
   }
+  // One entry per sensor_id until that sensor's next sample takes it: a writer inventing ids
+  // (never followed by samples) may not grow it without bound.
+  const std::string id = m.sensor_id().to_string();
+  if (imu_infos_.size() >= kMaxPendingImuInfos && imu_infos_.count(id) == 0) {
+    ++imu_info_refused_;
+    return "refused imu_info of '" + id + "': already " + std::to_string(kMaxPendingImuInfos) +
+           " sensors' info waiting for their samples";
+  }
   imu_info_seen_ = true;
-  imu_infos_[m.sensor_id().to_string()] = m;
+  imu_infos_[id] = m;
   return {};
 }
 

@@ -169,8 +169,9 @@ class StepRunner {
   void vision(const msg::VisionPose& m, const std::string& writer);
   void vehicle_input(const msg::VehicleInput& m, const std::string& writer);
   /// What an IMU says about itself (`imu_info`): its delay goes to the step with the next sample
-  /// of that sensor_id. A delay outside [0, 0.05] s is refused and counted (`imu_info_refused`);
-  /// returns the refusal's message ("" when kept).
+  /// of that sensor_id. A delay outside [0, 0.05] s, or a new sensor_id while 256 others' info
+  /// waits for their samples, is refused and counted (`imu_info_refused`); returns the refusal's
+  /// message ("" when kept).
   std::string imu_info(const msg::ImuSensorInfo& m);
   /// The step's imu_delay()->describe() once after the delay in use changed (for the node's log),
   /// "" otherwise.
@@ -228,6 +229,9 @@ class StepRunner {
   /// The last ImuSensorInfo of each sensor_id; its delay is offered to the step at that sensor's
   /// next sample (a node may hear of several IMUs; the step takes the one it is fed).
   std::map<std::string, msg::ImuSensorInfo> imu_infos_;
+  /// At most this many sensors' info waits (the QoS profiles' instances per endpoint): more is
+  /// refused and counted.
+  static constexpr size_t kMaxPendingImuInfos = 256;
   std::string pending_delay_message_;
   bool imu_info_seen_ = false;
   uint64_t imu_info_refused_ = 0;
