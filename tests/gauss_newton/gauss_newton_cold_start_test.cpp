@@ -25,7 +25,7 @@ using testing::kTourSettleS;
 // of it, deg. (The issue's 2 deg is not reached by either: Gauss-Newton solves each sample
 // without filtering, and the tour's accelerations tilt it: 4.2 deg.)
 constexpr double kSameAsTrueFieldDeg = 0.05;
-constexpr double kMinInside95 = 0.80;      // the issue asks 85 %: measured 83.8 % (see the print)
+constexpr double kMinInside95 = 0.85;      // the issue asks 85 %: measured 92.5 % (see the print)
 constexpr double kMinDipOffDeg = 3.0;      // the dip learnt inside the magnet is this far off, deg
 constexpr double kTrueDipDeg = 60.0;       // the tour's Earth field
 constexpr double kDipTolDeg = 1.0;         // the relearnt dip against it, deg

@@ -82,7 +82,18 @@ GaussNewtonResult GaussNewton::solve(const Eigen::Vector3d& accel, const Eigen::
   j.topRows<3>() = -skew(rt * u);
   j.bottomRows<3>() = -w * skew(rt * r);
   out.information_body = j.transpose() * j;
+  out.up_body = rt * u;
   return out;
+}
+
+Eigen::Matrix3d accel_direction_sensitivity(const Eigen::Matrix3d& information_body, const Eigen::Vector3d& up_body) {
+  // d delta = -(J^T J)^-1 J_a^T d a for a change d a of the accelerometer rows; with
+  // E[d a d a^T] = I per unit variance, the covariance is (J^T J)^-1 J_a^T J_a (J^T J)^-1 and
+  // J_a^T J_a = [p x]^T [p x] = I - p p^T for the unit p = up_body (the along-p part is normalised away)
+  const Eigen::Vector3d p = up_body.normalized();
+  const Eigen::Matrix3d inv = information_body.inverse();
+  const Eigen::Matrix3d s = inv * (Eigen::Matrix3d::Identity() - p * p.transpose()) * inv;
+  return 0.5 * (s + s.transpose());
 }
 
 bool GaussNewton::update(const ImuSample& s) {
@@ -131,7 +142,17 @@ bool GaussNewton::update(const ImuSample& s) {
   // E|e|^2 = sigma^2. Averaged over kResidualTauS (one sample of one degree of freedom is often
   // near zero by chance).
   const double r2 = s_.result.residual * s_.result.residual;
-  s_.residual2_lp = s_.initialized ? s_.residual2_lp + (dt / (kResidualTauS + dt)) * (r2 - s_.residual2_lp) : r2;
+  const double a_lp = dt / (kResidualTauS + dt);
+  s_.residual2_lp = s_.initialized ? s_.residual2_lp + a_lp * (r2 - s_.residual2_lp) : r2;
+  // The accelerometer norm against the gravity it reads (its mean over kGravityNormTauS, cumulative
+  // at first): what departs from it is the vertical external acceleration (and noise), for the
+  // covariance's external-acceleration term. Averaged over kResidualTauS like the residual.
+  const double norm = s.accel_mps2.norm();
+  ++s_.gravity_n;
+  const double a_g = std::max(1.0 / static_cast<double>(s_.gravity_n), dt / (kGravityNormTauS + dt));
+  s_.gravity_mps2 += a_g * (norm - s_.gravity_mps2);
+  const double dev2 = (norm - s_.gravity_mps2) * (norm - s_.gravity_mps2);
+  s_.norm_dev2_lp = s_.initialized ? s_.norm_dev2_lp + a_lp * (dev2 - s_.norm_dev2_lp) : dev2;
   s_.initialized = true;
   if (!healthy()) {
     reset_unhealthy();
@@ -147,8 +168,16 @@ Eigen::Matrix3d GaussNewton::attitude_covariance() const {
   // q_true q_est^-1 = exp(R delta) for q_true = q_est exp(delta)). sigma^2 never below the
   // kMinResidualVar floor, so P is positive definite.
   const double var = std::max(s_.residual2_lp, kMinResidualVar);
+  Eigen::Matrix3d p_body = var * s_.result.information_body.inverse();
+  // external acceleration: the accelerometer direction's variance the norm shows beyond sigma^2
+  // (accel_direction_sensitivity(); isotropic: each axis as large as the vertical one)
+  const double g = s_.gravity_mps2;
+  const double excess = g > 0.0 ? s_.norm_dev2_lp / (g * g) - var : 0.0;
+  if (excess > 0.0) {
+    p_body += excess * accel_direction_sensitivity(s_.result.information_body, s_.result.up_body);
+  }
   const Eigen::Matrix3d r = s_.result.q_world_body.toRotationMatrix();
-  Eigen::Matrix3d p = r * (var * s_.result.information_body.inverse()) * r.transpose();
+  Eigen::Matrix3d p = r * p_body * r.transpose();
   p = 0.5 * (p + p.transpose());
   if (heading_unknown()) {
     p(2, 2) += kUnknownHeadingVarRad2;

@@ -86,6 +86,8 @@ struct GaussNewtonResult {
   /// J^T J at the solution (J = d e / d delta, body-frame small rotation): the information of
   /// one unit of residual variance, for the covariance
   Eigen::Matrix3d information_body = Eigen::Matrix3d::Identity();
+  /// R(q)^T u at the solution: world up in the body frame (the accelerometer rows' direction)
+  Eigen::Vector3d up_body = Eigen::Vector3d::UnitZ();
 };
 
 /// The residual variance is averaged over this long, s (GaussNewton::attitude_covariance()).
@@ -93,6 +95,23 @@ inline constexpr double kResidualTauS = 0.5;
 /// Floor of that variance, unit-vector components^2 (1e-3 deg of a direction): keeps the published
 /// covariance positive definite on a noise-free sample.
 inline constexpr double kMinResidualVar = 3e-10;
+/// The accelerometer norm's reference (the gravity the sensor reads) is its mean over this long, s:
+/// a device that does not fly away has a bounded vertical velocity, so its vertical external
+/// acceleration averages out over seconds; the first samples take the cumulative mean.
+inline constexpr double kGravityNormTauS = 10.0;
+
+/// The external-acceleration term of the Gauss-Newton covariance (issue 31). The least-squares
+/// covariance sigma^2 (J^T J)^-1 assumes the accelerometer direction's error per component is the
+/// residual's sigma^2. The accelerometer norm shows the vertical external acceleration (plus
+/// noise): |f| - g ~ a_z. Taken isotropic (each axis as large as the vertical one), the
+/// accelerometer direction's error variance per component is var_a = E(|f| - g)^2 / g^2. What
+/// exceeds sigma^2 enters through the solution's sensitivity to the accelerometer rows:
+/// d delta = -(J^T J)^-1 J_a^T d a, J_a = -[p_u x], J_a^T J_a = I - p_u p_u^T, so
+///   P_body += max(0, var_a - sigma^2) (J^T J)^-1 (I - p_u p_u^T) (J^T J)^-1,
+/// which carries a tilt about north into the heading by tan(dip) (the field's vertical part).
+/// Returns that matrix per unit of excess variance (body frame, rad^2 per unit-vector component^2).
+[[nodiscard]] Eigen::Matrix3d accel_direction_sensitivity(const Eigen::Matrix3d& information_body,
+                                                          const Eigen::Vector3d& up_body);
 
 /// Everything the Gauss-Newton filter carries from one sample to the next besides its
 /// parameters: inspect it, save it, restore it into a filter with the same parameters.
@@ -104,6 +123,9 @@ struct GaussNewtonState {
   int dip_n = 0;
   FieldGate gate;  ///< the cold-start gate (field_verify_s): a provisional reference relearnt
   double residual2_lp = 0.0;  ///< |e|^2 low-passed over kResidualTauS (unit-vector units^2)
+  double gravity_mps2 = 0.0;  ///< the accelerometer norm's mean over kGravityNormTauS, m/s^2
+  int64_t gravity_n = 0;      ///< samples in that mean (cumulative until kGravityNormTauS is reached)
+  double norm_dev2_lp = 0.0;  ///< (|f| - gravity)^2 low-passed over kResidualTauS, (m/s^2)^2
   int64_t last_stamp_ns = -1;
   StampAnchor anchor;  ///< time restarts after a stamp jump only when two samples agree
   RejectCounters rejections;
@@ -130,10 +152,10 @@ class GaussNewton {
   [[nodiscard]] const GaussNewtonResult& result() const { return s_.result; }
   /// Covariance of the world-frame attitude error (rad^2, about ENU x, y, z) of result(): the
   /// least-squares one, sigma^2 (J^T J)^-1 rotated to the world, with sigma^2 the residual's
-  /// variance per unit-vector component low-passed over kResidualTauS. The residual has one degree
-  /// of freedom (the angle between the two vectors against the dip); the errors it cannot see
-  /// (an external acceleration or a disturbance that keeps that angle) are taken as large as the
-  /// one it sees. Plus pi^2 / 3 on the heading while heading_unknown().
+  /// variance per unit-vector component low-passed over kResidualTauS (the residual has one degree
+  /// of freedom: the angle between the two vectors against the dip), plus the external
+  /// acceleration the accelerometer norm shows beyond sigma^2 (accel_direction_sensitivity()),
+  /// plus pi^2 / 3 on the heading while heading_unknown().
   [[nodiscard]] Eigen::Matrix3d attitude_covariance() const;
   /// True while the field reference is learnt or provisional (field_verify_s > 0): a start next to
   /// a magnet solves every heading from the magnet's field, and nothing tells that yet.
