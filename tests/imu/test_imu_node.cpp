@@ -8,6 +8,7 @@
 #include <chrono>
 #include <map>
 #include <mutex>
+#include <regex>
 #include <string>
 #include <vector>
 
@@ -61,17 +62,20 @@ struct Received {
   }
 };
 
-TEST(ImuNode, PublishesExactlyTheValidSamplesCountsCorruptionAndSurvivesADisconnect) {
+// One imu_driver component, imu0, reading `port` (reliable `imu`), diagnostics every `period_s`.
+runtime::HostSpec driver_host(const std::string& port, const std::string& period_s) {
   auto& registry = runtime::ComponentRegistry::instance();
   if (registry.find("imu_driver") == nullptr) runtime::register_imu_driver(registry);
+  return runtime::parse_host(YAML::Load("components: [{type: imu_driver, name: imu0, params: {port: " + port +
+                                        ", reliable: true, diagnostics_period_s: " + period_s + "}}]"),
+                             "test", ".");
+}
+
+TEST(ImuNode, PublishesExactlyTheValidSamplesCountsCorruptionAndSurvivesADisconnect) {
   poise::testing::DomainLease domain;
   const std::string path = ::testing::TempDir() + "poise-imu-node-" + std::to_string(::getpid());
   PtyLink link(path);
-  const runtime::HostSpec spec = runtime::parse_host(
-      YAML::Load("components: [{type: imu_driver, name: imu0, params: {port: " + path +
-                 ", reliable: true, diagnostics_period_s: 0.1}}]"),
-      "test", ".");
-  runtime::Host host(spec, domain.id());
+  runtime::Host host(driver_host(path, "0.1"), domain.id());
   host.start();
 
   Received rx;
@@ -177,6 +181,47 @@ TEST(ImuNode, PublishesExactlyTheValidSamplesCountsCorruptionAndSurvivesADisconn
   ASSERT_TRUE(poise::testing::wait_until([&] { return rx.counter("connects") == 2; }, kWait));
   EXPECT_EQ(rx.counter("disconnects"), 1u);
   host.stop();
+}
+
+// The status line `poise run` prints next to the filters' (note 10: the driver said 1004 lines
+// while the filters had 1201 samples in, its line built at its last diagnostics). Oracle: the
+// number of lines written to the port.
+uint64_t status_count(const std::string& status, const std::string& what) {
+  const std::regex re("([0-9]+) " + what);
+  std::smatch m;
+  return std::regex_search(status, m, re) ? std::stoull(m[1].str()) : 0;
+}
+
+TEST(ImuNode, GivenALongDiagnosticsPeriodWhenLinesArriveThenTheStatusCountsThemWhenPrinted) {
+  poise::testing::DomainLease domain;
+  const std::string path = ::testing::TempDir() + "poise-imu-status-" + std::to_string(::getpid());
+  PtyLink link(path);
+  // GIVEN a driver whose diagnostics come once an hour (the first at its first tick)
+  runtime::Host host(driver_host(path, "3600"), domain.id());
+  host.start();
+  ASSERT_TRUE(poise::testing::wait_until(
+      [&] { return host.status().front().find("connected") != std::string::npos; }, kWait))
+      << host.status().front();
+  // WHEN lines arrive after that diagnostics
+  constexpr uint64_t kLines = 40;
+  for (uint32_t seq = 0; seq < kLines; ++seq) {
+    ASSERT_TRUE(write_all(link, format_imu_line(sample(seq))));
+    poise::testing::sleep_ms(2);
+  }
+  // THEN the status counts every one of them, read and published, without waiting for the next
+  std::string status;
+  EXPECT_TRUE(poise::testing::wait_until(
+      [&] {
+        status = host.status().front();
+        return status_count(status, "lines") == kLines && status_count(status, "samples") == kLines &&
+               status_count(status, "published") == kLines;
+      },
+      kWait))
+      << status;
+  host.stop();
+  // AND once stopped it gives the final counts
+  EXPECT_NE(host.status().front().find("final: " + std::to_string(kLines) + " samples read"), std::string::npos)
+      << host.status().front();
 }
 
 }  // namespace

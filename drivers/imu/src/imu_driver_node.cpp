@@ -176,6 +176,10 @@ ImuDriverNode::~ImuDriverNode() { stop(); }
 void ImuDriverNode::start() {
   if (thread_.joinable()) return;
   stop_.store(false);
+  {
+    std::lock_guard<std::mutex> lock(status_mutex_);
+    final_.clear();  // started again: the running line
+  }
   thread_ = std::thread([this] {
     reader_.run([this] { return stop_.load(); }, [this](int64_t now) { on_tick(now); });
   });
@@ -191,7 +195,7 @@ void ImuDriverNode::stop() {
   if (was_running) {  // the reading thread has ended: the counts are final
     const std::string line = final_counts(driver_.stats(), imu_queue_.stats());
     std::lock_guard<std::mutex> lock(status_mutex_);
-    status_ = line;
+    final_ = line;
   }
 }
 
@@ -222,6 +226,12 @@ void ImuDriverNode::on_sample(const ImuSample& sample, const SampleInfo& info) {
 }
 
 void ImuDriverNode::on_tick(int64_t now_ns) {
+  {  // the counts as of now, for status() (the reading thread alone touches driver_)
+    std::lock_guard<std::mutex> lock(status_mutex_);
+    status_stats_ = driver_.stats();
+    status_connected_ = reader_.connected();
+    status_ticked_ = true;
+  }
   if (now_ns < next_diag_ns_) return;
   next_diag_ns_ = now_ns + static_cast<int64_t>(options_.diagnostics_period_s * 1e9);
   const DriverStats& st = driver_.stats();
@@ -241,23 +251,11 @@ void ImuDriverNode::on_tick(int64_t now_ns) {
   report.metrics.push_back({"longest_write", static_cast<double>(q.longest_write_ns) * 1e-6, "ms"});
   report.metrics.push_back({"clock_ratio", st.clock_ratio, "ratio"});  // sensor s per host s
   diag_queue_.push(nodes::to_diagnostics_msg(report, sensor_id_), now_ns);
-  char line[640];
-  std::snprintf(line, sizeof line,
-                "%s, %.1f Hz, %" PRIu64 " lines, %" PRIu64 " samples, %" PRIu64 " rejected, %" PRIu64
-                " lost (seq gaps), %" PRIu64 " published, dropped %" PRIu64 " stale %" PRIu64
-                " queue full, longest write %.1f ms, latency p50 %.2f ms p99 %.2f ms, clock offset "
-                "%.6f s drift %.0f ppm",
-                reader_.connected() ? "connected" : "waiting for port",
-                summary.rate_hz, st.lines, st.samples, st.rejected_total(), st.seq_gap_drops,
-                q.written, q.dropped_stale, q.dropped_full,
-                static_cast<double>(q.longest_write_ns) * 1e-6, summary.latency_p50_ms,
-                summary.latency_p99_ms, static_cast<double>(st.clock_offset_ns) * 1e-9,
-                st.clock_drift_ppm);
-  const std::string clock = clock_ratio_problem(st);
   {
     std::lock_guard<std::mutex> lock(status_mutex_);
-    status_ = clock.empty() ? std::string(line) : std::string(line) + "; " + clock;
+    status_rate_ = summary;
   }
+  const std::string clock = clock_ratio_problem(st);
   // The sensor clock does not keep the host's pace (t_us in the wrong unit): said once, by name,
   // instead of a silent stream of stale drops (issue 33).
   if (!clock.empty() && !warned_clock_ && options_.log_to_stderr) {
@@ -277,9 +275,32 @@ void ImuDriverNode::on_tick(int64_t now_ns) {
   }
 }
 
+std::string status_line(const DriverStats& st, const RateLatencyMeter::Summary& rate,
+                        const dds::PublishQueue<msg::ImuSample>::Stats& q, bool connected) {
+  char line[640];
+  std::snprintf(line, sizeof line,
+                "%s, %.1f Hz, %" PRIu64 " lines, %" PRIu64 " samples, %" PRIu64 " rejected, %" PRIu64
+                " lost (seq gaps), %" PRIu64 " published, dropped %" PRIu64 " stale %" PRIu64
+                " queue full, longest write %.1f ms, latency p50 %.2f ms p99 %.2f ms, clock offset "
+                "%.6f s drift %.0f ppm",
+                connected ? "connected" : "waiting for port", rate.rate_hz, st.lines, st.samples,
+                st.rejected_total(), st.seq_gap_drops, q.written, q.dropped_stale, q.dropped_full,
+                static_cast<double>(q.longest_write_ns) * 1e-6, rate.latency_p50_ms, rate.latency_p99_ms,
+                static_cast<double>(st.clock_offset_ns) * 1e-9, st.clock_drift_ppm);
+  const std::string clock = clock_ratio_problem(st);
+  return clock.empty() ? std::string(line) : std::string(line) + "; " + clock;
+}
+
 std::string ImuDriverNode::status() const {
+  const auto q = imu_queue_.stats();  // its own lock, current
   std::lock_guard<std::mutex> lock(status_mutex_);
-  return status_.empty() ? std::string("starting") : status_;
+  if (!final_.empty()) {
+    return final_;
+  }
+  if (!status_ticked_) {
+    return "starting";
+  }
+  return status_line(status_stats_, status_rate_, q, status_connected_);
 }
 
 }  // namespace poise::imu

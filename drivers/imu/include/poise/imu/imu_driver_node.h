@@ -65,7 +65,15 @@ nodes::DiagnosticsReport driver_diagnostics(const DriverStats& stats,
 /// by reason (the reasons that occurred), lost to sequence gaps, dropped by the publish queue.
 std::string final_counts(const DriverStats& stats, const dds::PublishQueue<msg::ImuSample>::Stats& queue);
 
-/// status() while running: the last diagnostics period's line; after stop(): final_counts().
+/// The running status line: connection, rate, counts read and published, drops, latency, clock
+/// (and clock_ratio_problem() when there is one).
+std::string status_line(const DriverStats& stats, const RateLatencyMeter::Summary& rate,
+                        const dds::PublishQueue<msg::ImuSample>::Stats& queue, bool connected);
+
+/// status() while running: status_line() with the counts as of the reading thread's last tick
+/// (each read from the port, at least every poll_ms, 50 ms) and the publish queue's as of the call,
+/// so that it agrees with the filters' lines printed next to it; the rate and latency are over the
+/// window that ended at the last diagnostics. After stop(): final_counts().
 class ImuDriverNode : public runtime::Component {
  public:
   ImuDriverNode(const ImuNodeOptions& options, const std::string& sensor_id,
@@ -100,8 +108,12 @@ class ImuDriverNode : public runtime::Component {
   int64_t next_diag_ns_ = 0;
   uint32_t diag_seq_ = 0;
   int64_t last_stamp_ns_ = 0;
-  mutable std::mutex status_mutex_;
-  std::string status_;
+  mutable std::mutex status_mutex_;  // guards the status_ members and final_
+  DriverStats status_stats_;             // driver_.stats() at the last tick
+  RateLatencyMeter::Summary status_rate_;  // at the last diagnostics
+  bool status_connected_ = false;
+  bool status_ticked_ = false;
+  std::string final_;                    // final_counts() once stopped
   uint64_t warned_no_valid_at_bytes_ = 0;
   bool warned_clock_ = false;
 };
