@@ -254,6 +254,7 @@ void ParallelKf::bias_measure(const Eigen::Vector3d& h, double z, double w, cons
     k -= keep->dot(k) * *keep;
   }
   s_.bias += k * innovation;
+  s_.lag_bias_cov -= (s_.lag_bias_cov * h) * k.transpose();  // b_err -= k (h^T b_err + noise)
   // Joseph form (valid for any gain): P - k ph^T - ph k^T + s k k^T
   s_.bias_cov += s * k * k.transpose() - k * ph.transpose() - ph * k.transpose();
 }
@@ -298,6 +299,7 @@ void ParallelKf::bias_update() {
   // bias Kalman filter over the window t: predict (random walk), then measure at rest (the
   // low-passed gyro) or in motion (motion_bias_measure)
   const double t = s_.mb_time;
+  propagate_lag_error(t);
   const double v = p_.bias_drift_rps * p_.bias_drift_rps * t / p_.bias_forgetting_time_s;
   const double var_max = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
   s_.bias_cov.diagonal().array() += v;
@@ -306,6 +308,7 @@ void ParallelKf::bias_update() {
       const double f = std::sqrt(var_max / s_.bias_cov(i, i));
       s_.bias_cov.row(i) *= f;
       s_.bias_cov.col(i) *= f;
+      s_.lag_bias_cov.col(i) *= f;
     }
   }
   if (s_.rest_det.rest) {
@@ -317,6 +320,7 @@ void ParallelKf::bias_update() {
       const Eigen::Vector3d ph = s_.bias_cov.col(i);
       const Eigen::Vector3d k = ph / (ph(i) + w);
       s_.bias += k * (s_.rest_det.gyro_lp(i) - s_.bias(i));
+      s_.lag_bias_cov -= s_.lag_bias_cov.col(i) * k.transpose();
       s_.bias_cov -= k * ph.transpose();
     }
   }
@@ -329,6 +333,66 @@ void ParallelKf::bias_update() {
   s_.mb_time = 0.0;
   s_.mb_head_used = false;
   s_.mb_head_trusted = true;
+}
+
+void ParallelKf::propagate_lag_error(double t) {
+  // Over the window t the estimate drifts at beta = R b_err (b_err = b_true - b, the gyro's error
+  // after the bias is removed). The tilt is the low-passed accelerometer's, so its error about
+  // each world horizontal axis is beta through (1 - H(s)) / s, H the low-pass: first order
+  // 1 / (1 + tau s) gives tau / (1 + tau s), the Butterworth (w_c = sqrt(2) / tau) gives
+  // (s + a1) / (s^2 + a1 s + a0), a1 = 2 / tau, a0 = 2 / tau^2 (a ramp's lag a1 / a0 = tau; the
+  // error overshoots through zero after the bias is learnt). Observable form per axis:
+  // e' = -a1 e + f + beta, f' = -a0 e + a1 beta. The heading integrates beta_z and keeps the share
+  // lag_keep_z that the window's accepted fields left. Discretised over t (t / tau about 0.01):
+  // x = Phi x + G b_err, Phi = exp(A t), G = int_0^t exp(A s) ds B R, to third order in A t.
+  using Matrix5 = Eigen::Matrix<double, 5, 5>;
+  using Matrix53 = Eigen::Matrix<double, 5, 3>;
+  const double tau = p_.accel_lowpass_tau_s;
+  Matrix5 a = Matrix5::Zero();
+  Matrix53 b = Matrix53::Zero();
+  b(2, 2) = 1.0;
+  if (tau > 0.0) {
+    if (p_.accel_lowpass_order == 2) {
+      const double a1 = 2.0 / tau;
+      const double a0 = 2.0 / (tau * tau);
+      for (int i = 0; i < 2; ++i) {
+        a(i, i) = -a1;
+        a(i, 3 + i) = 1.0;
+        a(3 + i, i) = -a0;
+        b(i, i) = 1.0;
+        b(3 + i, i) = a1;
+      }
+    } else {
+      a(0, 0) = a(1, 1) = -1.0 / tau;
+      b(0, 0) = b(1, 1) = 1.0;
+    }
+  }
+  const Matrix5 at = a * t;
+  const Matrix5 at2 = at * at;
+  Matrix5 phi = Matrix5::Identity() + at + 0.5 * at2 + at2 * at / 6.0;
+  Matrix5 gam = t * (Matrix5::Identity() + 0.5 * at + at2 / 6.0);
+  if (!(tau > 0.0)) {  // no low-pass: KF1 follows the accelerometer (its own lag is a few samples)
+    phi.topLeftCorner<2, 2>().setZero();
+    gam.topLeftCorner<2, 2>().setZero();
+  }
+  phi.row(2) *= s_.lag_keep_z;
+  gam.row(2) *= s_.lag_keep_z;
+  if (s_.gate.learnt) {
+    // The heading is built from sZ and sX' (2): with sX' exact, a tilt error a about magnetic
+    // north (ENU y) turns it by -tan(dip) a. KF2 pulls sX' to the field, so the heading error
+    // psi follows psi' = beta_z - (psi + tan(dip) a) / tau_2: the share of the heading's lag
+    // error the fields removed is replaced by -tan(dip) times the tilt's.
+    const double cos_dip = std::max(std::cos(s_.gate.dip_rad), std::sqrt(kMinCos2Dip));
+    phi(2, 1) -= (1.0 - s_.lag_keep_z) * std::sin(s_.gate.dip_rad) / cos_dip;
+  }
+  const Matrix53 g = gam * b * s_.q_world_body.toRotationMatrix();
+  const Matrix53 c = s_.lag_bias_cov;
+  const Matrix53 gp = g * s_.bias_cov;
+  const Matrix5 pc = phi * c * g.transpose();
+  Matrix5 p = phi * s_.lag_cov * phi.transpose() + pc + pc.transpose() + gp * g.transpose();
+  s_.lag_cov = 0.5 * (p + p.transpose());
+  s_.lag_bias_cov = phi * c + gp;
+  s_.lag_keep_z = 1.0;
 }
 
 FieldGateParams ParallelKfParams::field_gate() const {
@@ -401,7 +465,9 @@ void ParallelKf::heading_step(const Eigen::Matrix3d& a,
   // since the heading was last held by fields (KF2's gain about the vertical), not all of it: a
   // field accepted now and then amid gated ones leaves most of it. Continuously accepted, this
   // settles at about KF2's lag.
-  s_.since_mag_s *= 1.0 - std::min(1.0, dt / std::max(heading_lag_s(dt), dt));
+  const double share = std::min(1.0, dt / std::max(heading_lag_s(dt), dt));
+  s_.since_mag_s *= 1.0 - share;
+  s_.lag_keep_z *= 1.0 - share;
   if (s_.gate.learnt && s_.gate.m_ut > 0.0) {
     // The heading follows the field with KF2's lag, so what moves it is the disturbance averaged
     // over that lag: its part along the reference (norm) and across it in the vertical plane
@@ -437,6 +503,9 @@ void ParallelKf::restart_heading(const Eigen::Vector3d& mag) {
   s_.mag_use = ParallelKfState::MagUse::kRestarted;
   s_.mag_used = true;
   s_.since_mag_s = 0.0;
+  s_.lag_cov.row(2).setZero();  // the heading starts again from the field: no lag error in it
+  s_.lag_cov.col(2).setZero();
+  s_.lag_bias_cov.row(2).setZero();
   s_.field_dn_lp = 0.0;  // deviations from the reference it replaced
   s_.field_dv_lp = 0.0;
   s_.mb_head_trusted = false;  // a jump of the heading, not a measurement of the bias
@@ -560,11 +629,20 @@ Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) con
   cov(0, 1) = cov(1, 0) = -p_up(0, 1);
   cov(2, 2) = p_field(0, 0) / (c * c);
   // what the KFs do not model (see the header)
-  const Eigen::Matrix3d p_bias = p_.bias_estimation ? Eigen::Matrix3d(r * s_.bias_cov * r.transpose())
-                                                    : Eigen::Matrix3d::Zero();
   const double g = p_.tilt.gravity_mps2;
-  const double lag_tilt_s = p_.accel_lowpass_tau_s;
-  cov.topLeftCorner<2, 2>() += lag_tilt_s * lag_tilt_s * p_bias.topLeftCorner<2, 2>();
+  if (p_.bias_estimation) {
+    // the error past bias errors left (propagated), and at least what the present bias
+    // uncertainty gives over the lags (tau^2 P_b for the tilt, P_b,z t^2 for the heading): the
+    // bias filter takes its motion measurements as independent of the attitude error, although
+    // they are that error's own rate, so its P_b decorrelates faster than the error does
+    cov += s_.lag_cov.topLeftCorner<3, 3>();
+    const Eigen::Matrix3d p_bias = r * s_.bias_cov * r.transpose();
+    const double tau = p_.accel_lowpass_tau_s;
+    const double t = s_.since_mag_s;
+    const Eigen::Vector3d floor(tau * tau * p_bias(0, 0), tau * tau * p_bias(1, 1),
+                                s_.heading_initialized ? p_bias(2, 2) * t * t : 0.0);
+    cov.diagonal() += (floor - s_.lag_cov.diagonal().head<3>()).cwiseMax(0.0);
+  }
   cov.topLeftCorner<2, 2>().diagonal().array() += s_.accel_dev2_lp / (g * g);
   if (p_.motion_gyro_scale_error > 0.0) {
     // scale errors of the three gyro axes, independent, each s: the error about body axis i is
@@ -579,8 +657,6 @@ Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) con
   }
   if (s_.heading_initialized) {
     const double m = s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0;
-    const double t = s_.since_mag_s;  // includes KF2's lag (heading_step)
-    cov(2, 2) += p_bias(2, 2) * t * t;
     const double power = 0.5 * (s_.field_dn_lp * s_.field_dn_lp + s_.field_dv_lp * s_.field_dv_lp);
     cov(2, 2) += power / (m * m * c * c);
   }

@@ -307,7 +307,17 @@ struct ParallelKfState {
   double accel_dev2_lp = 0.0;  ///< (|low-passed s_A| - g)^2, low-passed over accel_lowpass_tau_s, (m/s^2)^2
   double field_dn_lp = 0.0;    ///< |s_M| - m of the fields used for heading, low-passed over KF2's lag, uT
   double field_dv_lp = 0.0;    ///< m (dip - alpha) of the same, low-passed the same way, uT
+  /// The attitude error the bias error has left in the estimate (world frame x, y, z, rad; then
+  /// the second state of the tilt low-pass's error about x and y, rad/s, for a second-order
+  /// low-pass): it drifts by R (b_true - b), the tilt forgets the drift through the accelerometer
+  /// low-pass, the heading with KF2's lag (only while fields are accepted). Its covariance, and its
+  /// cross-covariance with the bias error (x body), are propagated once per bias window and
+  /// updated with every bias measurement, so an error left by a bias that has since been learnt
+  /// stays until the lags have forgotten it.
+  Eigen::Matrix<double, 5, 5> lag_cov = Eigen::Matrix<double, 5, 5>::Zero();
+  Eigen::Matrix<double, 5, 3> lag_bias_cov = Eigen::Matrix<double, 5, 3>::Zero();
   double since_mag_s = 0.0;    ///< time since fields last held the heading (each accepted one removes dt / KF2's lag of it), s
+  double lag_keep_z = 1.0;  ///< share of the heading's lag error left by the accepted fields of the bias window
   double last_dt_s = 0.0;      ///< the last step, s
   /// KF2's direction was (re)started from a field the gate did not gate (learning, accepted or
   /// relearnt); false after a start on a gated field (a configured reference next to a magnet):
@@ -344,19 +354,25 @@ class ParallelKf {
   /// `out` (= output()), the one the filter publishes: the two KFs' own covariances (tilt from the
   /// up vector's, heading from the horizontal part of the field direction's over cos(dip)^2) plus
   /// what they do not model (docs/ESTIMATORS.md "The published covariance"):
-  ///   tilt    + tau^2 P_b (world x, y): a bias error b is followed by the accelerometer low-pass
-  ///             with a lag of tau, a tilt error of tau b;
+  ///   all     + the attitude error left by the bias error (lag_cov): it drifts the estimate by
+  ///             R b; the tilt forgets that drift with the accelerometer low-pass's lag tau (a
+  ///             ramp b gives tau b), the heading with KF2's lag while fields are accepted, not
+  ///             while they are gated. Propagated with the bias error's cross-covariance, so the
+  ///             error a bias left before it was learnt is forgotten with the lags, not at once;
   ///           + (|LP(s_A)| - g)^2 / g^2: the external acceleration (and accelerometer bias) left
   ///             in the low-passed vector, its horizontal part taken as large as the vertical one
   ///             that the magnitude shows;
   ///           + s^2 dtheta_i^2 about each body axis i (world x, y part): a gyro scale error s
   ///             (motion_gyro_scale_error) turns the attitude by s times the rotation dtheta away
   ///             from the attitude low-passed over tau, which the tilt has not caught up with;
-  ///   heading + P_b,z t^2: the vertical bias error integrated over t, the time since the heading
-  ///             was last held by fields: t grows with time and each accepted field removes the
-  ///             share of it that KF2's correction removes, dt / tau_2 (tau_2 KF2's lag about the
-  ///             vertical), so continuously accepted fields hold t at about tau_2, and a field
-  ///             accepted now and then amid gated ones leaves most of a gated stretch in it;
+  ///             each accepted field removes the share dt / tau_2 of the heading's (tau_2 KF2's
+  ///             lag about the vertical), so a field accepted now and then amid gated ones leaves
+  ///             most of a gated stretch's drift in it; and KF2 pulls the heading towards
+  ///             -tan(dip) times the tilt error about magnetic north (the heading is built from sZ);
+  ///           each diagonal term at least tau^2 P_b (tilt) and P_b,z t^2 (heading; t the time
+  ///             since fields last held the heading, each accepted field removing dt / tau_2 of
+  ///             it): the bias filter's motion measurements are the lag error's own rate, so its
+  ///             P_b decorrelates from that error faster than the error does;
   ///           + the scale error's part about the vertical, with the attitude low-passed over tau_2;
   ///           + the disturbance of the fields used, averaged over KF2's lag (the norm and dip
   ///             deviations from the reference, low-passed), over (m cos(dip))^2: its horizontal
@@ -424,6 +440,8 @@ class ParallelKf {
   [[nodiscard]] double motion_bias_noise(double dt) const;
   /// KF2's correction lag about the vertical for a step of dt, s (0 before a direction exists)
   [[nodiscard]] double heading_lag_s(double dt) const;
+  /// Propagates the attitude error the bias error leaves (lag_cov, lag_bias_cov) over t seconds.
+  void propagate_lag_error(double t);
   void heading_step(const Eigen::Matrix3d& a,
                     const Eigen::Vector3d& mag, bool mag_ok, double dt);
   /// KF2 restarted on the field `mag` (a relearnt reference, or the first accepted field after a
