@@ -36,6 +36,7 @@ ParallelKfParams ParallelKfParams::paper() {
   p.mag_reference_tau_s = 0.0;
   p.mag_verify_s = 0.0;
   p.imu_delay_s = 0.0;  // the paper predicts nothing
+  p.coning_correction = false;
   return p;
 }
 
@@ -133,7 +134,13 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   // One transition for both filters: exp(-h w) or the printed first order I - h[w x] (5a), (9a)
   Eigen::Matrix3d a;
   if (p_.tilt.exact_rotation) {
-    a = rot_exp(-dt * w);
+    Eigen::Vector3d phi = dt * w;
+    if (p_.coning_correction && p_.gyro_current_weight == 0.5) {
+      // the rotation over the step for a rate linear between the two samples (w1 + (w2 - w1) s / h):
+      // h (w1 + w2) / 2 + (h^2 / 12) w1 x w2 (the rotation vector's rate is w + theta x w / 2)
+      phi += (dt * dt / 12.0) * s_.prev_gyro.cross(gyro);
+    }
+    a = rot_exp(-phi);
   } else {
     a = -dt * skew(w);
     a.diagonal().array() += 1.0;

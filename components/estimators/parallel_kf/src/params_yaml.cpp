@@ -27,6 +27,7 @@ ParallelKfParams load_parallel_kf_params(const std::string& path, const Parallel
     r.get_nullable("dip_deg", p.dip_deg);
     r.get("startup_s", p.startup_s);
     r.get("gyro_current_weight", p.gyro_current_weight);
+    r.get("coning_correction", p.coning_correction);
     r.get_nullable("imu_delay_s", p.imu_delay_s);
     r.get("accel_lowpass_tau_s", p.accel_lowpass_tau_s);
     r.get("accel_lowpass_order", p.accel_lowpass_order);

@@ -34,15 +34,16 @@
 //     does not move (accel_lowpass_tau_s); KF1 then follows the low-passed vector closely;
 //   - KF1's tilt correction applied to KF2's field direction as well (share_tilt_correction):
 //     one attitude error moves both world directions seen in the body;
-//   - trapezoidal propagation (gyro_current_weight; the paper uses k-1) and the output predicted
+//   - trapezoidal propagation (gyro_current_weight; the paper uses k-1) with the coning of a rate
+//     linear between samples (coning_correction), and the output predicted
 //     over the IMU's group delay (imu_delay_s, a calibrated property of the sensor);
 //   - soft inflation of M2 as the field approaches the gate (mag_soft_weight, off: no gain);
 //   - exact rotation propagation, renormalisation, c_a/c_d defined at a reference rate.
 // Measured on the 19 BROAD trials in ../shared/broad (mean total RMSE, undisturbed / disturbed):
 //   paper 11.6 / 16.0 deg (first-order propagation lets |sZ| grow without bound at ~1000 deg/s),
-//   default with BROAD's calibrated IMU delay (imu_delay_s 4.18 ms) 1.151 / 1.865 deg in-sample,
-//   1.207 / 1.865 deg leave-one-trial-out cross-validated; with no delay known (half a sample
-//   assumed) 1.241 / 1.953, with imu_delay_s 0 1.374 / 2.121 (docs/ESTIMATORS.md). The Gauss-Newton baseline: 34.4 / 62.4 deg.
+//   default with BROAD's calibrated IMU delay (imu_delay_s 4.18 ms) 1.151 / 1.870 deg in-sample,
+//   1.208 / 1.869 deg leave-one-trial-out cross-validated; with no delay known (half a sample
+//   assumed) 1.240 / 1.956, with imu_delay_s 0 1.373 / 2.123 (docs/ESTIMATORS.md). The Gauss-Newton baseline: 34.4 / 62.4 deg.
 // Bad input (NaN, zero vectors, non-monotonic stamps, gaps) is rejected and counted; the state is
 // untouched (a gap re-anchors time).
 // 6-axis input (ImuSample::has_mag false, the default: a sample has a magnetometer only when its
@@ -115,6 +116,11 @@ struct ParallelKfParams {
   /// own, so the whole state describes the sensor's time; the sensor's group delay is then
   /// compensated by imu_delay_s alone), 1 = the current sample (leads by half a sample).
   double gyro_current_weight = 0.5;
+  /// With the trapezoid (gyro_current_weight 0.5) and exact rotation: the step's rotation is that
+  /// of a rate linear between the two samples, h (w1 + w2) / 2 + (h^2 / 12) w1 x w2 (the second
+  /// term is the coning of a rotation axis that moves during the step; it grows with (|w| h)^2,
+  /// so it matters at low rates: 40.8 Hz BROAD undisturbed 2.264 -> 2.020 deg, docs/ESTIMATORS.md).
+  bool coning_correction = true;
   /// IMU group delay, s: the sensor's samples describe the motion this long before their stamp
   /// (its internal low-pass; MPU6050 DLPF_CFG 3: about 4.8 ms). The output is predicted over it
   /// with the bias-corrected gyro, q_world_body = q (x) exp(w delay); the filter state is not
