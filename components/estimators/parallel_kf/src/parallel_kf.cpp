@@ -354,45 +354,54 @@ void ParallelKf::propagate_lag_error(double t) {
   // x = Phi x + G b_err, Phi = exp(A t), G = int_0^t exp(A s) ds B R, to third order in A t.
   using Matrix5 = Eigen::Matrix<double, 5, 5>;
   using Matrix53 = Eigen::Matrix<double, 5, 3>;
-  const double tau = p_.accel_lowpass_tau_s;
-  Matrix5 a = Matrix5::Zero();
-  Matrix53 b = Matrix53::Zero();
-  b(2, 2) = 1.0;
-  if (tau > 0.0) {
-    if (p_.accel_lowpass_order == 2) {
-      const double a1 = 2.0 / tau;
-      const double a0 = 2.0 / (tau * tau);
-      for (int i = 0; i < 2; ++i) {
-        a(i, i) = -a1;
-        a(i, 3 + i) = 1.0;
-        a(3 + i, i) = -a0;
-        b(i, i) = 1.0;
-        b(3 + i, i) = a1;
+  if (t != lag_t_) {  // Phi and Gamma B depend on t and the parameters only
+    lag_t_ = t;
+    const double tau = p_.accel_lowpass_tau_s;
+    Matrix5 a = Matrix5::Zero();
+    Matrix53 b = Matrix53::Zero();
+    b(2, 2) = 1.0;
+    if (tau > 0.0) {
+      if (p_.accel_lowpass_order == 2) {
+        const double a1 = 2.0 / tau;
+        const double a0 = 2.0 / (tau * tau);
+        for (int i = 0; i < 2; ++i) {
+          a(i, i) = -a1;
+          a(i, 3 + i) = 1.0;
+          a(3 + i, i) = -a0;
+          b(i, i) = 1.0;
+          b(3 + i, i) = a1;
+        }
+      } else {
+        a(0, 0) = a(1, 1) = -1.0 / tau;
+        b(0, 0) = b(1, 1) = 1.0;
       }
-    } else {
-      a(0, 0) = a(1, 1) = -1.0 / tau;
-      b(0, 0) = b(1, 1) = 1.0;
     }
+    const Matrix5 at = a * t;
+    const Matrix5 at2 = at * at;
+    lag_phi_ = Matrix5::Identity() + at + 0.5 * at2 + at2 * at / 6.0;
+    Matrix5 gam = t * (Matrix5::Identity() + 0.5 * at + at2 / 6.0);
+    if (!(tau > 0.0)) {  // no low-pass: KF1 follows the accelerometer (its own lag is a few samples)
+      lag_phi_.topLeftCorner<2, 2>().setZero();
+      gam.topLeftCorner<2, 2>().setZero();
+    }
+    lag_gam_b_ = gam * b;
   }
-  const Matrix5 at = a * t;
-  const Matrix5 at2 = at * at;
-  Matrix5 phi = Matrix5::Identity() + at + 0.5 * at2 + at2 * at / 6.0;
-  Matrix5 gam = t * (Matrix5::Identity() + 0.5 * at + at2 / 6.0);
-  if (!(tau > 0.0)) {  // no low-pass: KF1 follows the accelerometer (its own lag is a few samples)
-    phi.topLeftCorner<2, 2>().setZero();
-    gam.topLeftCorner<2, 2>().setZero();
-  }
+  Matrix5 phi = lag_phi_;
+  Matrix53 gam_b = lag_gam_b_;
   phi.row(2) *= s_.lag_keep_z;
-  gam.row(2) *= s_.lag_keep_z;
+  gam_b.row(2) *= s_.lag_keep_z;
   if (s_.gate.learnt) {
     // The heading is built from sZ and sX' (2): with sX' exact, a tilt error a about magnetic
     // north (ENU y) turns it by -tan(dip) a. KF2 pulls sX' to the field, so the heading error
     // psi follows psi' = beta_z - (psi + tan(dip) a) / tau_2: the share of the heading's lag
     // error the fields removed is replaced by -tan(dip) times the tilt's.
-    const double cos_dip = std::max(std::cos(s_.gate.dip_rad), std::sqrt(kMinCos2Dip));
-    phi(2, 1) -= (1.0 - s_.lag_keep_z) * std::sin(s_.gate.dip_rad) / cos_dip;
+    if (s_.gate.dip_rad != lag_dip_for_) {
+      lag_dip_for_ = s_.gate.dip_rad;
+      lag_tan_dip_ = std::sin(lag_dip_for_) / std::max(std::cos(lag_dip_for_), std::sqrt(kMinCos2Dip));
+    }
+    phi(2, 1) -= (1.0 - s_.lag_keep_z) * lag_tan_dip_;
   }
-  const Matrix53 g = gam * b * s_.q_world_body.toRotationMatrix();
+  const Matrix53 g = gam_b * s_.q_world_body.toRotationMatrix();
   const Matrix53 c = s_.lag_bias_cov;
   const Matrix53 gp = g * s_.bias_cov;
   const Matrix5 pc = phi * c * g.transpose();

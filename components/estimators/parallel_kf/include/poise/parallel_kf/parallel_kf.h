@@ -463,6 +463,12 @@ class ParallelKf {
   ParallelKfParams p_;
   FieldGateParams gp_;          ///< p_.field_gate(), built once
   DirectionKfParams kf2_params_;  ///< KF2's, from p_, built once
+  // propagate_lag_error()'s transition over a window of lag_t_ s (a function of t and p_ only)
+  double lag_t_ = -1.0;
+  Eigen::Matrix<double, 5, 5> lag_phi_ = Eigen::Matrix<double, 5, 5>::Identity();
+  Eigen::Matrix<double, 5, 3> lag_gam_b_ = Eigen::Matrix<double, 5, 3>::Zero();
+  double lag_dip_for_ = std::nan("");  // lag_tan_dip_ = tan(dip) for this dip (guarded)
+  double lag_tan_dip_ = 0.0;
   ParallelKfState s_;
 
   // Reporting (parallel_kf_report.cpp): the state's per-source reports of the last sample.
