@@ -108,6 +108,22 @@ void ParallelKf::reset() {
   s_.c2_dip_for = std::nan("");
 }
 
+Eigen::Matrix3d ParallelKf::transition(const Eigen::Vector3d& w, const Eigen::Vector3d& gyro, double dt) const {
+  // One transition for both filters: exp(-h w) or the printed first order I - h[w x] (5a), (9a)
+  if (p_.tilt.exact_rotation) {
+    Eigen::Vector3d phi = dt * w;
+    if (p_.coning_correction && p_.gyro_current_weight == 0.5) {
+      // the rotation over the step for a rate linear between the two samples (w1 + (w2 - w1) s / h):
+      // h (w1 + w2) / 2 + (h^2 / 12) w1 x w2 (the rotation vector's rate is w + theta x w / 2)
+      phi += (dt * dt / 12.0) * s_.prev_gyro.cross(gyro);
+    }
+    return rot_exp(-phi);
+  }
+  Eigen::Matrix3d a = -dt * skew(w);
+  a.diagonal().array() += 1.0;
+  return a;
+}
+
 bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   c = check_imu_sample(s, s_.last_stamp_ns, p_.limits, s_.rejections, p_.use_magnetometer);
   if (s_.anchor.reanchor(c, s.stamp_ns, p_.limits.max_dt_s)) {
@@ -131,20 +147,7 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   const Eigen::Vector3d gyro = s.gyro_rps - s_.bias;
   const Eigen::Vector3d w = s_.prev_gyro + p_.gyro_current_weight * (gyro - s_.prev_gyro);
 
-  // One transition for both filters: exp(-h w) or the printed first order I - h[w x] (5a), (9a)
-  Eigen::Matrix3d a;
-  if (p_.tilt.exact_rotation) {
-    Eigen::Vector3d phi = dt * w;
-    if (p_.coning_correction && p_.gyro_current_weight == 0.5) {
-      // the rotation over the step for a rate linear between the two samples (w1 + (w2 - w1) s / h):
-      // h (w1 + w2) / 2 + (h^2 / 12) w1 x w2 (the rotation vector's rate is w + theta x w / 2)
-      phi += (dt * dt / 12.0) * s_.prev_gyro.cross(gyro);
-    }
-    a = rot_exp(-phi);
-  } else {
-    a = -dt * skew(w);
-    a.diagonal().array() += 1.0;
-  }
+  const Eigen::Matrix3d a = transition(w, gyro, dt);
 
   // KF1: tilt + external acceleration (5)-(7)
   s_.kf1.core().predict_with_transition(a, dt);

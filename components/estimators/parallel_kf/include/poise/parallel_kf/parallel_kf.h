@@ -438,6 +438,9 @@ class ParallelKf {
  private:
   bool step(const ImuSample& s, SampleCheck& c);  ///< update() without the reporting
   void initialize(const ImuSample& s, bool mag_ok);
+  /// The step's transition for both filters, from the step rate w (the previous and current
+  /// bias-corrected rates `gyro` weighted) and, with the coning term, the two rates themselves
+  [[nodiscard]] Eigen::Matrix3d transition(const Eigen::Vector3d& w, const Eigen::Vector3d& gyro, double dt) const;
   void bias_update();  ///< the bias filter over the window s_.mb_time (predict, rest or motion)
   /// One scalar bias measurement along unit h (body): value z (rad/s), noise variance w; the
   /// component along unit *keep (if given) is left as it is.
