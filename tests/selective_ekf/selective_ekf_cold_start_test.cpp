@@ -143,3 +143,60 @@ TEST(SelectiveEkfColdStart, GivenAStartInMotionWhenTheLowPassForgetsItsFirstSamp
 
 }  // namespace
 }  // namespace poise
+
+namespace poise {
+namespace {
+
+// The tour's first pause (11-13 s): the rest detector (2 deg/s, 1.5 s still, 0.5 s low-pass) says
+// rest from about 13.0 s, as the handheld motion resumes slowly. Oracle: the simulator's bias.
+// Before, the zero rate asserted at those samples took their rate as bias: the error grew from
+// 0.19 to 0.5 deg/s on z (docs/SELECTIVE_EKF.md). The bias may not get worse across the pause.
+TEST(SelectiveEkfColdStart, GivenTheToursPauseWhenTheMotionResumesUnderTheRestDetectorsThresholdThenTheBiasIsNotTakenFromTheRate) {
+  constexpr double kBeforeS = 12.9;         // inside the pause, before the detector says rest, s
+  constexpr double kAfterS = 14.0;          // the motion resumed 1 s ago, s
+  constexpr double kBiasGrowthTolDps = 0.02;  // deg/s per axis above the error before the pause
+  SelectiveEkf ekf;
+  Eigen::Vector3d before = Eigen::Vector3d::Constant(-1.0);
+  Eigen::Vector3d after = Eigen::Vector3d::Constant(-1.0);
+  bool rest_seen = false;
+  testing::run_tour_until_attached_magnet(testing::kTourColdStartS, [&](const sim::SimSample& s) {
+    if (!ekf.update_imu(s.imu)) {
+      return;
+    }
+    const Eigen::Vector3d err = (ekf.state().b_rps - s.truth.gyro_bias_rps).cwiseAbs() * kDegPerRad;
+    rest_seen = rest_seen || ekf.state().pre.rest_detector.rest;
+    if (s.truth.t_s <= kBeforeS) {
+      before = err;
+    }
+    if (s.truth.t_s <= kAfterS) {
+      after = err;
+    }
+  });
+  std::printf("tour pause: bias error %.3f %.3f %.3f deg/s before, %.3f %.3f %.3f deg/s after\n", before.x(),
+              before.y(), before.z(), after.x(), after.y(), after.z());
+  EXPECT_TRUE(rest_seen) << "the detector said rest at the pause (else nothing is tested)";
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_LE(after[i], before[i] + kBiasGrowthTolDps) << "axis " << i;
+  }
+}
+
+// The issue's figure on the simulator: the tour from 7 s (inside the magnet) until the attached
+// magnet, every sample scored against the truth with the published covariance. The issue asks
+// for at least 85 % inside the 95 % ellipsoid (NEES <= 7.815, 3 degrees of freedom); 65.1 % before
+// the tilt rows' bias columns and the rest aid's low-pass.
+TEST(SelectiveEkfColdStart, GivenAStartInsideAMagnetsFieldWhenScoredAgainstTheTruthThenAtLeast85PercentAreInsideThe95PercentEllipsoid) {
+  constexpr double kMinInside = 0.85;  // fraction of samples, the issue's bound
+  SelectiveEkf ekf;
+  NeesSummary stats;
+  testing::run_tour_until_attached_magnet(testing::kTourColdStartS, [&](const sim::SimSample& s) {
+    if (ekf.update_imu(s.imu)) {
+      stats.add(attitude_nees(world_attitude_error(ekf.q_world_body(), s.truth.q_world_body), ekf.attitude_covariance()));
+    }
+  });
+  std::printf("cold start: %.1f %% of %zu samples inside the 95 %% ellipsoid, median NEES %.2f\n",
+              100.0 * stats.fraction_inside(), stats.samples(), stats.median());
+  EXPECT_GE(stats.fraction_inside(), kMinInside);
+}
+
+}  // namespace
+}  // namespace poise

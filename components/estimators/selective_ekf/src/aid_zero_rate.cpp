@@ -1,6 +1,20 @@
-// Aid source: the zero rate at rest. Rows y = 0 = w, H = [I 0 0 0 0] (with the gyro row they
-// observe the bias b directly); only while the rest detector (preprocess) says rest.
+// Aid source: rest. While the rest detector (preprocess) says rest:
+//   bias   its low-passed gyro (rest_filter_tau_s) measures the bias: y = gyro_lp = b + n,
+//          H = [0 0 I 0 0], variance sigma_gyro^2 + sigma_rest^2 per sample (the low-pass of white
+//          noise keeps the raw samples' low-frequency density, so fusing it every sample with their
+//          variance adds their information);
+//   rate   the rate is zero: y = 0 = w, H = [I 0 0 0 0], variance sigma_rest^2, with the bias as a
+//          consider state (its gain zeroed, update.h), and only while the rate is consistent with
+//          rest: w^T (P_ww + sigma_rest^2 I)^-1 w <= 7.815 (chi-square, 3 degrees of freedom, 95 %).
+//          The attitude then stops integrating gyro noise at rest.
+// The detector lags: it still says rest for the first samples of a motion that starts slowly
+// (below its 2 deg/s). A zero rate asserted there took the sample's rate as bias (with the gyro
+// row: 0.5 deg/s at the tour's 2 s pause, docs/SELECTIVE_EKF.md) and held the attitude while the
+// body turned. In the low-pass those samples weigh dt / tau each; the rate row no longer reaches
+// the bias, and it stops once the rate stands out of the noise.
 #include "aid.h"
+
+#include "poise/core/consistency.h"
 
 namespace poise::selective_ekf_aids {
 
@@ -9,12 +23,21 @@ void aid_zero_rate(const AidContext& c, const ImuInput& in, SourceStatus& st) {
   if (!in.rest) {
     return;
   }
-  // innovation
+  // bias: innovation, fuse (no gate)
   Eigen::Matrix<double, 3, SelectiveEkf::kN> h = Eigen::Matrix<double, 3, SelectiveEkf::kN>::Zero();
-  h.middleCols<3>(SelectiveEkf::kW).setIdentity();
-  const double r = c.p.sigma_rest_rate_rps * c.p.sigma_rest_rate_rps;
-  // gate: none; fuse
-  fuse<3>(c.x, h, -c.x.w_rps, Eigen::Vector3d::Constant(r), kReportGateSigma, false, st);
+  h.middleCols<3>(SelectiveEkf::kB).setIdentity();
+  const double r_rest = c.p.sigma_rest_rate_rps * c.p.sigma_rest_rate_rps;
+  const double r_bias = c.p.sigma_gyro_rps * c.p.sigma_gyro_rps + r_rest;
+  fuse<3>(c.x, h, c.x.pre.rest_detector.gyro_lp - c.x.b_rps, Eigen::Vector3d::Constant(r_bias), kReportGateSigma,
+          false, st);
+  // rate: gate (consistent with rest), fuse with the bias considered
+  const Eigen::Matrix3d s_w =
+      c.x.P.block<3, 3>(SelectiveEkf::kW, SelectiveEkf::kW) + r_rest * Eigen::Matrix3d::Identity();
+  if (c.x.w_rps.dot(s_w.ldlt().solve(c.x.w_rps)) <= kNees95Dof3) {  // chi-square, 3 dof, 95 %
+    h.setZero();
+    h.middleCols<3>(SelectiveEkf::kW).setIdentity();
+    fuse_bias_considered<3>(c.x, h, -c.x.w_rps, Eigen::Vector3d::Constant(r_rest));
+  }
   // status
   record(st, Decision::kFused, in.stamp_ns, c.first_pass);
 }

@@ -14,8 +14,6 @@
 // Terms (world frame):
 //   P          R P_thth R^T at the output: the delay prediction exp(w d) with the rate's
 //              covariance, and the output blend's remaining correction delta delta^T
-//   bias lag   tilt: a bias error b turns the gyro-propagated frame of the accelerometer
-//              low-pass, which then lags gravity by tau_lp b: share^2 tau_lp^2 P_b (world x, y)
 //   following  tilt: the accelerometer's disturbance (external acceleration, its errors) that the
 //              tilt is still following: the tilt rows' innovation as a world-frame rotation,
 //              low-passed over the tilt's lag (what averages out within it is left out, what
@@ -34,7 +32,8 @@
 //              field reference still learnt or provisional (field_verify_s), or a heading started
 //              on a gated field; nothing bounds the heading then (a start next to a magnet)
 // The gyro's white noise and bias random walk between corrections, the heading's growth while the
-// magnetometer is gated (and its fall when it is trusted again) are P's own.
+// magnetometer is gated (and its fall when it is trusted again) are P's own; so is the bias error
+// seen through the accelerometer low-pass's lag (the tilt rows' bias columns, aid_accel_tilt.cpp).
 #include "aid.h"
 
 #include <algorithm>
@@ -188,9 +187,6 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const double r_tilt = tilt_sigma * tilt_sigma;
   if (r_tilt > 0.0) {
     const double share = std::min(1.0, p_tilt * p_tilt / (q * r_tilt));
-    const double tau = p_.accel_lowpass_tau_s;
-    const Eigen::Matrix3d p_b = r * x_.P.block<3, 3>(kB, kB) * r.transpose();
-    tilt_slow.topLeftCorner<2, 2>() += share * share * tau * tau * p_b.topLeftCorner<2, 2>();
     tilt_slow.topLeftCorner<2, 2>() +=
         share * share * u.tilt_innovation_lp.head<2>() * u.tilt_innovation_lp.head<2>().transpose();
   }

@@ -289,6 +289,9 @@ void SelectiveEkf::preprocess(ImuInput& in) {
   pre.since_start_s += dt_s;
   const double k = p_.accel_lowpass_tau_s > 0.0 ? dt_s / (p_.accel_lowpass_tau_s + dt_s) : 1.0;
   pre.lp_accel_i += k * (pre.q_ib * in.accel - pre.lp_accel_i);
+  // the frame drift a bias error causes (A += R_ib dt), less the low-pass's share of it (the same
+  // gain as the low-pass): D <- (1 - k) (D + R_ib dt)
+  pre.bias_lag = (1.0 - k) * (pre.bias_lag + pre.q_ib.toRotationMatrix() * dt_s);
   Eigen::Vector3d up;
   in.up_meas = safe_normalize(pre.q_ib.conjugate() * pre.lp_accel_i, up) ? up : in.accel.normalized();
   if (p_.tilt_accel_ref_mps2 > 0.0) {

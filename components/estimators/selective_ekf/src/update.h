@@ -86,6 +86,14 @@ inline void inject(SelectiveEkfState& x, const SelectiveEkf::Vec& dx) {
   x.w_rps += dx.segment<3>(SelectiveEkf::kW);
   x.q_world_body = (x.q_world_body * quat_exp(dx.segment<3>(SelectiveEkf::kTh))).normalized();
   x.b_rps += dx.segment<3>(SelectiveEkf::kB);
+  // The accelerometer low-pass ran its frame with the old bias: its up vector carries the frame's
+  // drift the old bias error caused, less its lag (-D db, aid_accel_tilt.cpp). Turn it as if the
+  // corrected bias had been used over its window, so that what the tilt rows' bias columns
+  // predict (D times the bias error still left) stays true.
+  const Eigen::Vector3d turn = x.pre.bias_lag * dx.segment<3>(SelectiveEkf::kB);
+  if (turn.squaredNorm() > 0.0) {
+    x.pre.lp_accel_i = quat_exp(turn) * x.pre.lp_accel_i;
+  }
   x.t_m += dx.segment<3>(SelectiveEkf::kT);
   x.v_mps += dx.segment<3>(SelectiveEkf::kV);
 }
@@ -118,6 +126,25 @@ bool fuse(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>
     inject(x, dx);
   }
   return ok;
+}
+
+/// M rows with the bias rows of the gain zeroed (a Schmidt consider update: the bias keeps its
+/// uncertainty and its correlations, and learns nothing from these rows): K = P H^T S^-1 without
+/// its bias rows, P <- (I - K H) P (I - K H)^T + K R K^T (the Joseph form, exact for any gain).
+/// Returns the innovation variances diag(S).
+template <int M>
+Eigen::Matrix<double, M, 1> fuse_bias_considered(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>& h,
+                                                 const Eigen::Matrix<double, M, 1>& innov,
+                                                 const Eigen::Matrix<double, M, 1>& r_diag) {
+  const Eigen::Matrix<double, M, M> r = r_diag.asDiagonal();
+  const Eigen::Matrix<double, M, M> s = h * x.P * h.transpose() + r;
+  Eigen::Matrix<double, SelectiveEkf::kN, M> k = x.P * h.transpose() * s.inverse();
+  k.template middleRows<3>(SelectiveEkf::kB).setZero();
+  const SelectiveEkf::Mat ikh = SelectiveEkf::Mat::Identity() - k * h;
+  const SelectiveEkf::Mat updated = ikh * x.P * ikh.transpose() + k * r * k.transpose();
+  x.P = 0.5 * (updated + updated.transpose());
+  inject(x, k * innov);
+  return s.diagonal();
 }
 
 /// The status step of every aid: the decision on a measurement stamped `stamp_ns`. Counters count

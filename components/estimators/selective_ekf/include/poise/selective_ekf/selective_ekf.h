@@ -20,8 +20,11 @@
 //     ImuMeasurement::kSplit (default) replaces q_imu by two measurements so that a disturbed
 //     magnetometer never costs tilt:
 //     tilt:      z_up = the accelerometer low-passed (accel_lowpass_tau_s) in a gyro-propagated,
-//                almost inertial frame, normalised; u = R(q)^T e_z. Two rows e_i . (z_up x u) = dth
-//                . e_i (e_1, e_2 orthonormal, perpendicular to u), H = [0 e_i^T 0 0 0]. Variance per
+//                almost inertial frame, normalised; u = R(q)^T e_z. Two rows e_i . (z_up x u) = e_i .
+//                (dth + R_ib^T D db) (e_1, e_2 orthonormal, perpendicular to u; D the frame's drift
+//                per unit bias error less the low-pass's lag of it, SelectiveEkfPreState::bias_lag),
+//                H = [0 e_i^T e_i^T R_ib^T D 0 0]; a bias correction turns the low-pass by D db as if
+//                the corrected bias had been used over its window. Variance per
 //                row: spectral density sigma_tilt^2 / h (sigma_tilt derived from
 //                accel_lowpass_tau_s by default: see the parameter), inflated by the recent external
 //                acceleration (| |a| - g | low-passed, see tilt_accel_ref_mps2).
@@ -32,8 +35,9 @@
 //                error (9) = |dpsi| only while vision anchors the heading (without vision the
 //                predicted heading is the gyro's, and rejecting the magnetometer because it
 //                disagrees with a drifting prediction locks the drift in).
-//     zero rate: at rest (rest detector on the raw gyro and accelerometer), y = 0 = w + n_rest,
-//                H = [I 0 0 0 0]: with the gyro row it observes b directly.
+//     rest:      at rest (rest detector on the raw gyro and accelerometer), the detector's
+//                low-passed gyro y = b + n, H = [0 0 I 0 0], and (while w is consistent with rest
+//                at 95 %) y = 0 = w + n_rest, H = [I 0 0 0 0] with the bias considered.
 //     q_vision:  log(q^-1 (x) q_vis)  = dth + n,  H = [0 I 0 0 0]   q_vis = q_world_cam (x) q_body_cam^-1
 //     t_vision:  p_world_cam = t + R(q) p_body_cam,  H = [0  -R [p_body_cam x]  0  I  0]
 //     Measured quaternions are sign-aligned to the prediction before the innovation.
@@ -365,6 +369,11 @@ struct VisionCounters {
 struct SelectiveEkfPreState {
   Eigen::Quaterniond q_ib = Eigen::Quaterniond::Identity();  ///< body -> almost inertial frame
   Eigen::Vector3d lp_accel_i{0, 0, 0};  ///< low-passed accelerometer in that frame, m/s^2
+  /// How a gyro-bias error turns the low-pass's up vector against its frame (the tilt rows' bias
+  /// columns, aid_accel_tilt.cpp): a bias error db (body) turns the frame by A db (A = the
+  /// integral of R_ib dt) and the low-pass, which lags it, by its low-passed Lambda db; this is
+  /// D = A - Lambda (s), D' = R_ib - D / tau (at rest R_ib tau (1 - exp(-t / tau))).
+  Eigen::Matrix3d bias_lag = Eigen::Matrix3d::Zero();
   double ext_accel_ms = 0.0;            ///< low-passed (|a| - g)^2, (m/s^2)^2
   /// the first sample was not at rest (the rest detector's thresholds): the low-pass carries its
   /// external acceleration, as the initial attitude does (a start in motion)
