@@ -404,6 +404,73 @@ TEST(SelectiveEkfVision, GivenImuDelayWhenOutputThenStatePredictedByTheEstimated
   EXPECT_THROW(SelectiveEkf{bad}, std::invalid_argument);
 }
 
+// The default: no delay known (imu_delay_s NaN, as the parallel KF's): half a sample, the least
+// delay any sampled sensor has. Oracles: the stamps (the state at the interval's middle), the
+// state predicted over half a sample with its rate, and the guess's error (dt^2 / 12) w_z^2 on the
+// heading variance against a filter configured with that half sample.
+TEST(SelectiveEkfVision, GivenNoDelayKnownWhenRunThenTheStateIsAtTheIntervalsMiddleAndTheOutputPredictedOverHalfASample) {
+  constexpr int64_t kStepNs = 10'000'000;  // 100 Hz
+  constexpr double kDtS = 0.01;
+  // of the term: the two filters differ besides it by their first interval (the unknown delay's
+  // first sample has no interval, so its state starts at the stamp, the other's 5 ms before): 5 %
+  constexpr double kVarRelTol = 0.1;
+  auto feed = [](SelectiveEkf& ekf) {
+    for (int k = 0; k < 200; ++k) {
+      ImuSample s = level_sample(int64_t{1'000'000'000} + k * kStepNs);
+      s.gyro_rps = Eigen::Vector3d(0.0, 0.0, 1.0);
+      s.mag_ut = quat_exp(Eigen::Vector3d(0.0, 0.0, 0.01 * k)).conjugate() * s.mag_ut;
+      ASSERT_TRUE(ekf.update_imu(s));
+    }
+  };
+  // GIVEN the defaults (delay not known) and the same filter told half a sample
+  SelectiveEkfParams p;
+  ASSERT_TRUE(std::isnan(p.imu_delay_s));
+  p.output_max_correction_dps = 0.0;  // the output is the state's prediction itself
+  SelectiveEkfParams half = p;
+  half.imu_delay_s = 0.5 * kDtS;
+  SelectiveEkf unknown(p);
+  SelectiveEkf known(half);
+  // WHEN both run (1 rad/s about z)
+  feed(unknown);
+  feed(known);
+  // THEN the state runs at the interval's middle, the output is predicted over half a sample
+  EXPECT_EQ(unknown.state().stamp_ns, int64_t{1'000'000'000} + 199 * kStepNs - kStepNs / 2);
+  const Eigen::Quaterniond predicted =
+      (unknown.state().q_world_body * quat_exp(unknown.state().w_rps * 0.5 * kDtS)).normalized();
+  EXPECT_LT(quat_angle_between(unknown.q_world_body(), predicted), kReplayExactDeg * kRadPerDeg);
+  // AND the published covariance carries the guess's error about the rate axis (world z)
+  const double w_z = (unknown.state().q_world_body * unknown.state().w_rps).z();
+  const double added = unknown.attitude_covariance()(2, 2) - known.attitude_covariance()(2, 2);
+  std::printf("delay not known: heading variance + %.3g rad^2 (dt^2 / 12 w^2 = %.3g)\n", added,
+              kDtS * kDtS / 12.0 * w_z * w_z);
+  const double term = kDtS * kDtS / 12.0 * w_z * w_z;
+  EXPECT_NEAR(added, term, kVarRelTol * term);
+  // AND null in YAML is "not known"
+  const std::string path = ::testing::TempDir() + "/sekf_delay_null.yaml";
+  std::ofstream(path) << "selective_ekf:\n  imu_delay_s: null\n";
+  EXPECT_TRUE(std::isnan(load_selective_ekf_params(path).imu_delay_s));
+}
+
+// As the parallel KF's adapter: a delay the IMU's driver publishes (`poise process --filter`
+// offers the recorded imu_info) is taken unless the configuration set one; a running filter
+// restarts on it (its state's time is the stamp minus the delay).
+TEST(SelectiveEkfConfig, GivenNoConfiguredDelayWhenTheDriverPublishesOneThenItIsTakenElseTheConfiguredOneWins) {
+  constexpr double kPublishedS = 0.0048;  // oracle: the delay offered
+  SelectiveEkfFilter unknown;
+  SelectiveEkfParams zero;
+  zero.imu_delay_s = 0.0;
+  SelectiveEkfFilter configured_zero(zero);
+  EXPECT_TRUE(unknown.take_published_imu_delay(kPublishedS));
+  EXPECT_DOUBLE_EQ(unknown.core().params().imu_delay_s, kPublishedS);
+  ASSERT_TRUE(unknown.update(level_sample(1'000'000'000)));
+  EXPECT_TRUE(unknown.take_published_imu_delay(0.003));  // a later one replaces it, the filter restarts
+  EXPECT_DOUBLE_EQ(unknown.core().params().imu_delay_s, 0.003);
+  EXPECT_FALSE(unknown.initialized());
+  EXPECT_FALSE(configured_zero.take_published_imu_delay(kPublishedS));
+  EXPECT_DOUBLE_EQ(configured_zero.core().params().imu_delay_s, 0.0);
+  EXPECT_THROW(unknown.take_published_imu_delay(0.2), std::invalid_argument);
+}
+
 TEST(SelectiveEkfVision, GivenNoLeverArmWhenBlockPathUsedThenSameAsTheFullCovariancePath) {
   // GIVEN the same run twice: a zero lever arm (attitude and position blocks updated separately)
   // and a 1 nm lever arm (any lever couples the blocks: the full 12-state path)
@@ -433,6 +500,7 @@ TEST(SelectiveEkfVision, GivenLateVisionWhenAllArrivedThenStateEqualsOnTimeProce
   // filter that takes the stamps as exact replays late frames into the on-time state exactly
   SelectiveEkfParams exact;
   exact.vision_time_offset_sigma_s = 0.0;
+  exact.imu_delay_s = 0.0;  // the simulator samples the motion at the stamp: frames at IMU stamps are on time
   SelectiveEkf on_time(exact);
   SelectiveEkf late(exact);
   VisionSynthesizer s1(tag(0.0));
@@ -539,7 +607,9 @@ TEST(SelectiveEkfVision, GivenFutureFrameWhenImuCatchesUpThenAppliedAtItsStamp) 
 
 TEST(SelectiveEkfVision, GivenNegatedQuaternionWhenFusedThenSameAsPositive) {
   auto make = [] {
-    SelectiveEkf f;
+    SelectiveEkfParams p;
+    p.imu_delay_s = 0.0;  // the samples describe the stamp: the frame at the last one is on time
+    SelectiveEkf f(p);
     for (int k = 0; k <= 100; ++k) {
       f.update_imu(level_sample(1'000'000'000 + k * 10'000'000LL));
     }
@@ -791,7 +861,7 @@ void expect_same_params(const SelectiveEkfParams& a, const SelectiveEkfParams& b
   EXPECT_EQ(a.vision_reset_after_rejections, b.vision_reset_after_rejections);
   EXPECT_EQ(a.history_s, b.history_s);
   EXPECT_EQ(a.vision_time_offset_s, b.vision_time_offset_s);
-  EXPECT_EQ(a.imu_delay_s, b.imu_delay_s);
+  EXPECT_TRUE(same_or_both_nan(a.imu_delay_s, b.imu_delay_s));
   EXPECT_EQ(a.output_max_correction_dps, b.output_max_correction_dps);
   EXPECT_EQ(a.q_body_camera.coeffs(), b.q_body_camera.coeffs());
   EXPECT_EQ(a.p_body_camera_m, b.p_body_camera_m);
@@ -845,7 +915,8 @@ TEST(SelectiveEkfConfig, GivenShippedYamlFilesWhenLoadedThenValidAndDistinct) {
   const SelectiveEkfParams defaults;
   EXPECT_EQ(on.disturbance_angle_threshold_deg, defaults.disturbance_angle_threshold_deg);
   EXPECT_EQ(on.quat_error_threshold_deg, defaults.quat_error_threshold_deg);
-  EXPECT_EQ(on.imu_delay_s, defaults.imu_delay_s);
+  EXPECT_TRUE(std::isnan(on.imu_delay_s));  // not known (the defaults'), like the parallel KF's
+  EXPECT_TRUE(std::isnan(defaults.imu_delay_s));
   // BROAD's files: the same filter with the IMU delay measured by `poise calibrate imu-delay`
   const SelectiveEkfParams broad = load_selective_ekf_params(dir + "selective_ekf_broad.yaml");
   const SelectiveEkfParams broad_off = load_selective_ekf_params(dir + "selective_ekf_broad_nogating.yaml");
@@ -869,9 +940,9 @@ TEST(SelectiveEkfConfig, GivenTheFilterTableThenOnlyBroadEvaluationsGetTheBroadI
   EXPECT_EQ(delay_of(eval::make_filter_for_broad("selective")), kBroadImuDelayS);
   EXPECT_EQ(delay_of(eval::make_filter_for_broad("selective_vision30")), kBroadImuDelayS);
   // anything else (`poise process`) and an explicit config: no BROAD assumption
-  EXPECT_EQ(delay_of(eval::make_filter("selective")), 0.0);
+  EXPECT_TRUE(std::isnan(delay_of(eval::make_filter("selective"))));  // not known
   const std::string file = std::string(POISE_SOURCE_DIR) + "/config/filters/selective_ekf.yaml";
-  EXPECT_EQ(delay_of(eval::make_filter_for_broad("selective", file)), 0.0);
+  EXPECT_TRUE(std::isnan(delay_of(eval::make_filter_for_broad("selective", file))));
 }
 
 TEST(SelectiveEkfConfig, GivenBadYamlWhenLoadedThenErrorNamesTheKey) {
@@ -1088,7 +1159,9 @@ TEST(SelectiveEkfImuOnly, GivenVisionBlackoutWhenVisionReturnsThenNoStepBeyondTh
 TEST(SelectiveEkfVision, GivenAVisionResetWhenOutputLimitedThenTheOutputGlidesAtTheLimit) {
   // GIVEN a level device at rest, 100 Hz, the tag seen at identity, then at 20 deg yaw (the
   // camera re-localised: the gate rejects it 10 times, then the state resets to it)
-  SelectiveEkf f;  // output_max_correction_dps = 20 by default
+  SelectiveEkfParams p;
+  p.imu_delay_s = 0.0;  // the samples describe the stamp: a frame at a sample's stamp is on time
+  SelectiveEkf f(p);  // output_max_correction_dps = 20 by default
   const double limit_dps = f.params().output_max_correction_dps;
   const Eigen::Quaterniond yaw20 = quat_from_euler_zyx(0.0, 0.0, 20.0 * kRadPerDeg);
   Eigen::Quaterniond prev = Eigen::Quaterniond::Identity();

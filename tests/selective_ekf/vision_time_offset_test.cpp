@@ -100,6 +100,7 @@ TEST(VisionTimeOffset, GivenTheSelectiveEkfWithWrongCameraStampsWhenEstimatingTh
   auto run = [](double sigma_s, double& final_err_deg) {
     SelectiveEkfParams p;
     p.vision_time_offset_sigma_s = sigma_s;
+    p.imu_delay_s = 0.0;  // the samples describe the motion at their stamps (else half a sample is in the offset)
     SelectiveEkf ekf(p);
     std::mt19937_64 rng(5);
     double next_frame = 0.2;

@@ -58,7 +58,8 @@ void validate(const SelectiveEkfParams& p) {
   check.require(p.vision_time_offset_walk_s_sqrt_s >= 0.0 && p.vision_time_offset_walk_s_sqrt_s <= 0.01,
                 "vision_time_offset_walk_s_sqrt_s", "in [0, 0.01] (s/sqrt(s))");
   check.require(p.predict_horizon_s >= 0.0 && p.predict_horizon_s <= 0.2, "predict_horizon_s", "in [0, 0.2] (s)");
-  check.require(p.imu_delay_s >= 0.0 && p.imu_delay_s <= 0.05, "imu_delay_s", "in [0, 0.05] (s)");
+  check.require(std::isnan(p.imu_delay_s) || (p.imu_delay_s >= 0.0 && p.imu_delay_s <= 0.05), "imu_delay_s",
+                "in [0, 0.05] (s), or null (not known: half a sample)");
   check.require(selective_ekf_aids::finite_quat(p.q_body_camera), "q_body_camera", "a finite unit quaternion [w, x, y, z]");
   check.require(p.p_body_camera_m.allFinite(), "p_body_camera_m", "finite (m)");
   check.positive(p.init_sigma_attitude_deg, "init_sigma_attitude_deg", "deg");

@@ -79,7 +79,7 @@ void read(YamlParamReader& r, SelectiveEkfParams& p) {
   r.get("vision_time_offset_sigma_s", p.vision_time_offset_sigma_s);
   r.get("vision_time_offset_walk_s_sqrt_s", p.vision_time_offset_walk_s_sqrt_s);
   r.get("predict_horizon_s", p.predict_horizon_s);
-  r.get("imu_delay_s", p.imu_delay_s);
+  r.get_nullable("imu_delay_s", p.imu_delay_s);
   r.get("output_max_correction_dps", p.output_max_correction_dps);
   r.get_with("q_body_camera", [&p](const YAML::Node& n) { p.q_body_camera = as_quat_wxyz(n); });
   r.get("p_body_camera_m", p.p_body_camera_m);

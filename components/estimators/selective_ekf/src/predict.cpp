@@ -44,7 +44,7 @@ PredictedAttitude SelectiveEkf::predict(int64_t t_ns) const {
     return out;
   }
   const double horizon_s = static_cast<double>(out.stamp_ns - last_imu_stamp_ns_) * selective_ekf_aids::kNsToS;
-  const double delay_s = static_cast<double>(imu_delay_ns_) * selective_ekf_aids::kNsToS;
+  const double delay_s = static_cast<double>(current_delay_ns()) * selective_ekf_aids::kNsToS;
   out.horizon_s = horizon_s;
   out.q_world_body = quat_canonical((out.q_world_body * quat_exp(x_.w_rps * horizon_s)).normalized());
   const Eigen::Matrix3d grown = out.covariance + propagated_attitude_covariance(x_, p_, delay_s + horizon_s) -

@@ -14,6 +14,8 @@
 // Terms (world frame):
 //   P          R P_thth R^T at the output: the delay prediction exp(w d) with the rate's
 //              covariance, and the output blend's remaining correction delta delta^T
+//   delay      imu_delay_s not known (NaN): d is half a sample, the true delay uniform over none
+//              to one sample: (dt^2 / 12) (R w)(R w)^T
 //   following  tilt: the accelerometer's disturbance (external acceleration, its errors) that the
 //              tilt is still following: the tilt rows' innovation as a world-frame rotation,
 //              low-passed over the tilt's lag (what averages out within it is left out, what
@@ -141,7 +143,7 @@ void SelectiveEkf::track_unmodelled(const ImuInput& in, bool aided, double aidin
 Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const SelectiveEkfUnmodelled& u = x_.unmodelled;
   // P at the output: th_out = Exp(w d)^T th + J_r(w d) d w (the delay prediction)
-  const double d = static_cast<double>(imu_delay_ns_) * aids::kNsToS;
+  const double d = static_cast<double>(current_delay_ns()) * aids::kNsToS;
   const Eigen::Vector3d wd = x_.w_rps * d;
   const Eigen::Matrix3d a = quat_exp(wd).toRotationMatrix().transpose();
   const Eigen::Matrix3d b = so3_right_jacobian(wd) * d;
@@ -157,6 +159,12 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const Eigen::Vector3d delta = quat_log(quat_align_sign(q_world_body(), q_state) * q_state.conjugate());
   cov += delta * delta.transpose();
 
+  if (std::isnan(p_.imu_delay_s)) {
+    // the delay not known: predicted over half a sample, the true one taken as uniform over none
+    // to one sample (variance dt^2 / 12); its error turns the output about the rate axis
+    const Eigen::Vector3d w_world = r * x_.w_rps;
+    cov += (u.last_dt_s * u.last_dt_s / 12.0) * (w_world * w_world.transpose());
+  }
   if (heading_unknown()) {
     cov(2, 2) += kUnknownHeadingVarRad2;
   }

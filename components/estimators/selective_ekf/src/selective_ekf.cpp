@@ -54,7 +54,7 @@ SelectiveEkf::SelectiveEkf(const SelectiveEkfParams& params) : p_(params) {
   validate(p_);
   gp_ = heading_field_gate(p_);
   p_.q_body_camera.normalize();
-  imu_delay_ns_ = seconds_to_ns(p_.imu_delay_s);
+  imu_delay_ns_ = std::isnan(p_.imu_delay_s) ? 0 : seconds_to_ns(p_.imu_delay_s);
   // The dip reference and input limits are shared with the Gauss-Newton source.
   if (std::isfinite(p_.dip_deg) && !std::isfinite(p_.gauss_newton.dip_deg)) {
     p_.gauss_newton.dip_deg = p_.dip_deg;
@@ -108,7 +108,11 @@ void SelectiveEkf::set_imu_delay_s(double delay_s) {
   p.imu_delay_s = delay_s;
   validate(p);
   p_.imu_delay_s = delay_s;
-  imu_delay_ns_ = seconds_to_ns(delay_s);
+  imu_delay_ns_ = std::isnan(delay_s) ? 0 : seconds_to_ns(delay_s);
+}
+
+int64_t SelectiveEkf::delay_ns(double dt_s) const {
+  return std::isnan(p_.imu_delay_s) ? seconds_to_ns(0.5 * std::max(dt_s, 0.0)) : imu_delay_ns_;
 }
 
 Eigen::Quaterniond SelectiveEkf::q_world_body() const {
@@ -116,15 +120,16 @@ Eigen::Quaterniond SelectiveEkf::q_world_body() const {
 }
 
 Eigen::Quaterniond SelectiveEkf::state_output() const {
-  if (imu_delay_ns_ == 0) {
+  const int64_t delay = current_delay_ns();
+  if (delay == 0) {
     return quat_canonical(x_.q_world_body);
   }
-  const double d = static_cast<double>(imu_delay_ns_) * kNsToS;
+  const double d = static_cast<double>(delay) * kNsToS;
   return quat_canonical((x_.q_world_body * quat_exp(x_.w_rps * d)).normalized());
 }
 
 Eigen::Vector3d SelectiveEkf::position_m() const {
-  return x_.t_m + x_.v_mps * (static_cast<double>(imu_delay_ns_) * kNsToS);
+  return x_.t_m + x_.v_mps * (static_cast<double>(current_delay_ns()) * kNsToS);
 }
 
 Eigen::Vector3d SelectiveEkf::attitude_sigma_deg() const {
@@ -312,7 +317,7 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
   if (anchor_.reanchor(c, s.stamp_ns, p_.limits.max_dt_s)) {
     // Confirmed time jump: keep the state, restart time here; the history cannot span it.
     last_imu_stamp_ns_ = s.stamp_ns;
-    x_.stamp_ns = s.stamp_ns - imu_delay_ns_;
+    x_.stamp_ns = s.stamp_ns - current_delay_ns();
     history_.clear();
     vision_log_.clear();
     return false;
@@ -321,7 +326,8 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
     return false;
   }
   ImuInput in;
-  in.stamp_ns = s.stamp_ns - imu_delay_ns_;  // state time: when the measured motion happened
+  // state time: when the measured motion happened
+  in.stamp_ns = s.stamp_ns - delay_ns(initialized_ ? c.dt_s : 0.0);
   in.gyro = s.gyro_rps;
   in.accel = s.accel_mps2;
   // switched off (use_magnetometer: false): not even its value goes in, as from a 6-axis sensor
@@ -459,7 +465,7 @@ bool SelectiveEkf::update_vision(const VisionPose& v_in) {
                               [](int64_t t, const VisionPose& e) { return t < e.capture_stamp_ns; });
   const auto fresh = static_cast<size_t>(pos - vision_log_.begin());
   vision_log_.insert(pos, v);
-  const int64_t state_now_ns = last_imu_stamp_ns_ - imu_delay_ns_;
+  const int64_t state_now_ns = last_imu_stamp_ns_ - current_delay_ns();
   if (v.capture_stamp_ns > state_now_ns) {
     ++vc_.future;  // applied when the IMU reaches its capture stamp
     return true;

@@ -109,6 +109,17 @@ std::optional<Eigen::Matrix3d> SelectiveEkfFilter::attitude_covariance() const {
   return attitude_covariance_world(ekf_);
 }
 
+bool SelectiveEkfFilter::take_published_imu_delay(double delay_s) {
+  if (delay_configured_) {
+    return false;
+  }
+  if (ekf_.initialized()) {
+    ekf_.reset();  // the state's time is the IMU stamp minus the delay: restart on the new one
+  }
+  ekf_.set_imu_delay_s(delay_s);
+  return true;
+}
+
 Eigen::Matrix<double, 9, 9> pose_covariance_world(const SelectiveEkfState& x,
                                                    const Eigen::Quaterniond& q_world_body) {
   // J maps the error state [w, th_body, b, t, v] to [p, v, th_world]: th_world = R th_body.

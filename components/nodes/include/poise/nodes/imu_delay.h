@@ -1,8 +1,8 @@
 // Which IMU group delay (imu_delay_s) an estimator step uses: the one its configuration gives
 // explicitly (the component's `imu_delay_s` parameter, or the key in its filter file) wins; else
 // the delay the IMU's driver publishes with the samples (`imu_info`, msg::ImuSensorInfo, from the
-// firmware's $INF line: docs/SERIAL_PROTOCOL.md); else the configuration's default (0; the
-// parallel KF's is NaN: not known, half a sample assumed).
+// firmware's $INF line: docs/SERIAL_PROTOCOL.md); else the configuration's default (NaN for the
+// parallel KF and the selective EKF: not known, half a sample assumed).
 #pragma once
 
 #include "poise/runtime/component.h"

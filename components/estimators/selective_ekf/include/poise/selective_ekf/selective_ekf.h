@@ -235,8 +235,13 @@ struct SelectiveEkfParams {
   /// (the sensor's internal low-pass filter; MPU6050 DLPF_CFG 3: ~4.8 ms; calibrated with
   /// `poise calibrate imu-delay` against a reference). The filter runs at stamp - delay, fuses
   /// vision at its (true) capture time, and outputs the attitude predicted to the sample stamp
-  /// with the estimated rate. 0 = the stamps are the sampling instants of the motion.
-  double imu_delay_s = 0.0;
+  /// with the estimated rate. 0 = the stamps are the sampling instants of the motion. NaN
+  /// (default; null in YAML) = not known: half the sample interval, the least delay any sampled
+  /// sensor has (a sample is the mean over its interval): the state runs at the interval's middle
+  /// and the output is predicted over half a sample, its covariance raised by the guess's error
+  /// (dt^2 / 12) (R w)(R w)^T (the true delay uniform over none to one sample), as the parallel
+  /// KF's. A delay the IMU's driver publishes (`imu_info`) or a configured one wins.
+  double imu_delay_s = std::nan("");
   /// Output correction rate limit, deg/s: q_world_body() turns with the gyro (bias removed) and
   /// follows the state's estimate with corrections of at most this rate, so a large correction
   /// (vision back after a blackout) is a short glide, not a jump an AR renderer would show; small
@@ -539,9 +544,9 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// Resets after an unhealthy state (poise/core/state_health.h).
   [[nodiscard]] uint64_t state_resets() const { return health_.resets; }
   [[nodiscard]] const SelectiveEkfParams& params() const { return p_; }
-  /// Sets imu_delay_s (e.g. the delay the IMU's driver publishes) before the first sample or after
-  /// reset(): the state's time is the IMU stamp minus the delay. Throws std::invalid_argument
-  /// outside [0, 0.05] s, std::logic_error once initialized.
+  /// Sets imu_delay_s (e.g. the delay the IMU's driver publishes; NaN = not known) before the
+  /// first sample or after reset(): the state's time is the IMU stamp minus the delay. Throws
+  /// std::invalid_argument outside [0, 0.05] s, std::logic_error once initialized.
   void set_imu_delay_s(double delay_s);
   [[nodiscard]] const GaussNewton& gauss_newton() const { return gn_; }
   /// Body-frame attitude standard deviations, deg (of the state's P).
@@ -615,7 +620,11 @@ class SelectiveEkf : private SelectiveEkfFullState {
 
   SelectiveEkfParams p_;
   FieldGateParams gp_;  ///< heading_field_gate(p_)
-  int64_t imu_delay_ns_ = 0;         ///< state time = IMU stamp - imu_delay_ns_
+  int64_t imu_delay_ns_ = 0;         ///< imu_delay_s when known (delay_ns())
+  /// The delay in use, ns: imu_delay_s, or (not known) half the sample interval `dt_s`.
+  [[nodiscard]] int64_t delay_ns(double dt_s) const;
+  /// delay_ns() of the last sample (the state's time = its stamp - this).
+  [[nodiscard]] int64_t current_delay_ns() const { return delay_ns(x_.unmodelled.last_dt_s); }
 };
 
 // ---- Reporting (selective_ekf_report.cpp): the core's outputs in the shapes every node maps 1:1.
@@ -658,7 +667,7 @@ VisionPose to_vision_pose(const CameraPoseMeasurement& m);
 /// AttitudeFilter adapter (IMU-only path; vision goes through core().update_vision()).
 class SelectiveEkfFilter : public AttitudeFilter {
  public:
-  explicit SelectiveEkfFilter(const SelectiveEkfParams& p = {}) : ekf_(p) {}
+  explicit SelectiveEkfFilter(const SelectiveEkfParams& p = {}) : ekf_(p), delay_configured_(!std::isnan(p.imu_delay_s)) {}
   bool update(const ImuSample& s) override { return ekf_.update_imu(s); }
   [[nodiscard]] Eigen::Quaterniond q_world_body() const override { return ekf_.q_world_body(); }
   [[nodiscard]] bool initialized() const override { return ekf_.initialized(); }
@@ -671,11 +680,16 @@ class SelectiveEkfFilter : public AttitudeFilter {
   [[nodiscard]] std::map<std::string, uint64_t> rejections() const override;
   [[nodiscard]] std::optional<Eigen::Matrix3d> attitude_covariance() const override;
   [[nodiscard]] HeadingStatus heading_status() const override { return ekf_.heading_status(); }
+  /// Used unless imu_delay_s was configured (not NaN): the state's time is the stamp minus the
+  /// delay, so a running filter restarts on it (as the node does); throws std::invalid_argument
+  /// outside [0, 0.05] s (set_imu_delay_s).
+  bool take_published_imu_delay(double delay_s) override;
   [[nodiscard]] SelectiveEkf& core() { return ekf_; }
   [[nodiscard]] const SelectiveEkf& core() const { return ekf_; }
 
  private:
   SelectiveEkf ekf_;
+  bool delay_configured_ = false;  ///< imu_delay_s was set by the parameters (a published one is ignored)
 };
 
 }  // namespace poise
