@@ -471,6 +471,56 @@ TEST(SelectiveEkfConfig, GivenNoConfiguredDelayWhenTheDriverPublishesOneThenItIs
   EXPECT_THROW(unknown.take_published_imu_delay(0.2), std::invalid_argument);
 }
 
+// A camera's per-detection covariance is taken whole (issue 31): a floor tag fixes the heading far
+// better than the tilt. Oracles: the first frame resets the attitude with the frame's covariance,
+// which for a pose yawed 90 deg is the world matrix with x and y swapped in the body frame; the
+// camera's 6x6 [position | rotation] reaches it through to_vision_pose; a covariance that is not
+// one is rejected and counted.
+TEST(SelectiveEkfVision, GivenAFrameWithItsOwnAnisotropicCovarianceWhenFusedThenTheBodyFrameCovarianceIsItsRotation) {
+  constexpr double kTolRad2 = 1e-12;  // rad^2: the same numbers through a rotation
+  const double sx = 0.2 * kRadPerDeg;
+  const double sy = 0.1 * kRadPerDeg;
+  const double sz = 0.02 * kRadPerDeg;  // the heading, ten times better than the tilt
+  SelectiveEkfParams p;
+  p.imu_delay_s = 0.0;
+  p.vision_time_offset_sigma_s = 0.0;  // stamps exact: the covariance is the camera's alone
+  SelectiveEkf f(p);
+  for (int k = 0; k <= 10; ++k) {
+    ASSERT_TRUE(f.update_imu(level_sample(1'000'000'000 + k * 10'000'000LL)));
+  }
+  CameraPoseMeasurement cam;
+  cam.stamp_ns = 1'000'000'000 + 10 * 10'000'000LL;
+  cam.q_world_camera = quat_from_euler_zyx(0.0, 0.0, 90.0 * kRadPerDeg);  // q_body_camera identity
+  cam.covariance.setZero();
+  cam.covariance.topLeftCorner<3, 3>() = Eigen::Matrix3d::Identity() * 1e-4;
+  cam.covariance.bottomRightCorner<3, 3>() = Eigen::Vector3d(sx * sx, sy * sy, sz * sz).asDiagonal();
+  const VisionPose v = to_vision_pose(cam);
+  ASSERT_NEAR((v.attitude_covariance_world - cam.covariance.bottomRightCorner<3, 3>()).cwiseAbs().maxCoeff(), 0.0,
+              kTolRad2);
+  ASSERT_TRUE(f.update_vision(v));
+  const Eigen::Matrix3d p_th = f.state().P.block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh);
+  EXPECT_NEAR(p_th(0, 0), sy * sy, kTolRad2);  // body x is world y at yaw 90 deg
+  EXPECT_NEAR(p_th(1, 1), sx * sx, kTolRad2);
+  EXPECT_NEAR(p_th(2, 2), sz * sz, kTolRad2);
+  // AND a second frame, fused: each principal axis by its own variance, so the heading's variance
+  // stays near sz^2 where the isotropic mean (sqrt of the mean variance, 0.13 deg) would leave it
+  VisionPose v2 = v;
+  v2.capture_stamp_ns += 10'000'000;
+  ASSERT_TRUE(f.update_imu(level_sample(v2.capture_stamp_ns)));
+  ASSERT_TRUE(f.update_vision(v2));
+  const double heading_var = f.state().P(SelectiveEkf::kTh + 2, SelectiveEkf::kTh + 2);
+  EXPECT_LT(heading_var, sz * sz);
+  // AND a matrix that is not a covariance is refused and counted
+  VisionPose bad = v2;
+  bad.capture_stamp_ns += 1;
+  bad.attitude_covariance_world(0, 0) = -1e-6;
+  EXPECT_FALSE(f.update_vision(bad));
+  bad.attitude_covariance_world = v.attitude_covariance_world;
+  bad.attitude_covariance_world(1, 2) = std::nan("");
+  EXPECT_FALSE(f.update_vision(bad));
+  EXPECT_EQ(f.vision_counters().bad_input, 2U);
+}
+
 TEST(SelectiveEkfVision, GivenNoLeverArmWhenBlockPathUsedThenSameAsTheFullCovariancePath) {
   // GIVEN the same run twice: a zero lever arm (attitude and position blocks updated separately)
   // and a 1 nm lever arm (any lever couples the blocks: the full 12-state path)

@@ -63,7 +63,14 @@ struct VisionMeasurement {
   Eigen::Vector3d p_world_camera_m{0, 0, 0};
   double sigma_rad = 0.0;
   double sigma_m = 0.0;
+  /// the pose's own attitude covariance (world frame, rad^2) when it carries one, else sigma_rad^2 I
+  bool has_attitude_covariance = false;
+  Eigen::Matrix3d attitude_covariance_world = Eigen::Matrix3d::Zero();
 };
+/// Whether a vision pose's attitude covariance is present (not all zero).
+bool has_attitude_covariance(const VisionPose& v);
+/// Whether a present attitude covariance is usable: finite, symmetric, positive definite.
+bool attitude_covariance_ok(const Eigen::Matrix3d& c);
 VisionMeasurement vision_measurement(const SelectiveEkfParams& p, const VisionPose& v);
 /// src/vision_time_offset.cpp: the estimator's parameters from the filter's; the frame fed to
 /// the offset estimator and moved onto the IMU clock with the offset in use (its variance raised

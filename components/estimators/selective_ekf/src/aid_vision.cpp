@@ -8,6 +8,8 @@
 // Both gated by the innovation test at vision_gate_sigma.
 #include "aid.h"
 
+#include <Eigen/Eigenvalues>
+
 #include <cmath>
 
 namespace poise::selective_ekf_aids {
@@ -20,18 +22,41 @@ VisionMeasurement vision_measurement(const SelectiveEkfParams& p, const VisionPo
   m.p_world_camera_m = v.p_world_camera_m;
   m.sigma_rad = std::isfinite(v.sigma_rad) && v.sigma_rad > 0.0 ? v.sigma_rad : p.sigma_vision_deg * kRadPerDeg;
   m.sigma_m = std::isfinite(v.sigma_m) && v.sigma_m > 0.0 ? v.sigma_m : p.sigma_vision_m;
+  m.has_attitude_covariance = has_attitude_covariance(v) && attitude_covariance_ok(v.attitude_covariance_world);
+  m.attitude_covariance_world = m.has_attitude_covariance ? v.attitude_covariance_world
+                                                          : Eigen::Matrix3d::Identity() * m.sigma_rad * m.sigma_rad;
+  if (m.has_attitude_covariance) {
+    m.sigma_rad = std::sqrt(m.attitude_covariance_world.trace() / 3.0);  // its RMS (time-offset estimator)
+  }
   return m;
+}
+
+bool has_attitude_covariance(const VisionPose& v) { return (v.attitude_covariance_world.array() != 0.0).any(); }
+
+bool attitude_covariance_ok(const Eigen::Matrix3d& c) {
+  // symmetric to the rounding of a computed covariance (relative 1e-6)
+  if (!c.allFinite() || !((c - c.transpose()).cwiseAbs().maxCoeff() <= 1e-6 * c.cwiseAbs().maxCoeff())) {
+    return false;
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(c);
+  return eig.info() == Eigen::Success && eig.eigenvalues().minCoeff() > 0.0;
 }
 
 void aid_vision_attitude(const AidContext& c, const VisionMeasurement& v, SourceStatus& st) {
   SelectiveEkfState& x = c.x;
   const int64_t now = v.stamp_ns;
   const double sr = v.sigma_rad;
+  // the measurement's covariance in the body frame of the innovation log(q^-1 (x) q_vis): the
+  // world-frame rotation vector turned by the measured attitude
+  const Eigen::Matrix3d rv = v.q_world_body.toRotationMatrix();
+  const Eigen::Matrix3d r_body = v.has_attitude_covariance
+                                     ? Eigen::Matrix3d(rv.transpose() * v.attitude_covariance_world * rv)
+                                     : Eigen::Matrix3d(Eigen::Matrix3d::Identity() * sr * sr);
   auto reset_attitude = [&]() {
     x.q_world_body = v.q_world_body;
     x.P.middleRows<3>(SelectiveEkf::kTh).setZero();
     x.P.middleCols<3>(SelectiveEkf::kTh).setZero();
-    x.P.block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh) = Eigen::Matrix3d::Identity() * sr * sr;
+    x.P.block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh) = r_body;
     x.vision_aligned = true;
     x.vision_consecutive_rejects = 0;
     x.last_vision_fused_ns = now;
@@ -48,8 +73,18 @@ void aid_vision_attitude(const AidContext& c, const VisionMeasurement& v, Source
   const Eigen::Vector3d innov = quat_log(x.q_world_body.conjugate() * qa);
   Eigen::Matrix<double, 3, SelectiveEkf::kN> h = Eigen::Matrix<double, 3, SelectiveEkf::kN>::Zero();
   h.middleCols<3>(SelectiveEkf::kTh).setIdentity();
+  // the pose's own covariance: rows along its principal axes (R = V diag(l) V^T: rows V^T H,
+  // innovations V^T y, variances l; exact, and the diagonal R the row-by-row update needs)
+  Eigen::Vector3d r_diag = Eigen::Vector3d::Constant(sr * sr);
+  Eigen::Vector3d y = innov;
+  if (v.has_attitude_covariance) {
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(0.5 * (r_body + r_body.transpose()));
+    h.middleCols<3>(SelectiveEkf::kTh) = eig.eigenvectors().transpose();
+    y = eig.eigenvectors().transpose() * innov;
+    r_diag = eig.eigenvalues();
+  }
   // gate and fuse; status (a reset after too many rejections in a row)
-  if (fuse<3>(x, h, innov, Eigen::Vector3d::Constant(sr * sr), c.p.vision_gate_sigma, true, st)) {
+  if (fuse<3>(x, h, y, r_diag, c.p.vision_gate_sigma, true, st)) {
     x.vision_consecutive_rejects = 0;
     x.last_vision_fused_ns = now;
     record(st, Decision::kFused, now, c.first_pass);

@@ -433,7 +433,8 @@ bool SelectiveEkf::update_vision(const VisionPose& v_in) {
   if (!aids::finite_quat(v_in.q_world_camera) || v_in.capture_stamp_ns < 0 ||
       (v_in.has_position && !v_in.p_world_camera_m.allFinite()) ||
       (std::isfinite(v_in.sigma_rad) && v_in.sigma_rad <= 0.0) ||
-      (std::isfinite(v_in.sigma_m) && v_in.sigma_m <= 0.0)) {
+      (std::isfinite(v_in.sigma_m) && v_in.sigma_m <= 0.0) ||
+      (aids::has_attitude_covariance(v_in) && !aids::attitude_covariance_ok(v_in.attitude_covariance_world))) {
     ++vc_.bad_input;
     aids::record(sa, Decision::kRejectedBadInput, v_in.capture_stamp_ns, true);
     return false;

@@ -3,6 +3,8 @@
 // apart from its mathematics in selective_ekf.cpp.
 #include "poise/selective_ekf/selective_ekf.h"
 
+#include "aid.h"
+
 #include <Eigen/Eigenvalues>
 
 #include <cmath>
@@ -148,6 +150,11 @@ VisionPose to_vision_pose(const CameraPoseMeasurement& m) {
   const double var_r = m.covariance.diagonal().tail<3>().mean();
   v.sigma_m = var_p > 0.0 && std::isfinite(var_p) ? std::sqrt(var_p) : std::nan("");
   v.sigma_rad = var_r > 0.0 && std::isfinite(var_r) ? std::sqrt(var_r) : std::nan("");
+  // the camera's per-detection attitude covariance, whole (its heading is far better than its tilt)
+  const Eigen::Matrix3d c_r = m.covariance.bottomRightCorner<3, 3>();
+  if (selective_ekf_aids::attitude_covariance_ok(c_r)) {
+    v.attitude_covariance_world = c_r;
+  }
   return v;
 }
 

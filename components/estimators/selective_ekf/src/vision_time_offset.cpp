@@ -257,6 +257,9 @@ void apply_time_offset(VisionTimeOffsetEstimator& est, const SelectiveEkfParams&
   // the attitude at a capture time known to sigma_offset is known to |w| sigma_offset less
   const double timing_rad = w_rps.norm() * est.sigma_s();
   v.sigma_rad = std::sqrt(m.sigma_rad * m.sigma_rad + timing_rad * timing_rad);
+  if (m.has_attitude_covariance) {
+    v.attitude_covariance_world += Eigen::Matrix3d::Identity() * timing_rad * timing_rad;
+  }
 }
 
 }  // namespace selective_ekf_aids

@@ -297,6 +297,12 @@ struct VisionPose {
   bool has_position = true;
   double sigma_rad = std::nan("");     ///< per-axis attitude std; NaN: params' default
   double sigma_m = std::nan("");       ///< per-axis position std; NaN: params' default
+  /// The attitude's covariance as the camera computed it for this detection, world-frame rotation
+  /// vector of the pose (rad^2; VisionPose.covariance's [rx ry rz] block). All zero = absent
+  /// (sigma_rad then, isotropic); else it must be finite, symmetric and positive definite (a bad
+  /// one is rejected, counted vision_bad_input) and it replaces sigma_rad in the update: a floor
+  /// tag fixes the heading far better than the tilt, and an isotropic sigma threw that away.
+  Eigen::Matrix3d attitude_covariance_world = Eigen::Matrix3d::Zero();
 };
 
 /// The filter's aid sources: one SourceStatus each (status()), the index of its status table.
