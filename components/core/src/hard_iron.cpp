@@ -1,0 +1,143 @@
+#include "poise/core/hard_iron.h"
+
+#include "poise/core/params_check.h"
+
+#include <Eigen/Dense>
+
+#include <cmath>
+
+namespace poise {
+
+void HardIronParams::validate() const {
+  ParamCheck check("hard_iron");
+  check.positive(prior_sigma_ut, "prior_sigma_ut", "uT");
+  check.positive(noise_ut, "noise_ut", "uT");
+  check.non_negative(timing_s, "timing_s", "s");
+  check.non_negative(walk_ut_per_sqrt_s, "walk_ut_per_sqrt_s", "uT/sqrt(s)");
+  check.positive(lag_s, "lag_s", "s");
+  check.positive(min_rotation_rad, "min_rotation_rad", "rad");
+  check.require(min_rotation_rad < M_PI, "min_rotation_rad", "< pi (rad)");
+  check.positive(gate_chi2, "gate_chi2", "(chi-square, 3 dof)");
+  check.positive(reset_after_s, "reset_after_s", "s");
+  check.positive(converged_sigma_ut, "converged_sigma_ut", "uT");
+  check.non_negative(min_applied_ut, "min_applied_ut", "uT");
+  check.positive(max_dt_s, "max_dt_s", "s");
+  check.require(lag_s < 100.0, "lag_s", "< 100 (s)");
+  check.positive(max_mag_ut, "max_mag_ut", "uT");
+  check.positive(max_gyro_rps, "max_gyro_rps", "rad/s");
+}
+
+const char* to_string(HardIronStep s) {
+  switch (s) {
+    case HardIronStep::kUpdated: return "updated";
+    case HardIronStep::kWarmingUp: return "warming_up";
+    case HardIronStep::kInterval: return "interval";
+    case HardIronStep::kNotEnoughRotation: return "not_enough_rotation";
+    case HardIronStep::kGated: return "gated";
+    case HardIronStep::kReset: return "reset";
+    case HardIronStep::kGap: return "gap";
+    case HardIronStep::kRejectedInput: return "rejected_input";
+    case HardIronStep::kNoMagnetometer: return "no_magnetometer";
+  }
+  return "unknown";
+}
+
+HardIronEstimator::HardIronEstimator(const HardIronParams& p) : p_(p) {
+  p_.validate();
+  reset();
+}
+
+void HardIronEstimator::reset() {
+  b_.setZero();
+  P_ = Eigen::Matrix3d::Identity() * (p_.prior_sigma_ut * p_.prior_sigma_ut);
+  q_.setIdentity();
+  start_ = Entry{};
+  have_last_ = false;
+  last_ns_ = 0;
+  last_w_.setZero();
+  refused_s_ = 0.0;
+  report_ = HardIronReport{};
+}
+
+const HardIronReport& HardIronEstimator::finish(HardIronStep s) {
+  report_.step = s;
+  ++report_.counts[to_string(s)];
+  report_.converged = (P_.diagonal().array() < p_.converged_sigma_ut * p_.converged_sigma_ut).all();
+  return report_;
+}
+
+double HardIronEstimator::reading_var(const ImuSample& s) const {
+  const double timing_ut = s.gyro_rps.norm() * p_.timing_s * s.mag_ut.norm();
+  return p_.noise_ut * p_.noise_ut + timing_ut * timing_ut;
+}
+
+const HardIronReport& HardIronEstimator::update(const ImuSample& s) {
+  if (!s.has_mag || !s.has_gyro) {
+    return finish(HardIronStep::kNoMagnetometer);
+  }
+  // Norms are only compared once every component is known finite (1e308 squared overflows).
+  if (!s.mag_ut.allFinite() || !s.gyro_rps.allFinite() || s.mag_ut.cwiseAbs().maxCoeff() > p_.max_mag_ut ||
+      s.gyro_rps.cwiseAbs().maxCoeff() > p_.max_gyro_rps || s.mag_ut.norm() > p_.max_mag_ut ||
+      s.gyro_rps.norm() > p_.max_gyro_rps) {
+    return finish(HardIronStep::kRejectedInput);
+  }
+  const double dt = have_last_ ? static_cast<double>(s.stamp_ns - last_ns_) * 1e-9 : 0.0;
+  if (!have_last_ || !(dt > 0.0) || dt > p_.max_dt_s) {
+    const bool gap = have_last_;
+    q_.setIdentity();
+    have_last_ = true;
+    last_ns_ = s.stamp_ns;
+    last_w_ = s.gyro_rps;
+    start_ = {s.stamp_ns, s.mag_ut, reading_var(s), q_};
+    return finish(gap ? HardIronStep::kGap : HardIronStep::kWarmingUp);
+  }
+  // Orientation from the gyro (trapezoidal rate), body to an arbitrary fixed frame.
+  const Eigen::Vector3d rot = 0.5 * (last_w_ + s.gyro_rps) * dt;
+  const double angle = rot.norm();
+  if (angle > 0.0) {
+    q_ = (q_ * Eigen::Quaterniond(Eigen::AngleAxisd(angle, rot / angle))).normalized();
+  }
+  last_ns_ = s.stamp_ns;
+  last_w_ = s.gyro_rps;
+  P_ += Eigen::Matrix3d::Identity() * (p_.walk_ut_per_sqrt_s * p_.walk_ut_per_sqrt_s * dt);
+  const auto lag_ns = static_cast<int64_t>(std::llround(p_.lag_s * 1e9));
+  if (s.stamp_ns - start_.stamp_ns < lag_ns) {
+    return finish(HardIronStep::kInterval);
+  }
+  // Comparisons do not overlap: the readings between j and k are not used, k starts the next
+  // interval, so each reading enters at most two comparisons (as the later, then as the earlier one)
+  // and the model errors that persist over an interval are not counted many times over.
+  const Entry j = start_;
+  start_ = {s.stamp_ns, s.mag_ut, reading_var(s), q_};
+  const Eigen::Quaterniond rel = q_.conjugate() * j.q;  // R_k^T R_j
+  report_.rotation_rad = Eigen::AngleAxisd(rel).angle();
+  if (report_.rotation_rad < p_.min_rotation_rad) {
+    return finish(HardIronStep::kNotEnoughRotation);
+  }
+  const Eigen::Matrix3d C = rel.toRotationMatrix();
+  const Eigen::Matrix3d H = Eigen::Matrix3d::Identity() - C;
+  const Eigen::Vector3d r = s.mag_ut - C * j.m - H * b_;
+  // Both readings carry their own variance per axis: cov(m_k - C m_j) = (var_k + var_j) I.
+  const Eigen::Matrix3d R = Eigen::Matrix3d::Identity() * (start_.var_ut2 + j.var_ut2);
+  const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
+  const Eigen::LDLT<Eigen::Matrix3d> ldlt(S);
+  report_.nis = r.dot(ldlt.solve(r));
+  if (!(report_.nis <= p_.gate_chi2)) {
+    refused_s_ += static_cast<double>(s.stamp_ns - j.stamp_ns) * 1e-9;
+    if (refused_s_ >= p_.reset_after_s) {
+      refused_s_ = 0.0;
+      P_ = Eigen::Matrix3d::Identity() * (p_.prior_sigma_ut * p_.prior_sigma_ut);
+      return finish(HardIronStep::kReset);
+    }
+    return finish(HardIronStep::kGated);
+  }
+  refused_s_ = 0.0;
+  const Eigen::Matrix3d K = ldlt.solve(H * P_).transpose();  // P H^T S^-1 (P, S symmetric)
+  b_ += K * r;
+  const Eigen::Matrix3d IKH = Eigen::Matrix3d::Identity() - K * H;
+  P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
+  P_ = 0.5 * (P_ + P_.transpose());
+  return finish(HardIronStep::kUpdated);
+}
+
+}  // namespace poise

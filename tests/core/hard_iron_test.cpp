@@ -1,0 +1,170 @@
+// The online hard-iron offset (poise/core/hard_iron.h). Oracle: a simulated body turned by a known
+// angular rate in a uniform world field, with a known body-frame offset added to every reading:
+// m_body = R^T m_world + b. The estimator sees only the gyro and the readings.
+#include "poise/core/hard_iron.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <random>
+#include <stdexcept>
+#include <string>
+
+namespace poise {
+namespace {
+
+constexpr double kRateHz = 200.0;
+const Eigen::Vector3d kWorldField(0.0, 16.0, -41.0);  // uT, ENU: north and down, dip about 69 deg
+constexpr double kReadingNoiseUt = 0.5;                 // per axis, 1 sigma
+constexpr double kConvergedTolUt = 0.5;                 // |b_hat - b| after 20 s of rotation
+
+// A rate that turns the body about every axis in turn (rad/s), smooth in time.
+Eigen::Vector3d tumbling_rate(double t) {
+  return {1.5 * std::sin(0.7 * t), 1.2 * std::cos(0.45 * t), 0.9 * std::sin(0.31 * t + 1.0)};
+}
+
+struct Sim {
+  Eigen::Quaterniond q = Eigen::Quaterniond::Identity();  // q_world_body
+  std::mt19937 rng{42};
+  std::normal_distribution<double> noise{0.0, kReadingNoiseUt};
+  int64_t k = 0;
+
+  // The sample at step k; the body turns at w(t) over the step (exactly, in small sub-steps).
+  ImuSample next(const Eigen::Vector3d& offset, Eigen::Vector3d (*rate)(double)) {
+    const double t = static_cast<double>(k) / kRateHz;
+    if (k > 0) {
+      constexpr int kSub = 20;
+      for (int i = 0; i < kSub; ++i) {
+        const double ti = t - (1.0 - (i + 0.5) / kSub) / kRateHz;
+        const Eigen::Vector3d rot = rate(ti) / (kRateHz * kSub);
+        if (rot.norm() > 0.0) {
+          q = (q * Eigen::Quaterniond(Eigen::AngleAxisd(rot.norm(), rot.normalized()))).normalized();
+        }
+      }
+    }
+    ImuSample s;
+    s.stamp_ns = static_cast<int64_t>(std::llround(t * 1e9));
+    s.gyro_rps = rate(t);
+    s.has_mag = true;
+    s.mag_ut = q.conjugate() * kWorldField + offset +
+               Eigen::Vector3d(noise(rng), noise(rng), noise(rng));
+    ++k;
+    return s;
+  }
+};
+
+Eigen::Vector3d still(double /*t*/) { return Eigen::Vector3d::Zero(); }
+
+TEST(HardIron, GivenATumblingSensorWithAKnownOffsetWhenFedTwentySecondsThenTheEstimateIsWithinTolerance) {
+  const Eigen::Vector3d b(12.0, -25.0, 40.0);
+  HardIronEstimator h;
+  Sim sim;
+  for (int i = 0; i < static_cast<int>(20 * kRateHz); ++i) {
+    h.update(sim.next(b, tumbling_rate));
+  }
+  EXPECT_LT((h.offset_ut() - b).norm(), kConvergedTolUt) << h.offset_ut().transpose();
+  EXPECT_TRUE(h.converged());
+  EXPECT_TRUE(h.applied());
+  EXPECT_GT(h.report().counts.at("updated"), 0U);
+  // The covariance is not overconfident: each axis' error within 4 sigma.
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_LT(std::abs(h.offset_ut()[i] - b[i]), 4.0 * h.sigma_ut()[i] + 0.05) << "axis " << i;
+  }
+  const Eigen::Vector3d m(1.0, 2.0, 3.0);
+  EXPECT_TRUE(h.corrected(m).isApprox(m - h.offset_ut()));
+}
+
+TEST(HardIron, GivenAStillSensorWhenFedThenNothingIsLearntAndTheReportSaysNotEnoughRotation) {
+  HardIronEstimator h;
+  Sim sim;
+  for (int i = 0; i < static_cast<int>(10 * kRateHz); ++i) {
+    h.update(sim.next(Eigen::Vector3d(30.0, 0.0, 0.0), still));
+  }
+  EXPECT_EQ(h.report().counts.count("updated"), 0U);
+  EXPECT_GT(h.report().counts.at("not_enough_rotation"), 0U);
+  EXPECT_EQ(h.offset_ut(), Eigen::Vector3d::Zero());
+  EXPECT_FALSE(h.converged());
+  const Eigen::Vector3d m(1.0, 2.0, 3.0);
+  EXPECT_EQ(h.corrected(m), m);
+}
+
+TEST(HardIron, GivenACleanSensorWhenTumbledThenTheEstimateStaysNearZeroAndIsNotApplied) {
+  HardIronEstimator h;
+  Sim sim;
+  for (int i = 0; i < static_cast<int>(20 * kRateHz); ++i) {
+    h.update(sim.next(Eigen::Vector3d::Zero(), tumbling_rate));
+  }
+  EXPECT_TRUE(h.converged());
+  EXPECT_LT(h.offset_ut().norm(), kConvergedTolUt);
+  EXPECT_FALSE(h.applied()) << "|b| " << h.offset_ut().norm() << " <= min_applied_ut "
+                            << h.params().min_applied_ut;
+}
+
+TEST(HardIron, GivenTheOffsetRemovedMidRunWhenTumblingThenItResetsAndLearnsZero) {
+  HardIronEstimator h;
+  Sim sim;
+  for (int i = 0; i < static_cast<int>(20 * kRateHz); ++i) {
+    h.update(sim.next(Eigen::Vector3d(30.0, -10.0, 20.0), tumbling_rate));
+  }
+  ASSERT_TRUE(h.applied());
+  for (int i = 0; i < static_cast<int>(20 * kRateHz); ++i) {
+    h.update(sim.next(Eigen::Vector3d::Zero(), tumbling_rate));
+  }
+  EXPECT_GE(h.report().counts.at("reset"), 1U);
+  EXPECT_LT(h.offset_ut().norm(), kConvergedTolUt);
+  EXPECT_FALSE(h.applied());
+}
+
+TEST(HardIron, GivenHostileReadingsWhenFedThenEachIsRejectedCountedAndTheEstimateUntouched) {
+  HardIronEstimator h;
+  Sim sim;
+  for (int i = 0; i < static_cast<int>(5 * kRateHz); ++i) {
+    h.update(sim.next(Eigen::Vector3d(5.0, 5.0, 5.0), tumbling_rate));
+  }
+  const Eigen::Vector3d b = h.offset_ut();
+  const Eigen::Matrix3d P = h.covariance();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const double inf = std::numeric_limits<double>::infinity();
+  ImuSample s = sim.next(Eigen::Vector3d::Zero(), tumbling_rate);
+  const Eigen::Vector3d hostile_mag[] = {{nan, 0, 0}, {1e308, 1e308, 1e308}, {0, -inf, 0}, {1e4, 0, 0}};
+  for (const auto& m : hostile_mag) {
+    ImuSample x = s;
+    x.mag_ut = m;
+    EXPECT_EQ(h.update(x).step, HardIronStep::kRejectedInput) << m.transpose();
+  }
+  const Eigen::Vector3d hostile_gyro[] = {{nan, 0, 0}, {1e308, 0, 0}, {0, 0, inf}};
+  for (const auto& w : hostile_gyro) {
+    ImuSample x = s;
+    x.gyro_rps = w;
+    EXPECT_EQ(h.update(x).step, HardIronStep::kRejectedInput) << w.transpose();
+  }
+  ImuSample no_mag = s;
+  no_mag.has_mag = false;
+  EXPECT_EQ(h.update(no_mag).step, HardIronStep::kNoMagnetometer);
+  EXPECT_EQ(h.report().counts.at("rejected_input"), 7U);
+  EXPECT_EQ(h.offset_ut(), b);
+  EXPECT_EQ(h.covariance(), P);
+  // A stamp that goes back is a gap, not a comparison.
+  ImuSample back = s;
+  back.stamp_ns -= 1000000000;
+  h.update(s);
+  EXPECT_EQ(h.update(back).step, HardIronStep::kGap);
+}
+
+TEST(HardIronParams, GivenABadValueOfAKeyWhenConstructedThenTheMessageNamesIt) {
+  HardIronParams p;
+  p.noise_ut = -1.0;
+  try {
+    HardIronEstimator h(p);
+    FAIL() << "accepted noise_ut = -1";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("hard_iron parameter noise_ut"), std::string::npos) << e.what();
+  }
+  HardIronParams q;
+  q.lag_s = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(HardIronEstimator{q}, std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace poise
