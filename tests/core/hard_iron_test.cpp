@@ -66,7 +66,7 @@ TEST(HardIron, GivenATumblingSensorWithAKnownOffsetWhenFedTwentySecondsThenTheEs
   EXPECT_LT((h.offset_ut() - b).norm(), kConvergedTolUt) << h.offset_ut().transpose();
   EXPECT_TRUE(h.converged());
   EXPECT_TRUE(h.applied());
-  EXPECT_GT(h.report().counts.at("updated"), 0U);
+  EXPECT_GT(h.report().count(HardIronStep::kUpdated), 0U);
   // The covariance is not overconfident: each axis' error within 4 sigma.
   for (int i = 0; i < 3; ++i) {
     EXPECT_LT(std::abs(h.offset_ut()[i] - b[i]), 4.0 * h.sigma_ut()[i] + 0.05) << "axis " << i;
@@ -81,8 +81,8 @@ TEST(HardIron, GivenAStillSensorWhenFedThenNothingIsLearntAndTheReportSaysNotEno
   for (int i = 0; i < static_cast<int>(10 * kRateHz); ++i) {
     h.update(sim.next(Eigen::Vector3d(30.0, 0.0, 0.0), still));
   }
-  EXPECT_EQ(h.report().counts.count("updated"), 0U);
-  EXPECT_GT(h.report().counts.at("not_enough_rotation"), 0U);
+  EXPECT_EQ(h.report().count(HardIronStep::kUpdated), 0U);
+  EXPECT_GT(h.report().count(HardIronStep::kNotEnoughRotation), 0U);
   EXPECT_EQ(h.offset_ut(), Eigen::Vector3d::Zero());
   EXPECT_FALSE(h.converged());
   const Eigen::Vector3d m(1.0, 2.0, 3.0);
@@ -111,7 +111,7 @@ TEST(HardIron, GivenTheOffsetRemovedMidRunWhenTumblingThenItResetsAndLearnsZero)
   for (int i = 0; i < static_cast<int>(20 * kRateHz); ++i) {
     h.update(sim.next(Eigen::Vector3d::Zero(), tumbling_rate));
   }
-  EXPECT_GE(h.report().counts.at("reset"), 1U);
+  EXPECT_GE(h.report().count(HardIronStep::kReset), 1U);
   EXPECT_LT(h.offset_ut().norm(), kConvergedTolUt);
   EXPECT_FALSE(h.applied());
 }
@@ -142,7 +142,7 @@ TEST(HardIron, GivenHostileReadingsWhenFedThenEachIsRejectedCountedAndTheEstimat
   ImuSample no_mag = s;
   no_mag.has_mag = false;
   EXPECT_EQ(h.update(no_mag).step, HardIronStep::kNoMagnetometer);
-  EXPECT_EQ(h.report().counts.at("rejected_input"), 7U);
+  EXPECT_EQ(h.report().count(HardIronStep::kRejectedInput), 7U);
   EXPECT_EQ(h.offset_ut(), b);
   EXPECT_EQ(h.covariance(), P);
   // A stamp that goes back is a gap, not a comparison.

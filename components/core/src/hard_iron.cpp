@@ -8,8 +8,8 @@
 
 namespace poise {
 
-void HardIronParams::validate() const {
-  ParamCheck check("hard_iron");
+void HardIronParams::validate(const char* filter) const {
+  const ParamCheck check(filter);
   check.positive(prior_sigma_ut, "prior_sigma_ut", "uT");
   check.positive(noise_ut, "noise_ut", "uT");
   check.non_negative(timing_s, "timing_s", "s");
@@ -38,6 +38,7 @@ const char* to_string(HardIronStep s) {
     case HardIronStep::kGap: return "gap";
     case HardIronStep::kRejectedInput: return "rejected_input";
     case HardIronStep::kNoMagnetometer: return "no_magnetometer";
+    case HardIronStep::kCount: break;
   }
   return "unknown";
 }
@@ -61,13 +62,13 @@ void HardIronEstimator::reset() {
 
 const HardIronReport& HardIronEstimator::finish(HardIronStep s) {
   report_.step = s;
-  ++report_.counts[to_string(s)];
+  ++report_.counts[static_cast<size_t>(s)];
   report_.converged = (P_.diagonal().array() < p_.converged_sigma_ut * p_.converged_sigma_ut).all();
   return report_;
 }
 
-double HardIronEstimator::reading_var(const ImuSample& s) const {
-  const double timing_ut = s.gyro_rps.norm() * p_.timing_s * s.mag_ut.norm();
+double HardIronEstimator::reading_var(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const {
+  const double timing_ut = gyro_rps.norm() * p_.timing_s * mag_ut.norm();
   return p_.noise_ut * p_.noise_ut + timing_ut * timing_ut;
 }
 
@@ -75,40 +76,45 @@ const HardIronReport& HardIronEstimator::update(const ImuSample& s) {
   if (!s.has_mag || !s.has_gyro) {
     return finish(HardIronStep::kNoMagnetometer);
   }
+  return update(s.stamp_ns, s.gyro_rps, s.mag_ut);
+}
+
+const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps,
+                                                const Eigen::Vector3d& mag_ut) {
   // Norms are only compared once every component is known finite (1e308 squared overflows).
-  if (!s.mag_ut.allFinite() || !s.gyro_rps.allFinite() || s.mag_ut.cwiseAbs().maxCoeff() > p_.max_mag_ut ||
-      s.gyro_rps.cwiseAbs().maxCoeff() > p_.max_gyro_rps || s.mag_ut.norm() > p_.max_mag_ut ||
-      s.gyro_rps.norm() > p_.max_gyro_rps) {
+  if (!mag_ut.allFinite() || !gyro_rps.allFinite() || mag_ut.cwiseAbs().maxCoeff() > p_.max_mag_ut ||
+      gyro_rps.cwiseAbs().maxCoeff() > p_.max_gyro_rps || mag_ut.norm() > p_.max_mag_ut ||
+      gyro_rps.norm() > p_.max_gyro_rps) {
     return finish(HardIronStep::kRejectedInput);
   }
-  const double dt = have_last_ ? static_cast<double>(s.stamp_ns - last_ns_) * 1e-9 : 0.0;
+  const double dt = have_last_ ? static_cast<double>(stamp_ns - last_ns_) * 1e-9 : 0.0;
   if (!have_last_ || !(dt > 0.0) || dt > p_.max_dt_s) {
     const bool gap = have_last_;
     q_.setIdentity();
     have_last_ = true;
-    last_ns_ = s.stamp_ns;
-    last_w_ = s.gyro_rps;
-    start_ = {s.stamp_ns, s.mag_ut, reading_var(s), q_};
+    last_ns_ = stamp_ns;
+    last_w_ = gyro_rps;
+    start_ = {stamp_ns, mag_ut, reading_var(gyro_rps, mag_ut), q_};
     return finish(gap ? HardIronStep::kGap : HardIronStep::kWarmingUp);
   }
   // Orientation from the gyro (trapezoidal rate), body to an arbitrary fixed frame.
-  const Eigen::Vector3d rot = 0.5 * (last_w_ + s.gyro_rps) * dt;
+  const Eigen::Vector3d rot = 0.5 * (last_w_ + gyro_rps) * dt;
   const double angle = rot.norm();
   if (angle > 0.0) {
     q_ = (q_ * Eigen::Quaterniond(Eigen::AngleAxisd(angle, rot / angle))).normalized();
   }
-  last_ns_ = s.stamp_ns;
-  last_w_ = s.gyro_rps;
+  last_ns_ = stamp_ns;
+  last_w_ = gyro_rps;
   P_ += Eigen::Matrix3d::Identity() * (p_.walk_ut_per_sqrt_s * p_.walk_ut_per_sqrt_s * dt);
   const auto lag_ns = static_cast<int64_t>(std::llround(p_.lag_s * 1e9));
-  if (s.stamp_ns - start_.stamp_ns < lag_ns) {
+  if (stamp_ns - start_.stamp_ns < lag_ns) {
     return finish(HardIronStep::kInterval);
   }
   // Comparisons do not overlap: the readings between j and k are not used, k starts the next
   // interval, so each reading enters at most two comparisons (as the later, then as the earlier one)
   // and the model errors that persist over an interval are not counted many times over.
   const Entry j = start_;
-  start_ = {s.stamp_ns, s.mag_ut, reading_var(s), q_};
+  start_ = {stamp_ns, mag_ut, reading_var(gyro_rps, mag_ut), q_};
   const Eigen::Quaterniond rel = q_.conjugate() * j.q;  // R_k^T R_j
   report_.rotation_rad = Eigen::AngleAxisd(rel).angle();
   if (report_.rotation_rad < p_.min_rotation_rad) {
@@ -116,14 +122,14 @@ const HardIronReport& HardIronEstimator::update(const ImuSample& s) {
   }
   const Eigen::Matrix3d C = rel.toRotationMatrix();
   const Eigen::Matrix3d H = Eigen::Matrix3d::Identity() - C;
-  const Eigen::Vector3d r = s.mag_ut - C * j.m - H * b_;
+  const Eigen::Vector3d r = mag_ut - C * j.m - H * b_;
   // Both readings carry their own variance per axis: cov(m_k - C m_j) = (var_k + var_j) I.
   const Eigen::Matrix3d R = Eigen::Matrix3d::Identity() * (start_.var_ut2 + j.var_ut2);
   const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
   const Eigen::LDLT<Eigen::Matrix3d> ldlt(S);
   report_.nis = r.dot(ldlt.solve(r));
   if (!(report_.nis <= p_.gate_chi2)) {
-    refused_s_ += static_cast<double>(s.stamp_ns - j.stamp_ns) * 1e-9;
+    refused_s_ += static_cast<double>(stamp_ns - j.stamp_ns) * 1e-9;
     if (refused_s_ >= p_.reset_after_s) {
       refused_s_ = 0.0;
       P_ = Eigen::Matrix3d::Identity() * (p_.prior_sigma_ut * p_.prior_sigma_ut);

@@ -15,9 +15,9 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include <array>
+#include <cstddef>
 #include <cstdint>
-#include <map>
-#include <string>
 
 namespace poise {
 
@@ -42,8 +42,9 @@ struct HardIronParams {
   double max_dt_s = 0.1;              ///< a longer gap between samples restarts the comparison, s
   double max_mag_ut = 5000.0;         ///< |m| above this (or non-finite) is refused, uT
   double max_gyro_rps = 100.0;        ///< |w| above this (or non-finite) is refused, rad/s
-  /// Throws std::invalid_argument "hard_iron parameter <key> must be ..." on a bad value.
-  void validate() const;
+  /// Throws std::invalid_argument "<filter> parameter <key> must be ..." on a bad value (`filter`:
+  /// how the caller's messages name this section, e.g. "parallel_kf hard_iron_estimator").
+  void validate(const char* filter = "hard_iron") const;
 };
 
 /// Why the last sample did or did not update the estimate.
@@ -57,6 +58,7 @@ enum class HardIronStep {
   kGap,              ///< stamp gap beyond max_dt_s (or not increasing): the interval starts again
   kRejectedInput,    ///< non-finite or out-of-range reading: nothing used, counted
   kNoMagnetometer,   ///< the sample has no magnetometer (or no gyro)
+  kCount,            ///< number of reasons (not a reason)
 };
 const char* to_string(HardIronStep s);
 
@@ -65,7 +67,10 @@ struct HardIronReport {
   double nis = 0.0;          ///< normalised innovation squared of the last comparison
   double rotation_rad = 0.0; ///< rotation over the last comparison's interval
   bool converged = false;    ///< every axis' sigma < converged_sigma_ut
-  std::map<std::string, uint64_t> counts;  ///< per to_string(step), since construction/reset
+  /// per step reason (indexed by HardIronStep), since construction/reset: an array, not a map,
+  /// so the per-sample path of a filter that carries the estimator does no lookup
+  std::array<uint64_t, static_cast<size_t>(HardIronStep::kCount)> counts{};
+  [[nodiscard]] uint64_t count(HardIronStep s) const { return counts[static_cast<size_t>(s)]; }
 };
 
 class HardIronEstimator {
@@ -73,6 +78,8 @@ class HardIronEstimator {
   explicit HardIronEstimator(const HardIronParams& p = {});
   /// Feeds one sample; returns the report of this step.
   const HardIronReport& update(const ImuSample& s);
+  /// The same from the parts a filter has at hand (its bias-corrected gyro, the raw reading).
+  const HardIronReport& update(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut);
   /// The body-frame offset estimate, uT, and its covariance, uT^2.
   [[nodiscard]] const Eigen::Vector3d& offset_ut() const { return b_; }
   [[nodiscard]] const Eigen::Matrix3d& covariance() const { return P_; }
@@ -94,7 +101,7 @@ class HardIronEstimator {
     Eigen::Quaterniond q = Eigen::Quaterniond::Identity();  ///< gyro-integrated orientation (arbitrary start)
   };
   const HardIronReport& finish(HardIronStep s);
-  [[nodiscard]] double reading_var(const ImuSample& s) const;
+  [[nodiscard]] double reading_var(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
 
   HardIronParams p_;
   Eigen::Vector3d b_ = Eigen::Vector3d::Zero();
