@@ -37,6 +37,7 @@ ParallelKfParams ParallelKfParams::paper() {
   p.mag_verify_s = 0.0;
   p.imu_delay_s = 0.0;  // the paper predicts nothing
   p.coning_correction = false;
+  p.hard_iron = false;
   return p;
 }
 
@@ -83,6 +84,7 @@ void ParallelKfParams::validate() const {
                                 "mag_reference_tau_s", "mag_reacquire_s", "mag_reacquire_tol", "mag_max_reject_s",
                                 "mag_verify_s"});
   poise::validate(limits, check);
+  hard_iron_estimator.validate("parallel_kf hard_iron_estimator");
 }
 
 ParallelKf::ParallelKf(const ParallelKfParams& params) : p_(params) {
@@ -106,6 +108,7 @@ void ParallelKf::reset() {
   s_.gate.reset(gp_);
   s_.bias_cov = Eigen::Matrix3d::Identity() * (p_.bias_sigma_init_rps * p_.bias_sigma_init_rps);
   s_.c2_dip_for = std::nan("");
+  s_.hard_iron = HardIronEstimator(p_.hard_iron_estimator);
 }
 
 Eigen::Matrix3d ParallelKf::transition(const Eigen::Vector3d& w, const Eigen::Vector3d& gyro, double dt) const {
@@ -197,8 +200,8 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
     s_.kf2.set_u(rotate_by_shortest(z_before, s_.kf1.up_body(), s_.kf2.u()));  // both unit (renormalised)
   }
 
-  // KF2: heading + magnetic disturbance (8)-(11)
-  heading_step(a, s.mag_ut, c.mag_ok, dt);
+  // KF2: heading + magnetic disturbance (8)-(11), on the reading with the hard-iron offset removed
+  heading_step(a, hard_iron_corrected(s.stamp_ns, gyro, s.mag_ut, c.mag_ok), c.mag_ok, dt);
   s_.gate.tick(gp_, dt);
   if (p_.bias_estimation) {
     s_.mb_time += dt;
@@ -214,8 +217,24 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   return true;
 }
 
+Eigen::Vector3d ParallelKf::hard_iron_corrected(int64_t stamp_ns, const Eigen::Vector3d& gyro,
+                                                const Eigen::Vector3d& mag, bool mag_ok) {
+  s_.mag_corrected = false;
+  if (!p_.hard_iron || !mag_ok) {
+    return mag;
+  }
+  s_.hard_iron.update(stamp_ns, gyro, mag);
+  if (!s_.hard_iron.applied()) {
+    return mag;
+  }
+  s_.mag_corrected = true;
+  ++s_.mag_corrected_count;
+  return mag - s_.hard_iron.offset_ut();
+}
+
 void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
   s_.kf1.reset(s.accel_mps2);  // sZ from the accelerometer
+  hard_iron_corrected(s.stamp_ns, s.gyro_rps, s.mag_ut, mag_ok);  // the estimate's first reading (never applied yet)
   if (mag_ok) {
     s_.kf2.reset(s.mag_ut.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
     s_.heading_initialized = true;
@@ -684,6 +703,19 @@ Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) con
     // none to one sample (variance dt^2 / 12); its error turns the output about the rate axis
     const Eigen::Vector3d w_world = r * s_.prev_gyro;
     cov += (s_.last_dt_s * s_.last_dt_s / 12.0) * (w_world * w_world.transpose());
+  }
+  if (s_.mag_corrected && s_.heading_initialized) {
+    // The offset removed is b's estimate: its error e (covariance P_b, body, uT^2) stays in every
+    // reading the heading is built from. Only e's horizontal part across the field turns the
+    // heading: with the horizontal field of magnitude B_h = m cos(dip) along the unit h and e_perp
+    // = e . x (x the unit horizontal direction across it, body: up x sX' normalised), the measured
+    // horizontal field points at atan2(e_perp, B_h) ~ e_perp / B_h from h. b is constant, so KF2's
+    // averaging over its lag does not reduce it: var_heading += x^T P_b x / B_h^2 (rad^2).
+    Eigen::Vector3d across;
+    if (safe_normalize(s_.kf1.up_body().cross(s_.kf2.u()), across, 1e-9)) {
+      const double b_h = (s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0) * c;
+      cov(2, 2) += across.dot(s_.hard_iron.covariance() * across) / (b_h * b_h);
+    }
   }
   if (heading_unknown()) {
     cov(2, 2) += kUnknownHeadingVarRad2;

@@ -42,7 +42,8 @@ bool ParallelKf::healthy() {
 void ParallelKf::reset_unhealthy() {
   using S = ParallelKfState;
   const FieldGate gate = s_.gate;  // its counters are kept, its reference is learnt again
-  reset_keeping(s_, [this] { reset(); }, &S::rejections, &S::gyro_src, &S::accel_src, &S::mag_src);
+  reset_keeping(s_, [this] { reset(); }, &S::rejections, &S::gyro_src, &S::accel_src, &S::mag_src,
+                &S::mag_corrected_count);
   s_.gate.gated = gate.gated;
   s_.gate.forced = gate.forced;
   s_.gate.reacquired = gate.reacquired;
@@ -85,7 +86,8 @@ void ParallelKf::report(const ImuSample& s, const SampleCheck& c, bool accepted,
     case MagUse::kNone: break;
   }
   if (s_.mag_used) {
-    s_.mag_src.mark_fused(s.stamp_ns);
+    // fused after the hard-iron offset was removed from the reading (hard_iron): said so
+    s_.mag_src.mark_fused(s.stamp_ns, s_.mag_corrected ? "hard_iron_corrected" : "");
   } else {
     s_.mag_src.mark_not_available(was_initialized ? "not_used" : "initialising");
   }

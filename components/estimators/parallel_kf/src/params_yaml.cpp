@@ -1,7 +1,8 @@
 // YAML loading of ParallelKfParams (the one loader shape, poise/core/yaml_params.h): keys under
 // `parallel_kf:` or at the top level; `preset` (paper | default) picks the base, every other key
 // is a field name (KF1's under `tilt:`, the sample limits under `limits:`; `tilt.x: v` is the
-// same as `tilt: {x: v}`). Unknown keys and out-of-range values are errors naming the file and key.
+// same as `tilt: {x: v}`; the hard-iron estimator's keys under `hard_iron_estimator:`). Unknown
+// keys and out-of-range values are errors naming the file and key.
 #include "poise/parallel_kf/parallel_kf.h"
 
 #include "poise/core/yaml_params.h"
@@ -55,6 +56,22 @@ ParallelKfParams load_parallel_kf_params(const std::string& path, const Parallel
     r.get("mag_max_reject_s", p.mag_max_reject_s);
     r.get("mag_verify_s", p.mag_verify_s);
     r.get("mag_soft_weight", p.mag_soft_weight);
+    r.get("hard_iron", p.hard_iron);
+    YamlParamReader hi = r.child("hard_iron_estimator");
+    hi.get("prior_sigma_ut", p.hard_iron_estimator.prior_sigma_ut);
+    hi.get("noise_ut", p.hard_iron_estimator.noise_ut);
+    hi.get("timing_s", p.hard_iron_estimator.timing_s);
+    hi.get("walk_ut_per_sqrt_s", p.hard_iron_estimator.walk_ut_per_sqrt_s);
+    hi.get("lag_s", p.hard_iron_estimator.lag_s);
+    hi.get("min_rotation_rad", p.hard_iron_estimator.min_rotation_rad);
+    hi.get("gate_chi2", p.hard_iron_estimator.gate_chi2);
+    hi.get("reset_after_s", p.hard_iron_estimator.reset_after_s);
+    hi.get("converged_sigma_ut", p.hard_iron_estimator.converged_sigma_ut);
+    hi.get("min_applied_ut", p.hard_iron_estimator.min_applied_ut);
+    hi.get("max_dt_s", p.hard_iron_estimator.max_dt_s);
+    hi.get("max_mag_ut", p.hard_iron_estimator.max_mag_ut);
+    hi.get("max_gyro_rps", p.hard_iron_estimator.max_gyro_rps);
+    hi.finish();
     read_sample_limits(r, p.limits);
     read_magnetometer_use(r, p.use_magnetometer);
   });
