@@ -26,7 +26,12 @@ constexpr double kInitS = 5.0;                 // s allowed for start-up converg
 constexpr double kDisturbanceTolUt = 2.0;      // uT, disturbance estimate vs injected (hold phase)
 constexpr double kHeadingTolMagnetDeg = 3.0;   // deg, heading while the magnet is near (default)
 constexpr double kTiltVarianceStable = 2.0;     // the accelerometer keeps the tilt variance
-constexpr double kHeadingVarianceGrowth = 1.5;  // 20 s without magnetometer (1.25e-4 -> 2.61e-4 rad^2 measured)
+// Without the magnetometer for kNoMagS, the heading variance must grow by at least the gyro noise
+// KF2 models integrated over that time (sigma_G^2 T, sigma_G = sigma_gyro_heading_rps as a rate
+// noise density): the least a gyro-only heading accumulates. A growth, not a ratio: the variance it
+// starts from holds the decaying error past bias errors left (the lag model), which depends on when
+// rest was detected (x86-64 and arm64 differ there: 1.6e-4 / 2.4e-4 rad^2).
+constexpr double kNoMagS = 20.0;
 
 struct RunStats {
   double max_roll_pitch_err_deg = 0.0;
@@ -254,7 +259,7 @@ TEST(ParallelKf, GivenMagnetometerLostWhenRunningThenHeadingVarianceGrowsAndTilt
   // WHEN it runs 10 s with the magnetometer, then 20 s without it
   while (!simu.done()) {
     sim::SimSample s = simu.next();
-    if (s.truth.t_s > 30.0) {
+    if (s.truth.t_s > 10.0 + kNoMagS) {
       break;
     }
     if (s.truth.t_s > 10.0) {
@@ -278,7 +283,8 @@ TEST(ParallelKf, GivenMagnetometerLostWhenRunningThenHeadingVarianceGrowsAndTilt
   // uncertainty integrated since the last field, printed) while the accelerometer keeps the tilt
   std::printf("heading variance %.3g -> %.3g rad^2 over 20 s without the magnetometer\n", with_mag(2, 2),
               without_mag(2, 2));
-  EXPECT_GT(without_mag(2, 2), kHeadingVarianceGrowth * with_mag(2, 2));
+  const double sigma_g = ParallelKfParams::named("default").sigma_gyro_heading_rps;
+  EXPECT_GT(without_mag(2, 2) - with_mag(2, 2), sigma_g * sigma_g * kNoMagS);
   EXPECT_LT(without_mag(0, 0), kTiltVarianceStable * with_mag(0, 0));
   EXPECT_LT(without_mag(1, 1), kTiltVarianceStable * with_mag(1, 1));
 }
