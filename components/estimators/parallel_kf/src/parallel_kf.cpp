@@ -655,17 +655,21 @@ double ParallelKf::heading_lag_s(double dt) const {
 }
 
 Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) const {
+  return covariance_terms(out).sum();
+}
+
+ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& out) const {
+  ParallelKfCovarianceTerms t;
   const Eigen::Matrix3d r = out.q_world_body.toRotationMatrix();
   const Eigen::Matrix3d p_up = r * tilt_covariance().topLeftCorner<3, 3>() * r.transpose();
   const Eigen::Matrix3d p_field = r * heading_covariance().topLeftCorner<3, 3>() * r.transpose();
   const double c = std::max(std::cos(out.dip_rad), 0.1);
   // A small rotation phi moves the up axis e_z by phi x e_z = (phi_y, -phi_x, 0): the tilt
   // angles are read off the up vector's x/y errors; heading from the field's east component.
-  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  cov(0, 0) = p_up(1, 1);
-  cov(1, 1) = p_up(0, 0);
-  cov(0, 1) = cov(1, 0) = -p_up(0, 1);
-  cov(2, 2) = p_field(0, 0) / (c * c);
+  t.kf(0, 0) = p_up(1, 1);
+  t.kf(1, 1) = p_up(0, 0);
+  t.kf(0, 1) = t.kf(1, 0) = -p_up(0, 1);
+  t.kf(2, 2) = p_field(0, 0) / (c * c);
   // what the KFs do not model (see the header)
   const double g = p_.tilt.gravity_mps2;
   if (p_.bias_estimation) {
@@ -673,15 +677,15 @@ Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) con
     // uncertainty gives over the lags (tau^2 P_b for the tilt, P_b,z t^2 for the heading): the
     // bias filter takes its motion measurements as independent of the attitude error, although
     // they are that error's own rate, so its P_b decorrelates faster than the error does
-    cov += s_.lag_cov.topLeftCorner<3, 3>();
+    t.bias_lag = s_.lag_cov.topLeftCorner<3, 3>();
     const Eigen::Matrix3d p_bias = r * s_.bias_cov * r.transpose();
     const double tau = p_.accel_lowpass_tau_s;
-    const double t = s_.since_mag_s;
+    const double since = s_.since_mag_s;
     const Eigen::Vector3d floor(tau * tau * p_bias(0, 0), tau * tau * p_bias(1, 1),
-                                s_.heading_initialized ? p_bias(2, 2) * t * t : 0.0);
-    cov.diagonal() += (floor - s_.lag_cov.diagonal().head<3>()).cwiseMax(0.0);
+                                s_.heading_initialized ? p_bias(2, 2) * since * since : 0.0);
+    t.bias_lag.diagonal() += (floor - s_.lag_cov.diagonal().head<3>()).cwiseMax(0.0);
   }
-  cov.topLeftCorner<2, 2>().diagonal().array() += s_.accel_dev2_lp / (g * g);
+  t.external_accel.topLeftCorner<2, 2>().diagonal().array() += s_.accel_dev2_lp / (g * g);
   if (p_.motion_gyro_scale_error > 0.0) {
     // scale errors of the three gyro axes, independent, each s: the error about body axis i is
     // s times the rotation about it since the low-passed attitude
@@ -690,19 +694,19 @@ Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) con
     const Eigen::Vector3d d_heading = quat_log(s_.q_lp_heading.conjugate() * s_.q_ib);
     const Eigen::Matrix3d p_tilt = r * (s2 * d_tilt.cwiseAbs2()).asDiagonal() * r.transpose();
     const Eigen::Matrix3d p_heading = r * (s2 * d_heading.cwiseAbs2()).asDiagonal() * r.transpose();
-    cov.topLeftCorner<2, 2>() += p_tilt.topLeftCorner<2, 2>();
-    cov(2, 2) += p_heading(2, 2);
+    t.gyro_scale.topLeftCorner<2, 2>() = p_tilt.topLeftCorner<2, 2>();
+    t.gyro_scale(2, 2) = p_heading(2, 2);
   }
   if (s_.heading_initialized) {
     const double m = s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0;
     const double power = 0.5 * (s_.field_dn_lp * s_.field_dn_lp + s_.field_dv_lp * s_.field_dv_lp);
-    cov(2, 2) += power / (m * m * c * c);
+    t.field(2, 2) = power / (m * m * c * c);
   }
   if (std::isnan(p_.imu_delay_s)) {
     // the delay not known: predicted over half a sample, the true one taken as uniform over
     // none to one sample (variance dt^2 / 12); its error turns the output about the rate axis
     const Eigen::Vector3d w_world = r * s_.prev_gyro;
-    cov += (s_.last_dt_s * s_.last_dt_s / 12.0) * (w_world * w_world.transpose());
+    t.delay = (s_.last_dt_s * s_.last_dt_s / 12.0) * (w_world * w_world.transpose());
   }
   if (s_.mag_corrected && s_.heading_initialized) {
     // The offset removed is b's estimate: its error e (covariance P_b, body, uT^2) stays in every
@@ -714,13 +718,13 @@ Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) con
     Eigen::Vector3d across;
     if (safe_normalize(s_.kf1.up_body().cross(s_.kf2.u()), across, 1e-9)) {
       const double b_h = (s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0) * c;
-      cov(2, 2) += across.dot(s_.hard_iron.covariance() * across) / (b_h * b_h);
+      t.hard_iron(2, 2) = across.dot(s_.hard_iron.covariance() * across) / (b_h * b_h);
     }
   }
   if (heading_unknown()) {
-    cov(2, 2) += kUnknownHeadingVarRad2;
+    t.unknown_heading(2, 2) = kUnknownHeadingVarRad2;
   }
-  return cov;
+  return t;
 }
 
 }  // namespace poise

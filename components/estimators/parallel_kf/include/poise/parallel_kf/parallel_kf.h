@@ -265,6 +265,23 @@ struct ParallelKfOutput {
   double dip_rad = 0;             ///< alpha
 };
 
+/// The published attitude covariance term by term (rad^2, world rotation vector, as
+/// ParallelKf::attitude_covariance): what each modelled error contributes, so each one's share can
+/// be measured against the real error. The covariance is their sum.
+struct ParallelKfCovarianceTerms {
+  Eigen::Matrix3d kf = Eigen::Matrix3d::Zero();              ///< the two KFs' own covariances
+  Eigen::Matrix3d bias_lag = Eigen::Matrix3d::Zero();        ///< the attitude error the bias error left
+  Eigen::Matrix3d external_accel = Eigen::Matrix3d::Zero();  ///< external acceleration in the low-passed vector
+  Eigen::Matrix3d gyro_scale = Eigen::Matrix3d::Zero();      ///< a gyro scale error (motion_gyro_scale_error)
+  Eigen::Matrix3d field = Eigen::Matrix3d::Zero();           ///< the disturbance of the fields used
+  Eigen::Matrix3d delay = Eigen::Matrix3d::Zero();           ///< the output's prediction over an unknown delay
+  Eigen::Matrix3d hard_iron = Eigen::Matrix3d::Zero();       ///< the removed hard-iron offset's error
+  Eigen::Matrix3d unknown_heading = Eigen::Matrix3d::Zero(); ///< a heading nothing bounds
+  [[nodiscard]] Eigen::Matrix3d sum() const {
+    return kf + bias_lag + external_accel + gyro_scale + field + delay + hard_iron + unknown_heading;
+  }
+};
+
 /// Everything the parallel KF carries from one sample to the next (besides its parameters):
 /// inspect it, save it, restore it into a filter with the same parameters (`set_state`). Nothing
 /// that evolves with the samples lives outside it: the output attitude and the per-source reports
@@ -414,6 +431,8 @@ class ParallelKf {
   ///             verified or the heading was started on a gated field: nothing bounds it then.
   /// Not coupled between tilt and heading (the two KFs are independent by design).
   [[nodiscard]] Eigen::Matrix3d attitude_covariance(const ParallelKfOutput& out) const;
+  /// attitude_covariance(out), term by term (their sum is it).
+  [[nodiscard]] ParallelKfCovarianceTerms covariance_terms(const ParallelKfOutput& out) const;
   /// Whether the heading is backed by a trusted field (poise/core/heading_status.h):
   /// kNoReference before a field (6-axis: the gyro's heading); kVerified when the field reference
   /// is verified (configured, or accepted for mag_verify_s), the heading was started or corrected
