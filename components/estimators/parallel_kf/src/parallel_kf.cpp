@@ -13,6 +13,11 @@ constexpr double kInitVarDirection = 1e-2;  // P11 / P21 at (re)initialisation, 
 constexpr double kInitVarDisturbanceUt2 = 4.0;  // P22 of KF2 at initialisation, uT^2
 constexpr double kMinCos2Dip = 0.05;        // guard for the heading part of the KF2 correction
 constexpr double kBiasPeriodS = 0.04;  // the bias filter runs once per window of this length, s (25 Hz)
+// The gravity reference of the external-acceleration term follows the accelerometer with a time
+// constant of this many tilt low-pass time constants: a horizontal acceleration integrates to a
+// velocity change dv, which the reference holds as about dv / (this * tau), a tenth of what the
+// tilt's low-pass holds.
+constexpr double kAccelReferenceTaus = 10.0;
 
 }  // namespace
 
@@ -107,6 +112,7 @@ void ParallelKf::reset() {
   s_.kf2.reset(Eigen::Vector3d::UnitX(), kInitVarDirection, kInitVarDisturbanceUt2);
   s_.gate.reset(gp_);
   s_.bias_cov = Eigen::Matrix3d::Identity() * (p_.bias_sigma_init_rps * p_.bias_sigma_init_rps);
+  s_.bias_err_cov = s_.bias_cov;
   s_.c2_dip_for = std::nan("");
   s_.hard_iron = HardIronEstimator(p_.hard_iron_estimator);
 }
@@ -169,8 +175,7 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
       s_.lp_accel_i += (dt / (p_.accel_lowpass_tau_s + dt)) * (s_.r_ib * s.accel_mps2 - s_.lp_accel_i);
     }
     s_.kf1.correct(s_.r_ib.transpose() * s_.lp_accel_i);
-    const double dev = s_.lp_accel_i.norm() - p_.tilt.gravity_mps2;
-    s_.accel_dev2_lp += (dt / (p_.accel_lowpass_tau_s + dt)) * (dev * dev - s_.accel_dev2_lp);
+    external_accel_step(s.accel_mps2, dt);
   } else {
     s_.kf1.correct(s.accel_mps2);
     const double dev = s.accel_mps2.norm() - p_.tilt.gravity_mps2;
@@ -258,9 +263,30 @@ void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
   s_.r_ib.setIdentity();
   s_.r_ib_steps = 0;
   s_.lp_accel_i = s.accel_mps2;
+  s_.accel_ref_i = s.accel_mps2;
   s_.accel_bw = Butterworth2<3>(p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : 1.0);
   s_.accel_bw.reset(s.accel_mps2);
   s_.initialized = true;
+}
+
+void ParallelKf::external_accel_step(const Eigen::Vector3d& accel, double dt) {
+  // In the almost inertial frame gravity moves only as the bias error turns the frame, so the
+  // accelerometer averaged there slowly (time constant kAccelReferenceTaus tau) is gravity: what
+  // the tilt's low-pass holds beyond it, across it, is the horizontal external acceleration that
+  // low-pass let through, which tilts the estimate by itself over g (a vertical one only changes
+  // the magnitude, which the old term read). The reference lags the frame's turn by the bias
+  // error more than the tilt's low-pass does: that difference counts too (conservative while the
+  // bias is being learnt).
+  const double tau = p_.accel_lowpass_tau_s;
+  const double tau_ref = kAccelReferenceTaus * tau;
+  s_.accel_ref_i += (dt / (tau_ref + dt)) * (s_.r_ib * accel - s_.accel_ref_i);
+  Eigen::Vector3d up;
+  if (!safe_normalize(s_.accel_ref_i, up)) {
+    return;
+  }
+  Eigen::Vector3d d = s_.lp_accel_i - s_.accel_ref_i;
+  d -= d.dot(up) * up;
+  s_.accel_h_cov_i += (dt / (tau + dt)) * (d * d.transpose() - s_.accel_h_cov_i);
 }
 
 double ParallelKf::motion_bias_noise(double dt) const {
@@ -286,6 +312,15 @@ void ParallelKf::bias_measure(const Eigen::Vector3d& h, double z, double w, cons
   s_.lag_bias_cov -= (s_.lag_bias_cov * h) * k.transpose();  // b_err -= k (h^T b_err + noise)
   // Joseph form (valid for any gain): P - k ph^T - ph k^T + s k k^T
   s_.bias_cov += s * k * k.transpose() - k * ph.transpose() - ph * k.transpose();
+  bias_error_update(h, k, w);
+}
+
+void ParallelKf::bias_error_update(const Eigen::Vector3d& h, const Eigen::Vector3d& k, double w_true) {
+  // the bias error after b += k (h^T b_true + n - h^T b): (I - k h^T) b_err - k n, n of variance
+  // w_true (Joseph form with the gain the estimate used)
+  const Eigen::Vector3d ph = s_.bias_err_cov * h;
+  const double s = h.dot(ph) + w_true;
+  s_.bias_err_cov += s * k * k.transpose() - k * ph.transpose() - ph * k.transpose();
 }
 
 void ParallelKf::motion_bias_measure() {
@@ -332,11 +367,17 @@ void ParallelKf::bias_update() {
   const double v = p_.bias_drift_rps * p_.bias_drift_rps * t / p_.bias_forgetting_time_s;
   const double var_max = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
   s_.bias_cov.diagonal().array() += v;
+  s_.bias_err_cov.diagonal().array() += v;
   for (int i = 0; i < 3; ++i) {  // never less certain than at start (keeps P symmetric, PSD)
     if (s_.bias_cov(i, i) > var_max) {
       const double f = std::sqrt(var_max / s_.bias_cov(i, i));
       s_.bias_cov.row(i) *= f;
       s_.bias_cov.col(i) *= f;
+    }
+    if (s_.bias_err_cov(i, i) > var_max) {
+      const double f = std::sqrt(var_max / s_.bias_err_cov(i, i));
+      s_.bias_err_cov.row(i) *= f;
+      s_.bias_err_cov.col(i) *= f;
       s_.lag_bias_cov.col(i) *= f;
     }
   }
@@ -345,12 +386,18 @@ void ParallelKf::bias_update() {
     // steady state of P+ = (P + v) w / (P + v + w) at P+ = p gives w = p^2 / v + p
     const double p_rest = p_.bias_sigma_rest_rps * p_.bias_sigma_rest_rps;
     const double w = p_rest * p_rest / v + p_rest;
+    // What the window's samples really tell: the gyro's white noise (KF2's sigma_G per sample)
+    // averaged over the window's t / dt samples. w above is larger by design (a smooth
+    // estimate); the bias error covariance follows the gain it gives with this noise.
+    const double sg = kf2_params_.sigma_gyro_rps;
+    const double w_true = sg * sg * s_.last_dt_s / t;
     for (int i = 0; i < 3; ++i) {  // H = I, W = w I: three scalar updates, one per axis
       const Eigen::Vector3d ph = s_.bias_cov.col(i);
       const Eigen::Vector3d k = ph / (ph(i) + w);
       s_.bias += k * (s_.rest_det.gyro_lp(i) - s_.bias(i));
       s_.lag_bias_cov -= s_.lag_bias_cov.col(i) * k.transpose();
       s_.bias_cov -= k * ph.transpose();
+      bias_error_update(Eigen::Vector3d::Unit(i), k, w_true);
     }
   }
   if (p_.motion_bias_sigma_rps > 0.0) {
@@ -425,7 +472,7 @@ void ParallelKf::propagate_lag_error(double t) {
   }
   const Matrix53 g = gam_b * s_.q_world_body.toRotationMatrix();
   const Matrix53 c = s_.lag_bias_cov;
-  const Matrix53 gp = g * s_.bias_cov;
+  const Matrix53 gp = g * s_.bias_err_cov;
   const Matrix5 pc = phi * c * g.transpose();
   Matrix5 p = phi * s_.lag_cov * phi.transpose() + pc + pc.transpose() + gp * g.transpose();
   s_.lag_cov = 0.5 * (p + p.transpose());
@@ -678,14 +725,27 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
     // bias filter takes its motion measurements as independent of the attitude error, although
     // they are that error's own rate, so its P_b decorrelates faster than the error does
     t.bias_lag = s_.lag_cov.topLeftCorner<3, 3>();
-    const Eigen::Matrix3d p_bias = r * s_.bias_cov * r.transpose();
+    const Eigen::Matrix3d p_bias = r * s_.bias_err_cov * r.transpose();
     const double tau = p_.accel_lowpass_tau_s;
     const double since = s_.since_mag_s;
     const Eigen::Vector3d floor(tau * tau * p_bias(0, 0), tau * tau * p_bias(1, 1),
                                 s_.heading_initialized ? p_bias(2, 2) * since * since : 0.0);
     t.bias_lag.diagonal() += (floor - s_.lag_cov.diagonal().head<3>()).cwiseMax(0.0);
   }
-  t.external_accel.topLeftCorner<2, 2>().diagonal().array() += s_.accel_dev2_lp / (g * g);
+  if (p_.accel_lowpass_tau_s > 0.0) {
+    // the horizontal external acceleration a the low-pass let through (its covariance M, inertial
+    // frame; external_accel_step) tilts the up vector towards it: rotation e_z x a / g
+    const Eigen::Matrix3d w = r * s_.r_ib.transpose();
+    const Eigen::Matrix3d m = w * s_.accel_h_cov_i * w.transpose();
+    Eigen::Matrix2d tilt;
+    tilt << m(1, 1), -m(0, 1), -m(0, 1), m(0, 0);
+    tilt /= g * g;
+    t.external_accel.topLeftCorner<2, 2>() = tilt;
+  } else {
+    // KF1 sees the raw accelerometer: the external acceleration's horizontal part taken as large
+    // as the vertical one its magnitude shows
+    t.external_accel.topLeftCorner<2, 2>().diagonal().array() += s_.accel_dev2_lp / (g * g);
+  }
   if (p_.motion_gyro_scale_error > 0.0) {
     // scale errors of the three gyro axes, independent, each s: the error about body axis i is
     // s times the rotation about it since the low-passed attitude

@@ -317,6 +317,9 @@ struct ParallelKfState {
   // bias / rest
   Eigen::Vector3d bias{0, 0, 0};
   Eigen::Matrix3d bias_cov = Eigen::Matrix3d::Zero();  ///< covariance of the bias estimate, rad^2/s^2
+  /// covariance of the bias estimate's error: the gains of bias_cov's filter, with the rest
+  /// measurement's noise that of the gyro (bias_cov's is larger by design), rad^2/s^2
+  Eigen::Matrix3d bias_err_cov = Eigen::Matrix3d::Zero();
   Eigen::Vector3d bias_lp_i{0, 0, 0};  ///< the bias in the inertial frame, low-passed as the accelerometer
   double rate2_lp = 0.0;    ///< |s_G|^2 low-passed over accel_lowpass_tau_s, rad^2/s^2
   // motion bias window (summed between updates)
@@ -346,7 +349,14 @@ struct ParallelKfState {
   uint64_t mag_corrected_count = 0;  ///< samples whose s_M had the offset removed
 
   // What the two KFs do not model, for the published covariance (attitude_covariance)
-  double accel_dev2_lp = 0.0;  ///< (|low-passed s_A| - g)^2, low-passed over accel_lowpass_tau_s, (m/s^2)^2
+  double accel_dev2_lp = 0.0;  ///< without the low-pass: (|s_A| - g)^2, low-passed over rest_filter_tau_s, (m/s^2)^2
+  /// the accelerometer in the almost inertial frame low-passed over kAccelReferenceTaus tilt
+  /// low-pass time constants: gravity there, m/s^2
+  Eigen::Vector3d accel_ref_i{0, 0, 0};
+  /// the low-passed accelerometer's deviation from accel_ref_i across it (the horizontal external
+  /// acceleration the tilt's low-pass let through), its outer product low-passed over
+  /// accel_lowpass_tau_s, inertial frame, (m/s^2)^2
+  Eigen::Matrix3d accel_h_cov_i = Eigen::Matrix3d::Zero();
   double field_dn_lp = 0.0;    ///< |s_M| - m of the fields used for heading, low-passed over KF2's lag, uT
   double field_dv_lp = 0.0;    ///< m (dip - alpha) of the same, low-passed the same way, uT
   /// The attitude error the bias error has left in the estimate (world frame x, y, z, rad; then
@@ -401,9 +411,12 @@ class ParallelKf {
   ///             ramp b gives tau b), the heading with KF2's lag while fields are accepted, not
   ///             while they are gated. Propagated with the bias error's cross-covariance, so the
   ///             error a bias left before it was learnt is forgotten with the lags, not at once;
-  ///           + (|LP(s_A)| - g)^2 / g^2: the external acceleration (and accelerometer bias) left
-  ///             in the low-passed vector, its horizontal part taken as large as the vertical one
-  ///             that the magnitude shows;
+  ///           + the horizontal external acceleration a_h the low-pass let through, tilting the
+  ///             estimate by e_z x a_h / g: the low-passed vector's part across a slow gravity
+  ///             reference (the accelerometer averaged over kAccelReferenceTaus tau in the almost
+  ///             inertial frame), its outer product low-passed over tau (external_accel_step); a
+  ///             vertical acceleration, which only changes the magnitude, does not count (without
+  ///             the low-pass: (|s_A| - g)^2 / g^2 per tilt axis, as before);
   ///           + s^2 dtheta_i^2 about each body axis i (world x, y part): a gyro scale error s
   ///             (motion_gyro_scale_error) turns the attitude by s times the rotation dtheta away
   ///             from the attitude low-passed over tau, which the tilt has not caught up with;
@@ -411,6 +424,9 @@ class ParallelKf {
   ///             lag about the vertical), so a field accepted now and then amid gated ones leaves
   ///             most of a gated stretch's drift in it; and KF2 pulls the heading towards
   ///             -tan(dip) times the tilt error about magnetic north (the heading is built from sZ);
+  ///           (P_b here is bias_err_cov, the covariance of the bias estimate's real error: the
+  ///             bias filter's gains with the rest measurement's noise that of the gyro's white
+  ///             noise, not the larger one the filter is designed with)
   ///           each diagonal term at least tau^2 P_b (tilt) and P_b,z t^2 (heading; t the time
   ///             since fields last held the heading, each accepted field removing dt / tau_2 of
   ///             it): the bias filter's motion measurements are the lag error's own rate, so its
@@ -497,11 +513,16 @@ class ParallelKf {
   /// component along unit *keep (if given) is left as it is.
   void bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep);
   void motion_bias_measure();
+  /// The horizontal external acceleration the tilt's low-pass let through (accel_ref_i,
+  /// accel_h_cov_i), from the raw accelerometer `accel` (body) of a step of dt; for the covariance.
+  void external_accel_step(const Eigen::Vector3d& accel, double dt);
   [[nodiscard]] double motion_bias_noise(double dt) const;
   /// KF2's correction lag about the vertical for a step of dt, s (0 before a direction exists)
   [[nodiscard]] double heading_lag_s(double dt) const;
   /// Propagates the attitude error the bias error leaves (lag_cov, lag_bias_cov) over t seconds.
   void propagate_lag_error(double t);
+  /// bias_err_cov after a bias measurement along h with gain k and measurement noise w_true.
+  void bias_error_update(const Eigen::Vector3d& h, const Eigen::Vector3d& k, double w_true);
   void heading_step(const Eigen::Matrix3d& a,
                     const Eigen::Vector3d& mag, bool mag_ok, double dt);
   /// KF2 restarted on the field `mag` (a relearnt reference, or the first accepted field after a
