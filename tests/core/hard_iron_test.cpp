@@ -75,6 +75,36 @@ TEST(HardIron, GivenATumblingSensorWithAKnownOffsetWhenFedTwentySecondsThenTheEs
   EXPECT_TRUE(h.corrected(m).isApprox(m - h.offset_ut()));
 }
 
+// A filter hands its own gyro-only orientation (the parallel KF's R_ib) instead of the estimator
+// integrating the gyro again. Oracle: the simulator's true orientation handed in, in a frame turned
+// by an arbitrary constant rotation (only R_k^T R_j may matter), and the known offset.
+TEST(HardIron, GivenTheOrientationHandedInWhenTumblingWithAKnownOffsetThenTheEstimateIsWithinTolerance) {
+  const Eigen::Vector3d b(-6.0, 1.0, 58.0);  // about trial 32's attached magnet, uT
+  const Eigen::Matrix3d frame = Eigen::AngleAxisd(2.0, Eigen::Vector3d(1.0, 2.0, 3.0).normalized()).toRotationMatrix();
+  HardIronEstimator h;
+  Sim sim;
+  for (int i = 0; i < static_cast<int>(20 * kRateHz); ++i) {
+    const ImuSample s = sim.next(b, tumbling_rate);
+    h.update(s.stamp_ns, Eigen::Matrix3d(frame * sim.q.toRotationMatrix()), s.gyro_rps, s.mag_ut);
+  }
+  EXPECT_LT((h.offset_ut() - b).norm(), kConvergedTolUt) << h.offset_ut().transpose();
+  EXPECT_TRUE(h.applied());
+  EXPECT_EQ(h.report().count(HardIronStep::kGated), 0U);
+  EXPECT_GT(h.report().count(HardIronStep::kInterval), 0U);  // the samples between comparisons
+  // a non-finite orientation is refused and counted where it would be used, never fused
+  HardIronEstimator g;
+  const Eigen::Matrix3d nan = Eigen::Matrix3d::Constant(std::numeric_limits<double>::quiet_NaN());
+  EXPECT_EQ(g.update(0, nan, Eigen::Vector3d::Zero(), kWorldField).step, HardIronStep::kRejectedInput);
+  EXPECT_EQ(g.update(0, Eigen::Matrix3d::Identity(), Eigen::Vector3d::Zero(), kWorldField).step,
+            HardIronStep::kWarmingUp);
+  for (int64_t t_ns = 10'000'000; t_ns < 250'000'000; t_ns += 10'000'000) {  // inside the 0.25 s interval
+    EXPECT_EQ(g.update(t_ns, nan, Eigen::Vector3d::Zero(), kWorldField).step, HardIronStep::kInterval);
+  }
+  EXPECT_EQ(g.update(250'000'000, nan, Eigen::Vector3d::Zero(), kWorldField).step, HardIronStep::kRejectedInput);
+  EXPECT_TRUE(g.offset_ut().allFinite());
+  EXPECT_TRUE(g.covariance().allFinite());
+}
+
 TEST(HardIron, GivenAStillSensorWhenFedThenNothingIsLearntAndTheReportSaysNotEnoughRotation) {
   HardIronEstimator h;
   Sim sim;

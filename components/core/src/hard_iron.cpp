@@ -45,26 +45,41 @@ const char* to_string(HardIronStep s) {
 
 HardIronEstimator::HardIronEstimator(const HardIronParams& p) : p_(p) {
   p_.validate();
+  lag_ns_ = static_cast<int64_t>(std::llround(p_.lag_s * 1e9));
   reset();
 }
 
 void HardIronEstimator::reset() {
   b_.setZero();
   P_ = Eigen::Matrix3d::Identity() * (p_.prior_sigma_ut * p_.prior_sigma_ut);
-  q_.setIdentity();
   start_ = Entry{};
   have_last_ = false;
   last_ns_ = 0;
+  q_.setIdentity();
   last_w_.setZero();
+  last_w_ns_ = 0;
+  have_w_ = false;
   refused_s_ = 0.0;
   report_ = HardIronReport{};
+  refresh();
 }
 
 const HardIronReport& HardIronEstimator::finish(HardIronStep s) {
   report_.step = s;
   ++report_.counts[static_cast<size_t>(s)];
-  report_.converged = (P_.diagonal().array() < p_.converged_sigma_ut * p_.converged_sigma_ut).all();
   return report_;
+}
+
+void HardIronEstimator::refresh() {
+  report_.converged = (P_.diagonal().array() < p_.converged_sigma_ut * p_.converged_sigma_ut).all();
+  applied_ = report_.converged && b_.squaredNorm() > p_.min_applied_ut * p_.min_applied_ut;
+}
+
+bool HardIronEstimator::usable(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const {
+  // Squared norms: a NaN gives NaN, an infinite or huge (1e308: overflows) component +inf, and
+  // both fail the comparison, so no finiteness check is needed before them.
+  return mag_ut.squaredNorm() <= p_.max_mag_ut * p_.max_mag_ut &&
+         gyro_rps.squaredNorm() <= p_.max_gyro_rps * p_.max_gyro_rps;
 }
 
 double HardIronEstimator::reading_var(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const {
@@ -81,41 +96,57 @@ const HardIronReport& HardIronEstimator::update(const ImuSample& s) {
 
 const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps,
                                                 const Eigen::Vector3d& mag_ut) {
-  // Norms are only compared once every component is known finite (1e308 squared overflows).
-  if (!mag_ut.allFinite() || !gyro_rps.allFinite() || mag_ut.cwiseAbs().maxCoeff() > p_.max_mag_ut ||
-      gyro_rps.cwiseAbs().maxCoeff() > p_.max_gyro_rps || mag_ut.norm() > p_.max_mag_ut ||
-      gyro_rps.norm() > p_.max_gyro_rps) {
+  if (!usable(gyro_rps, mag_ut)) {
+    return finish(HardIronStep::kRejectedInput);  // nothing kept: the next step's rate spans it
+  }
+  // Orientation from the gyro (trapezoidal rate), body to an arbitrary fixed frame; a gap is
+  // found by the update below (the orientation across it is then not used).
+  const double dt = have_w_ ? static_cast<double>(stamp_ns - last_w_ns_) * 1e-9 : 0.0;
+  const Eigen::Vector3d rot = 0.5 * (last_w_ + gyro_rps) * dt;
+  const double angle = rot.norm();
+  if (dt > 0.0 && dt <= p_.max_dt_s && angle > 0.0) {
+    q_ = (q_ * Eigen::Quaterniond(Eigen::AngleAxisd(angle, rot / angle))).normalized();
+  }
+  have_w_ = true;
+  last_w_ns_ = stamp_ns;
+  last_w_ = gyro_rps;
+  return update(stamp_ns, q_.toRotationMatrix(), gyro_rps, mag_ut);
+}
+
+const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::Matrix3d& r_body,
+                                                const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) {
+  if (!usable(gyro_rps, mag_ut)) {
     return finish(HardIronStep::kRejectedInput);
   }
   const double dt = have_last_ ? static_cast<double>(stamp_ns - last_ns_) * 1e-9 : 0.0;
   if (!have_last_ || !(dt > 0.0) || dt > p_.max_dt_s) {
     const bool gap = have_last_;
-    q_.setIdentity();
+    if (!r_body.allFinite()) {
+      return finish(HardIronStep::kRejectedInput);
+    }
     have_last_ = true;
     last_ns_ = stamp_ns;
-    last_w_ = gyro_rps;
-    start_ = {stamp_ns, mag_ut, reading_var(gyro_rps, mag_ut), q_};
+    start_ = {stamp_ns, mag_ut, reading_var(gyro_rps, mag_ut), r_body};
     return finish(gap ? HardIronStep::kGap : HardIronStep::kWarmingUp);
   }
-  // Orientation from the gyro (trapezoidal rate), body to an arbitrary fixed frame.
-  const Eigen::Vector3d rot = 0.5 * (last_w_ + gyro_rps) * dt;
-  const double angle = rot.norm();
-  if (angle > 0.0) {
-    q_ = (q_ * Eigen::Quaterniond(Eigen::AngleAxisd(angle, rot / angle))).normalized();
-  }
   last_ns_ = stamp_ns;
-  last_w_ = gyro_rps;
-  P_ += Eigen::Matrix3d::Identity() * (p_.walk_ut_per_sqrt_s * p_.walk_ut_per_sqrt_s * dt);
-  const auto lag_ns = static_cast<int64_t>(std::llround(p_.lag_s * 1e9));
-  if (stamp_ns - start_.stamp_ns < lag_ns) {
-    return finish(HardIronStep::kInterval);
+  if (stamp_ns - start_.stamp_ns < lag_ns_) {
+    return finish(HardIronStep::kInterval);  // the per-sample path: nothing else done
+  }
+  if (!r_body.allFinite()) {
+    return finish(HardIronStep::kRejectedInput);  // the caller's orientation, used only here
   }
   // Comparisons do not overlap: the readings between j and k are not used, k starts the next
   // interval, so each reading enters at most two comparisons (as the later, then as the earlier one)
   // and the model errors that persist over an interval are not counted many times over.
   const Entry j = start_;
-  start_ = {stamp_ns, mag_ut, reading_var(gyro_rps, mag_ut), q_};
-  const Eigen::Quaterniond rel = q_.conjugate() * j.q;  // R_k^T R_j
+  start_ = {stamp_ns, mag_ut, reading_var(gyro_rps, mag_ut), r_body};
+  // b's random walk over the interval, added once per comparison (P is constant in between)
+  P_.diagonal().array() +=
+      p_.walk_ut_per_sqrt_s * p_.walk_ut_per_sqrt_s * (static_cast<double>(stamp_ns - j.stamp_ns) * 1e-9);
+  refresh();
+  // R_k^T R_j, made a rotation again (the caller's orientation is renormalised only now and then)
+  const Eigen::Quaterniond rel = Eigen::Quaterniond(Eigen::Matrix3d(r_body.transpose() * j.r)).normalized();
   report_.rotation_rad = Eigen::AngleAxisd(rel).angle();
   if (report_.rotation_rad < p_.min_rotation_rad) {
     return finish(HardIronStep::kNotEnoughRotation);
@@ -133,6 +164,7 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::V
     if (refused_s_ >= p_.reset_after_s) {
       refused_s_ = 0.0;
       P_ = Eigen::Matrix3d::Identity() * (p_.prior_sigma_ut * p_.prior_sigma_ut);
+      refresh();
       return finish(HardIronStep::kReset);
     }
     return finish(HardIronStep::kGated);
@@ -143,6 +175,7 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::V
   const Eigen::Matrix3d IKH = Eigen::Matrix3d::Identity() - K * H;
   P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
   P_ = 0.5 * (P_ + P_.transpose());
+  refresh();
   return finish(HardIronStep::kUpdated);
 }
 

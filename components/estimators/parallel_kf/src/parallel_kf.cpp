@@ -161,14 +161,18 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   // KF1: tilt + external acceleration (5)-(7)
   s_.kf1.core().predict_with_transition(a, dt);
   const Eigen::Vector3d z_before = s_.kf1.up_body();
-  if (p_.accel_lowpass_tau_s > 0.0) {
-    // Low-pass the accelerometer in a gyro-propagated, almost inertial frame: external
-    // accelerations average out there while gravity stays put; KF1 sees the filtered vector.
-    s_.r_ib = (s_.r_ib * a.transpose()).eval();  // R_ib(k) = R_ib(k-1) exp(h w)
+  if (p_.accel_lowpass_tau_s > 0.0 || p_.hard_iron) {
+    // the gyro-only orientation (R_ib(k) = R_ib(k-1) exp(h w)): the accelerometer's low-pass frame
+    // and the hard-iron estimate's rotation between its readings, from this step's transition
+    s_.r_ib = (s_.r_ib * a.transpose()).eval();
     if (++s_.r_ib_steps >= 256) {
       s_.r_ib = Eigen::Quaterniond(s_.r_ib).normalized().toRotationMatrix();
       s_.r_ib_steps = 0;
     }
+  }
+  if (p_.accel_lowpass_tau_s > 0.0) {
+    // Low-pass the accelerometer in a gyro-propagated, almost inertial frame: external
+    // accelerations average out there while gravity stays put; KF1 sees the filtered vector.
     if (p_.accel_lowpass_order == 2) {
       s_.lp_accel_i = s_.accel_bw.step(s_.r_ib * s.accel_mps2, dt);
     } else {
@@ -228,7 +232,7 @@ Eigen::Vector3d ParallelKf::hard_iron_corrected(int64_t stamp_ns, const Eigen::V
   if (!p_.hard_iron || !mag_ok) {
     return mag;
   }
-  s_.hard_iron.update(stamp_ns, gyro, mag);
+  s_.hard_iron.update(stamp_ns, s_.r_ib, gyro, mag);  // the filter's gyro-only orientation: integrated once
   if (!s_.hard_iron.applied()) {
     return mag;
   }
@@ -239,6 +243,8 @@ Eigen::Vector3d ParallelKf::hard_iron_corrected(int64_t stamp_ns, const Eigen::V
 
 void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
   s_.kf1.reset(s.accel_mps2);  // sZ from the accelerometer
+  s_.r_ib.setIdentity();         // before the hard-iron estimate's first reading takes it
+  s_.r_ib_steps = 0;
   hard_iron_corrected(s.stamp_ns, s.gyro_rps, s.mag_ut, mag_ok);  // the estimate's first reading (never applied yet)
   if (mag_ok) {
     s_.kf2.reset(s.mag_ut.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
@@ -260,8 +266,6 @@ void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
     s_.heading_from_gyro = true;
   }
   s_.prev_gyro = s.gyro_rps;
-  s_.r_ib.setIdentity();
-  s_.r_ib_steps = 0;
   s_.lp_accel_i = s.accel_mps2;
   s_.accel_ref_i = s.accel_mps2;
   s_.accel_bw = Butterworth2<3>(p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : 1.0);

@@ -76,17 +76,24 @@ struct HardIronReport {
 class HardIronEstimator {
  public:
   explicit HardIronEstimator(const HardIronParams& p = {});
-  /// Feeds one sample; returns the report of this step.
+  /// Feeds one sample; returns the report of this step. The rotation between samples is
+  /// integrated here from the gyro (trapezoidal rate): for a caller without its own propagation.
   const HardIronReport& update(const ImuSample& s);
   /// The same from the parts a filter has at hand (its bias-corrected gyro, the raw reading).
   const HardIronReport& update(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut);
+  /// The same for a filter that already propagates the gyro: `r_body` is its gyro-only orientation
+  /// at this sample (body -> any frame fixed over lag_s, e.g. the parallel KF's R_ib), so the gyro
+  /// is not integrated a second time here; the rotation between two readings is r_k^T r_j, taken
+  /// once per comparison. `gyro_rps` only sizes the reading's timing variance.
+  const HardIronReport& update(int64_t stamp_ns, const Eigen::Matrix3d& r_body, const Eigen::Vector3d& gyro_rps,
+                               const Eigen::Vector3d& mag_ut);
   /// The body-frame offset estimate, uT, and its covariance, uT^2.
   [[nodiscard]] const Eigen::Vector3d& offset_ut() const { return b_; }
   [[nodiscard]] const Eigen::Matrix3d& covariance() const { return P_; }
   [[nodiscard]] Eigen::Vector3d sigma_ut() const { return P_.diagonal().cwiseSqrt(); }
   [[nodiscard]] bool converged() const { return report_.converged; }
   /// Whether corrected() removes the offset: converged and |b| > min_applied_ut.
-  [[nodiscard]] bool applied() const { return converged() && b_.norm() > p_.min_applied_ut; }
+  [[nodiscard]] bool applied() const { return applied_; }
   /// The reading with the offset removed when applied(), unchanged otherwise.
   [[nodiscard]] Eigen::Vector3d corrected(const Eigen::Vector3d& m_ut) const { return applied() ? Eigen::Vector3d(m_ut - b_) : m_ut; }
   [[nodiscard]] const HardIronReport& report() const { return report_; }
@@ -98,20 +105,27 @@ class HardIronEstimator {
     int64_t stamp_ns = 0;
     Eigen::Vector3d m = Eigen::Vector3d::Zero();
     double var_ut2 = 0.0;  ///< per-axis variance of this reading against the model
-    Eigen::Quaterniond q = Eigen::Quaterniond::Identity();  ///< gyro-integrated orientation (arbitrary start)
+    Eigen::Matrix3d r = Eigen::Matrix3d::Identity();  ///< the caller's orientation at the reading
   };
   const HardIronReport& finish(HardIronStep s);
+  void refresh();  ///< converged and applied from b_ and P_ (called where they change, not per sample)
+  [[nodiscard]] bool usable(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
   [[nodiscard]] double reading_var(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
 
   HardIronParams p_;
+  int64_t lag_ns_ = 0;  ///< p_.lag_s in ns
   Eigen::Vector3d b_ = Eigen::Vector3d::Zero();
   Eigen::Matrix3d P_;
-  Eigen::Quaterniond q_ = Eigen::Quaterniond::Identity();
   Entry start_;  ///< the reading that starts the current interval
   bool have_last_ = false;
   int64_t last_ns_ = 0;
+  /// update(stamp, gyro, mag)'s own gyro integration (trapezoidal rate; arbitrary start)
+  Eigen::Quaterniond q_ = Eigen::Quaterniond::Identity();
   Eigen::Vector3d last_w_ = Eigen::Vector3d::Zero();
+  int64_t last_w_ns_ = 0;
+  bool have_w_ = false;
   double refused_s_ = 0.0;  ///< time of consecutive refused comparisons
+  bool applied_ = false;
   HardIronReport report_;
 };
 

@@ -308,7 +308,8 @@ struct ParallelKfState {
   double mag_extra_var = 0.0;  ///< soft-gating inflation of M2 for the current sample, uT^2
 
   // inertial low-pass of the accelerometer
-  Eigen::Matrix3d r_ib = Eigen::Matrix3d::Identity();  ///< body -> almost inertial frame
+  /// body -> almost inertial frame, gyro only (accel_lowpass_tau_s > 0 or hard_iron)
+  Eigen::Matrix3d r_ib = Eigen::Matrix3d::Identity();
   int r_ib_steps = 0;
   Eigen::Vector3d lp_accel_i{0, 0, 0};
   Butterworth2<3> accel_bw;
@@ -501,8 +502,9 @@ class ParallelKf {
   bool step(const ImuSample& s, SampleCheck& c);  ///< update() without the reporting
   void initialize(const ImuSample& s, bool mag_ok);
   /// Feeds the hard-iron estimate (hard_iron, a sample with a usable s_M: `gyro` bias-corrected,
-  /// `mag` raw) and returns the reading the gate and KF2 see: `mag` less the offset while it is
-  /// applied (s_.mag_corrected), `mag` otherwise
+  /// `mag` raw, with s_.r_ib: the rotation between its readings comes from this filter's
+  /// transitions, not a second gyro integration) and returns the reading the gate and KF2 see:
+  /// `mag` less the offset while it is applied (s_.mag_corrected), `mag` otherwise
   Eigen::Vector3d hard_iron_corrected(int64_t stamp_ns, const Eigen::Vector3d& gyro, const Eigen::Vector3d& mag,
                                       bool mag_ok);
   /// The step's transition for both filters, from the step rate w (the previous and current
