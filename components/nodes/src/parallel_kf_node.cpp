@@ -75,6 +75,7 @@ class ParallelKfStep : public AttitudeStep {
     diag.counters = kf_.rejections().to_map();
     diag.counters["mag_gated_disturbed"] = kf_.mag_gated_count();
     diag.counters["mag_forced"] = kf_.mag_forced_count();
+    diag.counters["mag_hard_iron_corrected"] = kf_.mag_hard_iron_corrected_count();
     diag.counters["field_reacquired"] = kf_.field_reacquired_count();
     diag.counters["field_relearnt"] = kf_.field_relearnt_count();
     diag.counters["state_resets"] = kf_.state_resets();
