@@ -146,6 +146,43 @@ TEST(HardIron, GivenTheOffsetRemovedMidRunWhenTumblingThenItResetsAndLearnsZero)
   EXPECT_FALSE(h.applied());
 }
 
+// The consistency check (consistency_tau_s): an offset that the readings no longer carry is not
+// removed, although the estimate still holds it. Oracle: the simulator knows when the offset is
+// real. The gate is opened wide and resets are off so that the estimate keeps the old offset and
+// only decays (a Kalman filter with a small covariance): what stops the correction is the check,
+// not the gate and not min_applied_ut.
+TEST(HardIron, GivenAnOffsetTheReadingsNoLongerCarryWhenTheEstimateStillHoldsItThenItIsNotApplied) {
+  constexpr double kRealS = 20.0;      // the offset is on this long, then gone, s
+  constexpr double kSwitchOffS = 5.0;  // the check must stop the correction within this, s (tau 5 s: about 3.5 s)
+  for (const double tau_s : {5.0, 0.0}) {
+    HardIronParams p;
+    p.gate_chi2 = 1e12;
+    p.reset_after_s = 1e3;
+    p.consistency_tau_s = tau_s;
+    HardIronEstimator h(p);
+    Sim sim;
+    for (int i = 0; i < static_cast<int>(kRealS * kRateHz); ++i) {
+      h.update(sim.next(Eigen::Vector3d(30.0, -10.0, 20.0), tumbling_rate));
+    }
+    ASSERT_TRUE(h.applied()) << "tau " << tau_s;
+    if (tau_s > 0.0) {  // while the offset was real, removing it made the magnitude more constant
+      EXPECT_LT(h.report().corrected_norm_change_ut, h.report().raw_norm_change_ut);
+    }
+    for (int i = 0; i < static_cast<int>(kSwitchOffS * kRateHz); ++i) {
+      h.update(sim.next(Eigen::Vector3d::Zero(), tumbling_rate));
+    }
+    ASSERT_GT(h.offset_ut().norm(), p.min_applied_ut) << "tau " << tau_s << ": the estimate still holds an offset";
+    EXPECT_TRUE(h.converged());
+    EXPECT_EQ(h.report().count(HardIronStep::kReset), 0U);
+    if (tau_s > 0.0) {
+      EXPECT_FALSE(h.applied()) << "the correction of an offset that is gone makes the magnitude vary";
+      EXPECT_GT(h.report().corrected_norm_change_ut, h.report().raw_norm_change_ut);
+    } else {
+      EXPECT_TRUE(h.applied()) << "without the check the stale offset is still removed";
+    }
+  }
+}
+
 TEST(HardIron, GivenHostileReadingsWhenFedThenEachIsRejectedCountedAndTheEstimateUntouched) {
   HardIronEstimator h;
   Sim sim;

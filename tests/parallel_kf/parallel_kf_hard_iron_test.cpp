@@ -141,11 +141,13 @@ TEST(ParallelKfHardIron, GivenTheHardIronKeysInYamlWhenLoadedThenTheyAreReadAndH
   const std::string dir = std::string(POISE_SOURCE_DIR) + "/config/filters/";
   EXPECT_FALSE(load_parallel_kf_params(dir + "parallel_kf_paper.yaml").hard_iron);
   EXPECT_TRUE(load_parallel_kf_params(dir + "parallel_kf.yaml").hard_iron);
-  write("parallel_kf:\n  hard_iron: false\n  hard_iron_estimator:\n    min_applied_ut: 8\n    noise_ut: 2\n");
+  write("parallel_kf:\n  hard_iron: false\n  hard_iron_estimator:\n    min_applied_ut: 8\n    noise_ut: 2\n"
+        "    consistency_tau_s: 0\n");
   const ParallelKfParams p = load_parallel_kf_params(path);
   EXPECT_FALSE(p.hard_iron);
   EXPECT_EQ(p.hard_iron_estimator.min_applied_ut, 8.0);
   EXPECT_EQ(p.hard_iron_estimator.noise_ut, 2.0);
+  EXPECT_EQ(p.hard_iron_estimator.consistency_tau_s, 0.0);
   // hostile values: each refused with a message naming the key
   const struct {
     const char* yaml;
@@ -159,6 +161,8 @@ TEST(ParallelKfHardIron, GivenTheHardIronKeysInYamlWhenLoadedThenTheyAreReadAndH
       {"  hard_iron_estimator:\n    converged_sigma_ut: 0\n", "converged_sigma_ut"},
       {"  hard_iron_estimator:\n    min_rotation_rad: 4\n", "min_rotation_rad"},
       {"  hard_iron_estimator:\n    gate_chi2: -.inf\n", "gate_chi2"},
+      {"  hard_iron_estimator:\n    consistency_tau_s: -5\n", "consistency_tau_s"},
+      {"  hard_iron_estimator:\n    consistency_tau_s: .nan\n", "consistency_tau_s"},
       {"  hard_iron_estimator:\n    no_such_key: 1\n", "no_such_key"},
       {"  hard_iron_estimator:\n    prior_sigma_ut: [1, 2]\n", "prior_sigma_ut"},
   };

@@ -21,6 +21,7 @@ void HardIronParams::validate(const char* filter) const {
   check.positive(reset_after_s, "reset_after_s", "s");
   check.positive(converged_sigma_ut, "converged_sigma_ut", "uT");
   check.non_negative(min_applied_ut, "min_applied_ut", "uT");
+  check.non_negative(consistency_tau_s, "consistency_tau_s", "s, 0 = no check");
   check.positive(max_dt_s, "max_dt_s", "s");
   check.require(lag_s < 100.0, "lag_s", "< 100 (s)");
   check.positive(max_mag_ut, "max_mag_ut", "uT");
@@ -60,6 +61,9 @@ void HardIronEstimator::reset() {
   last_w_ns_ = 0;
   have_w_ = false;
   refused_s_ = 0.0;
+  raw_change2_ = 0.0;
+  cor_change2_ = 0.0;
+  change_weight_ = 0.0;
   report_ = HardIronReport{};
   refresh();
 }
@@ -72,7 +76,8 @@ const HardIronReport& HardIronEstimator::finish(HardIronStep s) {
 
 void HardIronEstimator::refresh() {
   report_.converged = (P_.diagonal().array() < p_.converged_sigma_ut * p_.converged_sigma_ut).all();
-  applied_ = report_.converged && b_.squaredNorm() > p_.min_applied_ut * p_.min_applied_ut;
+  report_.consistent = !(p_.consistency_tau_s > 0.0) || cor_change2_ < raw_change2_;
+  applied_ = report_.converged && b_.squaredNorm() > p_.min_applied_ut * p_.min_applied_ut && report_.consistent;
 }
 
 bool HardIronEstimator::usable(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const {
@@ -85,6 +90,21 @@ bool HardIronEstimator::usable(const Eigen::Vector3d& gyro_rps, const Eigen::Vec
 double HardIronEstimator::reading_var(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const {
   const double timing_ut = gyro_rps.norm() * p_.timing_s * mag_ut.norm();
   return p_.noise_ut * p_.noise_ut + timing_ut * timing_ut;
+}
+
+void HardIronEstimator::consistency(const Eigen::Vector3d& m_j, const Eigen::Vector3d& m_k, double interval_s) {
+  if (!(p_.consistency_tau_s > 0.0)) {
+    return;
+  }
+  const double keep = std::exp(-interval_s / p_.consistency_tau_s);
+  const double raw = m_k.norm() - m_j.norm();
+  const double cor = (m_k - b_).norm() - (m_j - b_).norm();
+  raw_change2_ = keep * raw_change2_ + raw * raw;
+  cor_change2_ = keep * cor_change2_ + cor * cor;
+  change_weight_ = keep * change_weight_ + 1.0;
+  report_.raw_norm_change_ut = std::sqrt(raw_change2_ / change_weight_);
+  report_.corrected_norm_change_ut = std::sqrt(cor_change2_ / change_weight_);
+  refresh();
 }
 
 const HardIronReport& HardIronEstimator::update(const ImuSample& s) {
@@ -151,6 +171,7 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   if (report_.rotation_rad < p_.min_rotation_rad) {
     return finish(HardIronStep::kNotEnoughRotation);
   }
+  consistency(j.m, mag_ut, static_cast<double>(stamp_ns - j.stamp_ns) * 1e-9);
   const Eigen::Matrix3d C = rel.toRotationMatrix();
   const Eigen::Matrix3d H = Eigen::Matrix3d::Identity() - C;
   const Eigen::Vector3d r = mag_ut - C * j.m - H * b_;

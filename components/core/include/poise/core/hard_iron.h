@@ -39,6 +39,13 @@ struct HardIronParams {
   /// Chosen on BROAD from {0, 2, 3, 5, 8}: 5 in every leave-one-trial-out fold but one (8), see
   /// docs/ESTIMATORS.md "Hard-iron offset".
   double min_applied_ut = 5.0;
+  /// The offset is applied only while removing it makes the field's magnitude more constant over
+  /// rotation than the raw readings' (a body-fixed offset must: |R^T m_world + b| varies with R,
+  /// |R^T m_world| does not). Each comparison with enough rotation adds the squared change of
+  /// |m| and of |m - b| (b: the estimate then) between its two readings; both sums forget with
+  /// this time constant, s (0 = no check). A field that varies in space (a magnet near the sensor,
+  /// not on it) fits an offset, but removing it makes the magnitude vary where it did not.
+  double consistency_tau_s = 5.0;
   double max_dt_s = 0.1;              ///< a longer gap between samples restarts the comparison, s
   double max_mag_ut = 5000.0;         ///< |m| above this (or non-finite) is refused, uT
   double max_gyro_rps = 100.0;        ///< |w| above this (or non-finite) is refused, rad/s
@@ -67,6 +74,11 @@ struct HardIronReport {
   double nis = 0.0;          ///< normalised innovation squared of the last comparison
   double rotation_rad = 0.0; ///< rotation over the last comparison's interval
   bool converged = false;    ///< every axis' sigma < converged_sigma_ut
+  /// rms change of |m| (raw) and of |m - b| between the two readings of the recent comparisons, uT
+  /// (consistency_tau_s); the offset is consistent when the corrected one is the smaller
+  double raw_norm_change_ut = 0.0;
+  double corrected_norm_change_ut = 0.0;
+  bool consistent = false;
   /// per step reason (indexed by HardIronStep), since construction/reset: an array, not a map,
   /// so the per-sample path of a filter that carries the estimator does no lookup
   std::array<uint64_t, static_cast<size_t>(HardIronStep::kCount)> counts{};
@@ -92,7 +104,8 @@ class HardIronEstimator {
   [[nodiscard]] const Eigen::Matrix3d& covariance() const { return P_; }
   [[nodiscard]] Eigen::Vector3d sigma_ut() const { return P_.diagonal().cwiseSqrt(); }
   [[nodiscard]] bool converged() const { return report_.converged; }
-  /// Whether corrected() removes the offset: converged and |b| > min_applied_ut.
+  /// Whether corrected() removes the offset: converged, |b| > min_applied_ut and consistent (the
+  /// corrected field's magnitude changes less over rotation than the raw one's).
   [[nodiscard]] bool applied() const { return applied_; }
   /// The reading with the offset removed when applied(), unchanged otherwise.
   [[nodiscard]] Eigen::Vector3d corrected(const Eigen::Vector3d& m_ut) const { return applied() ? Eigen::Vector3d(m_ut - b_) : m_ut; }
@@ -108,6 +121,8 @@ class HardIronEstimator {
     Eigen::Matrix3d r = Eigen::Matrix3d::Identity();  ///< the caller's orientation at the reading
   };
   const HardIronReport& finish(HardIronStep s);
+  /// Adds one comparison's |m| and |m - b| changes (consistency_tau_s) and refreshes.
+  void consistency(const Eigen::Vector3d& m_j, const Eigen::Vector3d& m_k, double interval_s);
   void refresh();  ///< converged and applied from b_ and P_ (called where they change, not per sample)
   [[nodiscard]] bool usable(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
   [[nodiscard]] double reading_var(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
@@ -125,6 +140,9 @@ class HardIronEstimator {
   int64_t last_w_ns_ = 0;
   bool have_w_ = false;
   double refused_s_ = 0.0;  ///< time of consecutive refused comparisons
+  double raw_change2_ = 0.0;  ///< forgetting sums of the squared |m| / |m - b| changes, uT^2
+  double cor_change2_ = 0.0;
+  double change_weight_ = 0.0;  ///< the same sum of the weights (for the rms)
   bool applied_ = false;
   HardIronReport report_;
 };
