@@ -54,6 +54,9 @@ void HardIronEstimator::reset() {
   b_.setZero();
   P_ = Eigen::Matrix3d::Identity() * (p_.prior_sigma_ut * p_.prior_sigma_ut);
   start_ = Entry{};
+  have_start_ = false;
+  prev_ = Entry{};
+  next_grid_ns_ = 0;
   have_last_ = false;
   last_ns_ = 0;
   q_.setIdentity();
@@ -146,42 +149,75 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
     }
     have_last_ = true;
     last_ns_ = stamp_ns;
-    start_ = {stamp_ns, mag_ut, reading_var(gyro_rps, mag_ut), r_body};
+    have_start_ = false;
+    prev_ = {stamp_ns, mag_ut, 0.0, r_body};
+    int64_t q = stamp_ns / lag_ns_;  // the first multiple of lag_s at or after this stamp
+    if (q * lag_ns_ < stamp_ns) {
+      ++q;
+    }
+    next_grid_ns_ = q * lag_ns_;
+    if (next_grid_ns_ == stamp_ns) {
+      start_ = {stamp_ns, mag_ut, reading_var(gyro_rps, mag_ut), r_body};
+      have_start_ = true;
+      next_grid_ns_ += lag_ns_;
+    }
     return finish(gap ? HardIronStep::kGap : HardIronStep::kWarmingUp);
   }
   last_ns_ = stamp_ns;
-  if (stamp_ns - start_.stamp_ns < lag_ns_) {
-    return finish(HardIronStep::kInterval);  // the per-sample path: nothing else done
+  if (stamp_ns < next_grid_ns_) {
+    prev_.stamp_ns = stamp_ns;  // the per-sample path: the last sample kept, nothing else done
+    prev_.m = mag_ut;
+    prev_.r = r_body;
+    return finish(HardIronStep::kInterval);
   }
-  if (!r_body.allFinite()) {
+  if (!r_body.allFinite() || !prev_.r.allFinite()) {
     return finish(HardIronStep::kRejectedInput);  // the caller's orientation, used only here
+  }
+  // The reading at the grid instant (a multiple of lag_s), interpolated between the last two
+  // samples: the same instants and, for a linearly resampled stream, the same readings at any
+  // sample rate (the pairs compared do not depend on where the samples fall).
+  const int64_t g = next_grid_ns_;
+  const double f = static_cast<double>(g - prev_.stamp_ns) / static_cast<double>(stamp_ns - prev_.stamp_ns);
+  const Eigen::Quaterniond q_prev = Eigen::Quaterniond(prev_.r).normalized();
+  const Eigen::Quaterniond q_now = Eigen::Quaterniond(r_body).normalized();
+  const Eigen::Vector3d m_g = prev_.m + f * (mag_ut - prev_.m);
+  const Entry k{g, m_g, reading_var(gyro_rps, m_g), q_prev.slerp(f, q_now).toRotationMatrix()};
+  prev_ = {stamp_ns, mag_ut, 0.0, r_body};
+  next_grid_ns_ = g + lag_ns_;
+  while (next_grid_ns_ <= stamp_ns) {
+    next_grid_ns_ += lag_ns_;  // (lag_s shorter than a step: the grid instants skipped)
+  }
+  if (!have_start_) {
+    start_ = k;
+    have_start_ = true;
+    return finish(HardIronStep::kInterval);
   }
   // Comparisons do not overlap: the readings between j and k are not used, k starts the next
   // interval, so each reading enters at most two comparisons (as the later, then as the earlier one)
   // and the model errors that persist over an interval are not counted many times over.
   const Entry j = start_;
-  start_ = {stamp_ns, mag_ut, reading_var(gyro_rps, mag_ut), r_body};
+  start_ = k;
   // b's random walk over the interval, added once per comparison (P is constant in between)
   P_.diagonal().array() +=
-      p_.walk_ut_per_sqrt_s * p_.walk_ut_per_sqrt_s * (static_cast<double>(stamp_ns - j.stamp_ns) * 1e-9);
+      p_.walk_ut_per_sqrt_s * p_.walk_ut_per_sqrt_s * (static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9);
   refresh();
   // R_k^T R_j, made a rotation again (the caller's orientation is renormalised only now and then)
-  const Eigen::Quaterniond rel = Eigen::Quaterniond(Eigen::Matrix3d(r_body.transpose() * j.r)).normalized();
+  const Eigen::Quaterniond rel = Eigen::Quaterniond(Eigen::Matrix3d(k.r.transpose() * j.r)).normalized();
   report_.rotation_rad = Eigen::AngleAxisd(rel).angle();
   if (report_.rotation_rad < p_.min_rotation_rad) {
     return finish(HardIronStep::kNotEnoughRotation);
   }
-  consistency(j.m, mag_ut, static_cast<double>(stamp_ns - j.stamp_ns) * 1e-9);
+  consistency(j.m, k.m, static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9);
   const Eigen::Matrix3d C = rel.toRotationMatrix();
   const Eigen::Matrix3d H = Eigen::Matrix3d::Identity() - C;
-  const Eigen::Vector3d r = mag_ut - C * j.m - H * b_;
+  const Eigen::Vector3d r = k.m - C * j.m - H * b_;
   // Both readings carry their own variance per axis: cov(m_k - C m_j) = (var_k + var_j) I.
   const Eigen::Matrix3d R = Eigen::Matrix3d::Identity() * (start_.var_ut2 + j.var_ut2);
   const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
   const Eigen::LDLT<Eigen::Matrix3d> ldlt(S);
   report_.nis = r.dot(ldlt.solve(r));
   if (!(report_.nis <= p_.gate_chi2)) {
-    refused_s_ += static_cast<double>(stamp_ns - j.stamp_ns) * 1e-9;
+    refused_s_ += static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9;
     if (refused_s_ >= p_.reset_after_s) {
       refused_s_ = 0.0;
       P_ = Eigen::Matrix3d::Identity() * (p_.prior_sigma_ut * p_.prior_sigma_ut);

@@ -132,6 +132,9 @@ class HardIronEstimator {
   Eigen::Vector3d b_ = Eigen::Vector3d::Zero();
   Eigen::Matrix3d P_;
   Entry start_;  ///< the reading that starts the current interval
+  bool have_start_ = false;
+  Entry prev_;   ///< the last usable sample (a grid reading is interpolated between it and the next)
+  int64_t next_grid_ns_ = 0;  ///< the next instant (a multiple of lag_s) a reading is taken at
   bool have_last_ = false;
   int64_t last_ns_ = 0;
   /// update(stamp, gyro, mag)'s own gyro integration (trapezoidal rate; arbitrary start)
