@@ -924,5 +924,61 @@ TEST(Process, GivenARecordingWithImuInfoWhenAFilterRunsAloneThenItIsOfferedTheRe
   EXPECT_DOUBLE_EQ(offered[0], kRecordedDelayS);
 }
 
+/// Fuses the accelerometer at every sample and the magnetometer at even seq only (rejected at odd):
+/// the oracle of what a processed estimate must say it fused.
+class SourceSpyFilter : public AttitudeFilter {
+ public:
+  bool update(const ImuSample& s) override {
+    seq_ = s.seq;
+    return true;
+  }
+  [[nodiscard]] Eigen::Quaterniond q_world_body() const override { return Eigen::Quaterniond::Identity(); }
+  [[nodiscard]] bool initialized() const override { return true; }
+  void reset() override {}
+  [[nodiscard]] SourceReports sources() const override {
+    SourceReport accel(poise::Source::kAccel);
+    accel.mark_fused(0);
+    SourceReport mag(poise::Source::kMag);
+    if (seq_ % 2 == 0) {
+      mag.mark_fused(0);
+    } else {
+      mag.mark_rejected("disturbed");
+    }
+    return {accel, mag};
+  }
+
+ private:
+  uint32_t seq_ = 0;
+};
+
+TEST(Process, GivenAFilterRunAloneWhenItReportsItsSourcesThenEachEstimateSaysWhatItFusedAsTheLiveNodeDoes) {
+  // GIVEN a recording of 500 IMU samples and a filter whose magnetometer is fused at even seq only
+  const std::string dir = testing::cases_dir("process_sources");
+  const std::string input = dir + "/input.mcap";
+  write_input(input);
+  // WHEN it runs alone (`poise process --filter`)
+  const ProcessStats stats = process_alone(input, dir + "/out.mcap", "spy", std::make_unique<SourceSpyFilter>());
+  // THEN every processed estimate carries mag_trusted and sources_fused as its sample's report says
+  const McapReader out = McapReader::open_file(dir + "/out.mcap");
+  MessageCursor cursor = out.messages();
+  uint64_t estimates = 0;
+  uint64_t trusted = 0;
+  while (const MessageView* m = cursor.next()) {
+    if (m->channel->topic != "processed/attitude/spy") {
+      continue;
+    }
+    msg::AttitudeEstimate e;
+    ASSERT_TRUE(decode_attitude(*m, e));
+    ++estimates;
+    const bool even = e.header().seq() % 2 == 0;
+    EXPECT_EQ(e.mag_trusted(), even) << "seq " << e.header().seq();
+    EXPECT_EQ((e.sources_fused() & msg::SOURCE_MAG) != 0, even) << "seq " << e.header().seq();
+    EXPECT_NE(e.sources_fused() & msg::SOURCE_ACCEL, 0u) << "seq " << e.header().seq();
+    trusted += e.mag_trusted() ? 1 : 0;
+  }
+  EXPECT_EQ(estimates, stats.estimates.at("spy"));
+  EXPECT_EQ(trusted, static_cast<uint64_t>(kImu / 2));  // seq 0..499: 250 even
+}
+
 }  // namespace
 }  // namespace poise::record

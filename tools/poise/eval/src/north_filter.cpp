@@ -26,6 +26,7 @@ class NorthFilter : public AttitudeFilter, public TrialInputs {
     return p ? std::optional<Eigen::Matrix3d>(north_.to_true(*p)) : std::nullopt;
   }
   [[nodiscard]] HeadingStatus heading_status() const override { return inner_->heading_status(); }
+  [[nodiscard]] SourceReports sources() const override { return inner_->sources(); }
   void begin_trial(const BroadTrial& trial) override {
     if (auto* inputs = dynamic_cast<TrialInputs*>(inner_.get())) {
       inputs->begin_trial(trial);

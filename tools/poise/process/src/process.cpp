@@ -2,6 +2,7 @@
 
 #include "poise/core/attitude.h"
 #include "poise/dds/convert.h"
+#include "poise/nodes/reports.h"
 #include "poise/record/idl_schema.h"
 #include "poise/record/mcap.h"
 #include "decode.h"
@@ -54,9 +55,15 @@ class FilterStep : public nodes::AttitudeStep {
       report.covariance(0, 0) = -1.0;  // unknown (REP 145)
     }
     report.heading_status = filter_->heading_status();
+    const SourceReports sources = filter_->sources();  // as the filter's live node fills them
+    report.sources_fused = nodes::sources_fused_bits(sources);
+    report.mag_trusted = nodes::source_fused(sources, poise::Source::kMag);
     return true;
   }
-  void diagnostics(nodes::DiagnosticsReport& /*diag*/) const override {}
+  void diagnostics(nodes::DiagnosticsReport& diag) const override {
+    diag.sources = filter_->sources();
+    diag.counters = filter_->rejections();
+  }
   /// A delay recorded on `imu_info`: the filter takes it unless its configuration set one.
   bool published_imu_delay(double delay_s, const std::string& /*what*/) override {
     return filter_->take_published_imu_delay(delay_s);

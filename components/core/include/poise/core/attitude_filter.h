@@ -5,6 +5,7 @@
 #pragma once
 
 #include "poise/core/heading_status.h"
+#include "poise/core/source_report.h"
 #include "poise/core/types.h"
 
 #include <Eigen/Geometry>
@@ -43,6 +44,10 @@ class AttitudeFilter {
   /// stretch (the heading part of attitude_covariance() then says how far it may be off),
   /// kNoReference for filters without an absolute heading (the default).
   [[nodiscard]] virtual HeadingStatus heading_status() const { return HeadingStatus::kNoReference; }
+  /// What the last sample did with each input and why (poise/core/source_report.h): the same
+  /// reports the filter's node publishes, so an offline run (`poise process --filter`) says
+  /// which sources it fused as the live node does. Empty when the filter keeps none.
+  [[nodiscard]] virtual SourceReports sources() const { return {}; }
   /// The group delay the IMU's driver published for the samples (`imu_info`), s: a filter whose
   /// configuration did not set its delay uses it from the next sample on. True when it does;
   /// false when the filter has no delay model or its configuration set the delay (it wins).

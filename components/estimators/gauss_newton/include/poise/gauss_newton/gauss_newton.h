@@ -224,6 +224,7 @@ class GaussNewtonFilter : public AttitudeFilter {
     return gn_.attitude_covariance();
   }
   [[nodiscard]] HeadingStatus heading_status() const override { return gn_.heading_status(); }
+  [[nodiscard]] SourceReports sources() const override { return gn_.sources(); }
   [[nodiscard]] const GaussNewton& core() const { return gn_; }
 
  private:

@@ -584,6 +584,7 @@ class ParallelKfFilter : public AttitudeFilter {
     return kf_.attitude_covariance(kf_.output());
   }
   [[nodiscard]] HeadingStatus heading_status() const override { return kf_.heading_status(); }
+  [[nodiscard]] SourceReports sources() const override { return kf_.sources(); }
   /// Used unless imu_delay_s was configured (not NaN); throws std::invalid_argument outside
   /// [0, 0.05] s (set_imu_delay_s).
   bool take_published_imu_delay(double delay_s) override {

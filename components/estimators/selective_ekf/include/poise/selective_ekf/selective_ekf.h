@@ -686,6 +686,7 @@ class SelectiveEkfFilter : public AttitudeFilter {
   [[nodiscard]] std::map<std::string, uint64_t> rejections() const override;
   [[nodiscard]] std::optional<Eigen::Matrix3d> attitude_covariance() const override;
   [[nodiscard]] HeadingStatus heading_status() const override { return ekf_.heading_status(); }
+  [[nodiscard]] SourceReports sources() const override { return selective_ekf_sources(ekf_); }
   /// Used unless imu_delay_s was configured (not NaN): the state's time is the stamp minus the
   /// delay, so a running filter restarts on it (as the node does); throws std::invalid_argument
   /// outside [0, 0.05] s (set_imu_delay_s).
