@@ -244,10 +244,19 @@ TEST(HardIron, GivenHostileReadingsWhenFedThenEachIsRejectedCountedAndTheEstimat
     x.gyro_rps = w;
     EXPECT_EQ(h.update(x).step, HardIronStep::kRejectedInput) << w.transpose();
   }
+  // stamps no sensor clock reads (before 0; the year 292277026596, INT64_MAX ns): refused as the
+  // cores' check_imu_sample refuses them, before any stamp difference is formed
+  const int64_t hostile_stamp[] = {-1, std::numeric_limits<int64_t>::max(), std::numeric_limits<int64_t>::min()};
+  for (const int64_t t : hostile_stamp) {
+    ImuSample x = s;
+    x.stamp_ns = t;
+    EXPECT_EQ(h.update(x).step, HardIronStep::kRejectedInput) << t;
+    EXPECT_EQ(h.update(t, Eigen::Matrix3d::Identity(), x.gyro_rps, x.mag_ut).step, HardIronStep::kRejectedInput) << t;
+  }
   ImuSample no_mag = s;
   no_mag.has_mag = false;
   EXPECT_EQ(h.update(no_mag).step, HardIronStep::kNoMagnetometer);
-  EXPECT_EQ(h.report().count(HardIronStep::kRejectedInput), 7U);
+  EXPECT_EQ(h.report().count(HardIronStep::kRejectedInput), 13U);
   EXPECT_EQ(h.offset_ut(), b);
   EXPECT_EQ(h.covariance(), P);
   // A stamp that goes back is a gap, not a comparison.
@@ -269,6 +278,13 @@ TEST(HardIronParams, GivenABadValueOfAKeyWhenConstructedThenTheMessageNamesIt) {
   HardIronParams q;
   q.lag_s = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THROW(HardIronEstimator{q}, std::invalid_argument);
+  // a lag below 1 ms would make the grid of readings a zero (or a per-ns) step; squared 1e308s overflow
+  HardIronParams tiny;
+  tiny.lag_s = 1e-12;
+  EXPECT_THROW(HardIronEstimator{tiny}, std::invalid_argument);
+  HardIronParams huge;
+  huge.prior_sigma_ut = 1e308;
+  EXPECT_THROW(HardIronEstimator{huge}, std::invalid_argument);
 }
 
 }  // namespace

@@ -26,6 +26,17 @@ void HardIronParams::validate(const char* filter) const {
   check.require(lag_s < 100.0, "lag_s", "< 100 (s)");
   check.positive(max_mag_ut, "max_mag_ut", "uT");
   check.positive(max_gyro_rps, "max_gyro_rps", "rad/s");
+  // A grid of readings lag_s apart in ns, and squares of the uT / rad/s values: bounded so that
+  // neither divides by a zero step, loops per grid instant nor overflows to inf.
+  check.require(lag_s >= 0.001, "lag_s", ">= 0.001 (s)");
+  check.require(prior_sigma_ut <= 1e4, "prior_sigma_ut", "<= 1e4 (uT)");
+  check.require(noise_ut <= 1e4, "noise_ut", "<= 1e4 (uT)");
+  check.require(timing_s <= 1.0, "timing_s", "<= 1 (s)");
+  check.require(walk_ut_per_sqrt_s <= 1e3, "walk_ut_per_sqrt_s", "<= 1e3 (uT/sqrt(s))");
+  check.require(converged_sigma_ut <= 1e4, "converged_sigma_ut", "<= 1e4 (uT)");
+  check.require(min_applied_ut <= 1e4, "min_applied_ut", "<= 1e4 (uT)");
+  check.require(max_mag_ut <= 1e6, "max_mag_ut", "<= 1e6 (uT)");
+  check.require(max_gyro_rps <= 1e4, "max_gyro_rps", "<= 1e4 (rad/s)");
 }
 
 const char* to_string(HardIronStep s) {
@@ -83,10 +94,11 @@ void HardIronEstimator::refresh() {
   applied_ = report_.converged && b_.squaredNorm() > p_.min_applied_ut * p_.min_applied_ut && report_.consistent;
 }
 
-bool HardIronEstimator::usable(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const {
+bool HardIronEstimator::usable(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const {
   // Squared norms: a NaN gives NaN, an infinite or huge (1e308: overflows) component +inf, and
-  // both fail the comparison, so no finiteness check is needed before them.
-  return mag_ut.squaredNorm() <= p_.max_mag_ut * p_.max_mag_ut &&
+  // both fail the comparison, so no finiteness check is needed before them. The stamp bound
+  // (as check_imu_sample's) keeps every stamp difference and the grid of readings in int64.
+  return stamp_ns >= 0 && stamp_ns <= kMaxStampNs && mag_ut.squaredNorm() <= p_.max_mag_ut * p_.max_mag_ut &&
          gyro_rps.squaredNorm() <= p_.max_gyro_rps * p_.max_gyro_rps;
 }
 
@@ -119,7 +131,7 @@ const HardIronReport& HardIronEstimator::update(const ImuSample& s) {
 
 const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps,
                                                 const Eigen::Vector3d& mag_ut) {
-  if (!usable(gyro_rps, mag_ut)) {
+  if (!usable(stamp_ns, gyro_rps, mag_ut)) {
     return finish(HardIronStep::kRejectedInput);  // nothing kept: the next step's rate spans it
   }
   // Orientation from the gyro (trapezoidal rate), body to an arbitrary fixed frame; a gap is
@@ -138,7 +150,7 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::V
 
 const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::Matrix3d& r_body,
                                                 const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) {
-  if (!usable(gyro_rps, mag_ut)) {
+  if (!usable(stamp_ns, gyro_rps, mag_ut)) {
     return finish(HardIronStep::kRejectedInput);
   }
   const double dt = have_last_ ? static_cast<double>(stamp_ns - last_ns_) * 1e-9 : 0.0;
@@ -183,10 +195,8 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   const Eigen::Vector3d m_g = prev_.m + f * (mag_ut - prev_.m);
   const Entry k{g, m_g, reading_var(gyro_rps, m_g), q_prev.slerp(f, q_now).toRotationMatrix()};
   prev_ = {stamp_ns, mag_ut, 0.0, r_body};
-  next_grid_ns_ = g + lag_ns_;
-  while (next_grid_ns_ <= stamp_ns) {
-    next_grid_ns_ += lag_ns_;  // (lag_s shorter than a step: the grid instants skipped)
-  }
+  // the next grid instant after this sample (lag_s shorter than a step: the instants between skipped)
+  next_grid_ns_ = g + ((stamp_ns - g) / lag_ns_ + 1) * lag_ns_;
   if (!have_start_) {
     start_ = k;
     have_start_ = true;
@@ -212,7 +222,7 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   const Eigen::Matrix3d H = Eigen::Matrix3d::Identity() - C;
   const Eigen::Vector3d r = k.m - C * j.m - H * b_;
   // Both readings carry their own variance per axis: cov(m_k - C m_j) = (var_k + var_j) I.
-  const Eigen::Matrix3d R = Eigen::Matrix3d::Identity() * (start_.var_ut2 + j.var_ut2);
+  const Eigen::Matrix3d R = Eigen::Matrix3d::Identity() * (k.var_ut2 + j.var_ut2);
   const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
   const Eigen::LDLT<Eigen::Matrix3d> ldlt(S);
   report_.nis = r.dot(ldlt.solve(r));

@@ -28,7 +28,7 @@ struct HardIronParams {
   /// turns at |w| is off by |w| timing_s |m| (added to noise_ut in quadrature, per reading)
   double timing_s = 0.002;
   double walk_ut_per_sqrt_s = 0.05;   ///< random walk of b (slow drift: temperature), uT/sqrt(s)
-  double lag_s = 0.25;                ///< interval between the two readings compared, s
+  double lag_s = 0.25;                ///< interval between the two readings compared, s (0.001-100)
   double min_rotation_rad = 0.2;      ///< least rotation over lag_s for an update, rad
   double gate_chi2 = 16.27;           ///< innovation gate (3 dof, 99.9 %)
   double reset_after_s = 0.5;         ///< refused innovations this long in a row: b learnt again, s
@@ -63,7 +63,7 @@ enum class HardIronStep {
   kGated,            ///< innovation refused by the chi-square gate
   kReset,            ///< refused for reset_after_s: the covariance reopened (offset changed)
   kGap,              ///< stamp gap beyond max_dt_s (or not increasing): the interval starts again
-  kRejectedInput,    ///< non-finite or out-of-range reading: nothing used, counted
+  kRejectedInput,    ///< non-finite or out-of-range reading or stamp (< 0, > kMaxStampNs): nothing used, counted
   kNoMagnetometer,   ///< the sample has no magnetometer (or no gyro)
   kCount,            ///< number of reasons (not a reason)
 };
@@ -124,7 +124,7 @@ class HardIronEstimator {
   /// Adds one comparison's |m| and |m - b| changes (consistency_tau_s) and refreshes.
   void consistency(const Eigen::Vector3d& m_j, const Eigen::Vector3d& m_k, double interval_s);
   void refresh();  ///< converged and applied from b_ and P_ (called where they change, not per sample)
-  [[nodiscard]] bool usable(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
+  [[nodiscard]] bool usable(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
   [[nodiscard]] double reading_var(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
 
   HardIronParams p_;
