@@ -26,11 +26,14 @@ constexpr double kInitS = 5.0;                 // s allowed for start-up converg
 constexpr double kDisturbanceTolUt = 2.0;      // uT, disturbance estimate vs injected (hold phase)
 constexpr double kHeadingTolMagnetDeg = 3.0;   // deg, heading while the magnet is near (default)
 constexpr double kTiltVarianceStable = 2.0;     // the accelerometer keeps the tilt variance
-// Without the magnetometer for kNoMagS, the heading variance must grow by at least the gyro noise
-// KF2 models integrated over that time (sigma_G^2 T, sigma_G = sigma_gyro_heading_rps as a rate
-// noise density): the least a gyro-only heading accumulates. A growth, not a ratio: the variance it
-// starts from holds the decaying error past bias errors left (the lag model), which depends on when
-// rest was detected (x86-64 and arm64 differ there: 1.6e-4 / 2.4e-4 rad^2).
+// Without the magnetometer for kNoMagS, the heading variance must grow by at least sigma_G^2 T:
+// what a heading integrated from a gyro with a white rate noise of density sigma_G (the default
+// sigma_gyro_heading_rps, 0.05 deg/s, read as rad/s/sqrt(Hz)) accumulates, a floor no gyro-only
+// heading can beat. (KF2's own process noise, h^2 sigma_G^2 per step, adds only h T sigma_G^2;
+// the growth that passes the floor comes from the vertical bias error the filter carries.) A
+// growth, not a ratio: the variance it starts from holds the decaying error past bias errors
+// left (the lag model), which depends on when rest was detected (x86-64 and arm64 differ there:
+// 1.6e-4 / 2.4e-4 rad^2).
 constexpr double kNoMagS = 20.0;
 
 struct RunStats {

@@ -40,13 +40,14 @@
 //   - soft inflation of M2 as the field approaches the gate (mag_soft_weight, off: no gain);
 //   - a hard-iron offset learnt online (hard_iron, poise/core/hard_iron.h: a magnet fixed to the
 //     sensor) from the bias-corrected gyro and the raw s_M, removed from the s_M the gate and KF2
-//     see once known and above 5 uT; the heading variance then carries its uncertainty;
+//     see once known, above 5 uT and consistent (removing it steadies the field's magnitude over
+//     rotation); the heading variance then carries its uncertainty;
 //   - exact rotation propagation, renormalisation, c_a/c_d defined at a reference rate.
 // Measured on the 19 BROAD trials in ../shared/broad (mean total RMSE, undisturbed / disturbed):
 //   paper 11.6 / 16.0 deg (first-order propagation lets |sZ| grow without bound at ~1000 deg/s),
-//   default with BROAD's calibrated IMU delay (imu_delay_s 4.18 ms) 1.149 / 1.507 deg in-sample
-//   (1.151 / 1.870 without the hard-iron offset, whose threshold chosen leave-one-trial-out gives
-//   1.149 / 1.641); with no delay known (half a sample assumed) 1.239 / 1.607 (docs/ESTIMATORS.md). The Gauss-Newton baseline: 34.4 / 62.4 deg.
+//   default with BROAD's calibrated IMU delay (imu_delay_s 4.18 ms) 1.151 / 1.454 deg in-sample,
+//   1.194 / 1.463 leave-one-trial-out cross-validated (1.151 / 1.870 without the hard-iron
+//   offset); with no delay known (half a sample assumed) 1.240 / 1.556 (docs/ESTIMATORS.md). The Gauss-Newton baseline: 34.4 / 62.4 deg.
 // Bad input (NaN, zero vectors, non-monotonic stamps, gaps) is rejected and counted; the state is
 // untouched (a gap re-anchors time).
 // 6-axis input (ImuSample::has_mag false, the default: a sample has a magnetometer only when its
@@ -215,9 +216,9 @@ struct ParallelKfParams {
   // --- hard-iron offset (extension; poise/core/hard_iron.h)
   /// Learn a body-fixed field offset b online (a magnet attached to the sensor) from the
   /// bias-corrected gyro and the raw magnetometer, and remove it from the reading the gate and
-  /// KF2 see once it is known (every axis' sigma < converged_sigma_ut) and |b| >
-  /// min_applied_ut; while removed, the heading variance carries b's remaining uncertainty.
-  /// BROAD (docs/ESTIMATORS.md "Hard-iron offset"): 1.151 / 1.870 -> 1.149 / 1.508 deg in-sample.
+  /// KF2 see once it is known (every axis' sigma < converged_sigma_ut), |b| > min_applied_ut and
+  /// consistent (HardIronParams::consistency_tau_s); while removed, the heading variance carries b's remaining uncertainty.
+  /// BROAD (docs/ESTIMATORS.md "Hard-iron offset"): 1.151 / 1.870 -> 1.151 / 1.454 deg in-sample.
   bool hard_iron = true;
   /// The estimator's own parameters (YAML `hard_iron_estimator: {key: value}`, same key names).
   HardIronParams hard_iron_estimator;
@@ -440,8 +441,8 @@ class ParallelKf {
   ///   both    + (dt^2 / 12) (R w)(R w)^T while imu_delay_s is not known (NaN): the output is
   ///             predicted over half a sample, the true delay taken as uniform over none to one
   ///             sample; its error turns the attitude about the rate axis w;
-  ///   heading + x^T P_b x / (m cos(dip))^2 while the hard-iron offset is removed (hard_iron): its
-  ///             estimate's error (covariance P_b, body) stays in every reading; its horizontal
+  ///   heading + x^T P_hi x / (m cos(dip))^2 while the hard-iron offset is removed (hard_iron): its
+  ///             estimate's error (covariance P_hi, body, uT^2) stays in every reading; its horizontal
   ///             part across the field (x, body: up x sX' normalised) turns the heading by
   ///             e.x / B_h, and a constant error is not averaged out by KF2's lag;
   ///   heading + pi^2 / 3 (a heading uniform over +-180 deg) while the field reference is not
