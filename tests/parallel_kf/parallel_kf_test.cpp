@@ -580,8 +580,54 @@ TEST(ParallelKfParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorNames
     {"sigma_mag_ut", [](ParallelKfParams& p) { p.sigma_mag_ut = std::nan(""); }},
     {"mag_norm_tol", [](ParallelKfParams& p) { p.mag_norm_tol = std::numeric_limits<double>::infinity(); }},
     {"accel_lowpass_order", [](ParallelKfParams& p) { p.accel_lowpass_order = 3; }},
-    {"limits.max_dt_s", [](ParallelKfParams& p) { p.limits.max_dt_s = -1.0; }}
+    {"limits.max_dt_s", [](ParallelKfParams& p) { p.limits.max_dt_s = -1.0; }},
+    {"gyro_bias_walk_rps_per_sqrt_s", [](ParallelKfParams& p) { p.gyro_bias_walk_rps_per_sqrt_s = -1e-5; }},
+    {"gyro_bias_walk_rps_per_sqrt_s", [](ParallelKfParams& p) { p.gyro_bias_walk_rps_per_sqrt_s = 1e308; }},
+    {"gyro_bias_walk_rps_per_sqrt_s",
+     [](ParallelKfParams& p) { p.gyro_bias_walk_rps_per_sqrt_s = std::numeric_limits<double>::infinity(); }}
   }, [](const ParallelKfParams& p) { ParallelKf f(p); });
+}
+
+// The gyro's bias walk is the sensor's figure: null (or absent) = not known, a number in
+// [0, 0.01] rad/s/sqrt(s) is taken, anything else is refused naming the key. Only the published
+// covariance reads it: the estimate is the same bit for bit whatever its value.
+TEST(ParallelKfParams, GivenTheGyroBiasWalkInAFileWhenLoadedThenNullIsNotKnownAHostileValueIsRefusedAndTheEstimateIgnoresIt) {
+  const std::string path = ::testing::TempDir() + "/pkf_gyro_bias_walk.yaml";
+  auto load = [&](const std::string& text) {
+    std::FILE* f = std::fopen(path.c_str(), "w");
+    EXPECT_NE(f, nullptr);
+    std::fputs(text.c_str(), f);
+    std::fclose(f);
+    return load_parallel_kf_params(path);
+  };
+  EXPECT_TRUE(std::isnan(ParallelKfParams::defaults().gyro_bias_walk_rps_per_sqrt_s));
+  EXPECT_TRUE(std::isnan(load("parallel_kf:\n  gyro_bias_walk_rps_per_sqrt_s: ~\n").gyro_bias_walk_rps_per_sqrt_s));
+  EXPECT_EQ(load("parallel_kf:\n  gyro_bias_walk_rps_per_sqrt_s: 2.0e-5\n").gyro_bias_walk_rps_per_sqrt_s, 2.0e-5);
+  EXPECT_EQ(load("parallel_kf:\n  gyro_bias_walk_rps_per_sqrt_s: 0\n").gyro_bias_walk_rps_per_sqrt_s, 0.0);
+  for (const char* bad : {"-1e-6", "1e308", ".inf", "fast", "[1, 2]"}) {
+    const std::string msg =
+        testing::error_message([&] { load(std::string("parallel_kf:\n  gyro_bias_walk_rps_per_sqrt_s: ") + bad + "\n"); });
+    EXPECT_NE(msg.find("gyro_bias_walk_rps_per_sqrt_s"), std::string::npos) << bad << " -> '" << msg << "'";
+  }
+  // the estimate is the same bit for bit whatever the walk (oracle: the default filter's)
+  sim::SensorSimulator a(sim::make_scenario("random_motion", 200.0, 4));
+  ParallelKf unknown{ParallelKfParams::defaults()};
+  ParallelKfParams none = ParallelKfParams::defaults();
+  none.gyro_bias_walk_rps_per_sqrt_s = 0.0;
+  ParallelKf known(none);
+  double heading_var_unknown = 0.0;
+  double heading_var_none = 0.0;
+  while (!a.done()) {
+    const sim::SimSample s = a.next();
+    ASSERT_EQ(unknown.update(s.imu), known.update(s.imu));
+    ASSERT_EQ(unknown.q_world_body().coeffs(), known.q_world_body().coeffs());
+    if (unknown.initialized()) {
+      heading_var_unknown = unknown.attitude_covariance(unknown.output())(2, 2);
+      heading_var_none = known.attitude_covariance(known.output())(2, 2);
+    }
+  }
+  // and a gyro whose bias does not walk publishes less heading variance than an unknown one
+  EXPECT_LT(heading_var_none, heading_var_unknown);
 }
 
 }  // namespace

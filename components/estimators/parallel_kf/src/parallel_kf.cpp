@@ -18,6 +18,9 @@ constexpr double kBiasPeriodS = 0.04;  // the bias filter runs once per window o
 // velocity change dv, which the reference holds as about dv / (this * tau), a tenth of what the
 // tilt's low-pass holds.
 constexpr double kAccelReferenceTaus = 10.0;
+// The largest gyro bias random walk accepted, rad/s/sqrt(s) (0.57 deg/s per sqrt(s): a bias that
+// moves by degrees per second within seconds is no longer a bias a filter can learn).
+constexpr double kMaxGyroBiasWalk = 0.01;
 
 }  // namespace
 
@@ -74,6 +77,9 @@ void ParallelKfParams::validate() const {
   check.positive(bias_sigma_rest_rps, "bias_sigma_rest_rps", "rad/s");
   check.positive(bias_drift_rps, "bias_drift_rps", "rad/s");
   check.positive(bias_forgetting_time_s, "bias_forgetting_time_s", "s");
+  check.require(std::isnan(gyro_bias_walk_rps_per_sqrt_s) ||
+                    (gyro_bias_walk_rps_per_sqrt_s >= 0.0 && gyro_bias_walk_rps_per_sqrt_s <= kMaxGyroBiasWalk),
+                "gyro_bias_walk_rps_per_sqrt_s", "in [0, 0.01] (rad/s/sqrt(s)), or null (not known: the design drift)");
   check.non_negative(motion_bias_sigma_rps, "motion_bias_sigma_rps", "rad/s, 0 = off");
   check.positive(motion_bias_clip_rps, "motion_bias_clip_rps", "rad/s");
   check.require(motion_gyro_scale_error >= 0.0 && motion_gyro_scale_error < 1.0, "motion_gyro_scale_error", "in [0, 1)");
@@ -215,10 +221,14 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   if (p_.bias_estimation) {
     s_.mb_time += dt;
     if (s_.mb_time >= kBiasPeriodS) {
+      const Eigen::Vector3d bias_before = s_.bias;
       bias_update();
       const double bn = s_.bias.norm();
       if (bn > p_.max_bias_rps) {
         s_.bias *= p_.max_bias_rps / bn;
+      }
+      if (p_.accel_lowpass_tau_s > 0.0) {
+        external_accel_return(s_.bias - bias_before);
       }
     }
   }
@@ -270,6 +280,10 @@ void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
   s_.accel_ref_i = s.accel_mps2;
   s_.accel_bw = Butterworth2<3>(p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : 1.0);
   s_.accel_bw.reset(s.accel_mps2);
+  s_.accel_bw_twin = s_.accel_bw;
+  s_.accel_twin_age.setZero();
+  s_.accel_ref_age.setZero();
+  s_.accel_ref_span_s = 0.0;
   s_.initialized = true;
 }
 
@@ -278,19 +292,43 @@ void ParallelKf::external_accel_step(const Eigen::Vector3d& accel, double dt) {
   // accelerometer averaged there slowly (time constant kAccelReferenceTaus tau) is gravity: what
   // the tilt's low-pass holds beyond it, across it, is the horizontal external acceleration that
   // low-pass let through, which tilts the estimate by itself over g (a vertical one only changes
-  // the magnitude, which the old term read). The reference lags the frame's turn by the bias
-  // error more than the tilt's low-pass does: that difference counts too (conservative while the
-  // bias is being learnt).
+  // the magnitude, which the old term read). The frame's turn by past bias errors is taken out of
+  // both (external_accel_return; the estimate's own error from it is lag_cov's); what the present
+  // bias error turns, the reference lags more than the low-pass does, and that still counts. The
+  // low-pass is a twin of the tilt's (the tilt's own state is the estimate's, never turned); a
+  // first-order one (accel_lowpass_order 1) is the tilt's itself, not turned.
   const double tau = p_.accel_lowpass_tau_s;
   const double tau_ref = kAccelReferenceTaus * tau;
-  s_.accel_ref_i += (dt / (tau_ref + dt)) * (s_.r_ib * accel - s_.accel_ref_i);
+  const Eigen::Vector3d a_i = s_.r_ib * accel;
+  // the mean of every sample so far until there are tau_ref seconds of them (a reference started on
+  // the first sample alone would hold its noise, e^(-t / tau_ref) of it, as a horizontal acceleration)
+  const double k_ref = dt / (std::min(s_.accel_ref_span_s, tau_ref) + dt);
+  s_.accel_ref_span_s += dt;
+  s_.accel_ref_i += k_ref * (a_i - s_.accel_ref_i);
+  // every held sample's integral of r_ib grows by r_ib dt (the weights sum to one), then the new
+  // sample (integral 0) takes its weight: the twin's mean age is its ramp lag tau
+  s_.accel_ref_age = (1.0 - k_ref) * (s_.accel_ref_age + dt * s_.r_ib);
+  s_.accel_twin_age = (1.0 - dt / (tau + dt)) * (s_.accel_twin_age + dt * s_.r_ib);
+  const Eigen::Vector3d& twin =
+      p_.accel_lowpass_order == 2 ? s_.accel_bw_twin.step(a_i, dt) : s_.lp_accel_i;
   Eigen::Vector3d up;
   if (!safe_normalize(s_.accel_ref_i, up)) {
     return;
   }
-  Eigen::Vector3d d = s_.lp_accel_i - s_.accel_ref_i;
+  Eigen::Vector3d d = twin - s_.accel_ref_i;
   d -= d.dot(up) * up;
   s_.accel_h_cov_i += (dt / (tau + dt)) * (d * d.transpose() - s_.accel_h_cov_i);
+}
+
+void ParallelKf::external_accel_return(const Eigen::Vector3d& db) {
+  // The frame r_ib was propagated with the old bias: with the new one (rate lower by db) a sample
+  // taken at t' would have been turned by phi = int_t'^t r_ib db into today's frame, so a low-passed
+  // vector y (its samples about y) turns by (sum of weight times that integral) db x y
+  if (db.isZero(0.0)) {
+    return;
+  }
+  s_.accel_bw_twin.transform(rot_exp(s_.accel_twin_age * db));
+  s_.accel_ref_i = rot_exp(s_.accel_ref_age * db) * s_.accel_ref_i;
 }
 
 double ParallelKf::motion_bias_noise(double dt) const {
@@ -371,7 +409,9 @@ void ParallelKf::bias_update() {
   const double v = p_.bias_drift_rps * p_.bias_drift_rps * t / p_.bias_forgetting_time_s;
   const double var_max = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
   s_.bias_cov.diagonal().array() += v;
-  s_.bias_err_cov.diagonal().array() += v;
+  // the bias estimate's real error grows by the gyro's own bias walk when the sensor says it
+  const double walk = p_.gyro_bias_walk_rps_per_sqrt_s;
+  s_.bias_err_cov.diagonal().array() += std::isnan(walk) ? v : walk * walk * t;
   for (int i = 0; i < 3; ++i) {  // never less certain than at start (keeps P symmetric, PSD)
     if (s_.bias_cov(i, i) > var_max) {
       const double f = std::sqrt(var_max / s_.bias_cov(i, i));

@@ -59,6 +59,14 @@ class Butterworth2 {
 
   /// Replaces the state by a rest on x (e.g. after the frame of the filtered quantity changed).
   void rest_on(const Vec& x) { reset(x); }
+  /// Applies the linear map m (N x N) to the whole state: afterwards the filter is as if it had
+  /// been fed m x instead of every past x (e.g. the frame of the filtered quantity turned by m).
+  template <typename Map>
+  void transform(const Map& m) {
+    y_ = m * y_;
+    s1_ = m * s1_;
+    s2_ = m * s2_;
+  }
 
  private:
   void coefficients(double dt_s) {

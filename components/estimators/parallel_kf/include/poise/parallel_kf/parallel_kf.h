@@ -165,6 +165,16 @@ struct ParallelKfParams {
   double bias_sigma_rest_rps = 0.03 * kRadPerDeg;  ///< steady-state uncertainty at rest, rad/s. Raising: faster, noisier.
   double bias_drift_rps = 0.1 * kRadPerDeg;        ///< bias change expected over bias_forgetting_time_s, rad/s
   double bias_forgetting_time_s = 100.0;           ///< s
+  /// The gyro's own bias instability, as a random walk of this density, rad/s/sqrt(s): a property
+  /// of the sensor (its Allan deviation's rate random walk K, the +1/2 slope; a simulated gyro
+  /// says what it draws), not of the filter. Only the published covariance uses it: the bias
+  /// estimate's real error (bias_err_cov) grows by its square per second. The estimate is the
+  /// same whatever its value (the bias filter keeps bias_drift_rps per bias_forgetting_time_s,
+  /// its design). NaN (the default; `null` in YAML) = not known: the design drift is taken as
+  /// the real one (bias_drift_rps / sqrt(bias_forgetting_time_s): 0.01 deg/s/sqrt(s), 1.75e-4
+  /// rad/s/sqrt(s)). In [0, 0.01] rad/s/sqrt(s) otherwise (docs/ESTIMATORS.md "The gyro's bias
+  /// walk": where the figure comes from).
+  double gyro_bias_walk_rps_per_sqrt_s = std::nan("");
   /// Gyro bias in motion (0 = off): the same Kalman filter is also measured while moving, by the
   /// rate at which KF1's correction turns sZ (the part of the attitude change that the gyro did
   /// not explain; only the two components perpendicular to gravity are observable), with the lag
@@ -359,6 +369,17 @@ struct ParallelKfState {
   /// acceleration the tilt's low-pass let through), its outer product low-passed over
   /// accel_lowpass_tau_s, inertial frame, (m/s^2)^2
   Eigen::Matrix3d accel_h_cov_i = Eigen::Matrix3d::Zero();
+  /// The tilt's low-pass run again on the same input (accel_bw's twin), for the external
+  /// acceleration term only: it and accel_ref_i are turned by each bias change into the frame the
+  /// new bias would have propagated (external_accel_return), so their difference holds no turn of
+  /// the frame by past bias errors (the estimate's own lag error from them is lag_cov's)
+  Butterworth2<3> accel_bw_twin;
+  /// Per low-pass (the twin, with the tilt's time constant; the reference, kAccelReferenceTaus
+  /// times it): the sum over its samples of weight times the integral of r_ib from the sample to
+  /// now, s: a bias change db turns the low-passed vector y by (this db) x y
+  Eigen::Matrix3d accel_twin_age = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d accel_ref_age = Eigen::Matrix3d::Zero();
+  double accel_ref_span_s = 0.0;  ///< time accel_ref_i has averaged (its window until kAccelReferenceTaus tau), s
   double field_dn_lp = 0.0;    ///< |s_M| - m of the fields used for heading, low-passed over KF2's lag, uT
   double field_dv_lp = 0.0;    ///< m (dip - alpha) of the same, low-passed the same way, uT
   /// The attitude error the bias error has left in the estimate (world frame x, y, z, rad; then
@@ -416,7 +437,10 @@ class ParallelKf {
   ///           + the horizontal external acceleration a_h the low-pass let through, tilting the
   ///             estimate by e_z x a_h / g: the low-passed vector's part across a slow gravity
   ///             reference (the accelerometer averaged over kAccelReferenceTaus tau in the almost
-  ///             inertial frame), its outer product low-passed over tau (external_accel_step); a
+  ///             inertial frame; both it and the low-passed vector, a twin of the tilt's, turned by
+  ///             each bias change into the frame the new bias would have propagated, so the turn of
+  ///             the frame by past bias errors is not read as an acceleration: that error of the
+  ///             estimate is lag_cov's), its outer product low-passed over tau (external_accel_step); a
   ///             vertical acceleration, which only changes the magnitude, does not count (without
   ///             the low-pass: (|s_A| - g)^2 / g^2 per tilt axis, as before);
   ///           + s^2 dtheta_i^2 about each body axis i (world x, y part): a gyro scale error s
@@ -428,7 +452,8 @@ class ParallelKf {
   ///             -tan(dip) times the tilt error about magnetic north (the heading is built from sZ);
   ///           (P_b here is bias_err_cov, the covariance of the bias estimate's real error: the
   ///             bias filter's gains with the rest measurement's noise that of the gyro's white
-  ///             noise, not the larger one the filter is designed with)
+  ///             noise, not the larger one the filter is designed with, growing by the gyro's own
+  ///             bias walk gyro_bias_walk_rps_per_sqrt_s when the sensor says it)
   ///           each diagonal term at least tau^2 P_b (tilt) and P_b,z t^2 (heading; t the time
   ///             since fields last held the heading, each accepted field removing dt / tau_2 of
   ///             it): the bias filter's motion measurements are the lag error's own rate, so its
@@ -519,6 +544,10 @@ class ParallelKf {
   /// The horizontal external acceleration the tilt's low-pass let through (accel_ref_i,
   /// accel_h_cov_i), from the raw accelerometer `accel` (body) of a step of dt; for the covariance.
   void external_accel_step(const Eigen::Vector3d& accel, double dt);
+  /// Turns the twin low-pass and the gravity reference of external_accel_step by a bias change
+  /// db (body, rad/s): the frame the new bias would have propagated, the vectors' samples turned
+  /// by the integral of r_ib db from each sample to now (accel_twin_age, accel_ref_age).
+  void external_accel_return(const Eigen::Vector3d& db);
   [[nodiscard]] double motion_bias_noise(double dt) const;
   /// KF2's correction lag about the vertical for a step of dt, s (0 before a direction exists)
   [[nodiscard]] double heading_lag_s(double dt) const;
