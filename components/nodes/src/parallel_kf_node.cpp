@@ -1,7 +1,9 @@
 // Component `parallel_kf`: the parallel Kalman filter (paper 000) on DDS.
 //   in:  imu (ImuSample)      out: attitude/parallel_kf (AttitudeEstimate), diagnostics
 //   params: preset (default | paper), filter_file (YAML of ParallelKfParams), imu_delay_s (the
-//           IMU's group delay, s; overrides the file), node keys (NodeParams), north
+//           IMU's group delay, s; overrides the file), gyro_bias_walk_rps_per_sqrt_s (the gyro's
+//           own bias walk, rad/s/sqrt(s), for the published covariance; overrides the file; a
+//           simulated IMU's host says its figure), node keys (NodeParams), north
 //           (declination_deg | location + date: estimator_step.h north_keys())
 //   Without imu_delay_s here or in the file, the delay the IMU's driver publishes on `imu_info`
 //   is used (poise/nodes/imu_delay.h).
@@ -18,13 +20,15 @@ namespace {
 ParallelKfParams load_params(const runtime::ComponentSpec& spec, const NorthReference& north) {
   std::vector<std::string> known = NodeParams::keys();
   known.insert(known.end(), north_keys().begin(), north_keys().end());
-  known.insert(known.end(), {"preset", "filter_file", "imu_delay_s"});
+  known.insert(known.end(), {"preset", "filter_file", "imu_delay_s", "gyro_bias_walk_rps_per_sqrt_s"});
   runtime::check_known_params(spec, known);
   const auto file = runtime::param<std::string>(spec, "filter_file", "");
   try {
     ParallelKfParams p = file.empty() ? ParallelKfParams::named(runtime::param<std::string>(spec, "preset", "default"))
                                       : load_parallel_kf_params(file);
     p.imu_delay_s = runtime::param<double>(spec, "imu_delay_s", p.imu_delay_s);
+    p.gyro_bias_walk_rps_per_sqrt_s =
+        runtime::param<double>(spec, "gyro_bias_walk_rps_per_sqrt_s", p.gyro_bias_walk_rps_per_sqrt_s);
     seed_field_reference(north, p.field_magnitude_ut, p.dip_deg);
     p.validate();
     return p;

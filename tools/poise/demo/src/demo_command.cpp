@@ -267,6 +267,12 @@ void run_demo(const DemoOptions& o) {
       if (std::string(f) == "selective_ekf" && o.camera.empty()) {
         params["q_body_camera"] = YAML::Load("[0, 1, 0, 0]");  // the synthetic camera looks down
       }
+      if (std::string(f) == "parallel_kf" && simulated_imu) {
+        // the simulated gyro's own bias walk (its scenario's; 0: a constant bias), for the
+        // published covariance (docs/ESTIMATORS.md "The gyro's bias walk")
+        params["gyro_bias_walk_rps_per_sqrt_s"] =
+            sim::make_scenario(o.scenario, o.rate_hz, o.seed).noise.gyro_bias_walk_rps_per_sqrt_s;
+      }
       spec.components.push_back(component(f, f, params));
       filters.emplace_back(f);
     }
