@@ -38,7 +38,7 @@ constexpr double kChi2Dof2P95 = 5.991;
 // A static sensor with an unknown gyro bias: the almost inertial frame turns by it until rest has
 // taught it (about 0.5 deg/s for 2 s here: 1 deg), and the gravity reference of the
 // external-acceleration term (30 s) held that turn as a horizontal acceleration for a minute, and
-// the noise of the first sample it started on (0.35 deg here; measured 0.23-0.37 deg from 5 to
+// the noise of the first sample it started on (0.35 deg here; measured 0.20-0.37 deg from 6 to
 // 20 s before). Each bias change now turns it into the new bias's frame and it starts as the mean
 // of the samples so far: nothing accelerates, so from kStaticFromS (the twin low-pass has
 // forgotten the start) the term's tilt sigma stays below kMaxExternalAccelSigmaStaticDeg, deg
