@@ -770,7 +770,14 @@ TEST(SelectiveEkfCore, GivenManyUpdatesThenCovarianceStaysSymmetricPositiveDefin
     }
     const auto& p = ekf.state().P;
     ASSERT_EQ((p - p.transpose()).norm(), 0.0);
-    ASSERT_GT(Eigen::SelfAdjointEigenSolver<SelectiveEkf::Mat>(p).eigenvalues().minCoeff(), 0.0);
+    // positive definite once predicted: the low-pass's error e starts known (zero: the low-pass
+    // starts at the first sample, its frame at the body) and is given variance by the first step
+    const double min_eig = Eigen::SelfAdjointEigenSolver<SelectiveEkf::Mat>(p).eigenvalues().minCoeff();
+    if (ekf.state().pre.since_start_s > 0.0) {
+      ASSERT_GT(min_eig, 0.0);
+    } else {
+      ASSERT_GE(min_eig, 0.0);
+    }
   }
   EXPECT_GT(synth.frames_dropped(), 0u);
 }
@@ -842,16 +849,16 @@ TEST(SelectiveEkfCore, GivenUnseenTiltStepWhenDerivedTiltDensityThenTiltFollowsT
     }
   }
   // THEN the tilt follows the accelerometer's low-pass no more slowly than a second lag of the same
-  // time constant, e(t) <= e0 (1 + t / tau) exp(-t / tau) (two equal first-order lags in series),
-  // and never ahead of the low-pass it measures, e(t) >= e0 exp(-t / tau) (that lag alone). (The
-  // old fixed density, a ~6 s tilt time constant, is 3.8 deg at t = tau: above the first bound.)
+  // time constant, e(t) <= e0 (1 + t / tau) exp(-t / tau) (two equal first-order lags in series).
+  // (The old fixed density, a ~6 s tilt time constant, is 3.8 deg at t = tau: above the bound.)
+  // It may get ahead of the uncorrected low-pass, e0 exp(-t / tau): a rotation the gyro did not
+  // see is an error of the low-pass's frame too (the state e), which the tilt rows correct with
+  // the attitude (3 tau: 0.08 deg against the lag's 0.25).
   constexpr double kTolDeg = 0.05;  // rounding of the discrete-time filter against the continuous lags
   ASSERT_EQ(checks.size(), 3u);
   for (const auto& [t, err] : checks) {
     const double two_lags = step_deg * (1.0 + t / tau) * std::exp(-t / tau);
-    const double one_lag = step_deg * std::exp(-t / tau);
     EXPECT_LE(err, two_lags + kTolDeg) << "t = " << t << " s";
-    EXPECT_GE(err, one_lag - kTolDeg) << "t = " << t << " s";
   }
 }
 
@@ -1407,29 +1414,7 @@ TEST(SelectiveEkfCore, GivenAnUnhealthyStateWhenUpdatedThenTheFilterResetsCounts
 }
 
 
-// ------------------------------------------------------------------ tilt rows' bias columns
-// The accelerometer low-pass runs in a frame turned with the estimated bias; at rest its bias lag
-// D (the frame's drift per unit bias error less the low-pass's lag of it) is the first-order
-// step response tau (1 - exp(-t / tau)) on the diagonal. Oracle: that closed form.
-TEST(SelectiveEkfTiltBias, GivenASensorAtRestWhenTheLowPassRunsThenItsBiasLagIsTheFirstOrderStepResponse) {
-  constexpr double kRateHz = 100.0;
-  constexpr double kRunS = 2.0;
-  constexpr double kTolS = 0.01;  // s; the discrete low-pass against the continuous one: ~2e-3 s
-  SelectiveEkfParams p;
-  SelectiveEkf ekf(p);
-  const int n = static_cast<int>(kRunS * kRateHz);
-  for (int k = 0; k <= n; ++k) {
-    ASSERT_TRUE(ekf.update_imu(level_sample(int64_t{1'000'000'000} + k * int64_t{10'000'000})));
-  }
-  const double tau = p.accel_lowpass_tau_s;
-  const double expected = tau * (1.0 - std::exp(-kRunS / tau));
-  const Eigen::Matrix3d d = ekf.state().pre.bias_lag;
-  EXPECT_NEAR(d(0, 0), expected, kTolS);
-  EXPECT_NEAR(d(1, 1), expected, kTolS);
-  EXPECT_NEAR(d(2, 2), expected, kTolS);
-  EXPECT_NEAR((d - d.diagonal().asDiagonal().toDenseMatrix()).cwiseAbs().maxCoeff(), 0.0, kTolS);
-}
-
+// ------------------------------------------------------------------ the tilt rows and the bias
 // A level sensor at rest with a gyro bias the filter does not know (its prior, 0.01 rad/s, covers
 // it), rest detection off so that only the tilt rows can teach the bias. The low-passed up vector
 // lags the frame the bias turns: read as tilt alone, that lag made the tilt confident and wrong.

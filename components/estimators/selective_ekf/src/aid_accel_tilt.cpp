@@ -1,13 +1,14 @@
 // Aid source: the tilt from the accelerometer (ImuMeasurement::kSplit). z_up is the accelerometer
-// low-passed in a gyro-propagated frame (preprocess), u = R(q)^T e_z; two rows e_i . (z_up x u) =
-// e_i . (dth + R_ib^T D db) with e_1, e_2 orthonormal and perpendicular to u: the frame is turned
-// with the estimated bias, so a bias error db turns it by A db (A = integral of R_ib dt) and the
-// low-pass, which lags it, by Lambda db; the low-passed up vector is off the truth by
-// -R_ib^T (A - Lambda) db = -R_ib^T D db (D in SelectiveEkfPreState::bias_lag; at rest
-// tau (1 - exp(-t / tau)) db). Without these bias columns a bias error was read as tilt: tilt
-// overconfident while the bias is learnt (averaged NEES 6.9-8.7 at rest) and the bias taught by
-// external acceleration (docs/SELECTIVE_EKF.md "The tilt rows' bias columns"). Variance per row:
-// the spectral density in.tilt_sigma^2 / dt, times the external-acceleration inflation. Never gated.
+// low-passed in an almost inertial frame R_ib that predict_to turns with the state's rate, exactly
+// as it predicts the attitude (preprocess), u = R(q)^T e_z; two rows e_i . (z_up x u) =
+// e_i . (dth - R_ib^T e) with e_1, e_2 orthonormal and perpendicular to u. The frame's error is
+// the prediction's own (the integrated rate error dw: gyro noise and bias error alike), the same
+// error the attitude integrates; the low-pass keeps it less its low-passed past, which is the
+// state e (kE, selective_ekf.h). Without e the frame's error was read as measurement noise
+// independent of the attitude's, which integrates the same gyro noise (counted twice: averaged
+// NEES 13 at 2 s and 0.05 on tilt from 10 s at rest, docs/SELECTIVE_EKF.md "The low-pass's
+// error as a state"); it also carries what the former bias columns did. Variance per row: the
+// spectral density in.tilt_sigma^2 / dt, times the external-acceleration inflation. Never gated.
 #include "aid.h"
 
 #include <cmath>
@@ -31,15 +32,14 @@ void aid_accel_tilt(const AidContext& c, const ImuInput& in, SourceStatus& st) {
     z_up = in.up_meas;
   }
   const Eigen::Vector3d cr = z_up.cross(u);
-  // bias columns: a bias error db leaves the low-passed up vector turned by -R_ib^T D db against
-  // the truth (the frame drifts by A db, the low-pass lags it by Lambda db), so the rows measure
-  // e_i . (dth + R_ib^T D db)
-  const Eigen::Matrix3d m = c.x.pre.q_ib.toRotationMatrix().transpose() * c.x.pre.bias_lag;
+  // the low-pass's error: its up vector is turned by exp(-R_ib^T e) against the truth (the
+  // frame's prediction error less its low-passed past), so the rows measure e_i . (dth - R_ib^T e)
+  const Eigen::Matrix3d m = -c.x.pre.q_ib.toRotationMatrix().transpose();
   Eigen::Matrix<double, 2, SelectiveEkf::kN> h = Eigen::Matrix<double, 2, SelectiveEkf::kN>::Zero();
   h.block<1, 3>(0, SelectiveEkf::kTh) = e1.transpose();
   h.block<1, 3>(1, SelectiveEkf::kTh) = e2.transpose();
-  h.block<1, 3>(0, SelectiveEkf::kB) = e1.transpose() * m;
-  h.block<1, 3>(1, SelectiveEkf::kB) = e2.transpose() * m;
+  h.block<1, 3>(0, SelectiveEkf::kE) = e1.transpose() * m;
+  h.block<1, 3>(1, SelectiveEkf::kE) = e2.transpose() * m;
   const Eigen::Vector2d innov(e1.dot(cr), e2.dot(cr));
   const double r = in.tilt_sigma * in.tilt_sigma / in.dt_s * in.tilt_var_scale;
   // gate: none; fuse. After a start in motion the low-pass and the attitude both began at the

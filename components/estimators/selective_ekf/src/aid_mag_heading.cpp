@@ -1,7 +1,9 @@
 // Aid source: the heading from the magnetometer (ImuMeasurement::kSplit). dpsi is the rotation
 // about world up taking the horizontal part of R(q) m onto magnetic north (+y ENU); a world-frame
-// rotation dpsi e_z is the body-frame rotation dpsi u, so one row dpsi = u . dth. Variance: the
-// spectral density sigma_heading^2 / dt, raised as the field nears the gate's tolerances. Gated
+// rotation dpsi e_z is the body-frame rotation dpsi u, and a tilted estimate turns the field's
+// horizontal projection by tan(dip) times its tilt error about north, so one row
+// dpsi = (u + tan(dip) R^T e_y) . dth, with the tilt considered (its gain zeroed: a disturbed field
+// never tilts the estimate; Joseph form). Variance: the spectral density sigma_heading^2 / dt, raised as the field nears the gate's tolerances. Gated
 // by the magnetometer's selective test (mag_trust.cpp): inflated or dropped while untrusted.
 #include "aid.h"
 
@@ -69,8 +71,13 @@ void aid_mag_heading(const AidContext& c, const ImuInput& in, bool anchored, Mag
       return;
     }
   }
+  // the row: dpsi = e_z . th_w + tan(dip) e_n . th_w (th_w = R dth the world-frame error, e_n
+  // magnetic north = +y): a tilted estimate turns the field's horizontal projection, so the tilt's
+  // error about north reaches the heading innovation through the dip
+  const double tan_dip = c.x.field_gate.learnt ? std::tan(c.x.field_gate.dip_rad) : 0.0;
+  const Eigen::Vector3d north_body = c.x.q_world_body.conjugate() * Eigen::Vector3d::UnitY();
   Eigen::Matrix<double, 1, SelectiveEkf::kN> h = Eigen::Matrix<double, 1, SelectiveEkf::kN>::Zero();
-  h.block<1, 3>(0, SelectiveEkf::kTh) = u.transpose();
+  h.block<1, 3>(0, SelectiveEkf::kTh) = (u + tan_dip * north_body).transpose();
   double r = c.p.sigma_heading_rad_sqrt_s * c.p.sigma_heading_rad_sqrt_s / in.dt_s;
   r *= heading_noise_factor(c.p, c.x.field_gate, mag.gate);
   const Eigen::Matrix<double, 1, 1> innov(dpsi);
@@ -88,7 +95,19 @@ void aid_mag_heading(const AidContext& c, const ImuInput& in, bool anchored, Mag
   if (!trusted) {
     r *= c.p.inflate_factor;
   }
-  fuse<1>(c.x, h, innov, Eigen::Matrix<double, 1, 1>(r), kReportGateSigma, false, st);
+  // the tilt is a consider state of this row (a disturbed field never costs tilt): its gain is
+  // zeroed, the heading's kept (the attitude block's gain projected on u), P keeps the tilt's
+  // uncertainty and its correlation with the heading (Joseph form)
+  SelectiveEkf::Mat keep = SelectiveEkf::Mat::Identity();
+  keep.block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh) = u * u.transpose();
+  keep.block<3, 3>(SelectiveEkf::kB, SelectiveEkf::kB) = u * u.transpose();
+  keep.block<3, 3>(SelectiveEkf::kE, SelectiveEkf::kE).setZero();
+  const Eigen::Matrix<double, 1, 1> rr(r);
+  st.innovation_variance.setZero();
+  st.innovation_variance.head<1>() = fuse_considered<1>(c.x, h, innov, rr, keep);
+  st.innovation.setZero();
+  st.innovation[0] = dpsi;
+  st.test_ratio = dpsi * dpsi / (kReportGateSigma * kReportGateSigma * st.innovation_variance[0]);
   // status
   record(st, trusted ? Decision::kFused : Decision::kFusedInflated, now, c.first_pass);
 }

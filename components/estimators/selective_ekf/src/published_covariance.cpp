@@ -28,14 +28,15 @@
 //              dip deviation dv = m (dip - dip_ref) low-passed over the heading's lag; the part
 //              across the horizontal field, which turns the heading, is taken as large as those
 //              two: share^2 (dn^2 + dv^2) / 2 / (m cos dip)^2
-//   dip        heading: the tilt's error through the dip, tan(dip) times the error about north
-//              (below, where it is added)
+//   dip        heading: the unmodelled tilt terms' error through the dip, tan(dip) times the
+//              error about north (below; P's own tilt error reaches the heading through the row)
 //   unknown    heading: pi^2 / 3 (a heading uniform over +-180 deg) while heading_unknown(): a
 //              field reference still learnt or provisional (field_verify_s), or a heading started
 //              on a gated field; nothing bounds the heading then (a start next to a magnet)
 // The gyro's white noise and bias random walk between corrections, the heading's growth while the
-// magnetometer is gated (and its fall when it is trusted again) are P's own; so is the bias error
-// seen through the accelerometer low-pass's lag (the tilt rows' bias columns, aid_accel_tilt.cpp).
+// magnetometer is gated (and its fall when it is trusted again) are P's own; so are the gyro noise
+// and bias error seen through the accelerometer low-pass (its error is the state e,
+// aid_accel_tilt.cpp) and P's tilt error through the dip (aid_mag_heading.cpp).
 #include "aid.h"
 
 #include <algorithm>
@@ -217,25 +218,16 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   // heading: the tilt's error through the dip. The row's innovation is
   //   dpsi = dth_z + tan(dip) dth_n
   // with dth_n the world-frame error about magnetic north (+y, the reference's horizontal
-  // direction): a tilted estimate turns the field's horizontal projection (mw = exp(-dth) m_true
-  // differentiated through atan2). The row's H has the first term only, so the heading settles
-  // where the two cancel: e_z = g e_y with g = -share tan(dip), the tilt error low-passed over the
-  // heading's lag. A tilt error slower than that lag (tilt_slow) is followed whole: it enters as
-  // A tilt_slow A^T with A = I + g e_z e_y^T (its heading part correlated with the tilt). P's own
-  // tilt error decorrelates within the tilt's lag tau_t; low-passed over the heading's tau_h it
-  // keeps f = tau_t / (tau_t + tau_h) of its variance (a first-order Gauss-Markov error through a
-  // first-order lag): g^2 f P_yy on the heading (its correlation with the present tilt, f P_yy,
-  // is left out: what is added to P stays positive semi-definite, so the pose covariance carries it).
+  // direction). The row's H has both terms and considers the tilt (aid_mag_heading.cpp), so P's
+  // own tilt error reaches P's heading. The tilt errors P does not hold (tilt_slow) pull the
+  // heading where the row's two terms cancel: e_z = g e_y with g = -share tan(dip); slower than
+  // the heading's lag they are followed whole: A tilt_slow A^T with A = I + g e_z e_y^T.
   if (std::isfinite(r_heading) && fg.learnt && cos_dip > 1e-3) {
     const double share = std::min(1.0, p_heading * p_heading / (q * r_heading));
     const double g = -share * std::tan(fg.dip_rad);
-    const double tau_t = p_tilt / q;
-    const double tau_h = p_heading / q;
-    const double f = tau_t + tau_h > 0.0 ? tau_t / (tau_t + tau_h) : 0.0;
     Eigen::Matrix3d follow = Eigen::Matrix3d::Identity();
     follow(2, 1) = g;
     tilt_slow = follow * tilt_slow * follow.transpose();
-    cov(2, 2) += g * g * f * p_world(1, 1);
   }
   return cov + tilt_slow;
 }

@@ -156,10 +156,16 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
   // the two (no lever-arm position fix yet, x_.coupled false) each block is propagated alone.
   const Eigen::Matrix3d a = dq.toRotationMatrix().transpose();  // J_dth'_dth = Exp(w h)^T
   const Eigen::Matrix3d b = so3_right_jacobian(wh) * h;         // J_dth'_dw
+  // The accelerometer low-pass's frame turns with the same rate (its error is the prediction's
+  // own): de' = de + R_ib J_r(w h) h dw with R_ib after the step.
+  x_.pre.q_ib = (x_.pre.q_ib * dq).normalized();
+  const Eigen::Matrix3d r_ib = x_.pre.q_ib.toRotationMatrix();
+  const Eigen::Matrix3d e_w = r_ib * b;  // J_de'_dw
   if (x_.coupled) {
     auto apply_f = [&](const Mat& m) {
       Mat out = m;
       out.middleRows<3>(kTh) = a * m.middleRows<3>(kTh) + b * m.middleRows<3>(kW);
+      out.middleRows<3>(kE) += e_w * m.middleRows<3>(kW);
       out.middleRows<3>(kT) += h * m.middleRows<3>(kV);
       return out;
     };
@@ -169,10 +175,11 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
   } else {
     using Mat6 = Eigen::Matrix<double, 6, 6>;
     using MatA = Eigen::Matrix<double, kAttN, kAttN>;
-    const MatA att = x_.P.topLeftCorner<kAttN, kAttN>();  // [w, th, b]: th' = a th + b w
+    const MatA att = x_.P.topLeftCorner<kAttN, kAttN>();  // [w, th, b, e]: th' = a th + b w, e' = e + R_ib b w
     auto apply_att = [&](const MatA& m) {
       MatA out = m;
       out.middleRows<3>(kTh) = a * m.middleRows<3>(kTh) + b * m.middleRows<3>(kW);
+      out.middleRows<3>(kE) += e_w * m.middleRows<3>(kW);
       return out;
     };
     const MatA fa = apply_att(att);
@@ -203,6 +210,14 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
     x_.P(kV + i, kT + i) += qc_v;
     x_.P(kT + i, kV + i) += qc_v;
   }
+  // the low-pass's frame integrates the same rate and attitude noise (body n), as R_ib n: E[n n^T]
+  // = s I gives Q_ee = s I, Q_th,e = s R_ib^T, Q_w,e = c R_ib^T
+  const double s_th = qth + qw * h * h / 3.0;
+  x_.P.block<3, 3>(kE, kE) += s_th * Eigen::Matrix3d::Identity();
+  x_.P.block<3, 3>(kTh, kE) += s_th * r_ib.transpose();
+  x_.P.block<3, 3>(kE, kTh) += s_th * r_ib;
+  x_.P.block<3, 3>(kW, kE) += qc_w * r_ib.transpose();
+  x_.P.block<3, 3>(kE, kW) += qc_w * r_ib;
   x_.stamp_ns = stamp_ns;
 }
 
@@ -288,15 +303,16 @@ void SelectiveEkf::preprocess(ImuInput& in) {
     in.up_meas = in.accel.normalized();
     return;
   }
-  // Accelerometer low-pass in the gyro-propagated (bias-corrected) frame: gravity does not move
+  // Accelerometer low-pass in the frame turned with the state's rate: gravity does not move
   // there, external accelerations average out.
-  pre.q_ib = (pre.q_ib * quat_exp((in.gyro - x_.b_rps) * dt_s)).normalized();
+  // (the frame was turned by predict_to with the state's rate)
   pre.since_start_s += dt_s;
   const double k = p_.accel_lowpass_tau_s > 0.0 ? dt_s / (p_.accel_lowpass_tau_s + dt_s) : 1.0;
   pre.lp_accel_i += k * (pre.q_ib * in.accel - pre.lp_accel_i);
-  // the frame drift a bias error causes (A += R_ib dt), less the low-pass's share of it (the same
-  // gain as the low-pass): D <- (1 - k) (D + R_ib dt)
-  pre.bias_lag = (1.0 - k) * (pre.bias_lag + pre.q_ib.toRotationMatrix() * dt_s);
+  // its error: the frame's error less the low-passed past of it, e <- (1 - k) e (rows and
+  // columns of P)
+  x_.P.middleRows<3>(kE) *= 1.0 - k;
+  x_.P.middleCols<3>(kE) *= 1.0 - k;
   Eigen::Vector3d up;
   in.up_meas = safe_normalize(pre.q_ib.conjugate() * pre.lp_accel_i, up) ? up : in.accel.normalized();
   if (p_.tilt_accel_ref_mps2 > 0.0) {

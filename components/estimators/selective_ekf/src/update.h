@@ -86,11 +86,9 @@ inline void inject(SelectiveEkfState& x, const SelectiveEkf::Vec& dx) {
   x.w_rps += dx.segment<3>(SelectiveEkf::kW);
   x.q_world_body = (x.q_world_body * quat_exp(dx.segment<3>(SelectiveEkf::kTh))).normalized();
   x.b_rps += dx.segment<3>(SelectiveEkf::kB);
-  // The accelerometer low-pass ran its frame with the old bias: its up vector carries the frame's
-  // drift the old bias error caused, less its lag (-D db, aid_accel_tilt.cpp). Turn it as if the
-  // corrected bias had been used over its window, so that what the tilt rows' bias columns
-  // predict (D times the bias error still left) stays true.
-  const Eigen::Vector3d turn = x.pre.bias_lag * dx.segment<3>(SelectiveEkf::kB);
+  // The accelerometer low-pass's error e (its up vector turned by exp(-e) against the truth,
+  // aid_accel_tilt.cpp): its correction turns the low-pass by -de.
+  const Eigen::Vector3d turn = -dx.segment<3>(SelectiveEkf::kE);
   if (turn.squaredNorm() > 0.0) {
     x.pre.lp_accel_i = quat_exp(turn) * x.pre.lp_accel_i;
   }
@@ -128,23 +126,32 @@ bool fuse(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>
   return ok;
 }
 
-/// M rows with the bias rows of the gain zeroed (a Schmidt consider update: the bias keeps its
-/// uncertainty and its correlations, and learns nothing from these rows): K = P H^T S^-1 without
-/// its bias rows, P <- (I - K H) P (I - K H)^T + K R K^T (the Joseph form, exact for any gain).
-/// Returns the innovation variances diag(S).
+/// M rows with the gain K = P H^T S^-1 projected by `keep` (kN x kN; a Schmidt consider update:
+/// what `keep` removes keeps its uncertainty and its correlations and learns nothing from these
+/// rows), P <- (I - K H) P (I - K H)^T + K R K^T (the Joseph form, exact for any gain). Returns the
+/// innovation variances diag(S).
 template <int M>
-Eigen::Matrix<double, M, 1> fuse_bias_considered(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>& h,
-                                                 const Eigen::Matrix<double, M, 1>& innov,
-                                                 const Eigen::Matrix<double, M, 1>& r_diag) {
+Eigen::Matrix<double, M, 1> fuse_considered(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>& h,
+                                            const Eigen::Matrix<double, M, 1>& innov,
+                                            const Eigen::Matrix<double, M, 1>& r_diag, const SelectiveEkf::Mat& keep) {
   const Eigen::Matrix<double, M, M> r = r_diag.asDiagonal();
   const Eigen::Matrix<double, M, M> s = h * x.P * h.transpose() + r;
-  Eigen::Matrix<double, SelectiveEkf::kN, M> k = x.P * h.transpose() * s.inverse();
-  k.template middleRows<3>(SelectiveEkf::kB).setZero();
+  const Eigen::Matrix<double, SelectiveEkf::kN, M> k = keep * (x.P * h.transpose() * s.inverse());
   const SelectiveEkf::Mat ikh = SelectiveEkf::Mat::Identity() - k * h;
   const SelectiveEkf::Mat updated = ikh * x.P * ikh.transpose() + k * r * k.transpose();
   x.P = 0.5 * (updated + updated.transpose());
   inject(x, k * innov);
   return s.diagonal();
+}
+
+/// fuse_considered with the bias rows of the gain zeroed (the bias considered).
+template <int M>
+Eigen::Matrix<double, M, 1> fuse_bias_considered(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>& h,
+                                                 const Eigen::Matrix<double, M, 1>& innov,
+                                                 const Eigen::Matrix<double, M, 1>& r_diag) {
+  SelectiveEkf::Mat keep = SelectiveEkf::Mat::Identity();
+  keep.block<3, 3>(SelectiveEkf::kB, SelectiveEkf::kB).setZero();
+  return fuse_considered<M>(x, h, innov, r_diag, keep);
 }
 
 /// The status step of every aid: the decision on a measurement stamped `stamp_ns`. Counters count

@@ -5,41 +5,48 @@
 //   x = [w, q, b, t, v]  nominal state: body angular rate w (rad/s), q = q_world_body (ENU, Hamilton),
 //                        gyro bias b (rad/s, extension: the paper has none), position t (m, world)
 //                        and velocity v (m/s, world) of the body.
-//   dx = [dw, dth, db, dt, dv]  15-dim error state; attitude error is body-frame (right) perturbation
-//                        q_true = q (x) exp(dth). This error-state form carries the same selective
-//                        behaviour as the paper's 13-dim form (accepted reading, section 4) and keeps
-//                        P free of the quaternion norm direction.
+//   dx = [dw, dth, db, de, dt, dv]  18-dim error state; attitude error is body-frame (right)
+//                        perturbation q_true = q (x) exp(dth). This error-state form carries the same
+//                        selective behaviour as the paper's 13-dim form (accepted reading, section 4)
+//                        and keeps P free of the quaternion norm direction. de (extension, kSplit): the
+//                        accelerometer low-pass's error, a rotation in its almost inertial frame (below).
 //   Process (3)-(4):     w, v, b random walks; q <- q (x) exp(w h); t <- t + v h.
-//                        F: dth' = Exp(w h)^T dth + J_r(w h) h dw; dt' = dt + h dv.
+//                        F: dth' = Exp(w h)^T dth + J_r(w h) h dw; dt' = dt + h dv;
+//                        de' = de + R_ib J_r(w h) h dw (the low-pass's frame is turned with the same w),
+//                        then de <- (1 - k) de at each low-pass step (gain k).
 //                        Q: angular-acceleration and acceleration white noise (spectral densities),
-//                        integrated over h (first order).
+//                        integrated over h (first order); the attitude's share enters de as R_ib times
+//                        the same noise (fully correlated).
 //   y = [w_gyro, q_imu | (tilt, heading), q_vision, t_vision]  (5)-(7): rows only when fresh.
-//     gyro:      y = w + b + n,                   H = [I 0 I 0 0]
-//     q_imu:     log(q^-1 (x) q_imu)  = dth + n,  H = [0 I 0 0 0]  (ImuMeasurement::kQuaternion: the
+//     gyro:      y = w + b + n,                   H = [I 0 I 0 0 0]
+//     q_imu:     log(q^-1 (x) q_imu)  = dth + n,  H = [0 I 0 0 0 0]  (ImuMeasurement::kQuaternion: the
 //                paper's Gauss-Newton quaternion, eq. 2)
 //     ImuMeasurement::kSplit (default) replaces q_imu by two measurements so that a disturbed
 //     magnetometer never costs tilt:
-//     tilt:      z_up = the accelerometer low-passed (accel_lowpass_tau_s) in a gyro-propagated,
-//                almost inertial frame, normalised; u = R(q)^T e_z. Two rows e_i . (z_up x u) = e_i .
-//                (dth + R_ib^T D db) (e_1, e_2 orthonormal, perpendicular to u; D the frame's drift
-//                per unit bias error less the low-pass's lag of it, SelectiveEkfPreState::bias_lag),
-//                H = [0 e_i^T e_i^T R_ib^T D 0 0]; a bias correction turns the low-pass by D db as if
-//                the corrected bias had been used over its window. Variance per
+//     tilt:      z_up = the accelerometer low-passed (accel_lowpass_tau_s) in an almost inertial
+//                frame turned with the state's rate w as the attitude is predicted, normalised; u =
+//                R(q)^T e_z. Two rows e_i . (z_up x u) = e_i . (dth - R_ib^T de) (e_1, e_2 orthonormal,
+//                perpendicular to u): the frame's error is the prediction's own error (the integrated
+//                dw, gyro noise and bias error alike), and the low-pass keeps it less its low-passed
+//                past (de). H = [0 e_i^T 0 -e_i^T R_ib^T 0 0]; a correction de turns the low-pass by
+//                -de. Variance per
 //                row: spectral density sigma_tilt^2 / h (sigma_tilt derived from
 //                accel_lowpass_tau_s by default: see the parameter), inflated by the recent external
 //                acceleration (| |a| - g | low-passed, see tilt_accel_ref_mps2).
 //     heading:   dpsi = rotation about world up taking R(q) m (horizontal part) onto magnetic north
-//                (+y ENU); one row dpsi = u . dth, H = [0 u^T 0 0 0]; variance sigma_heading^2 / h;
+//                (+y ENU); one row dpsi = (u + tan(dip) R^T e_y) . dth (a tilted estimate turns the
+//                field's horizontal projection), H = [0 (u + tan(dip) R^T e_y)^T 0 0 0 0], the tilt
+//                considered (gain zeroed); variance sigma_heading^2 / h;
 //                gated by the selective tests below: dip (8) against the filtered tilt within
 //                heading_dip_tolerance_deg, |m| within heading_norm_tolerance, and quaternion
 //                error (9) = |dpsi| only while vision anchors the heading (without vision the
 //                predicted heading is the gyro's, and rejecting the magnetometer because it
 //                disagrees with a drifting prediction locks the drift in).
 //     rest:      at rest (rest detector on the raw gyro and accelerometer), the detector's
-//                low-passed gyro y = b + n, H = [0 0 I 0 0], and (while w is consistent with rest
-//                at 95 %) y = 0 = w + n_rest, H = [I 0 0 0 0] with the bias considered.
-//     q_vision:  log(q^-1 (x) q_vis)  = dth + n,  H = [0 I 0 0 0]   q_vis = q_world_cam (x) q_body_cam^-1
-//     t_vision:  p_world_cam = t + R(q) p_body_cam,  H = [0  -R [p_body_cam x]  0  I  0]
+//                low-passed gyro y = b + n, H = [0 0 I 0 0 0], and (while w is consistent with rest
+//                at 95 %) y = 0 = w + n_rest, H = [I 0 0 0 0 0] with the bias considered.
+//     q_vision:  log(q^-1 (x) q_vis)  = dth + n,  H = [0 I 0 0 0 0]   q_vis = q_world_cam (x) q_body_cam^-1
+//     t_vision:  p_world_cam = t + R(q) p_body_cam,  H = [0  -R [p_body_cam x]  0  0  I  0]
 //     Measured quaternions are sign-aligned to the prediction before the innovation.
 //   (7) printed P - K H^T P is read as P - K H P. R is diagonal, so the rows are fused one at a
 //     time (exact): P <- P - u u^T / s with u = P h^T, s = h u + r (equal to the Joseph form for
@@ -378,13 +385,12 @@ struct VisionCounters {
 
 /// Accelerometer low-pass (kSplit) and rest detector: filter state, so that replays reproduce it.
 struct SelectiveEkfPreState {
-  Eigen::Quaterniond q_ib = Eigen::Quaterniond::Identity();  ///< body -> almost inertial frame
+  /// body -> almost inertial frame, turned with the state's rate w exactly as the attitude is
+  /// predicted (predict_to): its error is the attitude's prediction error, so the low-pass's error
+  /// is a linear function of the error state (the state e, kE: e' = R_ib J_r(w h) h dw, times
+  /// 1 - k at each low-pass step; the tilt rows measure dth - R_ib^T e)
+  Eigen::Quaterniond q_ib = Eigen::Quaterniond::Identity();
   Eigen::Vector3d lp_accel_i{0, 0, 0};  ///< low-passed accelerometer in that frame, m/s^2
-  /// How a gyro-bias error turns the low-pass's up vector against its frame (the tilt rows' bias
-  /// columns, aid_accel_tilt.cpp): a bias error db (body) turns the frame by A db (A = the
-  /// integral of R_ib dt) and the low-pass, which lags it, by its low-passed Lambda db; this is
-  /// D = A - Lambda (s), D' = R_ib - D / tau (at rest R_ib tau (1 - exp(-t / tau))).
-  Eigen::Matrix3d bias_lag = Eigen::Matrix3d::Zero();
   double ext_accel_ms = 0.0;            ///< low-passed (|a| - g)^2, (m/s^2)^2
   /// the first sample was not at rest (the rest detector's thresholds): the low-pass carries its
   /// external acceleration, as the initial attitude does (a start in motion)
@@ -425,7 +431,7 @@ struct SelectiveEkfState {
   Eigen::Vector3d b_rps{0.0, 0.0, 0.0};  ///< gyro bias
   Eigen::Vector3d t_m{0.0, 0.0, 0.0};
   Eigen::Vector3d v_mps{0.0, 0.0, 0.0};
-  Eigen::Matrix<double, 15, 15> P = Eigen::Matrix<double, 15, 15>::Identity();
+  Eigen::Matrix<double, 18, 18> P = Eigen::Matrix<double, 18, 18>::Identity();
   int64_t stamp_ns = -1;                 ///< time of the state
   int64_t untrusted_until_ns = -1;       ///< magnetometer untrusted until (hold)
   int64_t q_error_fail_since_ns = -1;    ///< start of the current quaternion-error failure run
@@ -510,16 +516,18 @@ class SelectiveEkfFullState {
 
 class SelectiveEkf : private SelectiveEkfFullState {
  public:
-  static constexpr int kN = 15;
+  static constexpr int kN = 18;
   using Mat = Eigen::Matrix<double, kN, kN>;
   using Vec = Eigen::Matrix<double, kN, 1>;
-  // error-state block offsets: [w, th, b] (attitude block, kAttN) then [t, v]
+  // error-state block offsets: [w, th, b, e] (attitude block, kAttN) then [t, v]; e is the
+  // accelerometer low-pass's error (SelectiveEkfPreState)
   static constexpr int kW = 0;
   static constexpr int kTh = 3;
   static constexpr int kB = 6;
-  static constexpr int kT = 9;
-  static constexpr int kV = 12;
-  static constexpr int kAttN = 9;
+  static constexpr int kE = 9;
+  static constexpr int kT = 12;
+  static constexpr int kV = 15;
+  static constexpr int kAttN = 12;
 
   explicit SelectiveEkf(const SelectiveEkfParams& params = {});
 
