@@ -11,12 +11,12 @@ namespace {
 
 constexpr double kExact = 1e-12;  // pure reordering / rotation of given numbers
 
-// Identity attitude: [p v theta] is the [t v theta] block reorder of the 15x15 P.
+// Identity attitude: [p v theta] is the [t v theta] block reorder of the estimate's error covariance P_err.
 TEST(SelectiveEkfReport, PoseCovarianceReordersBlocksAtIdentityAttitude) {
   SelectiveEkfState x;
   for (int i = 0; i < SelectiveEkf::kN; ++i) {
     for (int j = 0; j < SelectiveEkf::kN; ++j) {
-      x.P(i, j) = 100.0 * i + j;  // every entry names its row and column
+      x.P_err(i, j) = 100.0 * i + j;  // every entry names its row and column
     }
   }
   const Eigen::Matrix<double, 9, 9> c = pose_covariance_world(x, Eigen::Quaterniond::Identity());
@@ -26,7 +26,7 @@ TEST(SelectiveEkfReport, PoseCovarianceReordersBlocksAtIdentityAttitude) {
   const int from[9] = {kT, kT + 1, kT + 2, kV, kV + 1, kV + 2, kTh, kTh + 1, kTh + 2};
   for (int i = 0; i < 9; ++i) {
     for (int j = 0; j < 9; ++j) {
-      EXPECT_NEAR(c(i, j), x.P(from[i], from[j]), kExact) << i << "," << j;
+      EXPECT_NEAR(c(i, j), x.P_err(from[i], from[j]), kExact) << i << "," << j;
     }
   }
 }
@@ -34,9 +34,9 @@ TEST(SelectiveEkfReport, PoseCovarianceReordersBlocksAtIdentityAttitude) {
 // A yaw of 90 deg maps a body-x attitude variance onto world y; position is not rotated.
 TEST(SelectiveEkfReport, PoseCovarianceRotatesAttitudeErrorIntoTheWorld) {
   SelectiveEkfState x;
-  x.P.setZero();
-  x.P(SelectiveEkf::kTh, SelectiveEkf::kTh) = 4e-4;  // body x, rad^2
-  x.P(SelectiveEkf::kT, SelectiveEkf::kT) = 1e-2;    // world x position, m^2
+  x.P_err.setZero();
+  x.P_err(SelectiveEkf::kTh, SelectiveEkf::kTh) = 4e-4;  // body x, rad^2
+  x.P_err(SelectiveEkf::kT, SelectiveEkf::kT) = 1e-2;    // world x position, m^2
   const Eigen::Quaterniond yaw90(Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()));
   const Eigen::Matrix<double, 9, 9> c = pose_covariance_world(x, yaw90);
   EXPECT_NEAR(c(6, 6), 0.0, kExact);

@@ -28,9 +28,11 @@ void restart_heading(const AidContext& c, const Eigen::Vector3d& up, double dpsi
   // direction's variance and correlations dropped (positive semi-definite kept), then its start
   SelectiveEkf::Mat t = SelectiveEkf::Mat::Identity();
   t.block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh) -= up * up.transpose();
-  x.P = t * x.P * t.transpose();
   const double s0 = c.p.init_sigma_attitude_deg * kRadPerDeg;
-  x.P.block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh) += s0 * s0 * up * up.transpose();
+  for (SelectiveEkf::Mat* pm : {&x.P, &x.P_err}) {
+    *pm = t * *pm * t.transpose();
+    pm->block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh) += s0 * s0 * up * up.transpose();
+  }
   // the published covariance's field and rotation terms belonged to the old heading
   x.unmodelled.field_dn_lp = 0.0;
   x.unmodelled.field_dv_lp = 0.0;

@@ -54,9 +54,11 @@ void aid_vision_attitude(const AidContext& c, const VisionMeasurement& v, Source
                                      : Eigen::Matrix3d(Eigen::Matrix3d::Identity() * sr * sr);
   auto reset_attitude = [&]() {
     x.q_world_body = v.q_world_body;
-    x.P.middleRows<3>(SelectiveEkf::kTh).setZero();
-    x.P.middleCols<3>(SelectiveEkf::kTh).setZero();
-    x.P.block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh) = r_body;
+    for (SelectiveEkf::Mat* pm : {&x.P, &x.P_err}) {
+      pm->middleRows<3>(SelectiveEkf::kTh).setZero();
+      pm->middleCols<3>(SelectiveEkf::kTh).setZero();
+      pm->block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh) = r_body;
+    }
     x.vision_aligned = true;
     x.vision_consecutive_rejects = 0;
     x.last_vision_fused_ns = now;
@@ -108,9 +110,11 @@ void aid_vision_position(const AidContext& c, const VisionMeasurement& v, Source
   if (!x.position_aligned) {
     x.t_m = v.p_world_camera_m - rot * p.p_body_camera_m;
     x.v_mps.setZero();
-    x.P.middleRows<3>(SelectiveEkf::kT).setZero();
-    x.P.middleCols<3>(SelectiveEkf::kT).setZero();
-    x.P.block<3, 3>(SelectiveEkf::kT, SelectiveEkf::kT) = Eigen::Matrix3d::Identity() * sm * sm;
+    for (SelectiveEkf::Mat* pm : {&x.P, &x.P_err}) {
+      pm->middleRows<3>(SelectiveEkf::kT).setZero();
+      pm->middleCols<3>(SelectiveEkf::kT).setZero();
+      pm->block<3, 3>(SelectiveEkf::kT, SelectiveEkf::kT) = Eigen::Matrix3d::Identity() * sm * sm;
+    }
     x.position_aligned = true;
     record(st, Decision::kReset, now, c.first_pass);
     return;

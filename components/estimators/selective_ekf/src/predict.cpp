@@ -19,9 +19,9 @@ Eigen::Matrix3d propagated_attitude_covariance(const SelectiveEkfState& x, const
   const Eigen::Quaterniond dq = quat_exp(wh);
   const Eigen::Matrix3d a = dq.toRotationMatrix().transpose();  // J_dth'_dth = Exp(w h)^T
   const Eigen::Matrix3d b = so3_right_jacobian(wh) * h;         // J_dth'_dw
-  const Eigen::Matrix3d p_tt = x.P.block<3, 3>(kTh, kTh);
-  const Eigen::Matrix3d p_tw = x.P.block<3, 3>(kTh, kW);
-  const Eigen::Matrix3d p_ww = x.P.block<3, 3>(kW, kW);
+  const Eigen::Matrix3d p_tt = x.P_err.block<3, 3>(kTh, kTh);
+  const Eigen::Matrix3d p_tw = x.P_err.block<3, 3>(kTh, kW);
+  const Eigen::Matrix3d p_ww = x.P_err.block<3, 3>(kW, kW);
   const Eigen::Matrix3d atw = a * p_tw * b.transpose();
   Eigen::Matrix3d body = a * p_tt * a.transpose() + atw + atw.transpose() + b * p_ww * b.transpose();
   // continuous white noise over h: attitude walk q h, angular acceleration q h^3 / 3

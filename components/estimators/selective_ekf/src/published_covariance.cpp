@@ -12,7 +12,8 @@
 // without vision, the magnetometer for heading).
 //
 // Terms (world frame):
-//   P          R P_thth R^T at the output: the delay prediction exp(w d) with the rate's
+//   P          R P_thth R^T at the output, of the estimate's error covariance P_err (P's gains, a
+//              gyro sample the rate's mean over its interval: selective_ekf.h), the delay prediction exp(w d) with the rate's
 //              covariance, and the output blend's remaining correction delta delta^T
 //   delay      imu_delay_s not known (NaN): d is half a sample, the true delay uniform over none
 //              to one sample: (dt^2 / 12) (R w)(R w)^T
@@ -55,10 +56,16 @@ double lowpass_gain(double dt_s, double tau_s) {
   return std::isfinite(tau_s) ? dt_s / (std::max(tau_s, 0.0) + dt_s) : 0.0;
 }
 
-/// The attitude's process noise density, rad^2/s: the walk plus the gyro's white noise
-/// integrated over the sample interval (the same as the derived tilt density uses).
+/// The attitude's process noise density in P's model, rad^2/s, what the corrections hold the
+/// attitude against: the walk, the gyro's white noise integrated over the sample interval, and
+/// the rate model's path inside an interval that the gyro row does not see (q h^3 / 12 per
+/// interval, predict_to). The gains' correction time constant is P / this: without the last
+/// term (2 rad/s^2/sqrt(Hz), 4.1e-6 rad^2/s at 285.7 Hz, as large as the walk) the lags were
+/// taken about 1.4 times too long at 285.7 Hz and 9 times at 40.8 Hz.
 double attitude_process_noise(const SelectiveEkfParams& p, double dt_s) {
-  return p.sigma_attitude_walk * p.sigma_attitude_walk + p.sigma_gyro_rps * p.sigma_gyro_rps * std::max(dt_s, 0.0);
+  const double h = std::max(dt_s, 0.0);
+  return p.sigma_attitude_walk * p.sigma_attitude_walk + p.sigma_gyro_rps * p.sigma_gyro_rps * h +
+         p.sigma_angular_accel * p.sigma_angular_accel * h * h / 12.0;
 }
 
 }  // namespace
@@ -148,9 +155,11 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const Eigen::Vector3d wd = x_.w_rps * d;
   const Eigen::Matrix3d a = quat_exp(wd).toRotationMatrix().transpose();
   const Eigen::Matrix3d b = so3_right_jacobian(wd) * d;
-  const Eigen::Matrix3d p_tt = x_.P.block<3, 3>(kTh, kTh);
-  const Eigen::Matrix3d p_tw = x_.P.block<3, 3>(kTh, kW);
-  const Eigen::Matrix3d p_ww = x_.P.block<3, 3>(kW, kW);
+  // (the estimate's error covariance: P's gains, the process noise of a gyro sample that is the
+  // rate's mean over its interval; SelectiveEkfState::P_err)
+  const Eigen::Matrix3d p_tt = x_.P_err.block<3, 3>(kTh, kTh);
+  const Eigen::Matrix3d p_tw = x_.P_err.block<3, 3>(kTh, kW);
+  const Eigen::Matrix3d p_ww = x_.P_err.block<3, 3>(kW, kW);
   const Eigen::Matrix3d body = a * p_tt * a.transpose() + a * p_tw * b.transpose() +
                                b * p_tw.transpose() * a.transpose() + b * p_ww * b.transpose();
   const Eigen::Quaterniond q_state = state_output();
@@ -173,7 +182,8 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   if (!(q > 0.0)) {
     return cov;
   }
-  const Eigen::Matrix3d p_world = r * p_tt * r.transpose();
+  // the lags and shares are the gains', P's
+  const Eigen::Matrix3d p_world = r * x_.P.block<3, 3>(kTh, kTh) * r.transpose();
   const double p_tilt = 0.5 * (p_world(0, 0) + p_world(1, 1));
   const double p_heading = p_world(2, 2);
   // gyro scale error: s times the rotation away from the attitude low-passed over each lag

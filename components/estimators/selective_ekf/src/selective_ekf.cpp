@@ -77,6 +77,7 @@ void SelectiveEkf::reset() {
   x_.P.diagonal().segment<3>(kT).setConstant(p_.init_sigma_position_m * p_.init_sigma_position_m);
   x_.P.diagonal().segment<3>(kV).setConstant(p_.init_sigma_velocity_mps *
                                               p_.init_sigma_velocity_mps);
+  x_.P_err = x_.P;
   initialized_ = false;
   out_ready_ = false;
   last_imu_stamp_ns_ = -1;
@@ -169,55 +170,70 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
       out.middleRows<3>(kT) += h * m.middleRows<3>(kV);
       return out;
     };
-    const Mat fp = apply_f(x_.P);
-    const Mat fpf = apply_f(fp.transpose());
-    x_.P = 0.5 * (fpf + fpf.transpose());
+    for (Mat* pm : {&x_.P, &x_.P_err}) {
+      const Mat fp = apply_f(*pm);
+      const Mat fpf = apply_f(fp.transpose());
+      *pm = 0.5 * (fpf + fpf.transpose());
+    }
   } else {
     using Mat6 = Eigen::Matrix<double, 6, 6>;
     using MatA = Eigen::Matrix<double, kAttN, kAttN>;
-    const MatA att = x_.P.topLeftCorner<kAttN, kAttN>();  // [w, th, b, e]: th' = a th + b w, e' = e + R_ib b w
     auto apply_att = [&](const MatA& m) {
       MatA out = m;
       out.middleRows<3>(kTh) = a * m.middleRows<3>(kTh) + b * m.middleRows<3>(kW);
       out.middleRows<3>(kE) += e_w * m.middleRows<3>(kW);
       return out;
     };
-    const MatA fa = apply_att(att);
-    const MatA fpf = apply_att(fa.transpose());
-    x_.P.topLeftCorner<kAttN, kAttN>() = 0.5 * (fpf + fpf.transpose());  // exactly symmetric
-    Mat6 tr = x_.P.bottomRightCorner<6, 6>();  // [t, v]: t' = t + h v
-    tr.topRows<3>() += h * tr.bottomRows<3>();
-    tr.leftCols<3>() += h * tr.rightCols<3>();
-    x_.P.bottomRightCorner<6, 6>() = tr;
+    for (Mat* pm : {&x_.P, &x_.P_err}) {
+      const MatA att = pm->topLeftCorner<kAttN, kAttN>();  // [w, th, b, e]: th' = a th + b w, e' = e + R_ib b w
+      const MatA fa = apply_att(att);
+      const MatA fpf = apply_att(fa.transpose());
+      pm->topLeftCorner<kAttN, kAttN>() = 0.5 * (fpf + fpf.transpose());  // exactly symmetric
+      Mat6 tr = pm->bottomRightCorner<6, 6>();  // [t, v]: t' = t + h v
+      tr.topRows<3>() += h * tr.bottomRows<3>();
+      tr.leftCols<3>() += h * tr.rightCols<3>();
+      pm->bottomRightCorner<6, 6>() = tr;
+    }
   }
   const double qw = p_.sigma_angular_accel * p_.sigma_angular_accel * h;
   const double qth = p_.sigma_attitude_walk * p_.sigma_attitude_walk * h;
   const double qv = p_.sigma_linear_accel * p_.sigma_linear_accel * h;
   const double qb = p_.sigma_bias_walk * p_.sigma_bias_walk * h;
   // Q of the continuous white-noise models over h: [q h, q h^2/2; q h^2/2, q h^3/3] for each
-  // (rate, attitude) and (velocity, position) pair. The cross terms let the gyro row correct the
-  // attitude integrated with the previous rate (trapezoid-like, no one-sample lag).
+  // (rate, attitude) and (velocity, position) pair, the attitude's q h^3/3 (with the walk) given
+  // as s_th. The cross terms let the gyro row correct the attitude integrated with the previous
+  // rate (trapezoid-like, no one-sample lag).
   const double qc_w = qw * h / 2.0;
   const double qc_v = qv * h / 2.0;
-  for (int i = 0; i < 3; ++i) {
-    x_.P(kW + i, kW + i) += qw;
-    x_.P(kTh + i, kTh + i) += qth + qw * h * h / 3.0;
-    x_.P(kW + i, kTh + i) += qc_w;
-    x_.P(kTh + i, kW + i) += qc_w;
-    x_.P(kB + i, kB + i) += qb;
-    x_.P(kV + i, kV + i) += qv;
-    x_.P(kT + i, kT + i) += qv * h * h / 3.0;
-    x_.P(kV + i, kT + i) += qc_v;
-    x_.P(kT + i, kV + i) += qc_v;
-  }
-  // the low-pass's frame integrates the same rate and attitude noise (body n), as R_ib n: E[n n^T]
-  // = s I gives Q_ee = s I, Q_th,e = s R_ib^T, Q_w,e = c R_ib^T
-  const double s_th = qth + qw * h * h / 3.0;
-  x_.P.block<3, 3>(kE, kE) += s_th * Eigen::Matrix3d::Identity();
-  x_.P.block<3, 3>(kTh, kE) += s_th * r_ib.transpose();
-  x_.P.block<3, 3>(kE, kTh) += s_th * r_ib;
-  x_.P.block<3, 3>(kW, kE) += qc_w * r_ib.transpose();
-  x_.P.block<3, 3>(kE, kW) += qc_w * r_ib;
+  auto add_q = [&](Mat& m, double s_th) {
+    for (int i = 0; i < 3; ++i) {
+      m(kW + i, kW + i) += qw;
+      m(kTh + i, kTh + i) += s_th;
+      m(kW + i, kTh + i) += qc_w;
+      m(kTh + i, kW + i) += qc_w;
+      m(kB + i, kB + i) += qb;
+      m(kV + i, kV + i) += qv;
+      m(kT + i, kT + i) += qv * h * h / 3.0;
+      m(kV + i, kT + i) += qc_v;
+      m(kT + i, kV + i) += qc_v;
+    }
+    // the low-pass's frame integrates the same rate and attitude noise (body n), as R_ib n:
+    // E[n n^T] = s I gives Q_ee = s I, Q_th,e = s R_ib^T, Q_w,e = c R_ib^T
+    m.block<3, 3>(kE, kE) += s_th * Eigen::Matrix3d::Identity();
+    m.block<3, 3>(kTh, kE) += s_th * r_ib.transpose();
+    m.block<3, 3>(kE, kTh) += s_th * r_ib;
+    m.block<3, 3>(kW, kE) += qc_w * r_ib.transpose();
+    m.block<3, 3>(kE, kW) += qc_w * r_ib;
+  };
+  add_q(x_.P, qth + qw * h * h / 3.0);
+  // The estimate's error: the same, but a gyro sample is the rate's mean over its interval,
+  // centred on the state's time, so the attitude's increment between two state times is the
+  // trapezoid of the two rates, h (w_k-1 + w_k) / 2, up to the halves of the two intervals'
+  // paths, which telescope (over any run of samples only its two ends remain: a bounded error,
+  // not a noise that accumulates). The rate's noise n (q h) enters the attitude as (h / 2) n,
+  // which the gyro row sees: [q h, q h^2/2; q h^2/2, q h^3/4] and no residual. P's q h^3 / 3
+  // leaves q h^3 / 12 per interval that no row sees (a gyro sampling the rate at instants).
+  add_q(x_.P_err, qth + qw * h * h / 4.0);
   x_.stamp_ns = stamp_ns;
 }
 
@@ -301,6 +317,15 @@ void SelectiveEkf::preprocess(ImuInput& in) {
                        std::abs(in.accel.norm() - p_.gravity_mps2) > p_.rest_accel_max_mps2;
     pre.rest_detector.start(in.gyro, in.accel);
     in.up_meas = in.accel.normalized();
+    // The low-pass and the attitude both start on this sample's tilt, so the low-pass's error
+    // starts as the attitude's tilt error, e = (I - u u^T) dth (its frame is the body's now):
+    // the tilt rows see nothing of it until the low-pass forgets the sample. In the estimate's
+    // error covariance only; in P (the gains) e starts known, as tuned (a singular P).
+    const Eigen::Vector3d u0 = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
+    const Eigen::Matrix3d tilt = Eigen::Matrix3d::Identity() - u0 * u0.transpose();
+    x_.P_err.middleRows<3>(kE) = tilt * x_.P_err.middleRows<3>(kTh);
+    x_.P_err.middleCols<3>(kE) = x_.P_err.middleRows<3>(kE).transpose();
+    x_.P_err.block<3, 3>(kE, kE) = tilt * x_.P_err.block<3, 3>(kTh, kTh) * tilt;
     return;
   }
   // Accelerometer low-pass in the frame turned with the state's rate: gravity does not move
@@ -311,8 +336,10 @@ void SelectiveEkf::preprocess(ImuInput& in) {
   pre.lp_accel_i += k * (pre.q_ib * in.accel - pre.lp_accel_i);
   // its error: the frame's error less the low-passed past of it, e <- (1 - k) e (rows and
   // columns of P)
-  x_.P.middleRows<3>(kE) *= 1.0 - k;
-  x_.P.middleCols<3>(kE) *= 1.0 - k;
+  for (Mat* pm : {&x_.P, &x_.P_err}) {
+    pm->middleRows<3>(kE) *= 1.0 - k;
+    pm->middleCols<3>(kE) *= 1.0 - k;
+  }
   Eigen::Vector3d up;
   in.up_meas = safe_normalize(pre.q_ib.conjugate() * pre.lp_accel_i, up) ? up : in.accel.normalized();
   if (p_.tilt_accel_ref_mps2 > 0.0) {
@@ -523,7 +550,7 @@ bool SelectiveEkf::update_vision(const VisionPose& v_in) {
 bool SelectiveEkf::healthy() {
   const bool full = health_.full_due();
   return all_finite(x_.w_rps, x_.q_world_body.coeffs(), x_.b_rps, x_.t_m, x_.v_mps, out_q_.coeffs()) &&
-         covariance_ok(x_.P, full);
+         covariance_ok(x_.P, full) && x_.P_err.allFinite();
 }
 
 void SelectiveEkf::reset_unhealthy(int64_t stamp_ns) {

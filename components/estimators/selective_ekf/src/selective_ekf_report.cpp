@@ -129,7 +129,7 @@ Eigen::Matrix<double, 9, 9> pose_covariance_world(const SelectiveEkfState& x,
   j.block<3, 3>(0, SelectiveEkf::kT).setIdentity();
   j.block<3, 3>(3, SelectiveEkf::kV).setIdentity();
   j.block<3, 3>(6, SelectiveEkf::kTh) = q_world_body.normalized().toRotationMatrix();
-  return j * x.P * j.transpose();
+  return j * x.P_err * j.transpose();  // the estimate's error covariance
 }
 
 Eigen::Matrix<double, 9, 9> pose_covariance_world(const SelectiveEkf& ekf) {

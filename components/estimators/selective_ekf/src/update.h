@@ -96,6 +96,21 @@ inline void inject(SelectiveEkfState& x, const SelectiveEkf::Vec& dx) {
   x.v_mps += dx.segment<3>(SelectiveEkf::kV);
 }
 
+/// The estimate's error covariance (SelectiveEkfState::P_err) after rows H with the gain K (from
+/// P) and diagonal R: the Joseph form, exact for any gain, (I - K H) C (I - K H)^T + K R K^T =
+/// C - K A^T - A K^T + K (H A + R) K^T with A = C H^T.
+template <int M>
+void update_error_covariance(SelectiveEkfState& x, const Eigen::Matrix<double, SelectiveEkf::kN, M>& k,
+                             const Eigen::Matrix<double, M, SelectiveEkf::kN>& h,
+                             const Eigen::Matrix<double, M, 1>& r_diag) {
+  const Eigen::Matrix<double, SelectiveEkf::kN, M> a = x.P_err * h.transpose();
+  Eigen::Matrix<double, M, M> s = h * a;
+  s.diagonal() += r_diag;
+  const Eigen::Matrix<double, SelectiveEkf::kN, M> ka = k * s;
+  const SelectiveEkf::Mat updated = x.P_err - k * a.transpose() - a * k.transpose() + ka * k.transpose();
+  x.P_err = 0.5 * (updated + updated.transpose());
+}
+
 /// The fuse step of every aid: M rows with a dense H (M x kN) and diagonal R, one row at a time;
 /// runs on the [w, th, b] or [t, v] block alone while they are uncorrelated (x.coupled false).
 /// Fills the status's innovation, variance and test ratio; false when the gate rejects (or
@@ -109,6 +124,10 @@ bool fuse(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>
   const bool att = (h.template leftCols<kAttN>().array() != 0.0).any();
   const bool trans = (h.template rightCols<kN - kAttN>().array() != 0.0).any();
   SelectiveEkf::Vec dx = SelectiveEkf::Vec::Zero();
+  // P's (optimal) gain, for the estimate's error covariance: K = P H^T S^-1
+  const Eigen::Matrix<double, kN, M> u = x.P * h.transpose();
+  Eigen::Matrix<double, M, M> s = h * u;
+  s.diagonal() += r_diag;
   bool ok = false;
   if (!x.coupled && !(att && trans)) {
     // No cross-covariance between [w, th, b] and [t, v]: rows touching one block update it alone
@@ -121,6 +140,8 @@ bool fuse(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>
     ok = sequential_update<kN, M>(x.P, h, innov, r_diag, gate_sigma, gate, report_only, st, dx);
   }
   if (ok) {
+    const Eigen::Matrix<double, kN, M> k = u * s.inverse();
+    update_error_covariance<M>(x, k, h, r_diag);
     inject(x, dx);
   }
   return ok;
@@ -140,6 +161,7 @@ Eigen::Matrix<double, M, 1> fuse_considered(SelectiveEkfState& x, const Eigen::M
   const SelectiveEkf::Mat ikh = SelectiveEkf::Mat::Identity() - k * h;
   const SelectiveEkf::Mat updated = ikh * x.P * ikh.transpose() + k * r * k.transpose();
   x.P = 0.5 * (updated + updated.transpose());
+  update_error_covariance<M>(x, k, h, r_diag);
   inject(x, k * innov);
   return s.diagonal();
 }

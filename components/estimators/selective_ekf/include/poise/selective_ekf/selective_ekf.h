@@ -432,6 +432,12 @@ struct SelectiveEkfState {
   Eigen::Vector3d t_m{0.0, 0.0, 0.0};
   Eigen::Vector3d v_mps{0.0, 0.0, 0.0};
   Eigen::Matrix<double, 18, 18> P = Eigen::Matrix<double, 18, 18>::Identity();
+  /// The covariance of the estimate's error (the published covariance's P): the same gains (from
+  /// P) and the same measurements, but the process noise of a gyro whose sample is the rate's mean
+  /// over its interval (predict_to): P's rate model leaves q h^3 / 12 per interval that no row
+  /// sees, which keeps the gains as they were tuned and is not an error of the estimate. Updated
+  /// with the Joseph form for P's gain, exact for any gain.
+  Eigen::Matrix<double, 18, 18> P_err = Eigen::Matrix<double, 18, 18>::Identity();
   int64_t stamp_ns = -1;                 ///< time of the state
   int64_t untrusted_until_ns = -1;       ///< magnetometer untrusted until (hold)
   int64_t q_error_fail_since_ns = -1;    ///< start of the current quaternion-error failure run
@@ -566,7 +572,8 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// Body-frame attitude standard deviations, deg (of the state's P).
   [[nodiscard]] Eigen::Vector3d attitude_sigma_deg() const;
   /// The published covariance of q_world_body(): world-frame rotation vector of q_true (x)
-  /// q_est^-1, rad^2 (ENU x, y, z). P's attitude block carried to the output (the delay
+  /// q_est^-1, rad^2 (ENU x, y, z). The estimate's error covariance's attitude block
+  /// (SelectiveEkfState::P_err: P's gains, a gyro sample the rate's mean) carried to the output (the delay
   /// prediction with the rate's covariance, the output blend's remaining correction) plus what
   /// the filter does not model (src/published_covariance.cpp, ESTIMATORS.md): the gyro bias error
   /// through the accelerometer low-pass's lag, the accelerometer disturbance the tilt is still
@@ -665,7 +672,7 @@ SourceReports selective_ekf_sources(const SelectiveEkf& ekf);
 Eigen::Matrix3d attitude_covariance_world(const SelectiveEkf& ekf);
 
 /// The 9x9 covariance [p, v, theta] (m^2, (m/s)^2, rad^2; theta world-frame small angles) of the
-/// 15x15 error state [w, theta(body), b, t, v]: blocks reordered, theta rotated by R(q).
+/// estimate's error covariance (SelectiveEkfState::P_err): blocks reordered, theta rotated by R(q).
 Eigen::Matrix<double, 9, 9> pose_covariance_world(const SelectiveEkfState& x, const Eigen::Quaterniond& q_world_body);
 /// The published pose covariance: pose_covariance_world(state, q_world_body()) with its attitude
 /// block raised to the published attitude covariance (attitude_covariance_world): the difference
