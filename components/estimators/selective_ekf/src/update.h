@@ -98,7 +98,8 @@ inline void inject(SelectiveEkfState& x, const SelectiveEkf::Vec& dx) {
 
 /// The estimate's error covariance (SelectiveEkfState::P_err) after rows H with the gain K (from
 /// P) and diagonal R: the Joseph form, exact for any gain, (I - K H) C (I - K H)^T + K R K^T =
-/// C - K A^T - A K^T + K (H A + R) K^T with A = C H^T.
+/// C - K A^T - A K^T + K S K^T with A = C H^T, S = H A + R (symmetric) = C + G K^T + K G^T with
+/// G = K S / 2 - A: one N x M x N product, and symmetric to the bit by construction (m_ij + m_ji).
 template <int M>
 void update_error_covariance(SelectiveEkfState& x, const Eigen::Matrix<double, SelectiveEkf::kN, M>& k,
                              const Eigen::Matrix<double, M, SelectiveEkf::kN>& h,
@@ -106,9 +107,10 @@ void update_error_covariance(SelectiveEkfState& x, const Eigen::Matrix<double, S
   const Eigen::Matrix<double, SelectiveEkf::kN, M> a = x.P_err * h.transpose();
   Eigen::Matrix<double, M, M> s = h * a;
   s.diagonal() += r_diag;
-  const Eigen::Matrix<double, SelectiveEkf::kN, M> ka = k * s;
-  const SelectiveEkf::Mat updated = x.P_err - k * a.transpose() - a * k.transpose() + ka * k.transpose();
-  x.P_err = 0.5 * (updated + updated.transpose());
+  const Eigen::Matrix<double, SelectiveEkf::kN, M> g = 0.5 * (k * s) - a;
+  SelectiveEkf::Mat m;
+  m.noalias() = g * k.transpose();
+  x.P_err += m + m.transpose();
 }
 
 /// The fuse step of every aid: M rows with a dense H (M x kN) and diagonal R, one row at a time;
