@@ -66,25 +66,26 @@ TEST(HostFiles, GivenAnImuDelayOutOfRangeWhenCreatedThenConfigErrorNamesIt) {
   }
 }
 
-// The parallel KF component's gyro_bias_walk_rps_per_sqrt_s (the gyro's own bias walk, for the
-// published covariance): a figure in range is taken, anything else is a ConfigError naming it.
-TEST(HostFiles, GivenAGyroBiasWalkParamWhenTheParallelKfIsCreatedThenARangeFigureIsTakenAndAHostileOneNamed) {
+// The parallel KF component's gyro figures, gyro_bias_walk_rps_per_sqrt_s (the gyro's own bias
+// walk) and gyro_noise_density_rps_per_sqrt_hz (its white noise density), both for the published
+// covariance: a figure in range is taken, anything else is a ConfigError naming the key.
+TEST(HostFiles, GivenAGyroFigureParamWhenTheParallelKfIsCreatedThenARangeFigureIsTakenAndAHostileOneNamed) {
   register_nodes();
   DomainLease domain;
-  auto host_with = [](const std::string& value) {
-    return runtime::parse_host(
-        YAML::Load("components: [{type: parallel_kf, name: p, params: {gyro_bias_walk_rps_per_sqrt_s: " + value + "}}]"),
-        "test", ".");
-  };
-  EXPECT_NO_THROW(runtime::Host(host_with("0.0"), domain.id()));
-  EXPECT_NO_THROW(runtime::Host(host_with("2.0e-5"), domain.id()));
-  for (const char* bad : {"-1e-6", "1e308", ".inf", "fast"}) {
-    try {
-      runtime::Host host(host_with(bad), domain.id());
-      ADD_FAILURE() << "no error for gyro_bias_walk_rps_per_sqrt_s " << bad;
-    } catch (const runtime::ConfigError& e) {
-      EXPECT_NE(std::string(e.what()).find("gyro_bias_walk_rps_per_sqrt_s"), std::string::npos) << bad << ": "
-                                                                                                 << e.what();
+  for (const std::string key : {"gyro_bias_walk_rps_per_sqrt_s", "gyro_noise_density_rps_per_sqrt_hz"}) {
+    auto host_with = [&](const std::string& value) {
+      return runtime::parse_host(
+          YAML::Load("components: [{type: parallel_kf, name: p, params: {" + key + ": " + value + "}}]"), "test", ".");
+    };
+    EXPECT_NO_THROW(runtime::Host(host_with("0.0"), domain.id())) << key;
+    EXPECT_NO_THROW(runtime::Host(host_with("2.0e-5"), domain.id())) << key;
+    for (const char* bad : {"-1e-6", "1e308", ".inf", "fast"}) {
+      try {
+        runtime::Host host(host_with(bad), domain.id());
+        ADD_FAILURE() << "no error for " << key << " " << bad;
+      } catch (const runtime::ConfigError& e) {
+        EXPECT_NE(std::string(e.what()).find(key), std::string::npos) << bad << ": " << e.what();
+      }
     }
   }
 }

@@ -65,41 +65,76 @@ struct Averaged {
 /// kRuns runs of the static scenario, each with a bias drawn from the filter's prior walking at
 /// `sensor_walk` (rad/s/sqrt(s)); the filter told the sensor (told_the_simulated_sensor) and,
 /// unless NaN, that walk as gyro_bias_walk_rps_per_sqrt_s.
-Averaged run_at_rest(double sensor_walk, double told_walk) {
-  const int instants = static_cast<int>((kLastS - kFirstS) / kEveryS + 0.5) + 1;
+/// The instants first_s, first_s + every_s, ... (`count` of them) of one run of `cfg` through a
+/// filter with `p`, each run's NEES added to `a` over `runs`.
+struct Instants {
+  double first_s, every_s;
+  int count, runs;
+};
+
+Averaged zero_averaged(int count) {
   Averaged a;
-  a.total.assign(static_cast<size_t>(instants), 0.0);
-  a.tilt.assign(static_cast<size_t>(instants), 0.0);
-  a.heading.assign(static_cast<size_t>(instants), 0.0);
+  a.total.assign(static_cast<size_t>(count), 0.0);
+  a.tilt.assign(static_cast<size_t>(count), 0.0);
+  a.heading.assign(static_cast<size_t>(count), 0.0);
+  return a;
+}
+
+void add_run(const sim::SimConfig& cfg, const ParallelKfParams& p, const Instants& at, Averaged& a) {
+  ParallelKf kf(p);
+  sim::SensorSimulator simu(cfg);
+  int next = 0;
+  // WHEN the filter runs over every sample
+  while (!simu.done() && next < at.count) {
+    const sim::SimSample s = simu.next();
+    const bool ok = kf.update(s.imu);
+    if (ok && s.truth.t_s >= at.first_s + next * at.every_s) {
+      const ParallelKfOutput out = kf.output();
+      const Eigen::Vector3d e = world_attitude_error(out.q_world_body, s.truth.q_world_body);
+      const Eigen::Matrix3d cov = kf.attitude_covariance(out);
+      const auto i = static_cast<size_t>(next);
+      a.total[i] += attitude_nees(e, cov) / at.runs;
+      const Eigen::Vector2d et = e.head<2>();
+      a.tilt[i] += et.dot(cov.topLeftCorner<2, 2>().ldlt().solve(et)) / at.runs;
+      a.heading[i] += e.z() * e.z() / cov(2, 2) / at.runs;
+      ++next;
+    }
+  }
+  EXPECT_EQ(next, at.count) << cfg.name << " seed " << cfg.seed;
+}
+
+/// A gyro bias drawn from the filter's prior N(0, bias_sigma_init_rps^2 I).
+Eigen::Vector3d bias_from_the_prior(const ParallelKfParams& p, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> bias(0.0, p.bias_sigma_init_rps);
+  return Eigen::Vector3d(bias(rng), bias(rng), bias(rng));
+}
+
+/// How many of the averaged NEES `v` lie above and below the bounds `b`.
+struct Outside {
+  int above = 0;
+  int below = 0;
+};
+Outside count_outside(const std::vector<double>& v, const testing::AveragedNeesBounds& b) {
+  Outside o;
+  for (const double x : v) {
+    o.above += x > b.hi ? 1 : 0;
+    o.below += x < b.lo ? 1 : 0;
+  }
+  return o;
+}
+
+Averaged run_at_rest(double sensor_walk, double told_walk) {
+  const Instants at{kFirstS, kEveryS, static_cast<int>((kLastS - kFirstS) / kEveryS + 0.5) + 1, kRuns};
+  Averaged a = zero_averaged(at.count);
   for (int run = 0; run < kRuns; ++run) {
     // GIVEN the simulator's static scenario with a bias drawn from the filter's prior
     sim::SimConfig cfg = sim::make_scenario("static_magnet", kRateHz, 2000 + static_cast<uint64_t>(run));
     ParallelKfParams p = told_the_simulated_sensor(cfg);
     p.gyro_bias_walk_rps_per_sqrt_s = told_walk;
-    std::mt19937_64 rng(7000 + static_cast<uint64_t>(run));
-    std::normal_distribution<double> bias(0.0, p.bias_sigma_init_rps);
-    cfg.noise.gyro_bias_rps = Eigen::Vector3d(bias(rng), bias(rng), bias(rng));
+    cfg.noise.gyro_bias_rps = bias_from_the_prior(p, 7000 + static_cast<uint64_t>(run));
     cfg.noise.gyro_bias_walk_rps_per_sqrt_s = sensor_walk;
-    ParallelKf kf(p);
-    sim::SensorSimulator simu(cfg);
-    int next = 0;
-    // WHEN the filter runs over every sample
-    while (!simu.done() && next < instants) {
-      const sim::SimSample s = simu.next();
-      const bool ok = kf.update(s.imu);
-      if (ok && s.truth.t_s >= kFirstS + next * kEveryS) {
-        const ParallelKfOutput out = kf.output();
-        const Eigen::Vector3d e = world_attitude_error(out.q_world_body, s.truth.q_world_body);
-        const Eigen::Matrix3d cov = kf.attitude_covariance(out);
-        const auto i = static_cast<size_t>(next);
-        a.total[i] += attitude_nees(e, cov) / kRuns;
-        const Eigen::Vector2d et = e.head<2>();
-        a.tilt[i] += et.dot(cov.topLeftCorner<2, 2>().ldlt().solve(et)) / kRuns;
-        a.heading[i] += e.z() * e.z() / cov(2, 2) / kRuns;
-        ++next;
-      }
-    }
-    EXPECT_EQ(next, instants) << "run " << run;
+    add_run(cfg, p, at, a);
   }
   return a;
 }
@@ -154,13 +189,11 @@ TEST(ParallelKfChiSquare, GivenAGyroWhoseBiasWalksFasterThanTheDesignDriftWhenTh
   const Averaged told = run_at_rest(walk, walk);
   const Averaged not_told = run_at_rest(walk, std::nan(""));
   const testing::AveragedNeesBounds bh = testing::averaged_nees_bounds_95(1, kRuns);
-  int above_told = 0;
-  int below_told = 0;
-  int above_not_told = 0;
+  const Outside o_told = count_outside(told.heading, bh);
+  const int above_told = o_told.above;
+  const int below_told = o_told.below;
+  const int above_not_told = count_outside(not_told.heading, bh).above;
   for (size_t k = 0; k < told.heading.size(); ++k) {
-    above_told += told.heading[k] > bh.hi ? 1 : 0;
-    below_told += told.heading[k] < bh.lo ? 1 : 0;
-    above_not_told += not_told.heading[k] > bh.hi ? 1 : 0;
     std::printf("t %5.1f s: heading averaged NEES told %.3f, not told %.3f (total told %.3f)\n",
                 kFirstS + static_cast<double>(k) * kEveryS, told.heading[k], not_told.heading[k], told.total[k]);
   }
@@ -173,6 +206,56 @@ TEST(ParallelKfChiSquare, GivenAGyroWhoseBiasWalksFasterThanTheDesignDriftWhenTh
   EXPECT_EQ(above_told, 0);
   EXPECT_GE(above_not_told, kMinAboveNotTold);
   EXPECT_GT(not_told.heading.back(), bh.hi);
+}
+
+// In motion (issue 31's oracle): the simulator's random_motion (5 s still, then 30 s of random
+// rotation up to 1.2 rad/s per axis and horizontal accelerations up to 3 m/s^2), the filter told
+// every figure of the simulated sensor (told_the_simulated_sensor, its bias walk 0 and its white
+// gyro noise density), a bias drawn from the prior, kMotionRuns seeds. Oracle: the simulator's
+// truth; the NEES averaged over the runs at each instant against the two-sided 95 % bounds.
+// Each of the 28 instants lies outside with probability 5 % when the covariance is consistent:
+// at most 4 may (P(more | consistent) = 1.4 %, binomial). Measured: 0 above, 1 below (8 s: 2.24
+// against 2.19-3.94 at 10 s), mean 2.94; the heading alone (1 dof) 1.43-1.96, above its upper
+// bound (1.57) at several instants late in the run, not asserted. Before the motion measurements'
+// real noise (the bias error taken as if their design noise were real): 13 instants below, mean
+// 2.08, heading 0.24-0.38 at 30-34 s.
+constexpr int kMotionRuns = 30;
+constexpr int kMaxOutsideMotion = 4;
+constexpr double kMotionFirstS = 8.0;  // evaluated from (the motion starts at 5 s), s
+constexpr double kMotionLastS = 35.0;  // ... to (the motion ends), s
+constexpr double kMotionEveryS = 1.0;  // ... every, s
+
+Averaged run_in_motion() {
+  const Instants at{kMotionFirstS, kMotionEveryS,
+                    static_cast<int>((kMotionLastS - kMotionFirstS) / kMotionEveryS + 0.5) + 1, kMotionRuns};
+  Averaged a = zero_averaged(at.count);
+  for (int run = 0; run < kMotionRuns; ++run) {
+    // GIVEN random motion on a simulated sensor whose figures the filter is told
+    sim::SimConfig cfg = sim::make_scenario("random_motion", kRateHz, 3000 + static_cast<uint64_t>(run));
+    cfg.duration_s = kMotionLastS + 0.5;
+    ParallelKfParams p = told_the_simulated_sensor(cfg);
+    p.gyro_bias_walk_rps_per_sqrt_s = cfg.noise.gyro_bias_walk_rps_per_sqrt_s;
+    p.gyro_noise_density_rps_per_sqrt_hz = cfg.noise.sigma_gyro_rps / std::sqrt(cfg.rate_hz);
+    cfg.noise.gyro_bias_rps = bias_from_the_prior(p, 9000 + static_cast<uint64_t>(run));
+    add_run(cfg, p, at, a);
+  }
+  return a;
+}
+
+TEST(ParallelKfChiSquare, GivenRandomMotionOnASensorWhoseFiguresTheFilterIsToldWhenRunManyTimesThenTheAveragedNeesLiesInsideTheChiSquareBounds) {
+  const Averaged a = run_in_motion();
+  const testing::AveragedNeesBounds b = testing::averaged_nees_bounds_95(3, kMotionRuns);
+  const auto [above, below] = count_outside(a.total, b);
+  double mean = 0.0;
+  for (size_t k = 0; k < a.total.size(); ++k) {
+    mean += a.total[k] / static_cast<double>(a.total.size());
+    std::printf("t %5.1f s: averaged NEES %.3f (tilt, 2 dof, %.3f; heading, 1 dof, %.3f)\n",
+                kMotionFirstS + static_cast<double>(k) * kMotionEveryS, a.total[k], a.tilt[k], a.heading[k]);
+  }
+  std::printf("random motion, %d runs: bounds [%.3f, %.3f], mean %.3f, %d above, %d below, of %zu\n", kMotionRuns,
+              b.lo, b.hi, mean, above, below, a.total.size());
+  // THEN the averaged NEES lies inside the bounds at all but a few instants
+  EXPECT_LE(above + below, kMaxOutsideMotion);
 }
 
 }  // namespace

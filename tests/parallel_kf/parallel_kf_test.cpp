@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace poise {
@@ -584,50 +585,72 @@ TEST(ParallelKfParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorNames
     {"gyro_bias_walk_rps_per_sqrt_s", [](ParallelKfParams& p) { p.gyro_bias_walk_rps_per_sqrt_s = -1e-5; }},
     {"gyro_bias_walk_rps_per_sqrt_s", [](ParallelKfParams& p) { p.gyro_bias_walk_rps_per_sqrt_s = 1e308; }},
     {"gyro_bias_walk_rps_per_sqrt_s",
-     [](ParallelKfParams& p) { p.gyro_bias_walk_rps_per_sqrt_s = std::numeric_limits<double>::infinity(); }}
+     [](ParallelKfParams& p) { p.gyro_bias_walk_rps_per_sqrt_s = std::numeric_limits<double>::infinity(); }},
+    {"gyro_noise_density_rps_per_sqrt_hz", [](ParallelKfParams& p) { p.gyro_noise_density_rps_per_sqrt_hz = -1e-5; }},
+    {"gyro_noise_density_rps_per_sqrt_hz", [](ParallelKfParams& p) { p.gyro_noise_density_rps_per_sqrt_hz = 1e308; }},
+    {"gyro_noise_density_rps_per_sqrt_hz",
+     [](ParallelKfParams& p) { p.gyro_noise_density_rps_per_sqrt_hz = std::numeric_limits<double>::infinity(); }}
   }, [](const ParallelKfParams& p) { ParallelKf f(p); });
+}
+
+/// A figure of the sensor (`key`, the field `figure`): absent or null = not known (NaN), a number
+/// in range is taken, `bad` values are refused naming the key; the estimate is the same bit for bit
+/// whatever its value (oracle: the default filter's). Returns the heading variance published at
+/// the end of random_motion (seed) by the default filter and by one told `told`.
+std::pair<double, double> expect_a_sensor_figure(const std::string& key, double ParallelKfParams::*figure,
+                                                 double in_range, double told, uint64_t seed) {
+  const std::string path = ::testing::TempDir() + "/pkf_" + key + ".yaml";
+  auto load = [&](const std::string& value) {
+    std::FILE* f = std::fopen(path.c_str(), "w");
+    EXPECT_NE(f, nullptr);
+    std::fputs(("parallel_kf:\n  " + key + ": " + value + "\n").c_str(), f);
+    std::fclose(f);
+    return load_parallel_kf_params(path);
+  };
+  EXPECT_TRUE(std::isnan(ParallelKfParams::defaults().*figure)) << key;
+  EXPECT_TRUE(std::isnan(load("~").*figure)) << key;
+  EXPECT_EQ(load(std::to_string(in_range)).*figure, in_range) << key;
+  EXPECT_EQ(load("0").*figure, 0.0) << key;
+  for (const char* bad : {"-1e-6", "1e308", ".inf", "fast", "[1, 2]"}) {
+    const std::string msg = testing::error_message([&] { load(bad); });
+    EXPECT_NE(msg.find(key), std::string::npos) << bad << " -> '" << msg << "'";
+  }
+  sim::SensorSimulator a(sim::make_scenario("random_motion", 200.0, seed));
+  ParallelKf unknown{ParallelKfParams::defaults()};
+  ParallelKfParams p = ParallelKfParams::defaults();
+  p.*figure = told;
+  ParallelKf known(p);
+  std::pair<double, double> heading_var{0.0, 0.0};
+  while (!a.done()) {
+    const sim::SimSample s = a.next();
+    EXPECT_EQ(unknown.update(s.imu), known.update(s.imu));
+    EXPECT_EQ(unknown.q_world_body().coeffs(), known.q_world_body().coeffs());
+    if (unknown.initialized()) {
+      heading_var = {unknown.attitude_covariance(unknown.output())(2, 2),
+                     known.attitude_covariance(known.output())(2, 2)};
+    }
+  }
+  return heading_var;
 }
 
 // The gyro's bias walk is the sensor's figure: null (or absent) = not known, a number in
 // [0, 0.01] rad/s/sqrt(s) is taken, anything else is refused naming the key. Only the published
 // covariance reads it: the estimate is the same bit for bit whatever its value.
 TEST(ParallelKfParams, GivenTheGyroBiasWalkInAFileWhenLoadedThenNullIsNotKnownAHostileValueIsRefusedAndTheEstimateIgnoresIt) {
-  const std::string path = ::testing::TempDir() + "/pkf_gyro_bias_walk.yaml";
-  auto load = [&](const std::string& text) {
-    std::FILE* f = std::fopen(path.c_str(), "w");
-    EXPECT_NE(f, nullptr);
-    std::fputs(text.c_str(), f);
-    std::fclose(f);
-    return load_parallel_kf_params(path);
-  };
-  EXPECT_TRUE(std::isnan(ParallelKfParams::defaults().gyro_bias_walk_rps_per_sqrt_s));
-  EXPECT_TRUE(std::isnan(load("parallel_kf:\n  gyro_bias_walk_rps_per_sqrt_s: ~\n").gyro_bias_walk_rps_per_sqrt_s));
-  EXPECT_EQ(load("parallel_kf:\n  gyro_bias_walk_rps_per_sqrt_s: 2.0e-5\n").gyro_bias_walk_rps_per_sqrt_s, 2.0e-5);
-  EXPECT_EQ(load("parallel_kf:\n  gyro_bias_walk_rps_per_sqrt_s: 0\n").gyro_bias_walk_rps_per_sqrt_s, 0.0);
-  for (const char* bad : {"-1e-6", "1e308", ".inf", "fast", "[1, 2]"}) {
-    const std::string msg =
-        testing::error_message([&] { load(std::string("parallel_kf:\n  gyro_bias_walk_rps_per_sqrt_s: ") + bad + "\n"); });
-    EXPECT_NE(msg.find("gyro_bias_walk_rps_per_sqrt_s"), std::string::npos) << bad << " -> '" << msg << "'";
-  }
-  // the estimate is the same bit for bit whatever the walk (oracle: the default filter's)
-  sim::SensorSimulator a(sim::make_scenario("random_motion", 200.0, 4));
-  ParallelKf unknown{ParallelKfParams::defaults()};
-  ParallelKfParams none = ParallelKfParams::defaults();
-  none.gyro_bias_walk_rps_per_sqrt_s = 0.0;
-  ParallelKf known(none);
-  double heading_var_unknown = 0.0;
-  double heading_var_none = 0.0;
-  while (!a.done()) {
-    const sim::SimSample s = a.next();
-    ASSERT_EQ(unknown.update(s.imu), known.update(s.imu));
-    ASSERT_EQ(unknown.q_world_body().coeffs(), known.q_world_body().coeffs());
-    if (unknown.initialized()) {
-      heading_var_unknown = unknown.attitude_covariance(unknown.output())(2, 2);
-      heading_var_none = known.attitude_covariance(known.output())(2, 2);
-    }
-  }
+  const auto [unknown, none] =
+      expect_a_sensor_figure("gyro_bias_walk_rps_per_sqrt_s", &ParallelKfParams::gyro_bias_walk_rps_per_sqrt_s, 2.0e-5,
+                             0.0, 4);
   // and a gyro whose bias does not walk publishes less heading variance than an unknown one
-  EXPECT_LT(heading_var_none, heading_var_unknown);
+  EXPECT_LT(none, unknown);
+}
+
+// The gyro's white noise density is the sensor's figure too: in [0, 0.1] rad/s/sqrt(Hz), the
+// estimate the same bit for bit whatever its value.
+TEST(ParallelKfParams, GivenTheGyroNoiseDensityInAFileWhenLoadedThenNullIsNotKnownAHostileValueIsRefusedAndTheEstimateIgnoresIt) {
+  const auto [unknown, noisy] = expect_a_sensor_figure(
+      "gyro_noise_density_rps_per_sqrt_hz", &ParallelKfParams::gyro_noise_density_rps_per_sqrt_hz, 6.2e-5, 0.05, 5);
+  // and a far noisier gyro than the simulated one leaves a less certain bias: more heading variance
+  EXPECT_GT(noisy, unknown);
 }
 
 }  // namespace

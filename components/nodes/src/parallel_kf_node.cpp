@@ -3,7 +3,9 @@
 //   params: preset (default | paper), filter_file (YAML of ParallelKfParams), imu_delay_s (the
 //           IMU's group delay, s; overrides the file), gyro_bias_walk_rps_per_sqrt_s (the gyro's
 //           own bias walk, rad/s/sqrt(s), for the published covariance; overrides the file; a
-//           simulated IMU's host says its figure), node keys (NodeParams), north
+//           simulated IMU's host says its figure), gyro_noise_density_rps_per_sqrt_hz (the gyro's
+//           white noise density, rad/s/sqrt(Hz), for the published covariance; overrides the
+//           file), node keys (NodeParams), north
 //           (declination_deg | location + date: estimator_step.h north_keys())
 //   Without imu_delay_s here or in the file, the delay the IMU's driver publishes on `imu_info`
 //   is used (poise/nodes/imu_delay.h).
@@ -20,7 +22,8 @@ namespace {
 ParallelKfParams load_params(const runtime::ComponentSpec& spec, const NorthReference& north) {
   std::vector<std::string> known = NodeParams::keys();
   known.insert(known.end(), north_keys().begin(), north_keys().end());
-  known.insert(known.end(), {"preset", "filter_file", "imu_delay_s", "gyro_bias_walk_rps_per_sqrt_s"});
+  known.insert(known.end(), {"preset", "filter_file", "imu_delay_s", "gyro_bias_walk_rps_per_sqrt_s",
+                              "gyro_noise_density_rps_per_sqrt_hz"});
   runtime::check_known_params(spec, known);
   const auto file = runtime::param<std::string>(spec, "filter_file", "");
   try {
@@ -29,6 +32,8 @@ ParallelKfParams load_params(const runtime::ComponentSpec& spec, const NorthRefe
     p.imu_delay_s = runtime::param<double>(spec, "imu_delay_s", p.imu_delay_s);
     p.gyro_bias_walk_rps_per_sqrt_s =
         runtime::param<double>(spec, "gyro_bias_walk_rps_per_sqrt_s", p.gyro_bias_walk_rps_per_sqrt_s);
+    p.gyro_noise_density_rps_per_sqrt_hz =
+        runtime::param<double>(spec, "gyro_noise_density_rps_per_sqrt_hz", p.gyro_noise_density_rps_per_sqrt_hz);
     seed_field_reference(north, p.field_magnitude_ut, p.dip_deg);
     p.validate();
     return p;

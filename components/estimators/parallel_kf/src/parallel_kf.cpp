@@ -21,6 +21,9 @@ constexpr double kAccelReferenceTaus = 10.0;
 // The largest gyro bias random walk accepted, rad/s/sqrt(s) (0.57 deg/s per sqrt(s): a bias that
 // moves by degrees per second within seconds is no longer a bias a filter can learn).
 constexpr double kMaxGyroBiasWalk = 0.01;
+// The largest white gyro noise density accepted, rad/s/sqrt(Hz) (5.7 deg/s/sqrt(Hz): 81 deg/s per
+// sample at 200 Hz, no longer a rate sensor).
+constexpr double kMaxGyroNoiseDensity = 0.1;
 
 }  // namespace
 
@@ -80,6 +83,10 @@ void ParallelKfParams::validate() const {
   check.require(std::isnan(gyro_bias_walk_rps_per_sqrt_s) ||
                     (gyro_bias_walk_rps_per_sqrt_s >= 0.0 && gyro_bias_walk_rps_per_sqrt_s <= kMaxGyroBiasWalk),
                 "gyro_bias_walk_rps_per_sqrt_s", "in [0, 0.01] (rad/s/sqrt(s)), or null (not known: the design drift)");
+  check.require(std::isnan(gyro_noise_density_rps_per_sqrt_hz) ||
+                    (gyro_noise_density_rps_per_sqrt_hz >= 0.0 && gyro_noise_density_rps_per_sqrt_hz <= kMaxGyroNoiseDensity),
+                "gyro_noise_density_rps_per_sqrt_hz",
+                "in [0, 0.1] (rad/s/sqrt(Hz)), or null (not known: sigma_gyro_heading_rps per sample)");
   check.non_negative(motion_bias_sigma_rps, "motion_bias_sigma_rps", "rad/s, 0 = off");
   check.positive(motion_bias_clip_rps, "motion_bias_clip_rps", "rad/s");
   check.require(motion_gyro_scale_error >= 0.0 && motion_gyro_scale_error < 1.0, "motion_gyro_scale_error", "in [0, 1)");
@@ -339,7 +346,8 @@ double ParallelKf::motion_bias_noise(double dt) const {
   return p * p / v + p;
 }
 
-void ParallelKf::bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep) {
+void ParallelKf::bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep,
+                              MotionNoise* mn) {
   const double clip = p_.motion_bias_clip_rps;
   const double innovation = std::max(-clip, std::min(clip, z - h.dot(s_.bias)));
   const Eigen::Vector3d ph = s_.bias_cov * h;
@@ -354,15 +362,82 @@ void ParallelKf::bias_measure(const Eigen::Vector3d& h, double z, double w, cons
   s_.lag_bias_cov -= (s_.lag_bias_cov * h) * k.transpose();  // b_err -= k (h^T b_err + noise)
   // Joseph form (valid for any gain): P - k ph^T - ph k^T + s k k^T
   s_.bias_cov += s * k * k.transpose() - k * ph.transpose() - ph * k.transpose();
-  bias_error_update(h, k, w);
+  bias_error_update(h, k, gyro_white_var(s_.mb_time), mn);
 }
 
-void ParallelKf::bias_error_update(const Eigen::Vector3d& h, const Eigen::Vector3d& k, double w_true) {
-  // the bias error after b += k (h^T b_true + n - h^T b): (I - k h^T) b_err - k n, n of variance
-  // w_true (Joseph form with the gain the estimate used)
+double ParallelKf::gyro_white_var(double t) const {
+  // the mean of t / dt samples of per-sample variance density^2 / dt
+  const double density = p_.gyro_noise_density_rps_per_sqrt_hz;
+  if (std::isnan(density)) {
+    const double sg = kf2_params_.sigma_gyro_rps;
+    return sg * sg * s_.last_dt_s / t;
+  }
+  return density * density / t;
+}
+
+Eigen::Matrix3d ParallelKf::reference_error_cov() const {
+  const ParallelKfCovarianceTerms c = covariance_terms(output());
+  Eigen::Matrix3d px = c.kf + c.external_accel + c.gyro_scale + c.field + c.hard_iron;
+  if (s_.gate.learnt) {
+    // the heading is built from sZ (2): a tilt error a about magnetic north (ENU y) turns it by
+    // -tan(dip) a, and KF2 pulls it there (propagate_lag_error)
+    const double tan_dip = std::sin(s_.gate.dip_rad) / std::max(std::cos(s_.gate.dip_rad), std::sqrt(kMinCos2Dip));
+    px(2, 2) += tan_dip * tan_dip * px(1, 1);
+    px(2, 1) -= tan_dip * px(1, 1);
+    px(1, 2) = px(2, 1);
+  }
+  return px;
+}
+
+ParallelKf::MotionNoise ParallelKf::motion_noise_window(double t) const {
+  // x_j = A x_{j-1} + w per axis, a = e^(-t / tau), stationary at P_x: E[x_j x_{j-1}^T] = A P_x, so
+  // d = x_j - x_{j-1} has E[d d^T] = 2 P_x - A P_x - P_x A and E[d x_j^T] = P_x - P_x A; the bias
+  // error (correlated with x_{j-1} by earlier windows, C) has E[b_err x_j^T] = C A and
+  // E[b_err d^T] = C (A - I)
+  MotionNoise mn;
+  mn.t = t;
+  mn.r = s_.q_world_body.toRotationMatrix();
+  const Eigen::Matrix3d px = reference_error_cov();
+  const double tau_tilt = p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : p_.rest_filter_tau_s;
+  const double tau_heading = heading_lag_s(s_.last_dt_s);
+  const Eigen::Vector3d a(std::exp(-t / tau_tilt), std::exp(-t / tau_tilt),
+                          tau_heading > 0.0 ? std::exp(-t / tau_heading) : 0.0);
+  const Eigen::Matrix3d pa = px * a.asDiagonal();  // P_x A
+  mn.d_d = 2.0 * px - pa - pa.transpose();
+  mn.d_x = px - pa;
+  mn.e_x = s_.bias_err_att_cov * a.asDiagonal();
+  mn.e_d = mn.e_x - s_.bias_err_att_cov;
+  return mn;
+}
+
+void ParallelKf::bias_error_update(const Eigen::Vector3d& h, const Eigen::Vector3d& k, double w_white,
+                                   MotionNoise* mn) {
+  // the bias error after b += k (h^T b_true + n - h^T b): M b_err - k n, M = I - k h^T, with the
+  // gain the estimate used: P <- M P M^T + k k^T var(n) - M E[b_err n] k^T - k E[n b_err^T] M^T
   const Eigen::Vector3d ph = s_.bias_err_cov * h;
-  const double s = h.dot(ph) + w_true;
-  s_.bias_err_cov += s * k * k.transpose() - k * ph.transpose() - ph * k.transpose();
+  double var_n = w_white;
+  Eigen::Vector3d e_n = Eigen::Vector3d::Zero();  // E[b_err n]
+  if (mn != nullptr) {
+    // n = white - g^T d / t, g = R h the measured direction in the world
+    const Eigen::Vector3d g = mn->r * h;
+    var_n += g.dot(mn->d_d * g) / (mn->t * mn->t);
+    e_n = -(mn->e_d * g) / mn->t;
+  }
+  const double s = h.dot(ph) + var_n;
+  // M P M^T = P - k ph^T - ph k^T + (h^T P h) k k^T; M e_n = e_n - k (h . e_n)
+  const Eigen::Vector3d me_n = e_n - k * h.dot(e_n);
+  s_.bias_err_cov += s * k * k.transpose() - k * ph.transpose() - ph * k.transpose() - me_n * k.transpose() -
+                     k * me_n.transpose();
+  if (mn != nullptr) {
+    // E[b_err+ d^T] = M E[b_err d^T] - k E[n d^T], E[n d^T] = -g^T E[d d^T] / t; the same with x_j
+    const Eigen::Vector3d g = mn->r * h;
+    mn->e_d -= k * (h.transpose() * mn->e_d);
+    mn->e_d += k * (g.transpose() * mn->d_d) / mn->t;
+    mn->e_x -= k * (h.transpose() * mn->e_x);
+    mn->e_x += k * (g.transpose() * mn->d_x) / mn->t;
+  } else {
+    s_.bias_err_att_cov -= k * (h.transpose() * s_.bias_err_att_cov);
+  }
 }
 
 void ParallelKf::motion_bias_measure() {
@@ -392,12 +467,17 @@ void ParallelKf::motion_bias_measure() {
     const double scale_rps = p_.motion_gyro_scale_error / p_.motion_bias_sigma_rps;
     const double w_motion = motion_bias_noise(t);
     const double w = w_motion * (1.0 + scale_rps * scale_rps * s_.rate2_lp);
-    bias_measure(h1, h1.dot(m), w, &up);  // the vertical part is unobservable from gravity
-    bias_measure(h2, h2.dot(m), w, &up);
+    MotionNoise mn = motion_noise_window(t);
+    bias_measure(h1, h1.dot(m), w, &up, &mn);  // the vertical part is unobservable from gravity
+    bias_measure(h2, h2.dot(m), w, &up, &mn);
     if (s_.mb_head_used && s_.mb_head_trusted) {
       // heading correction rate about sZ from the accepted magnetometer updates in the window
-      bias_measure(up, up.dot(s_.bias) - s_.mb_head / t, w, nullptr);
+      bias_measure(up, up.dot(s_.bias) - s_.mb_head / t, w, nullptr, &mn);
     }
+    s_.bias_err_att_cov = mn.e_x;
+  } else {
+    // no motion measurement: x_{j-1} -> x_j decorrelates the bias error from it
+    s_.bias_err_att_cov = motion_noise_window(t).e_x;
   }
 }
 
@@ -423,6 +503,7 @@ void ParallelKf::bias_update() {
       s_.bias_err_cov.row(i) *= f;
       s_.bias_err_cov.col(i) *= f;
       s_.lag_bias_cov.col(i) *= f;
+      s_.bias_err_att_cov.row(i) *= f;
     }
   }
   if (s_.rest_det.rest) {
@@ -433,15 +514,14 @@ void ParallelKf::bias_update() {
     // What the window's samples really tell: the gyro's white noise (KF2's sigma_G per sample)
     // averaged over the window's t / dt samples. w above is larger by design (a smooth
     // estimate); the bias error covariance follows the gain it gives with this noise.
-    const double sg = kf2_params_.sigma_gyro_rps;
-    const double w_true = sg * sg * s_.last_dt_s / t;
+    const double w_true = gyro_white_var(t);
     for (int i = 0; i < 3; ++i) {  // H = I, W = w I: three scalar updates, one per axis
       const Eigen::Vector3d ph = s_.bias_cov.col(i);
       const Eigen::Vector3d k = ph / (ph(i) + w);
       s_.bias += k * (s_.rest_det.gyro_lp(i) - s_.bias(i));
       s_.lag_bias_cov -= s_.lag_bias_cov.col(i) * k.transpose();
       s_.bias_cov -= k * ph.transpose();
-      bias_error_update(Eigen::Vector3d::Unit(i), k, w_true);
+      bias_error_update(Eigen::Vector3d::Unit(i), k, w_true, nullptr);
     }
   }
   if (p_.motion_bias_sigma_rps > 0.0) {
@@ -635,6 +715,7 @@ void ParallelKf::restart_heading(const Eigen::Vector3d& mag) {
   s_.lag_cov.row(2).setZero();  // the heading starts again from the field: no lag error in it
   s_.lag_cov.col(2).setZero();
   s_.lag_bias_cov.row(2).setZero();
+  s_.bias_err_att_cov.col(2).setZero();  // and no error the bias filter has seen the rate of
   s_.field_dn_lp = 0.0;  // deviations from the reference it replaced
   s_.field_dv_lp = 0.0;
   s_.mb_head_trusted = false;  // a jump of the heading, not a measurement of the bias

@@ -268,10 +268,12 @@ void run_demo(const DemoOptions& o) {
         params["q_body_camera"] = YAML::Load("[0, 1, 0, 0]");  // the synthetic camera looks down
       }
       if (std::string(f) == "parallel_kf" && simulated_imu) {
-        // the simulated gyro's own bias walk (its scenario's; 0: a constant bias), for the
-        // published covariance (docs/ESTIMATORS.md "The gyro's bias walk")
-        params["gyro_bias_walk_rps_per_sqrt_s"] =
-            sim::make_scenario(o.scenario, o.rate_hz, o.seed).noise.gyro_bias_walk_rps_per_sqrt_s;
+        // the simulated gyro's own bias walk (its scenario's; 0: a constant bias) and white noise
+        // density (its per-sample sigma over sqrt(rate)), for the published covariance
+        // (docs/ESTIMATORS.md "The gyro's bias walk")
+        const sim::SensorNoise noise = sim::make_scenario(o.scenario, o.rate_hz, o.seed).noise;
+        params["gyro_bias_walk_rps_per_sqrt_s"] = noise.gyro_bias_walk_rps_per_sqrt_s;
+        params["gyro_noise_density_rps_per_sqrt_hz"] = noise.sigma_gyro_rps / std::sqrt(o.rate_hz);
       }
       spec.components.push_back(component(f, f, params));
       filters.emplace_back(f);

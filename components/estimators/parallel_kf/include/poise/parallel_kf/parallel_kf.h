@@ -175,6 +175,13 @@ struct ParallelKfParams {
   /// rad/s/sqrt(s)). In [0, 0.01] rad/s/sqrt(s) otherwise (docs/ESTIMATORS.md "The gyro's bias
   /// walk": where the figure comes from).
   double gyro_bias_walk_rps_per_sqrt_s = std::nan("");
+  /// The gyro's white noise density, rad/s/sqrt(Hz): a property of the sensor (its Allan
+  /// deviation's angle random walk N, the -1/2 slope; per-sample sigma = density * sqrt(rate)),
+  /// not of the filter. Only the published covariance uses it: the noise of the bias filter's
+  /// measurements in bias_err_cov (the mean of a window of t seconds: density^2 / t). NaN (the
+  /// default; `null` in YAML) = not known: sigma_gyro_heading_rps taken as the per-sample sigma at
+  /// the filter's rate. In [0, 0.1] rad/s/sqrt(Hz) otherwise.
+  double gyro_noise_density_rps_per_sqrt_hz = std::nan("");
   /// Gyro bias in motion (0 = off): the same Kalman filter is also measured while moving, by the
   /// rate at which KF1's correction turns sZ (the part of the attitude change that the gyro did
   /// not explain; only the two components perpendicular to gravity are observable), with the lag
@@ -329,9 +336,13 @@ struct ParallelKfState {
   // bias / rest
   Eigen::Vector3d bias{0, 0, 0};
   Eigen::Matrix3d bias_cov = Eigen::Matrix3d::Zero();  ///< covariance of the bias estimate, rad^2/s^2
-  /// covariance of the bias estimate's error: the gains of bias_cov's filter, with the rest
-  /// measurement's noise that of the gyro (bias_cov's is larger by design), rad^2/s^2
+  /// covariance of the bias estimate's error: the gains of bias_cov's filter, with the noise its
+  /// measurements really have (bias_cov's is larger by design; motion_noise_window), rad^2/s^2
   Eigen::Matrix3d bias_err_cov = Eigen::Matrix3d::Zero();
+  /// cross-covariance of the bias estimate's real error (body) with the attitude error of the
+  /// estimate that is not the bias's (world rotation vector: what the motion measurements' noise
+  /// is the rate of; motion_noise_window), rad^2/s
+  Eigen::Matrix3d bias_err_att_cov = Eigen::Matrix3d::Zero();
   Eigen::Vector3d bias_lp_i{0, 0, 0};  ///< the bias in the inertial frame, low-passed as the accelerometer
   double rate2_lp = 0.0;    ///< |s_G|^2 low-passed over accel_lowpass_tau_s, rad^2/s^2
   // motion bias window (summed between updates)
@@ -451,9 +462,12 @@ class ParallelKf {
   ///             most of a gated stretch's drift in it; and KF2 pulls the heading towards
   ///             -tan(dip) times the tilt error about magnetic north (the heading is built from sZ);
   ///           (P_b here is bias_err_cov, the covariance of the bias estimate's real error: the
-  ///             bias filter's gains with the rest measurement's noise that of the gyro's white
-  ///             noise, not the larger one the filter is designed with, growing by the gyro's own
-  ///             bias walk gyro_bias_walk_rps_per_sqrt_s when the sensor says it)
+  ///             bias filter's gains with the noise its measurements really have, not the larger
+  ///             one the filter is designed with: the gyro's white noise over the window
+  ///             (gyro_noise_density_rps_per_sqrt_hz when the sensor says it) and, in motion, the
+  ///             rate of the estimate's own attitude error that is not the bias's
+  ///             (motion_noise_window); growing by the gyro's own bias walk
+  ///             gyro_bias_walk_rps_per_sqrt_s when the sensor says it)
   ///           each diagonal term at least tau^2 P_b (tilt) and P_b,z t^2 (heading; t the time
   ///             since fields last held the heading, each accepted field removing dt / tau_2 of
   ///             it): the bias filter's motion measurements are the lag error's own rate, so its
@@ -525,6 +539,20 @@ class ParallelKf {
   [[nodiscard]] SourceReports sources() const;
 
  private:
+  /// What a window's motion measurements really carry besides the bias (bias_error_update): the
+  /// gyro's white noise averaged over the window, and the rate of the attitude error x that is not
+  /// the bias's over it, -(x_j - x_{j-1}) / t. x (world rotation vector) is taken as first-order
+  /// Gauss-Markov per axis: its covariance the published terms that are not the bias's
+  /// (reference_error_cov), its time constant the lag of the KF that follows it (the
+  /// accelerometer low-pass's tau for the tilt, KF2's for the heading).
+  struct MotionNoise {
+    Eigen::Matrix3d e_d = Eigen::Matrix3d::Zero();   ///< E[b_err d^T], d = x_j - x_{j-1}, body x world
+    Eigen::Matrix3d e_x = Eigen::Matrix3d::Zero();   ///< E[b_err x_j^T], body x world
+    Eigen::Matrix3d d_d = Eigen::Matrix3d::Zero();   ///< E[d d^T], world
+    Eigen::Matrix3d d_x = Eigen::Matrix3d::Zero();   ///< E[d x_j^T], world
+    Eigen::Matrix3d r = Eigen::Matrix3d::Identity();  ///< R_world_body
+    double t = 0.0;                                   ///< the window, s
+  };
   bool step(const ImuSample& s, SampleCheck& c);  ///< update() without the reporting
   void initialize(const ImuSample& s, bool mag_ok);
   /// Feeds the hard-iron estimate (hard_iron, a sample with a usable s_M: `gyro` bias-corrected,
@@ -539,7 +567,7 @@ class ParallelKf {
   void bias_update();  ///< the bias filter over the window s_.mb_time (predict, rest or motion)
   /// One scalar bias measurement along unit h (body): value z (rad/s), noise variance w; the
   /// component along unit *keep (if given) is left as it is.
-  void bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep);
+  void bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep, MotionNoise* mn);
   void motion_bias_measure();
   /// The horizontal external acceleration the tilt's low-pass let through (accel_ref_i,
   /// accel_h_cov_i), from the raw accelerometer `accel` (body) of a step of dt; for the covariance.
@@ -553,8 +581,16 @@ class ParallelKf {
   [[nodiscard]] double heading_lag_s(double dt) const;
   /// Propagates the attitude error the bias error leaves (lag_cov, lag_bias_cov) over t seconds.
   void propagate_lag_error(double t);
-  /// bias_err_cov after a bias measurement along h with gain k and measurement noise w_true.
-  void bias_error_update(const Eigen::Vector3d& h, const Eigen::Vector3d& k, double w_true);
+  [[nodiscard]] MotionNoise motion_noise_window(double t) const;
+  /// The covariance of the estimate's attitude error that is not the bias's (world, rad^2): the
+  /// published terms but the bias lag, the output's delay and an unknown heading.
+  [[nodiscard]] Eigen::Matrix3d reference_error_cov() const;
+  /// The white gyro noise of the mean of a window of t seconds, (rad/s)^2: the sensor's density
+  /// gyro_noise_density_rps_per_sqrt_hz squared over t, or not known, KF2's sigma_G per sample.
+  [[nodiscard]] double gyro_white_var(double t) const;
+  /// bias_err_cov (and bias_err_att_cov) after a bias measurement along h with gain k, whose
+  /// noise is white of variance w_white plus, with `mn`, the window's attitude error rate.
+  void bias_error_update(const Eigen::Vector3d& h, const Eigen::Vector3d& k, double w_white, MotionNoise* mn);
   void heading_step(const Eigen::Matrix3d& a,
                     const Eigen::Vector3d& mag, bool mag_ok, double dt);
   /// KF2 restarted on the field `mag` (a relearnt reference, or the first accepted field after a
