@@ -389,6 +389,12 @@ Eigen::Matrix3d ParallelKf::reference_error_cov() const {
   return px;
 }
 
+Eigen::Vector3d ParallelKf::reference_error_decay(double t) const {
+  const double tau_tilt = p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : p_.rest_filter_tau_s;
+  const double tau_heading = heading_lag_s(s_.last_dt_s);
+  return {std::exp(-t / tau_tilt), std::exp(-t / tau_tilt), tau_heading > 0.0 ? std::exp(-t / tau_heading) : 0.0};
+}
+
 ParallelKf::MotionNoise ParallelKf::motion_noise_window(double t) const {
   // x_j = A x_{j-1} + w per axis, a = e^(-t / tau), stationary at P_x: E[x_j x_{j-1}^T] = A P_x, so
   // d = x_j - x_{j-1} has E[d d^T] = 2 P_x - A P_x - P_x A and E[d x_j^T] = P_x - P_x A; the bias
@@ -398,10 +404,7 @@ ParallelKf::MotionNoise ParallelKf::motion_noise_window(double t) const {
   mn.t = t;
   mn.r = s_.q_world_body.toRotationMatrix();
   const Eigen::Matrix3d px = reference_error_cov();
-  const double tau_tilt = p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : p_.rest_filter_tau_s;
-  const double tau_heading = heading_lag_s(s_.last_dt_s);
-  const Eigen::Vector3d a(std::exp(-t / tau_tilt), std::exp(-t / tau_tilt),
-                          tau_heading > 0.0 ? std::exp(-t / tau_heading) : 0.0);
+  const Eigen::Vector3d a = reference_error_decay(t);
   const Eigen::Matrix3d pa = px * a.asDiagonal();  // P_x A
   mn.d_d = 2.0 * px - pa - pa.transpose();
   mn.d_x = px - pa;
@@ -476,8 +479,8 @@ void ParallelKf::motion_bias_measure() {
     }
     s_.bias_err_att_cov = mn.e_x;
   } else {
-    // no motion measurement: x_{j-1} -> x_j decorrelates the bias error from it
-    s_.bias_err_att_cov = motion_noise_window(t).e_x;
+    // no motion measurement: x_{j-1} -> x_j decorrelates the bias error from it, E[b_err x_j^T] = C A
+    s_.bias_err_att_cov = s_.bias_err_att_cov * reference_error_decay(t).asDiagonal();
   }
 }
 

@@ -582,6 +582,8 @@ class ParallelKf {
   /// Propagates the attitude error the bias error leaves (lag_cov, lag_bias_cov) over t seconds.
   void propagate_lag_error(double t);
   [[nodiscard]] MotionNoise motion_noise_window(double t) const;
+  /// x's decay over a window of t seconds per world axis, e^(-t / tau) (motion_noise_window's A).
+  [[nodiscard]] Eigen::Vector3d reference_error_decay(double t) const;
   /// The covariance of the estimate's attitude error that is not the bias's (world, rad^2): the
   /// published terms but the bias lag, the output's delay and an unknown heading.
   [[nodiscard]] Eigen::Matrix3d reference_error_cov() const;
