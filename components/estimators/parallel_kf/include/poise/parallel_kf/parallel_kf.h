@@ -566,7 +566,8 @@ class ParallelKf {
   [[nodiscard]] Eigen::Matrix3d transition(const Eigen::Vector3d& w, const Eigen::Vector3d& gyro, double dt) const;
   void bias_update();  ///< the bias filter over the window s_.mb_time (predict, rest or motion)
   /// One scalar bias measurement along unit h (body): value z (rad/s), noise variance w; the
-  /// component along unit *keep (if given) is left as it is.
+  /// component along unit *keep (if given) is left as it is; `mn` (a motion measurement's window,
+  /// else null) for the real error's update (bias_error_update).
   void bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep, MotionNoise* mn);
   void motion_bias_measure();
   /// The horizontal external acceleration the tilt's low-pass let through (accel_ref_i,
@@ -585,7 +586,8 @@ class ParallelKf {
   /// x's decay over a window of t seconds per world axis, e^(-t / tau) (motion_noise_window's A).
   [[nodiscard]] Eigen::Vector3d reference_error_decay(double t) const;
   /// The covariance of the estimate's attitude error that is not the bias's (world, rad^2): the
-  /// published terms but the bias lag, the output's delay and an unknown heading.
+  /// published terms but the bias lag, the output's delay and an unknown heading, the heading's
+  /// part also carrying -tan(dip) times the tilt error about magnetic north (KF2 pulls it there).
   [[nodiscard]] Eigen::Matrix3d reference_error_cov() const;
   /// The white gyro noise of the mean of a window of t seconds, (rad/s)^2: the sensor's density
   /// gyro_noise_density_rps_per_sqrt_hz squared over t, or not known, KF2's sigma_G per sample.
