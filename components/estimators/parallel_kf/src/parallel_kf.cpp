@@ -217,13 +217,18 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
     s_.mb_corr += s_.kf1.last_correction_rotvec();
     s_.mb_rate2 += w.squaredNorm() * dt;
   }
+  // KF2's prediction to this sample's body frame (9a), (9b), (11a)-(11e): the frame KF1's
+  // correction below is expressed in
+  if (s_.heading_initialized) {
+    s_.kf2.predict_with_transition(a, dt);
+  }
   if (p_.share_tilt_correction && s_.heading_initialized) {
     // the rotation that moved sZ moves sX' too (one attitude error, two world directions)
     s_.kf2.set_u(rotate_by_shortest(z_before, s_.kf1.up_body(), s_.kf2.u()));  // both unit (renormalised)
   }
 
   // KF2: heading + magnetic disturbance (8)-(11), on the reading with the hard-iron offset removed
-  heading_step(a, hard_iron_corrected(s.stamp_ns, gyro, s.mag_ut, c.mag_ok), c.mag_ok, dt);
+  heading_step(hard_iron_corrected(s.stamp_ns, gyro, s.mag_ut, c.mag_ok), c.mag_ok, dt);
   s_.gate.tick(gp_, dt);
   if (p_.bias_estimation) {
     s_.mb_time += dt;
@@ -623,12 +628,8 @@ FieldGateParams ParallelKfParams::field_gate() const {
   return g;
 }
 
-void ParallelKf::heading_step(const Eigen::Matrix3d& a,
-                              const Eigen::Vector3d& mag, bool mag_ok, double dt) {
+void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt) {
   s_.mag_used = false;
-  if (s_.heading_initialized) {
-    s_.kf2.predict_with_transition(a, dt);  // (9a), (9b), (11a)-(11e)
-  }
   if (!mag_ok) {
     return;
   }

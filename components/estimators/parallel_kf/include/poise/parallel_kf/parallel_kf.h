@@ -595,8 +595,8 @@ class ParallelKf {
   /// bias_err_cov (and bias_err_att_cov) after a bias measurement along h with gain k, whose
   /// noise is white of variance w_white plus, with `mn`, the window's attitude error rate.
   void bias_error_update(const Eigen::Vector3d& h, const Eigen::Vector3d& k, double w_white, MotionNoise* mn);
-  void heading_step(const Eigen::Matrix3d& a,
-                    const Eigen::Vector3d& mag, bool mag_ok, double dt);
+  /// KF2's correction (predicted already, before KF1's correction was shared) and the gate
+  void heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt);
   /// KF2 restarted on the field `mag` (a relearnt reference, or the first accepted field after a
   /// start on a gated one): the heading jumps to it, as at a start
   void restart_heading(const Eigen::Vector3d& mag);
