@@ -90,6 +90,31 @@ TEST(HostFiles, GivenAGyroFigureParamWhenTheParallelKfIsCreatedThenARangeFigureI
   }
 }
 
+// The selective EKF component's figures of the sensor (gyro and accelerometer noise densities,
+// gyro bias walk; for the published covariance): a figure in range is taken, anything else is a
+// ConfigError naming its key.
+TEST(HostFiles, GivenTheSensorFiguresAsParamsWhenTheSelectiveEkfIsCreatedThenRangeFiguresAreTakenAndHostileOnesNamed) {
+  register_nodes();
+  DomainLease domain;
+  for (const char* key : {"gyro_noise_density_rps_per_sqrt_hz", "accel_noise_density_mps2_per_sqrt_hz",
+                          "gyro_bias_walk_rps_per_sqrt_s"}) {
+    auto host_with = [key](const std::string& value) {
+      return runtime::parse_host(YAML::Load(std::string("components: [{type: selective_ekf, name: s, params: {") + key +
+                                            ": " + value + "}}]"),
+                                 "test", ".");
+    };
+    EXPECT_NO_THROW(runtime::Host(host_with("1.0e-4"), domain.id())) << key;
+    for (const char* bad : {"-1e-6", "1e308", ".inf", "fast"}) {
+      try {
+        runtime::Host host(host_with(bad), domain.id());
+        ADD_FAILURE() << "no error for " << key << " " << bad;
+      } catch (const runtime::ConfigError& e) {
+        EXPECT_NE(std::string(e.what()).find(key), std::string::npos) << bad << ": " << e.what();
+      }
+    }
+  }
+}
+
 // Every attitude node takes the same north keys; a location (WMM2025) or a declination in
 // degrees is accepted, and a bad one is a ConfigError saying what to fix.
 TEST(HostFiles, GivenNorthSettingsWhenEachAttitudeNodeIsCreatedThenTheyAreAcceptedOrNamed) {

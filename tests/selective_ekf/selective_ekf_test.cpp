@@ -1337,8 +1337,70 @@ TEST(SelectiveEkfParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorNam
     {"heading_dip_tolerance_deg", [](SelectiveEkfParams& p) { p.heading_dip_tolerance_deg = std::nan(""); }},
     {"imu_delay_s", [](SelectiveEkfParams& p) { p.imu_delay_s = 0.1; }},
     {"gyro_scale_error", [](SelectiveEkfParams& p) { p.gyro_scale_error = -0.01; }},
-    {"limits.max_dt_s", [](SelectiveEkfParams& p) { p.limits.max_dt_s = 0.0; }}
+    {"limits.max_dt_s", [](SelectiveEkfParams& p) { p.limits.max_dt_s = 0.0; }},
+    {"gyro_noise_density_rps_per_sqrt_hz", [](SelectiveEkfParams& p) { p.gyro_noise_density_rps_per_sqrt_hz = 0.0; }},
+    {"accel_noise_density_mps2_per_sqrt_hz",
+     [](SelectiveEkfParams& p) { p.accel_noise_density_mps2_per_sqrt_hz = std::numeric_limits<double>::infinity(); }},
+    {"gyro_bias_walk_rps_per_sqrt_s", [](SelectiveEkfParams& p) { p.gyro_bias_walk_rps_per_sqrt_s = -1e-6; }}
   }, [](const SelectiveEkfParams& p) { SelectiveEkf f(p); });
+}
+
+// The figures of the sensor (gyro and accelerometer noise densities, gyro bias walk): null (or
+// absent) = not known, a number in range is taken, anything else is refused naming the key. Only
+// the estimate's error covariance reads them: the estimate is the same bit for bit whatever their
+// values (oracle: the default filter's), and the published covariance differs.
+TEST(SelectiveEkfParams, GivenTheSensorFiguresInAFileWhenLoadedThenNullIsNotKnownAHostileValueIsRefusedAndTheEstimateIgnoresThem) {
+  const std::string path = ::testing::TempDir() + "/sel_sensor_figures.yaml";
+  auto load = [&](const std::string& text) {
+    std::FILE* f = std::fopen(path.c_str(), "w");
+    EXPECT_NE(f, nullptr);
+    std::fputs(text.c_str(), f);
+    std::fclose(f);
+    return load_selective_ekf_params(path);
+  };
+  const SelectiveEkfParams defaults;
+  EXPECT_TRUE(std::isnan(defaults.gyro_noise_density_rps_per_sqrt_hz));
+  EXPECT_TRUE(std::isnan(defaults.accel_noise_density_mps2_per_sqrt_hz));
+  EXPECT_TRUE(std::isnan(defaults.gyro_bias_walk_rps_per_sqrt_s));
+  using Field = double SelectiveEkfParams::*;
+  const std::pair<const char*, Field> figures[] = {
+      {"gyro_noise_density_rps_per_sqrt_hz", &SelectiveEkfParams::gyro_noise_density_rps_per_sqrt_hz},
+      {"accel_noise_density_mps2_per_sqrt_hz", &SelectiveEkfParams::accel_noise_density_mps2_per_sqrt_hz},
+      {"gyro_bias_walk_rps_per_sqrt_s", &SelectiveEkfParams::gyro_bias_walk_rps_per_sqrt_s}};
+  for (const auto& [key, field] : figures) {
+    SCOPED_TRACE(key);
+    const std::string head = std::string("selective_ekf:\n  ") + key + ": ";
+    EXPECT_TRUE(std::isnan(load(head + "~\n").*field));
+    const SelectiveEkfParams given = load(head + "1.0e-4\n");
+    for (const auto& [other, other_field] : figures) {
+      if (other_field == field) {
+        EXPECT_EQ(given.*field, 1.0e-4);
+      } else {
+        EXPECT_TRUE(std::isnan(given.*other_field)) << other;
+      }
+    }
+    for (const char* bad : {"-1e-6", "1e308", ".inf", "fast", "[1, 2]"}) {
+      const std::string msg = testing::error_message([&] { load(head + bad + "\n"); });
+      EXPECT_NE(msg.find(key), std::string::npos) << bad << " -> '" << msg << "'";
+    }
+  }
+  // the estimate is the same bit for bit whatever the figures; the published covariance is not
+  SelectiveEkfParams told;
+  told.gyro_noise_density_rps_per_sqrt_hz = 6.17e-5;
+  told.accel_noise_density_mps2_per_sqrt_hz = 2.83e-3;
+  told.gyro_bias_walk_rps_per_sqrt_s = 0.0;
+  SelectiveEkf unknown(defaults);
+  SelectiveEkf known(told);
+  sim::SensorSimulator a(sim::make_scenario("random_motion", kRateHz, kSeed));
+  bool differs = false;
+  while (!a.done()) {
+    const sim::SimSample s = a.next();
+    ASSERT_EQ(unknown.update_imu(s.imu), known.update_imu(s.imu));
+    ASSERT_EQ(unknown.q_world_body().coeffs(), known.q_world_body().coeffs());
+    ASSERT_EQ(unknown.state().P, known.state().P);
+    differs = differs || unknown.attitude_covariance() != known.attitude_covariance();
+  }
+  EXPECT_TRUE(differs);
 }
 
 TEST(SelectiveEkfParams, GivenABadGaussNewtonValueThenTheErrorNamesTheNestedKey) {

@@ -7,7 +7,10 @@
 //           delay the IMU's driver publishes on `imu_info`: poise/nodes/imu_delay.h; one that
 //           arrives after the first sample restarts the EKF with it), vision_time_offset_s,
 //           vision_time_offset_sigma_s (the camera-IMU time offset's prior and its sigma, s; sigma
-//           > 0 estimates it online) and predict_horizon_s (override the file; see below), node
+//           > 0 estimates it online) and predict_horizon_s (override the file; see below),
+//           gyro_noise_density_rps_per_sqrt_hz, accel_noise_density_mps2_per_sqrt_hz,
+//           gyro_bias_walk_rps_per_sqrt_s (figures of the sensor, for the published covariance
+//           only; override the file; a simulated IMU's host says its own), node
 //           keys (NodeParams), north
 //           (declination_deg | location + date: estimator_step.h north_keys(); vision poses are
 //           then taken as true ENU and turned into the filter's magnetic ENU)
@@ -38,7 +41,8 @@ SelectiveEkfParams load_params(const runtime::ComponentSpec& spec, const NorthRe
   std::vector<std::string> known = NodeParams::keys();
   known.insert(known.end(), north_keys().begin(), north_keys().end());
   known.insert(known.end(), {"filter_file", "q_body_camera", "p_body_camera_m", "imu_delay_s", "vision_time_offset_s",
-                             "vision_time_offset_sigma_s", "predict_horizon_s"});
+                             "vision_time_offset_sigma_s", "predict_horizon_s", "gyro_noise_density_rps_per_sqrt_hz",
+                             "accel_noise_density_mps2_per_sqrt_hz", "gyro_bias_walk_rps_per_sqrt_s"});
   runtime::check_known_params(spec, known);
   SelectiveEkfParams p;
   const auto file = runtime::param<std::string>(spec, "filter_file", "");
@@ -65,6 +69,12 @@ SelectiveEkfParams load_params(const runtime::ComponentSpec& spec, const NorthRe
     p.vision_time_offset_sigma_s =
         runtime::param<double>(spec, "vision_time_offset_sigma_s", p.vision_time_offset_sigma_s);
     p.predict_horizon_s = runtime::param<double>(spec, "predict_horizon_s", p.predict_horizon_s);
+    // figures of the sensor, for the published covariance only (override the file)
+    for (auto [key, value] : {std::pair{"gyro_noise_density_rps_per_sqrt_hz", &p.gyro_noise_density_rps_per_sqrt_hz},
+                              std::pair{"accel_noise_density_mps2_per_sqrt_hz", &p.accel_noise_density_mps2_per_sqrt_hz},
+                              std::pair{"gyro_bias_walk_rps_per_sqrt_s", &p.gyro_bias_walk_rps_per_sqrt_s}}) {
+      *value = runtime::param<double>(spec, key, *value);
+    }
     seed_field_reference(north, p.field_magnitude_ut, p.dip_deg);
     validate(p);
   } catch (const std::exception& e) {

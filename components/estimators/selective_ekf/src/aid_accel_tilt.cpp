@@ -42,6 +42,10 @@ void aid_accel_tilt(const AidContext& c, const ImuInput& in, SourceStatus& st) {
   h.block<1, 3>(1, SelectiveEkf::kE) = e2.transpose() * m;
   const Eigen::Vector2d innov(e1.dot(cr), e2.dot(cr));
   const double r = in.tilt_sigma * in.tilt_sigma / in.dt_s * in.tilt_var_scale;
+  // the rows' real white noise (P_err): with the accelerometer's noise known, none: its low-passed
+  // noise is part of e (an AR(1) state, preprocess), correlated over the low-pass's time constant
+  // and far smaller per period than the design density above
+  const Eigen::Vector2d r_err = Eigen::Vector2d::Constant(accel_noise_known(c.p) ? 0.0 : r);
   // gate: none; fuse. After a start in motion the low-pass and the attitude both began at the
   // first sample, external acceleration and all; as the low-pass forgets it (over
   // accel_lowpass_tau_s) the innovation ramps, which is what a bias error looks like. For that
@@ -49,11 +53,11 @@ void aid_accel_tilt(const AidContext& c, const ImuInput& in, SourceStatus& st) {
   // its uncertainty and the correlations (Joseph form for the gain used).
   if (c.x.pre.moving_start && c.x.pre.since_start_s < c.p.accel_lowpass_tau_s && !c.x.coupled) {
     st.innovation_variance.setZero();
-    st.innovation_variance.head<2>() = fuse_bias_considered<2>(c.x, h, innov, Eigen::Vector2d::Constant(r));
+    st.innovation_variance.head<2>() = fuse_bias_considered<2>(c.x, h, innov, Eigen::Vector2d::Constant(r), r_err);
     st.innovation.setZero();
     st.innovation.head<2>() = innov;
   } else {
-    fuse<2>(c.x, h, innov, Eigen::Vector2d::Constant(r), kReportGateSigma, false, st);
+    fuse<2>(c.x, h, innov, Eigen::Vector2d::Constant(r), r_err, kReportGateSigma, false, st);
   }
   // status
   record(st, Decision::kFused, in.stamp_ns, c.first_pass);

@@ -12,7 +12,9 @@ void aid_gyro(const AidContext& c, const ImuInput& in, SourceStatus& st) {
   h.middleCols<3>(SelectiveEkf::kB).setIdentity();
   const double r = c.p.sigma_gyro_rps * c.p.sigma_gyro_rps;
   // gate: none; fuse
-  fuse<3>(c.x, h, in.gyro - c.x.w_rps - c.x.b_rps, Eigen::Vector3d::Constant(r), kReportGateSigma, false, st);
+  // P_err: the gyro's own white noise over the sample interval when known
+  fuse<3>(c.x, h, in.gyro - c.x.w_rps - c.x.b_rps, Eigen::Vector3d::Constant(r),
+          Eigen::Vector3d::Constant(err_gyro_variance(c.p, in.dt_s)), kReportGateSigma, false, st);
   // status
   record(st, Decision::kFused, in.stamp_ns, c.first_pass);
 }

@@ -106,7 +106,7 @@ void aid_mag_heading(const AidContext& c, const ImuInput& in, bool anchored, Mag
   keep.block<3, 3>(SelectiveEkf::kE, SelectiveEkf::kE).setZero();
   const Eigen::Matrix<double, 1, 1> rr(r);
   st.innovation_variance.setZero();
-  st.innovation_variance.head<1>() = fuse_considered<1>(c.x, h, innov, rr, keep);
+  st.innovation_variance.head<1>() = fuse_considered<1>(c.x, h, innov, rr, rr, keep);
   st.innovation.setZero();
   st.innovation[0] = dpsi;
   st.test_ratio = dpsi * dpsi / (kReportGateSigma * kReportGateSigma * st.innovation_variance[0]);

@@ -28,15 +28,17 @@ void aid_zero_rate(const AidContext& c, const ImuInput& in, SourceStatus& st) {
   h.middleCols<3>(SelectiveEkf::kB).setIdentity();
   const double r_rest = c.p.sigma_rest_rate_rps * c.p.sigma_rest_rate_rps;
   const double r_bias = c.p.sigma_gyro_rps * c.p.sigma_gyro_rps + r_rest;
-  fuse<3>(c.x, h, c.x.pre.rest_detector.gyro_lp - c.x.b_rps, Eigen::Vector3d::Constant(r_bias), kReportGateSigma,
-          false, st);
+  // (P_err: the gyro's own white noise when known)
+  const double r_bias_err = err_gyro_variance(c.p, in.dt_s) + r_rest;
+  fuse<3>(c.x, h, c.x.pre.rest_detector.gyro_lp - c.x.b_rps, Eigen::Vector3d::Constant(r_bias),
+          Eigen::Vector3d::Constant(r_bias_err), kReportGateSigma, false, st);
   // rate: gate (consistent with rest), fuse with the bias considered
   const Eigen::Matrix3d s_w =
       c.x.P.block<3, 3>(SelectiveEkf::kW, SelectiveEkf::kW) + r_rest * Eigen::Matrix3d::Identity();
   if (c.x.w_rps.dot(s_w.ldlt().solve(c.x.w_rps)) <= kNees95Dof3) {  // chi-square, 3 dof, 95 %
     h.setZero();
     h.middleCols<3>(SelectiveEkf::kW).setIdentity();
-    fuse_bias_considered<3>(c.x, h, -c.x.w_rps, Eigen::Vector3d::Constant(r_rest));
+    fuse_bias_considered<3>(c.x, h, -c.x.w_rps, Eigen::Vector3d::Constant(r_rest), Eigen::Vector3d::Constant(r_rest));
   }
   // status
   record(st, Decision::kFused, in.stamp_ns, c.first_pass);

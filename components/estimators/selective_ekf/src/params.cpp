@@ -60,6 +60,17 @@ void validate(const SelectiveEkfParams& p) {
   check.require(p.predict_horizon_s >= 0.0 && p.predict_horizon_s <= 0.2, "predict_horizon_s", "in [0, 0.2] (s)");
   check.require(std::isnan(p.imu_delay_s) || (p.imu_delay_s >= 0.0 && p.imu_delay_s <= 0.05), "imu_delay_s",
                 "in [0, 0.05] (s), or null (not known: half a sample)");
+  // figures of the sensor (P_err only): null = not known
+  check.require(std::isnan(p.gyro_noise_density_rps_per_sqrt_hz) ||
+                    (p.gyro_noise_density_rps_per_sqrt_hz > 0.0 && p.gyro_noise_density_rps_per_sqrt_hz <= 0.01),
+                "gyro_noise_density_rps_per_sqrt_hz", "in (0, 0.01] (rad/s/sqrt(Hz)), or null (not known: sigma_gyro_rps)");
+  check.require(std::isnan(p.accel_noise_density_mps2_per_sqrt_hz) ||
+                    (p.accel_noise_density_mps2_per_sqrt_hz > 0.0 && p.accel_noise_density_mps2_per_sqrt_hz <= 1.0),
+                "accel_noise_density_mps2_per_sqrt_hz",
+                "in (0, 1] (m/s^2/sqrt(Hz)), or null (not known: the tilt density as white noise)");
+  check.require(std::isnan(p.gyro_bias_walk_rps_per_sqrt_s) ||
+                    (p.gyro_bias_walk_rps_per_sqrt_s >= 0.0 && p.gyro_bias_walk_rps_per_sqrt_s <= 0.01),
+                "gyro_bias_walk_rps_per_sqrt_s", "in [0, 0.01] (rad/s/sqrt(s)), or null (not known: sigma_bias_walk)");
   check.require(selective_ekf_aids::finite_quat(p.q_body_camera), "q_body_camera", "a finite unit quaternion [w, x, y, z]");
   check.require(p.p_body_camera_m.allFinite(), "p_body_camera_m", "finite (m)");
   check.positive(p.init_sigma_attitude_deg, "init_sigma_attitude_deg", "deg");

@@ -49,6 +49,9 @@ void read(YamlParamReader& r, SelectiveEkfParams& p) {
   r.get("field_verify_s", p.field_verify_s);
   r.get("sigma_heading_rad_sqrt_s", p.sigma_heading_rad_sqrt_s);
   r.get("gyro_scale_error", p.gyro_scale_error);
+  r.get_nullable("gyro_noise_density_rps_per_sqrt_hz", p.gyro_noise_density_rps_per_sqrt_hz);
+  r.get_nullable("accel_noise_density_mps2_per_sqrt_hz", p.accel_noise_density_mps2_per_sqrt_hz);
+  r.get_nullable("gyro_bias_walk_rps_per_sqrt_s", p.gyro_bias_walk_rps_per_sqrt_s);
   r.get("rest_detection", p.rest_detection);
   r.get("rest_gyro_max_rps", p.rest_gyro_max_rps);
   r.get("rest_accel_max_mps2", p.rest_accel_max_mps2);

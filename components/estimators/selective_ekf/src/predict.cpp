@@ -25,7 +25,7 @@ Eigen::Matrix3d propagated_attitude_covariance(const SelectiveEkfState& x, const
   const Eigen::Matrix3d atw = a * p_tw * b.transpose();
   Eigen::Matrix3d body = a * p_tt * a.transpose() + atw + atw.transpose() + b * p_ww * b.transpose();
   // continuous white noise over h: attitude walk q h, angular acceleration q h^3 / 3
-  body.diagonal().array() += p.sigma_attitude_walk * p.sigma_attitude_walk * h +
+  body.diagonal().array() += selective_ekf_aids::err_attitude_walk2(p) * h +
                              p.sigma_angular_accel * p.sigma_angular_accel * h * h * h / 3.0;
   const Eigen::Matrix3d r = (x.q_world_body * dq).toRotationMatrix();
   return r * body * r.transpose();

@@ -205,13 +205,13 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
   // rate (trapezoid-like, no one-sample lag).
   const double qc_w = qw * h / 2.0;
   const double qc_v = qv * h / 2.0;
-  auto add_q = [&](Mat& m, double s_th) {
+  auto add_q = [&](Mat& m, double s_th, double q_b) {
     for (int i = 0; i < 3; ++i) {
       m(kW + i, kW + i) += qw;
       m(kTh + i, kTh + i) += s_th;
       m(kW + i, kTh + i) += qc_w;
       m(kTh + i, kW + i) += qc_w;
-      m(kB + i, kB + i) += qb;
+      m(kB + i, kB + i) += q_b;
       m(kV + i, kV + i) += qv;
       m(kT + i, kT + i) += qv * h * h / 3.0;
       m(kV + i, kT + i) += qc_v;
@@ -225,7 +225,7 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
     m.block<3, 3>(kW, kE) += qc_w * r_ib.transpose();
     m.block<3, 3>(kE, kW) += qc_w * r_ib;
   };
-  add_q(x_.P, qth + qw * h * h / 3.0);
+  add_q(x_.P, qth + qw * h * h / 3.0, qb);
   // The estimate's error: the same, but a gyro sample is the rate's mean over its interval,
   // centred on the state's time, so the attitude's increment between two state times is the
   // trapezoid of the two rates, h (w_k-1 + w_k) / 2, up to the halves of the two intervals'
@@ -233,7 +233,9 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
   // not a noise that accumulates). The rate's noise n (q h) enters the attitude as (h / 2) n,
   // which the gyro row sees: [q h, q h^2/2; q h^2/2, q h^3/4] and no residual. P's q h^3 / 3
   // leaves q h^3 / 12 per interval that no row sees (a gyro sampling the rate at instants).
-  add_q(x_.P_err, qth + qw * h * h / 4.0);
+  // The sensor's own figures where known (update.h): the attitude's noise is then the gyro's
+  // alone (through the gyro row), the bias walks by the gyro's own walk.
+  add_q(x_.P_err, aids::err_attitude_walk2(p_) * h + qw * h * h / 4.0, aids::err_bias_walk2(p_) * h);
   x_.stamp_ns = stamp_ns;
 }
 
@@ -323,6 +325,17 @@ void SelectiveEkf::preprocess(ImuInput& in) {
     // error covariance only; in P (the gains) e starts known, as tuned (a singular P).
     const Eigen::Vector3d u0 = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
     const Eigen::Matrix3d tilt = Eigen::Matrix3d::Identity() - u0 * u0.transpose();
+    if (aids::accel_noise_known(p_) && !pre.moving_start) {
+      // A start at rest with the accelerometer's noise known: the tilt's error is that sample's
+      // noise, not init_sigma_attitude_deg (a bound for a start in motion, whose sample carries
+      // external acceleration). Its variance needs the sample's interval, so it is added at the
+      // next sample (start_noise_pending); here the tilt directions start known (the heading's
+      // start kept).
+      Mat keep = Mat::Identity();
+      keep.block<3, 3>(kTh, kTh) = u0 * u0.transpose();
+      x_.P_err = keep * x_.P_err * keep.transpose();
+      pre.start_noise_pending = true;
+    }
     x_.P_err.middleRows<3>(kE) = tilt * x_.P_err.middleRows<3>(kTh);
     x_.P_err.middleCols<3>(kE) = x_.P_err.middleRows<3>(kE).transpose();
     x_.P_err.block<3, 3>(kE, kE) = tilt * x_.P_err.block<3, 3>(kTh, kTh) * tilt;
@@ -333,6 +346,29 @@ void SelectiveEkf::preprocess(ImuInput& in) {
   // (the frame was turned by predict_to with the state's rate)
   pre.since_start_s += dt_s;
   const double k = p_.accel_lowpass_tau_s > 0.0 ? dt_s / (p_.accel_lowpass_tau_s + dt_s) : 1.0;
+  // With the accelerometer's noise known, a sample's white noise n (density N, variance N^2 / dt
+  // per axis) turns the low-passed vector by u x n / |lp| (u its direction): a rotation of
+  // covariance N^2 / (dt |lp|^2) (I - u u^T) in the low-pass's frame
+  Eigen::Matrix3d noise_rot = Eigen::Matrix3d::Zero();
+  if (aids::accel_noise_known(p_)) {
+    const double g2 = pre.lp_accel_i.squaredNorm();
+    if (g2 > 0.0) {
+      const Eigen::Vector3d ui = pre.lp_accel_i / std::sqrt(g2);
+      const double n = p_.accel_noise_density_mps2_per_sqrt_hz;
+      noise_rot = (n * n / (dt_s * g2)) * (Eigen::Matrix3d::Identity() - ui * ui.transpose());
+    }
+    if (pre.start_noise_pending) {
+      // the first sample's noise, now that an interval is known (taken as this one): it began
+      // both the attitude's tilt and the low-pass (e = dth there, the frames then equal), and one
+      // prediction has turned the attitude's part by Exp(w h)^T = R_ib^T
+      pre.start_noise_pending = false;
+      const Eigen::Matrix3d a = pre.q_ib.toRotationMatrix().transpose();
+      x_.P_err.block<3, 3>(kTh, kTh) += a * noise_rot * a.transpose();
+      x_.P_err.block<3, 3>(kE, kE) += noise_rot;
+      x_.P_err.block<3, 3>(kTh, kE) += a * noise_rot;
+      x_.P_err.block<3, 3>(kE, kTh) += noise_rot * a.transpose();
+    }
+  }
   pre.lp_accel_i += k * (pre.q_ib * in.accel - pre.lp_accel_i);
   // its error: the frame's error less the low-passed past of it, e <- (1 - k) e (rows and
   // columns of P)
@@ -340,6 +376,8 @@ void SelectiveEkf::preprocess(ImuInput& in) {
     pm->middleRows<3>(kE) *= 1.0 - k;
     pm->middleCols<3>(kE) *= 1.0 - k;
   }
+  // the estimate's error: e <- (1 - k) e + k n, the low-pass's own noise (AR(1))
+  x_.P_err.block<3, 3>(kE, kE) += (k * k) * noise_rot;
   Eigen::Vector3d up;
   in.up_meas = safe_normalize(pre.q_ib.conjugate() * pre.lp_accel_i, up) ? up : in.accel.normalized();
   if (p_.tilt_accel_ref_mps2 > 0.0) {

@@ -116,11 +116,14 @@ void update_error_covariance(SelectiveEkfState& x, const Eigen::Matrix<double, S
 /// The fuse step of every aid: M rows with a dense H (M x kN) and diagonal R, one row at a time;
 /// runs on the [w, th, b] or [t, v] block alone while they are uncorrelated (x.coupled false).
 /// Fills the status's innovation, variance and test ratio; false when the gate rejects (or
-/// `report_only`: the innovation of rows left out).
+/// `report_only`: the innovation of rows left out). `r_err_diag`: the rows' real white noise,
+/// what the estimate's error covariance P_err counts (the sensor's figure where it differs from
+/// the design's r_diag, which sets the gain).
 template <int M>
 bool fuse(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>& h,
           const Eigen::Matrix<double, M, 1>& innov, const Eigen::Matrix<double, M, 1>& r_diag,
-          double gate_sigma, bool gate, SourceStatus& st, bool report_only = false) {
+          const Eigen::Matrix<double, M, 1>& r_err_diag, double gate_sigma, bool gate, SourceStatus& st,
+          bool report_only = false) {
   constexpr int kN = SelectiveEkf::kN;
   constexpr int kAttN = SelectiveEkf::kAttN;
   const bool att = (h.template leftCols<kAttN>().array() != 0.0).any();
@@ -143,27 +146,36 @@ bool fuse(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>
   }
   if (ok) {
     const Eigen::Matrix<double, kN, M> k = u * s.inverse();
-    update_error_covariance<M>(x, k, h, r_diag);
+    update_error_covariance<M>(x, k, h, r_err_diag);
     inject(x, dx);
   }
   return ok;
 }
 
+/// fuse() of rows whose real noise is their design noise (P_err counts r_diag).
+template <int M>
+bool fuse(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>& h,
+          const Eigen::Matrix<double, M, 1>& innov, const Eigen::Matrix<double, M, 1>& r_diag,
+          double gate_sigma, bool gate, SourceStatus& st, bool report_only = false) {
+  return fuse<M>(x, h, innov, r_diag, r_diag, gate_sigma, gate, st, report_only);
+}
+
 /// M rows with the gain K = P H^T S^-1 projected by `keep` (kN x kN; a Schmidt consider update:
 /// what `keep` removes keeps its uncertainty and its correlations and learns nothing from these
-/// rows), P <- (I - K H) P (I - K H)^T + K R K^T (the Joseph form, exact for any gain). Returns the
-/// innovation variances diag(S).
+/// rows), P <- (I - K H) P (I - K H)^T + K R K^T (the Joseph form, exact for any gain); P_err the
+/// same with the rows' real noise r_err_diag (fuse()). Returns the innovation variances diag(S).
 template <int M>
 Eigen::Matrix<double, M, 1> fuse_considered(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>& h,
                                             const Eigen::Matrix<double, M, 1>& innov,
-                                            const Eigen::Matrix<double, M, 1>& r_diag, const SelectiveEkf::Mat& keep) {
+                                            const Eigen::Matrix<double, M, 1>& r_diag,
+                                            const Eigen::Matrix<double, M, 1>& r_err_diag, const SelectiveEkf::Mat& keep) {
   const Eigen::Matrix<double, M, M> r = r_diag.asDiagonal();
   const Eigen::Matrix<double, M, M> s = h * x.P * h.transpose() + r;
   const Eigen::Matrix<double, SelectiveEkf::kN, M> k = keep * (x.P * h.transpose() * s.inverse());
   const SelectiveEkf::Mat ikh = SelectiveEkf::Mat::Identity() - k * h;
   const SelectiveEkf::Mat updated = ikh * x.P * ikh.transpose() + k * r * k.transpose();
   x.P = 0.5 * (updated + updated.transpose());
-  update_error_covariance<M>(x, k, h, r_diag);
+  update_error_covariance<M>(x, k, h, r_err_diag);
   inject(x, k * innov);
   return s.diagonal();
 }
@@ -172,11 +184,38 @@ Eigen::Matrix<double, M, 1> fuse_considered(SelectiveEkfState& x, const Eigen::M
 template <int M>
 Eigen::Matrix<double, M, 1> fuse_bias_considered(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>& h,
                                                  const Eigen::Matrix<double, M, 1>& innov,
-                                                 const Eigen::Matrix<double, M, 1>& r_diag) {
+                                                 const Eigen::Matrix<double, M, 1>& r_diag,
+                                                 const Eigen::Matrix<double, M, 1>& r_err_diag) {
   SelectiveEkf::Mat keep = SelectiveEkf::Mat::Identity();
   keep.block<3, 3>(SelectiveEkf::kB, SelectiveEkf::kB).setZero();
-  return fuse_considered<M>(x, h, innov, r_diag, keep);
+  return fuse_considered<M>(x, h, innov, r_diag, r_err_diag, keep);
 }
+
+// ---- The figures the estimate's error covariance P_err uses: the sensor's own where the
+// parameters give them (gyro_noise_density_rps_per_sqrt_hz, accel_noise_density_mps2_per_sqrt_hz,
+// gyro_bias_walk_rps_per_sqrt_s), else the design's, as the gains (docs/SELECTIVE_EKF.md "The
+// sensor's own figures").
+
+/// The gyro row's white noise over a sample interval dt_s, (rad/s)^2: N^2 / dt (a sample is the
+/// rate's mean over its interval), else sigma_gyro_rps^2.
+inline double err_gyro_variance(const SelectiveEkfParams& p, double dt_s) {
+  const double n = p.gyro_noise_density_rps_per_sqrt_hz;
+  return std::isnan(n) || !(dt_s > 0.0) ? p.sigma_gyro_rps * p.sigma_gyro_rps : n * n / dt_s;
+}
+/// The attitude's own process noise density in P_err, rad^2/s: none when the gyro's noise is
+/// known (P_err's rate model has no residual: the gyro's white noise reaches the attitude through
+/// the gyro row), else the design's sigma_attitude_walk^2.
+inline double err_attitude_walk2(const SelectiveEkfParams& p) {
+  return std::isnan(p.gyro_noise_density_rps_per_sqrt_hz) ? p.sigma_attitude_walk * p.sigma_attitude_walk : 0.0;
+}
+/// The bias random walk's density in P_err, (rad/s)^2/s: the gyro's own, else sigma_bias_walk^2.
+inline double err_bias_walk2(const SelectiveEkfParams& p) {
+  const double w = std::isnan(p.gyro_bias_walk_rps_per_sqrt_s) ? p.sigma_bias_walk : p.gyro_bias_walk_rps_per_sqrt_s;
+  return w * w;
+}
+/// Whether the accelerometer's noise density is known: P_err then carries the low-pass's own
+/// noise in e and the tilt rows have no white noise.
+inline bool accel_noise_known(const SelectiveEkfParams& p) { return !std::isnan(p.accel_noise_density_mps2_per_sqrt_hz); }
 
 /// The status step of every aid: the decision on a measurement stamped `stamp_ns`. Counters count
 /// first passes only (not the replays after a late vision measurement).

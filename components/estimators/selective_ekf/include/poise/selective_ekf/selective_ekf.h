@@ -260,6 +260,25 @@ struct SelectiveEkfParams {
   /// attitude low-passed over the tilt's and the heading's correction lags). MPU6050: +-3 %
   /// uncalibrated; 0.5 % is the residue after a rate-table or turn calibration. 0 = none.
   double gyro_scale_error = 0.005;
+  // ---- figures of the sensor (the estimate's error covariance P_err only; the gains never read
+  // them, so the estimate is the same bit for bit whatever their value). NaN (default; null in
+  // YAML) = not known: the design figures above stand in for them, as before. A datasheet gives
+  // the densities (white noise, the -1/2 slope of the Allan deviation: sigma(T) = N / sqrt(T));
+  // a sample of rate f then has the per-sample sigma N sqrt(f). docs/SELECTIVE_EKF.md "The
+  // sensor's own figures".
+  /// The gyro's white noise density, rad/s/sqrt(Hz). Known: the gyro row's noise in P_err is
+  /// this over the sample interval (N^2 / h), and the attitude's noise is the gyro's alone (no
+  /// sigma_attitude_walk: P_err's rate model has no residual); else sigma_gyro_rps and the walk.
+  double gyro_noise_density_rps_per_sqrt_hz = std::nan("");
+  /// The accelerometer's white noise density, m/s^2/sqrt(Hz). Known: the tilt rows' noise is
+  /// the low-pass's own, carried in P_err's low-pass error e (AR(1): e <- (1 - k) e + k n, n the
+  /// sample's noise as a rotation of the low-passed vector), the rows white-noise free, and a
+  /// start at rest begins with the first sample's noise as the tilt's error (not
+  /// init_sigma_attitude_deg); else the tilt density sigma_tilt counted as white noise per row.
+  double accel_noise_density_mps2_per_sqrt_hz = std::nan("");
+  /// The gyro's bias random walk, rad/s/sqrt(s) (the +1/2 slope of the Allan deviation; the
+  /// parallel KF's key of the same name). Known: P_err's bias grows by it; else sigma_bias_walk.
+  double gyro_bias_walk_rps_per_sqrt_s = std::nan("");
   Eigen::Quaterniond q_body_camera = Eigen::Quaterniond::Identity();  ///< camera -> IMU body
   Eigen::Vector3d p_body_camera_m{0.0, 0.0, 0.0};  ///< camera origin in the body frame, m
 
@@ -396,6 +415,9 @@ struct SelectiveEkfPreState {
   /// external acceleration, as the initial attitude does (a start in motion)
   bool moving_start = false;
   double since_start_s = 0.0;           ///< time since the first sample, s
+  /// the first sample's accelerometer noise is still to be added to P_err's tilt and e (a start
+  /// at rest with accel_noise_density_mps2_per_sqrt_hz known: it needs an interval)
+  bool start_noise_pending = false;
   RestDetector rest_detector;           ///< rest detected at the last sample: rest_detector.rest
 };
 
