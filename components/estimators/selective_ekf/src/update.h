@@ -100,17 +100,43 @@ inline void inject(SelectiveEkfState& x, const SelectiveEkf::Vec& dx) {
 /// P) and diagonal R: the Joseph form, exact for any gain, (I - K H) C (I - K H)^T + K R K^T =
 /// C - K A^T - A K^T + K S K^T with A = C H^T, S = H A + R (symmetric) = C + G K^T + K G^T with
 /// G = K S / 2 - A: one N x M x N product, and symmetric to the bit by construction (m_ij + m_ji).
+/// On the diagonal block [Off, Off + NB) alone when the caller knows that K, H and C's cross terms
+/// outside it are zero (the attitude block's rows while x.coupled is false: the same numbers at
+/// (12 / 18)^2 of the cost).
+template <int Off, int NB, int M>
+void update_error_covariance_block(SelectiveEkfState& x, const Eigen::Matrix<double, SelectiveEkf::kN, M>& k_full,
+                                   const Eigen::Matrix<double, M, SelectiveEkf::kN>& h_full,
+                                   const Eigen::Matrix<double, M, 1>& r_diag) {
+  auto c = x.P_err.template block<NB, NB>(Off, Off);
+  const Eigen::Matrix<double, NB, M> k = k_full.template middleRows<NB>(Off);
+  const Eigen::Matrix<double, M, NB> h = h_full.template middleCols<NB>(Off);
+  const Eigen::Matrix<double, NB, M> a = c.lazyProduct(h.transpose());
+  Eigen::Matrix<double, M, M> s = h.lazyProduct(a);
+  s.diagonal() += r_diag;
+  const Eigen::Matrix<double, NB, M> g = 0.5 * k.lazyProduct(s) - a;
+  Eigen::Matrix<double, NB, NB> m;
+  m.noalias() = g.lazyProduct(k.transpose());
+  c += m + m.transpose();
+}
+
+/// update_error_covariance_block over the whole error state, or on the attitude block alone when
+/// `att_only` (rows and gain there only, no cross-covariance: x.coupled false).
 template <int M>
 void update_error_covariance(SelectiveEkfState& x, const Eigen::Matrix<double, SelectiveEkf::kN, M>& k,
                              const Eigen::Matrix<double, M, SelectiveEkf::kN>& h,
-                             const Eigen::Matrix<double, M, 1>& r_diag) {
-  const Eigen::Matrix<double, SelectiveEkf::kN, M> a = x.P_err * h.transpose();
-  Eigen::Matrix<double, M, M> s = h * a;
-  s.diagonal() += r_diag;
-  const Eigen::Matrix<double, SelectiveEkf::kN, M> g = 0.5 * (k * s) - a;
-  SelectiveEkf::Mat m;
-  m.noalias() = g * k.transpose();
-  x.P_err += m + m.transpose();
+                             const Eigen::Matrix<double, M, 1>& r_diag, bool att_only) {
+  if (att_only) {
+    update_error_covariance_block<0, SelectiveEkf::kAttN, M>(x, k, h, r_diag);
+  } else {
+    update_error_covariance_block<0, SelectiveEkf::kN, M>(x, k, h, r_diag);
+  }
+}
+
+/// Whether rows H touch the attitude block [w, th, b, e] alone while it has no cross-covariance
+/// with [t, v] (x.coupled false): their gain is zero outside it.
+template <int M>
+bool attitude_rows_only(const SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>& h) {
+  return !x.coupled && !(h.template rightCols<SelectiveEkf::kN - SelectiveEkf::kAttN>().array() != 0.0).any();
 }
 
 /// The fuse step of every aid: M rows with a dense H (M x kN) and diagonal R, one row at a time;
@@ -129,10 +155,22 @@ bool fuse(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>
   const bool att = (h.template leftCols<kAttN>().array() != 0.0).any();
   const bool trans = (h.template rightCols<kN - kAttN>().array() != 0.0).any();
   SelectiveEkf::Vec dx = SelectiveEkf::Vec::Zero();
-  // P's (optimal) gain, for the estimate's error covariance: K = P H^T S^-1
-  const Eigen::Matrix<double, kN, M> u = x.P * h.transpose();
-  Eigen::Matrix<double, M, M> s = h * u;
-  s.diagonal() += r_diag;
+  const bool att_only = att && !trans && !x.coupled;  // (before a lever-arm fix couples them)
+  // P's (optimal) gain before these rows, for the estimate's error covariance: K = P H^T S^-1
+  // (on the attitude block alone for its rows while uncoupled: zero elsewhere)
+  Eigen::Matrix<double, kN, M> k = Eigen::Matrix<double, kN, M>::Zero();
+  if (att_only) {
+    const Eigen::Matrix<double, kAttN, M> u = x.P.template topLeftCorner<kAttN, kAttN>().lazyProduct(
+        h.template leftCols<kAttN>().transpose());
+    Eigen::Matrix<double, M, M> s = h.template leftCols<kAttN>().lazyProduct(u);
+    s.diagonal() += r_diag;
+    k.template topRows<kAttN>() = u * s.inverse();
+  } else {
+    const Eigen::Matrix<double, kN, M> u = x.P * h.transpose();
+    Eigen::Matrix<double, M, M> s = h * u;
+    s.diagonal() += r_diag;
+    k = u * s.inverse();
+  }
   bool ok = false;
   if (!x.coupled && !(att && trans)) {
     // No cross-covariance between [w, th, b] and [t, v]: rows touching one block update it alone
@@ -145,8 +183,7 @@ bool fuse(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>
     ok = sequential_update<kN, M>(x.P, h, innov, r_diag, gate_sigma, gate, report_only, st, dx);
   }
   if (ok) {
-    const Eigen::Matrix<double, kN, M> k = u * s.inverse();
-    update_error_covariance<M>(x, k, h, r_err_diag);
+    update_error_covariance<M>(x, k, h, r_err_diag, att_only);
     inject(x, dx);
   }
   return ok;
@@ -169,13 +206,25 @@ Eigen::Matrix<double, M, 1> fuse_considered(SelectiveEkfState& x, const Eigen::M
                                             const Eigen::Matrix<double, M, 1>& innov,
                                             const Eigen::Matrix<double, M, 1>& r_diag,
                                             const Eigen::Matrix<double, M, 1>& r_err_diag, const SelectiveEkf::Mat& keep) {
+  const bool att_only = attitude_rows_only<M>(x, h);
   const Eigen::Matrix<double, M, M> r = r_diag.asDiagonal();
   const Eigen::Matrix<double, M, M> s = h * x.P * h.transpose() + r;
   const Eigen::Matrix<double, SelectiveEkf::kN, M> k = keep * (x.P * h.transpose() * s.inverse());
-  const SelectiveEkf::Mat ikh = SelectiveEkf::Mat::Identity() - k * h;
-  const SelectiveEkf::Mat updated = ikh * x.P * ikh.transpose() + k * r * k.transpose();
-  x.P = 0.5 * (updated + updated.transpose());
-  update_error_covariance<M>(x, k, h, r_err_diag);
+  if (att_only) {
+    // (the attitude block alone: K, H and P's cross terms are zero outside it)
+    constexpr int kA = SelectiveEkf::kAttN;
+    const Eigen::Matrix<double, kA, M> ka = k.template topRows<kA>();
+    const Eigen::Matrix<double, kA, kA> ikh =
+        Eigen::Matrix<double, kA, kA>::Identity() - ka * h.template leftCols<kA>();
+    const Eigen::Matrix<double, kA, kA> updated =
+        ikh * x.P.template topLeftCorner<kA, kA>() * ikh.transpose() + ka * r * ka.transpose();
+    x.P.template topLeftCorner<kA, kA>() = 0.5 * (updated + updated.transpose());
+  } else {
+    const SelectiveEkf::Mat ikh = SelectiveEkf::Mat::Identity() - k * h;
+    const SelectiveEkf::Mat updated = ikh * x.P * ikh.transpose() + k * r * k.transpose();
+    x.P = 0.5 * (updated + updated.transpose());
+  }
+  update_error_covariance<M>(x, k, h, r_err_diag, att_only);
   inject(x, k * innov);
   return s.diagonal();
 }
