@@ -267,21 +267,17 @@ void run_demo(const DemoOptions& o) {
       if (std::string(f) == "selective_ekf" && o.camera.empty()) {
         params["q_body_camera"] = YAML::Load("[0, 1, 0, 0]");  // the synthetic camera looks down
       }
-      if (std::string(f) == "selective_ekf" && simulated_imu) {
-        // the simulated sensor's own figures (its per-sample sigmas at its rate, its bias walk),
-        // for the published covariance (docs/SELECTIVE_EKF.md "The sensor's own figures")
-        const sim::SensorNoise n = sim::make_scenario(o.scenario, o.rate_hz, o.seed).noise;
-        params["gyro_noise_density_rps_per_sqrt_hz"] = n.sigma_gyro_rps / std::sqrt(o.rate_hz);
-        params["accel_noise_density_mps2_per_sqrt_hz"] = n.sigma_accel_mps2 / std::sqrt(o.rate_hz);
-        params["gyro_bias_walk_rps_per_sqrt_s"] = n.gyro_bias_walk_rps_per_sqrt_s;
-      }
-      if (std::string(f) == "parallel_kf" && simulated_imu) {
-        // the simulated gyro's own bias walk (its scenario's; 0: a constant bias) and white noise
-        // density (its per-sample sigma over sqrt(rate)), for the published covariance
-        // (docs/ESTIMATORS.md "The gyro's bias walk")
+      if (simulated_imu && (std::string(f) == "parallel_kf" || std::string(f) == "selective_ekf")) {
+        // the simulated sensor's own figures, for the published covariance: its gyro's bias walk
+        // (its scenario's; 0: a constant bias) and white noise density (its per-sample sigma over
+        // sqrt(rate); docs/ESTIMATORS.md "The gyro's bias walk"), and for the selective EKF the
+        // accelerometer's density too (docs/SELECTIVE_EKF.md "The sensor's own figures")
         const sim::SensorNoise noise = sim::make_scenario(o.scenario, o.rate_hz, o.seed).noise;
         params["gyro_bias_walk_rps_per_sqrt_s"] = noise.gyro_bias_walk_rps_per_sqrt_s;
         params["gyro_noise_density_rps_per_sqrt_hz"] = noise.sigma_gyro_rps / std::sqrt(o.rate_hz);
+        if (std::string(f) == "selective_ekf") {
+          params["accel_noise_density_mps2_per_sqrt_hz"] = noise.sigma_accel_mps2 / std::sqrt(o.rate_hz);
+        }
       }
       spec.components.push_back(component(f, f, params));
       filters.emplace_back(f);
