@@ -217,14 +217,13 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
     s_.mb_corr += s_.kf1.last_correction_rotvec();
     s_.mb_rate2 += w.squaredNorm() * dt;
   }
-  // KF2's prediction to this sample's body frame (9a), (9b), (11a)-(11e): the frame KF1's
-  // correction below is expressed in
   if (s_.heading_initialized) {
-    s_.kf2.predict_with_transition(a, dt);
-  }
-  if (p_.share_tilt_correction && s_.heading_initialized) {
+    // KF2 predicted to this sample's body frame (9a), (9b), (11a)-(11e), where KF1's correction is;
     // the rotation that moved sZ moves sX' too (one attitude error, two world directions)
-    s_.kf2.set_u(rotate_by_shortest(z_before, s_.kf1.up_body(), s_.kf2.u()));  // both unit (renormalised)
+    s_.kf2.predict_with_transition(a, dt);
+    if (p_.share_tilt_correction) {
+      s_.kf2.set_u(rotate_by_shortest(z_before, s_.kf1.up_body(), s_.kf2.u()));  // both unit (renormalised)
+    }
   }
 
   // KF2: heading + magnetic disturbance (8)-(11), on the reading with the hard-iron offset removed
