@@ -124,6 +124,7 @@ TEST(CameraConfig, GivenTheShippedFileWhenLoadedThenOnlyItsOverridesDifferFromTh
   EXPECT_EQ(c.world_pose.ambiguity_min_angle_rad, d.world_pose.ambiguity_min_angle_rad);
   EXPECT_EQ(c.world_pose.max_reprojection_rms_px, d.world_pose.max_reprojection_rms_px);
   EXPECT_EQ(c.world_pose.pixel_sigma_px, d.world_pose.pixel_sigma_px);
+  EXPECT_EQ(c.world_pose.pixel_sigma_dof, d.world_pose.pixel_sigma_dof);
   EXPECT_EQ(c.world_pose.max_iterations, d.world_pose.max_iterations);
   EXPECT_EQ(c.unknown_tag_size_m, d.unknown_tag_size_m);
   EXPECT_FALSE(c.T_body_camera.has_value());
@@ -156,6 +157,8 @@ TEST(CameraConfig, MistakesAreClearErrors) {
                       "threads must be in [1, 64]");
   expect_config_error([] { (void)parse_camera_config("detector: {family: tagXX}\n", "c.yaml"); },
                       "unknown tag family");
+  expect_config_error([] { (void)parse_camera_config("pose: {pixel_sigma_dof: 0}\n", "c.yaml"); },
+                      "pose.pixel_sigma_dof must be in (0, 1e6]");
   expect_config_error(
       [] { (void)parse_camera_config("extrinsic: {position_m: [0, 0, 0]}\n", "c.yaml"); },
       "q_body_camera");

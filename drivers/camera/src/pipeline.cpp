@@ -55,6 +55,7 @@ CameraConfig parse_camera_config(const std::string& yaml_text, const std::string
   pose.get("max_tag_reprojection_px", c.tag_pose.max_reprojection_rms_px);
   pose.get("max_world_reprojection_px", c.world_pose.max_reprojection_rms_px);
   pose.get("pixel_sigma_px", c.world_pose.pixel_sigma_px);
+  pose.get("pixel_sigma_dof", c.world_pose.pixel_sigma_dof);
   pose.get("max_iterations", c.world_pose.max_iterations);
   pose.get("unknown_tag_size_m", c.unknown_tag_size_m);
   pose.finish();

@@ -136,6 +136,9 @@ void validate_world_pose_params(const WorldPoseParams& p) {
   if (!(p.pixel_sigma_px > 0.0 && p.pixel_sigma_px < 100.0)) {
     throw ConfigError("pose.pixel_sigma_px must be in (0, 100) px");
   }
+  if (!(p.pixel_sigma_dof > 0.0 && p.pixel_sigma_dof <= 1e6)) {
+    throw ConfigError("pose.pixel_sigma_dof must be in (0, 1e6] (residual degrees of freedom)");
+  }
   if (!(p.max_reprojection_rms_px > 0.0)) {
     throw ConfigError("pose.max_world_reprojection_px must be positive");
   }
@@ -236,9 +239,12 @@ WorldPoseResult estimate_world_pose(const std::vector<TagObservation>& observati
     out.reject_reason = "degenerate";
     return out;
   }
-  const double dof = 2.0 * n - 6.0;
-  const double sigma2_fit = dof > 0.0 ? ssr / dof : 0.0;
-  const double sigma2 = std::max(params.pixel_sigma_px * params.pixel_sigma_px, sigma2_fit);
+  // The prior pooled with the fit, each by its degrees of freedom; a fit above the prior in full
+  // (header). N >= 4, so dof >= 2.
+  const double dof = std::max(0.0, 2.0 * n - 6.0);
+  const double nu0 = params.pixel_sigma_dof;
+  const double sigma2 = std::max(
+      ssr / dof, (nu0 * params.pixel_sigma_px * params.pixel_sigma_px + ssr) / (nu0 + dof));
   out.covariance = sigma2 * lu.inverse();
   out.covariance = 0.5 * (out.covariance + out.covariance.transpose()).eval();
   if (out.ambiguity_ratio > params.ambiguity_ratio_max) {

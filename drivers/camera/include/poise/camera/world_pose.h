@@ -9,7 +9,14 @@
 // is refined with Levenberg-Marquardt. The best competing start whose rotation differs by more
 // than ambiguity_min_angle_rad is refined too: world ambiguity ratio = RMS(best)/RMS(competitor).
 // With a single tag the two IPPE solutions are the two minima: the tag's own ratio is used.
-// Covariance = sigma^2 (J^T J)^-1 with sigma^2 = max(pixel_sigma_px^2, SSR / (2N - 6)).
+// Covariance = sigma^2 (J^T J)^-1, sigma^2 the corner noise per pixel axis. A fit below the prior
+// is pooled with it, each by its degrees of freedom (the conjugate update of a
+// scaled-inverse-chi-square prior worth nu0 residuals); a fit above the prior is taken in full:
+//   sigma^2 = max(SSR / (2N - 6), (nu0 sigma0^2 + SSR) / (nu0 + 2N - 6)),
+//   nu0 = pixel_sigma_dof, sigma0 = pixel_sigma_px.
+// One tag (2N - 6 = 2) leans on the prior; nine tags (66) on the fit. A camera noisier than its
+// prior is covered as before (the fit); one cleaner than its prior is no longer held at the prior
+// however many corners show it (the old rule, max(sigma0^2, SSR / (2N - 6)); issue 31).
 #pragma once
 
 #include "poise/camera/detector.h"
@@ -26,7 +33,13 @@
 namespace poise::camera {
 
 struct WorldPoseParams {
-  double pixel_sigma_px = 0.25;        ///< prior corner noise, px (lower bound on sigma)
+  /// Prior corner noise per pixel axis, px: the camera's figure (docs/CAMERA.md "Covariance": the
+  /// RMS of a calibration, or of a static tag's corners over frames). 0.25 px is the safe side
+  /// for a real camera (a clean render's corners are near 0.05-0.1 px).
+  double pixel_sigma_px = 0.25;
+  /// How many residuals the prior is worth against the fit's 2N - 6 (dimensionless, > 0): 8 = two
+  /// tags' corners. Raise it when the figure is measured well, lower it to trust the fit sooner.
+  double pixel_sigma_dof = 8.0;
   double max_reprojection_rms_px = 2.0;  ///< reject the world pose above this RMS, px
   int max_iterations = 20;             ///< Levenberg-Marquardt iterations
   /// As TagPoseParams (its defaults; the camera configuration sets both from the same keys).
