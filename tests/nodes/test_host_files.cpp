@@ -8,6 +8,8 @@
 
 #include <filesystem>
 #include <set>
+#include <string>
+#include <vector>
 
 namespace poise::runtime {
 void register_estimator_nodes(ComponentRegistry& registry);
@@ -66,19 +68,20 @@ TEST(HostFiles, GivenAnImuDelayOutOfRangeWhenCreatedThenConfigErrorNamesIt) {
   }
 }
 
-// The parallel KF component's gyro figures, gyro_bias_walk_rps_per_sqrt_s (the gyro's own bias
-// walk) and gyro_noise_density_rps_per_sqrt_hz (its white noise density), both for the published
-// covariance: a figure in range is taken, anything else is a ConfigError naming the key.
-TEST(HostFiles, GivenAGyroFigureParamWhenTheParallelKfIsCreatedThenARangeFigureIsTakenAndAHostileOneNamed) {
+/// Component `type` with each of `keys` as a parameter: every value of `good` is taken; a
+/// negative, huge, infinite or textual one is a ConfigError naming the key.
+void expect_sensor_figure_params(const std::string& type, const std::vector<std::string>& keys,
+                                 const std::vector<std::string>& good) {
   register_nodes();
   DomainLease domain;
-  for (const std::string key : {"gyro_bias_walk_rps_per_sqrt_s", "gyro_noise_density_rps_per_sqrt_hz"}) {
+  for (const std::string& key : keys) {
     auto host_with = [&](const std::string& value) {
       return runtime::parse_host(
-          YAML::Load("components: [{type: parallel_kf, name: p, params: {" + key + ": " + value + "}}]"), "test", ".");
+          YAML::Load("components: [{type: " + type + ", name: c, params: {" + key + ": " + value + "}}]"), "test", ".");
     };
-    EXPECT_NO_THROW(runtime::Host(host_with("0.0"), domain.id())) << key;
-    EXPECT_NO_THROW(runtime::Host(host_with("2.0e-5"), domain.id())) << key;
+    for (const std::string& value : good) {
+      EXPECT_NO_THROW(runtime::Host(host_with(value), domain.id())) << key << " " << value;
+    }
     for (const char* bad : {"-1e-6", "1e308", ".inf", "fast"}) {
       try {
         runtime::Host host(host_with(bad), domain.id());
@@ -90,29 +93,22 @@ TEST(HostFiles, GivenAGyroFigureParamWhenTheParallelKfIsCreatedThenARangeFigureI
   }
 }
 
+// The parallel KF component's gyro_bias_walk_rps_per_sqrt_s (the gyro's own bias random walk) and
+// gyro_noise_density_rps_per_sqrt_hz (its white noise density), both for the published
+// covariance: a figure in range is taken, anything else is a ConfigError naming the key.
+TEST(HostFiles, GivenAGyroFigureParamWhenTheParallelKfIsCreatedThenARangeFigureIsTakenAndAHostileOneNamed) {
+  expect_sensor_figure_params("parallel_kf", {"gyro_bias_walk_rps_per_sqrt_s", "gyro_noise_density_rps_per_sqrt_hz"},
+                              {"0.0", "2.0e-5"});
+}
+
 // The selective EKF component's figures of the sensor (gyro and accelerometer noise densities,
 // gyro bias walk; for the published covariance): a figure in range is taken, anything else is a
 // ConfigError naming its key.
 TEST(HostFiles, GivenTheSensorFiguresAsParamsWhenTheSelectiveEkfIsCreatedThenRangeFiguresAreTakenAndHostileOnesNamed) {
-  register_nodes();
-  DomainLease domain;
-  for (const char* key : {"gyro_noise_density_rps_per_sqrt_hz", "accel_noise_density_mps2_per_sqrt_hz",
-                          "gyro_bias_walk_rps_per_sqrt_s"}) {
-    auto host_with = [key](const std::string& value) {
-      return runtime::parse_host(YAML::Load(std::string("components: [{type: selective_ekf, name: s, params: {") + key +
-                                            ": " + value + "}}]"),
-                                 "test", ".");
-    };
-    EXPECT_NO_THROW(runtime::Host(host_with("1.0e-4"), domain.id())) << key;
-    for (const char* bad : {"-1e-6", "1e308", ".inf", "fast"}) {
-      try {
-        runtime::Host host(host_with(bad), domain.id());
-        ADD_FAILURE() << "no error for " << key << " " << bad;
-      } catch (const runtime::ConfigError& e) {
-        EXPECT_NE(std::string(e.what()).find(key), std::string::npos) << bad << ": " << e.what();
-      }
-    }
-  }
+  expect_sensor_figure_params("selective_ekf",
+                              {"gyro_noise_density_rps_per_sqrt_hz", "accel_noise_density_mps2_per_sqrt_hz",
+                               "gyro_bias_walk_rps_per_sqrt_s"},
+                              {"1.0e-4"});
 }
 
 // Every attitude node takes the same north keys; a location (WMM2025) or a declination in

@@ -10,6 +10,7 @@
 #include "poise/core/consistency.h"
 #include "poise/parallel_kf/parallel_kf.h"
 #include "poise/sim/sensor_simulator.h"
+#include "poise/testing/averaged_nees.h"
 #include "poise/testing/chi_square.h"
 
 #include <gtest/gtest.h>
@@ -57,50 +58,19 @@ ParallelKfParams told_the_simulated_sensor(const sim::SimConfig& cfg) {
   return p;
 }
 
-/// The NEES averaged over kRuns at each evaluated instant: total (3 dof), tilt (2), heading (1).
-struct Averaged {
-  std::vector<double> total, tilt, heading;
-};
-
-/// kRuns runs of the static scenario, each with a bias drawn from the filter's prior walking at
-/// `sensor_walk` (rad/s/sqrt(s)); the filter told the sensor (told_the_simulated_sensor) and,
-/// unless NaN, that walk as gyro_bias_walk_rps_per_sqrt_s.
-/// The instants first_s, first_s + every_s, ... (`count` of them) of one run of `cfg` through a
-/// filter with `p`, each run's NEES added to `a` over `runs`.
-struct Instants {
-  double first_s, every_s;
-  int count, runs;
-};
-
-Averaged zero_averaged(int count) {
-  Averaged a;
-  a.total.assign(static_cast<size_t>(count), 0.0);
-  a.tilt.assign(static_cast<size_t>(count), 0.0);
-  a.heading.assign(static_cast<size_t>(count), 0.0);
-  return a;
-}
-
-void add_run(const sim::SimConfig& cfg, const ParallelKfParams& p, const Instants& at, Averaged& a) {
+/// One run of `cfg` through a filter with `p`, its NEES added to `a` at each of a's instants.
+void add_run(const sim::SimConfig& cfg, const ParallelKfParams& p, testing::AveragedNees& a) {
   ParallelKf kf(p);
   sim::SensorSimulator simu(cfg);
-  int next = 0;
   // WHEN the filter runs over every sample
-  while (!simu.done() && next < at.count) {
-    const sim::SimSample s = simu.next();
-    const bool ok = kf.update(s.imu);
-    if (ok && s.truth.t_s >= at.first_s + next * at.every_s) {
-      const ParallelKfOutput out = kf.output();
-      const Eigen::Vector3d e = world_attitude_error(out.q_world_body, s.truth.q_world_body);
-      const Eigen::Matrix3d cov = kf.attitude_covariance(out);
-      const auto i = static_cast<size_t>(next);
-      a.total[i] += attitude_nees(e, cov) / at.runs;
-      const Eigen::Vector2d et = e.head<2>();
-      a.tilt[i] += et.dot(cov.topLeftCorner<2, 2>().ldlt().solve(et)) / at.runs;
-      a.heading[i] += e.z() * e.z() / cov(2, 2) / at.runs;
-      ++next;
-    }
-  }
-  EXPECT_EQ(next, at.count) << cfg.name << " seed " << cfg.seed;
+  const int reached = a.add_run(
+      simu, [&](const sim::SimSample& s) { return kf.update(s.imu); },
+      [&](const sim::SimSample& s, Eigen::Vector3d& e, Eigen::Matrix3d& cov) {
+        const ParallelKfOutput out = kf.output();
+        e = world_attitude_error(out.q_world_body, s.truth.q_world_body);
+        cov = kf.attitude_covariance(out);
+      });
+  EXPECT_EQ(reached, a.instants()) << cfg.name << " seed " << cfg.seed;
 }
 
 /// A gyro bias drawn from the filter's prior N(0, bias_sigma_init_rps^2 I).
@@ -110,23 +80,11 @@ Eigen::Vector3d bias_from_the_prior(const ParallelKfParams& p, uint64_t seed) {
   return Eigen::Vector3d(bias(rng), bias(rng), bias(rng));
 }
 
-/// How many of the averaged NEES `v` lie above and below the bounds `b`.
-struct Outside {
-  int above = 0;
-  int below = 0;
-};
-Outside count_outside(const std::vector<double>& v, const testing::AveragedNeesBounds& b) {
-  Outside o;
-  for (const double x : v) {
-    o.above += x > b.hi ? 1 : 0;
-    o.below += x < b.lo ? 1 : 0;
-  }
-  return o;
-}
-
-Averaged run_at_rest(double sensor_walk, double told_walk) {
-  const Instants at{kFirstS, kEveryS, static_cast<int>((kLastS - kFirstS) / kEveryS + 0.5) + 1, kRuns};
-  Averaged a = zero_averaged(at.count);
+/// kRuns runs of the static scenario, each with a bias drawn from the filter's prior walking at
+/// `sensor_walk` (rad/s/sqrt(s)); the filter told the sensor (told_the_simulated_sensor) and,
+/// unless NaN, that walk as gyro_bias_walk_rps_per_sqrt_s.
+testing::AveragedNees run_at_rest(double sensor_walk, double told_walk) {
+  testing::AveragedNees a(kFirstS, kLastS, kEveryS, kRuns);
   for (int run = 0; run < kRuns; ++run) {
     // GIVEN the simulator's static scenario with a bias drawn from the filter's prior
     sim::SimConfig cfg = sim::make_scenario("static_magnet", kRateHz, 2000 + static_cast<uint64_t>(run));
@@ -134,7 +92,7 @@ Averaged run_at_rest(double sensor_walk, double told_walk) {
     p.gyro_bias_walk_rps_per_sqrt_s = told_walk;
     cfg.noise.gyro_bias_rps = bias_from_the_prior(p, 7000 + static_cast<uint64_t>(run));
     cfg.noise.gyro_bias_walk_rps_per_sqrt_s = sensor_walk;
-    add_run(cfg, p, at, a);
+    add_run(cfg, p, a);
   }
   return a;
 }
@@ -142,34 +100,19 @@ Averaged run_at_rest(double sensor_walk, double told_walk) {
 TEST(ParallelKfChiSquare, GivenASensorAtRestWithKnownNoiseAndABiasFromThePriorWhenRunManyTimesThenTheAveragedNeesLiesInsideTheChiSquareBounds) {
   // (the simulator's bias a random walk of the density the filter's drift keys give, the filter
   // not told it: the design drift is then taken as the sensor's)
-  const Averaged a = run_at_rest(ParallelKfParams{}.bias_drift_rps / std::sqrt(ParallelKfParams{}.bias_forgetting_time_s),
-                                 std::nan(""));
-  const int instants = static_cast<int>(a.total.size());
+  const testing::AveragedNees a =
+      run_at_rest(ParallelKfParams{}.bias_drift_rps / std::sqrt(ParallelKfParams{}.bias_forgetting_time_s), std::nan(""));
   // THEN the NEES averaged over the runs lies inside the bounds at all but a few instants
   const testing::AveragedNeesBounds b = testing::averaged_nees_bounds_95(3, kRuns);
   const testing::AveragedNeesBounds bh = testing::averaged_nees_bounds_95(1, kRuns);
-  int outside = 0;
-  int above = 0;
-  int outside_heading = 0;
-  double mean = 0.0;
-  for (int i = 0; i < instants; ++i) {
-    const auto k = static_cast<size_t>(i);
-    const double avg = a.total[k];
-    mean += avg / instants;
-    if (kFirstS + i * kEveryS <= kTwoSidedUntilS + 1e-9) {
-      outside += avg < b.lo || avg > b.hi ? 1 : 0;
-    }
-    above += avg > b.hi ? 1 : 0;
-    const double avg_head = a.heading[k];
-    outside_heading += avg_head < bh.lo || avg_head > bh.hi ? 1 : 0;
-    std::printf("t %5.1f s: averaged NEES %.3f (tilt, 2 dof, %.3f; heading, 1 dof, %.3f)\n", kFirstS + i * kEveryS,
-                avg, a.tilt[k], avg_head);
-  }
-  std::printf("parallel KF, %d runs: averaged NEES bounds [%.3f, %.3f], mean over %d instants %.3f, %d outside "
-              "until %.0f s, %d above\n",
-              kRuns, b.lo, b.hi, instants, mean, outside, kTwoSidedUntilS, above);
+  const int outside = a.outside(a.total, b, kTwoSidedUntilS);
+  const int above = a.above(a.total, b.hi);
+  const int outside_heading = a.outside(a.heading, bh);
+  a.print();
+  std::printf("parallel KF, %d runs: averaged NEES bounds [%.3f, %.3f], %d outside until %.0f s, %d above, of %d\n",
+              kRuns, b.lo, b.hi, outside, kTwoSidedUntilS, above, a.instants());
   std::printf("heading alone: bounds [%.3f, %.3f], %d of %d instants outside\n", bh.lo, bh.hi, outside_heading,
-              instants);
+              a.instants());
   EXPECT_LE(outside, kMaxOutside);
   EXPECT_LE(above, kMaxAbove);
   EXPECT_LE(outside_heading, kMaxOutsideHeading);
@@ -186,20 +129,20 @@ constexpr int kMinAboveNotTold = 4;  // instants of 21 where the filter not told
 TEST(ParallelKfChiSquare, GivenAGyroWhoseBiasWalksFasterThanTheDesignDriftWhenTheFilterIsToldItsWalkThenItsHeadingIsNeverOverconfidentWhileNotToldItIs) {
   const ParallelKfParams d;
   const double walk = kWalkTimesDesign * d.bias_drift_rps / std::sqrt(d.bias_forgetting_time_s);
-  const Averaged told = run_at_rest(walk, walk);
-  const Averaged not_told = run_at_rest(walk, std::nan(""));
+  const testing::AveragedNees told = run_at_rest(walk, walk);
+  const testing::AveragedNees not_told = run_at_rest(walk, std::nan(""));
   const testing::AveragedNeesBounds bh = testing::averaged_nees_bounds_95(1, kRuns);
-  const Outside o_told = count_outside(told.heading, bh);
-  const int above_told = o_told.above;
-  const int below_told = o_told.below;
-  const int above_not_told = count_outside(not_told.heading, bh).above;
-  for (size_t k = 0; k < told.heading.size(); ++k) {
-    std::printf("t %5.1f s: heading averaged NEES told %.3f, not told %.3f (total told %.3f)\n",
-                kFirstS + static_cast<double>(k) * kEveryS, told.heading[k], not_told.heading[k], told.total[k]);
+  const int above_told = told.above(told.heading, bh.hi);
+  const int outside_told = told.outside(told.heading, bh);
+  const int above_not_told = not_told.above(not_told.heading, bh.hi);
+  for (int i = 0; i < told.instants(); ++i) {
+    const auto k = static_cast<size_t>(i);
+    std::printf("t %5.1f s: heading averaged NEES told %.3f, not told %.3f (total told %.3f)\n", told.instant_s(i),
+                told.heading[k], not_told.heading[k], told.total[k]);
   }
   std::printf("walk %.2e rad/s/sqrt(s): heading bounds [%.3f, %.3f]; told %d above, %d below; not told %d above, "
-              "of %zu\n",
-              walk, bh.lo, bh.hi, above_told, below_told, above_not_told, told.heading.size());
+              "of %d\n",
+              walk, bh.lo, bh.hi, above_told, outside_told - above_told, above_not_told, told.instants());
   // THEN told the walk, the heading is never overconfident (measured: 0.61-1.05; below the lower
   // bound at 7-12 s, where the floor P_b,z t^2 is conservative); not told, it claims too much as
   // soon as the walk has moved the bias (measured: above from 9.5 s, 4.1 at 12 s), and at the end
@@ -225,10 +168,8 @@ constexpr double kMotionFirstS = 8.0;  // evaluated from (the motion starts at 5
 constexpr double kMotionLastS = 35.0;  // ... to (the motion ends), s
 constexpr double kMotionEveryS = 1.0;  // ... every, s
 
-Averaged run_in_motion() {
-  const Instants at{kMotionFirstS, kMotionEveryS,
-                    static_cast<int>((kMotionLastS - kMotionFirstS) / kMotionEveryS + 0.5) + 1, kMotionRuns};
-  Averaged a = zero_averaged(at.count);
+testing::AveragedNees run_in_motion() {
+  testing::AveragedNees a(kMotionFirstS, kMotionLastS, kMotionEveryS, kMotionRuns);
   for (int run = 0; run < kMotionRuns; ++run) {
     // GIVEN random motion on a simulated sensor whose figures the filter is told
     sim::SimConfig cfg = sim::make_scenario("random_motion", kRateHz, 3000 + static_cast<uint64_t>(run));
@@ -237,25 +178,25 @@ Averaged run_in_motion() {
     p.gyro_bias_walk_rps_per_sqrt_s = cfg.noise.gyro_bias_walk_rps_per_sqrt_s;
     p.gyro_noise_density_rps_per_sqrt_hz = cfg.noise.sigma_gyro_rps / std::sqrt(cfg.rate_hz);
     cfg.noise.gyro_bias_rps = bias_from_the_prior(p, 9000 + static_cast<uint64_t>(run));
-    add_run(cfg, p, at, a);
+    add_run(cfg, p, a);
   }
   return a;
 }
 
 TEST(ParallelKfChiSquare, GivenRandomMotionOnASensorWhoseFiguresTheFilterIsToldWhenRunManyTimesThenTheAveragedNeesLiesInsideTheChiSquareBounds) {
-  const Averaged a = run_in_motion();
+  const testing::AveragedNees a = run_in_motion();
   const testing::AveragedNeesBounds b = testing::averaged_nees_bounds_95(3, kMotionRuns);
-  const auto [above, below] = count_outside(a.total, b);
+  const int outside = a.outside(a.total, b);
+  const int above = a.above(a.total, b.hi);
   double mean = 0.0;
-  for (size_t k = 0; k < a.total.size(); ++k) {
-    mean += a.total[k] / static_cast<double>(a.total.size());
-    std::printf("t %5.1f s: averaged NEES %.3f (tilt, 2 dof, %.3f; heading, 1 dof, %.3f)\n",
-                kMotionFirstS + static_cast<double>(k) * kMotionEveryS, a.total[k], a.tilt[k], a.heading[k]);
+  for (const double x : a.total) {
+    mean += x / a.instants();
   }
-  std::printf("random motion, %d runs: bounds [%.3f, %.3f], mean %.3f, %d above, %d below, of %zu\n", kMotionRuns,
-              b.lo, b.hi, mean, above, below, a.total.size());
+  a.print();
+  std::printf("random motion, %d runs: bounds [%.3f, %.3f], mean %.3f, %d above, %d below, of %d\n", kMotionRuns, b.lo,
+              b.hi, mean, above, outside - above, a.instants());
   // THEN the averaged NEES lies inside the bounds at all but a few instants
-  EXPECT_LE(above + below, kMaxOutsideMotion);
+  EXPECT_LE(outside, kMaxOutsideMotion);
 }
 
 }  // namespace
