@@ -201,16 +201,7 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   s_.last_dt_s = dt;
   s_.since_mag_s += dt;
   if (p_.motion_gyro_scale_error > 0.0) {
-    // the attitude low-passed as the tilt (tau) and the heading (KF2's lag) follow it: a gyro
-    // scale error s turns the estimate by s times the rotation away from them
-    s_.q_ib = (s_.q_ib * quat_exp(dt * w)).normalized();
-    const double tau_tilt = p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : p_.rest_filter_tau_s;
-    const double tau_heading = heading_lag_s(dt);
-    s_.q_lp_tilt = (s_.q_lp_tilt * quat_exp((dt / (tau_tilt + dt)) * quat_log(s_.q_lp_tilt.conjugate() * s_.q_ib)))
-                       .normalized();
-    s_.q_lp_heading =
-        (s_.q_lp_heading * quat_exp((dt / (tau_heading + dt)) * quat_log(s_.q_lp_heading.conjugate() * s_.q_ib)))
-            .normalized();
+    scale_error_step(w, dt);
   }
   const bool motion_bias = p_.bias_estimation && p_.motion_bias_sigma_rps > 0.0;
   if (motion_bias) {
@@ -245,6 +236,37 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   }
   s_.prev_gyro = gyro;
   return true;
+}
+
+void ParallelKf::scale_error_step(const Eigen::Vector3d& w, double dt) {
+  // The attitude low-passed as the tilt (tau) and the heading (KF2's lag) follow it: a gyro scale
+  // error s turns the estimate by s times the rotation away from them. The gyro-only attitude is
+  // r_ib where the filter keeps it (the low-pass frame, the hard-iron estimate), else integrated
+  // here. The low-passes step once per bias period on the time elapsed: their lags are seconds,
+  // kBiasPeriodS 0.04 s, and only the published covariance reads them.
+  if (!gyro_frame_kept()) {
+    s_.q_ib = (s_.q_ib * quat_exp(dt * w)).normalized();
+  }
+  s_.scale_lp_s += dt;
+  if (s_.scale_lp_s < kBiasPeriodS) {
+    return;
+  }
+  const double h = s_.scale_lp_s;
+  s_.scale_lp_s = 0.0;
+  const Eigen::Quaterniond q_ib = gyro_attitude();
+  const double tau_tilt = p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : p_.rest_filter_tau_s;
+  const double tau_heading = heading_lag_s(dt);  // s (dt over KF2's gain per step)
+  s_.q_lp_tilt =
+      (s_.q_lp_tilt * quat_exp((h / (tau_tilt + h)) * quat_log(s_.q_lp_tilt.conjugate() * q_ib))).normalized();
+  s_.q_lp_heading =
+      (s_.q_lp_heading * quat_exp((h / (tau_heading + h)) * quat_log(s_.q_lp_heading.conjugate() * q_ib)))
+          .normalized();
+}
+
+bool ParallelKf::gyro_frame_kept() const { return p_.accel_lowpass_tau_s > 0.0 || p_.hard_iron; }
+
+Eigen::Quaterniond ParallelKf::gyro_attitude() const {
+  return gyro_frame_kept() ? Eigen::Quaterniond(s_.r_ib).normalized() : s_.q_ib;
 }
 
 Eigen::Vector3d ParallelKf::hard_iron_corrected(int64_t stamp_ns, const Eigen::Vector3d& gyro,
@@ -677,7 +699,8 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
   // since the heading was last held by fields (KF2's gain about the vertical), not all of it: a
   // field accepted now and then amid gated ones leaves most of it. Continuously accepted, this
   // settles at about KF2's lag.
-  const double share = std::min(1.0, dt / std::max(heading_lag_s(dt), dt));
+  const double lag = heading_lag_s(dt);  // KF2's, after this correction
+  const double share = std::min(1.0, dt / std::max(lag, dt));
   s_.since_mag_s *= 1.0 - share;
   s_.lag_keep_z *= 1.0 - share;
   if (s_.gate.learnt && s_.gate.m_ut > 0.0) {
@@ -686,7 +709,7 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
     // (dip), each low-passed over the lag, are what the gate can see of it.
     const double m = s_.gate.m_ut;
     const double sin_dip = -s_.kf1.up_body().dot(mag) / mag.norm();
-    const double k = dt / (heading_lag_s(dt) + dt);
+    const double k = dt / (lag + dt);
     s_.field_dn_lp += k * (mag.norm() - m - s_.field_dn_lp);
     s_.field_dv_lp += k * (m * (std::asin(std::clamp(sin_dip, -1.0, 1.0)) - s_.gate.dip_rad) - s_.field_dv_lp);
   }
@@ -722,7 +745,7 @@ void ParallelKf::restart_heading(const Eigen::Vector3d& mag) {
   s_.field_dn_lp = 0.0;  // deviations from the reference it replaced
   s_.field_dv_lp = 0.0;
   s_.mb_head_trusted = false;  // a jump of the heading, not a measurement of the bias
-  s_.q_lp_heading = s_.q_ib;   // the heading's low-passed attitude (gyro scale error) starts again
+  s_.q_lp_heading = gyro_attitude();  // the heading's low-passed attitude (gyro scale error) starts again
 }
 
 void ParallelKf::update_attitude() {
@@ -878,8 +901,9 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
     // scale errors of the three gyro axes, independent, each s: the error about body axis i is
     // s times the rotation about it since the low-passed attitude
     const double s2 = p_.motion_gyro_scale_error * p_.motion_gyro_scale_error;
-    const Eigen::Vector3d d_tilt = quat_log(s_.q_lp_tilt.conjugate() * s_.q_ib);
-    const Eigen::Vector3d d_heading = quat_log(s_.q_lp_heading.conjugate() * s_.q_ib);
+    const Eigen::Quaterniond q_ib = gyro_attitude();
+    const Eigen::Vector3d d_tilt = quat_log(s_.q_lp_tilt.conjugate() * q_ib);
+    const Eigen::Vector3d d_heading = quat_log(s_.q_lp_heading.conjugate() * q_ib);
     const Eigen::Matrix3d p_tilt = r * (s2 * d_tilt.cwiseAbs2()).asDiagonal() * r.transpose();
     const Eigen::Matrix3d p_heading = r * (s2 * d_heading.cwiseAbs2()).asDiagonal() * r.transpose();
     t.gyro_scale.topLeftCorner<2, 2>() = p_tilt.topLeftCorner<2, 2>();

@@ -409,11 +409,13 @@ struct ParallelKfState {
   /// relearnt); false after a start on a gated field (a configured reference next to a magnet):
   /// the first accepted field then restarts it
   bool heading_anchored = false;
-  /// body -> an inertial frame by the gyro alone, and that attitude low-passed as the tilt
-  /// (accel_lowpass_tau_s) and the heading (KF2's lag) follow it (gyro scale error)
+  /// body -> an inertial frame by the gyro alone (integrated here only when r_ib is not kept:
+  /// ParallelKf::gyro_attitude()), and that attitude low-passed as the tilt (accel_lowpass_tau_s)
+  /// and the heading (KF2's lag) follow it (gyro scale error), stepped once per bias period
   Eigen::Quaterniond q_ib = Eigen::Quaterniond::Identity();
   Eigen::Quaterniond q_lp_tilt = Eigen::Quaterniond::Identity();
   Eigen::Quaterniond q_lp_heading = Eigen::Quaterniond::Identity();
+  double scale_lp_s = 0.0;  ///< time since the two low-passes last stepped (once per bias period), s
 };
 
 class ParallelKf {
@@ -573,6 +575,12 @@ class ParallelKf {
   /// The horizontal external acceleration the tilt's low-pass let through (accel_ref_i,
   /// accel_h_cov_i), from the raw accelerometer `accel` (body) of a step of dt; for the covariance.
   void external_accel_step(const Eigen::Vector3d& accel, double dt);
+  /// The gyro-only attitude and its two low-passes (the gyro scale error's covariance term).
+  void scale_error_step(const Eigen::Vector3d& w, double dt);
+  /// Whether step() keeps the gyro-only frame r_ib (the accelerometer low-pass or the hard-iron estimate).
+  [[nodiscard]] bool gyro_frame_kept() const;
+  /// The gyro-only attitude: r_ib where it is kept, else q_ib.
+  [[nodiscard]] Eigen::Quaterniond gyro_attitude() const;
   /// Turns the twin low-pass and the gravity reference of external_accel_step by a bias change
   /// db (body, rad/s): the frame the new bias would have propagated, the vectors' samples turned
   /// by the integral of r_ib db from each sample to now (accel_twin_age, accel_ref_age).
