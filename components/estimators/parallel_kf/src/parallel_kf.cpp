@@ -186,13 +186,12 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   if (p_.accel_lowpass_tau_s > 0.0) {
     // Low-pass the accelerometer in a gyro-propagated, almost inertial frame: external
     // accelerations average out there while gravity stays put; KF1 sees the filtered vector.
-    if (p_.accel_lowpass_order == 2) {
-      s_.lp_accel_i = s_.accel_bw.step(s_.r_ib * s.accel_mps2, dt);
-    } else {
-      s_.lp_accel_i += (dt / (p_.accel_lowpass_tau_s + dt)) * (s_.r_ib * s.accel_mps2 - s_.lp_accel_i);
-    }
+    const Eigen::Vector3d accel_i = s_.r_ib * s.accel_mps2;
+    const double k_lp = dt / (p_.accel_lowpass_tau_s + dt);  // first order (accel_lowpass_order 1)
+    s_.lp_accel_i = p_.accel_lowpass_order == 2 ? s_.accel_bw.step(accel_i, dt)
+                                                : Eigen::Vector3d(s_.lp_accel_i + k_lp * (accel_i - s_.lp_accel_i));
     s_.kf1.correct(s_.r_ib.transpose() * s_.lp_accel_i);
-    external_accel_step(s.accel_mps2, dt);
+    external_accel_step(accel_i, dt);
   } else {
     s_.kf1.correct(s.accel_mps2);
     const double dev = s.accel_mps2.norm() - p_.tilt.gravity_mps2;
@@ -320,7 +319,7 @@ void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
   s_.initialized = true;
 }
 
-void ParallelKf::external_accel_step(const Eigen::Vector3d& accel, double dt) {
+void ParallelKf::external_accel_step(const Eigen::Vector3d& a_i, double dt) {
   // In the almost inertial frame gravity moves only as the bias error turns the frame, so the
   // accelerometer averaged there slowly (time constant kAccelReferenceTaus tau) is gravity: what
   // the tilt's low-pass holds beyond it, across it, is the horizontal external acceleration that
@@ -332,7 +331,6 @@ void ParallelKf::external_accel_step(const Eigen::Vector3d& accel, double dt) {
   // first-order one (accel_lowpass_order 1) is the tilt's itself, not turned.
   const double tau = p_.accel_lowpass_tau_s;
   const double tau_ref = kAccelReferenceTaus * tau;
-  const Eigen::Vector3d a_i = s_.r_ib * accel;
   // the mean of every sample so far until there are tau_ref seconds of them (a reference started on
   // the first sample alone would hold its noise, e^(-t / tau_ref) of it, as a horizontal acceleration)
   const double k_ref = dt / (std::min(s_.accel_ref_span_s, tau_ref) + dt);

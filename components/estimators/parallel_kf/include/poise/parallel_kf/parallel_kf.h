@@ -573,8 +573,9 @@ class ParallelKf {
   void bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep, MotionNoise* mn);
   void motion_bias_measure();
   /// The horizontal external acceleration the tilt's low-pass let through (accel_ref_i,
-  /// accel_h_cov_i), from the raw accelerometer `accel` (body) of a step of dt; for the covariance.
-  void external_accel_step(const Eigen::Vector3d& accel, double dt);
+  /// accel_h_cov_i), from the raw accelerometer in the almost inertial frame `a_i` (r_ib times the
+  /// body's, which step() computes once for the tilt's low-pass) of a step of dt; for the covariance.
+  void external_accel_step(const Eigen::Vector3d& a_i, double dt);
   /// The gyro-only attitude and its two low-passes (the gyro scale error's covariance term).
   void scale_error_step(const Eigen::Vector3d& w, double dt);
   /// Whether step() keeps the gyro-only frame r_ib (the accelerometer low-pass or the hard-iron estimate).
