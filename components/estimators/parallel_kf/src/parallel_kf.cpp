@@ -309,46 +309,115 @@ void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
   }
   s_.prev_gyro = s.gyro_rps;
   s_.lp_accel_i = s.accel_mps2;
+  s_.accel_ref_stages_i = s.accel_mps2.replicate<1, 3>();
   s_.accel_ref_i = s.accel_mps2;
+  s_.accel_ref_sum_i.setZero();
+  s_.accel_ref_sum_s = 0.0;
+  s_.accel_ref_g_ratio = 0.0;
+  s_.accel_ref_c = 0.0;
   s_.accel_bw = Butterworth2<3>(p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : 1.0);
   s_.accel_bw.reset(s.accel_mps2);
   s_.accel_bw_twin = s_.accel_bw;
   s_.accel_twin_age.setZero();
-  s_.accel_ref_age.setZero();
+  for (Eigen::Matrix3d& age : s_.accel_ref_stage_age) {
+    age.setZero();
+  }
+  s_.accel_ref_stage_lag.setZero();
   s_.accel_ref_span_s = 0.0;
   s_.initialized = true;
 }
 
-void ParallelKf::external_accel_step(const Eigen::Vector3d& a_i, double dt) {
+void ParallelKf::external_accel_step(const Eigen::Vector3d& accel_i, double dt) {
   // In the almost inertial frame gravity moves only as the bias error turns the frame, so the
-  // accelerometer averaged there slowly (time constant kAccelReferenceTaus tau) is gravity: what
-  // the tilt's low-pass holds beyond it, across it, is the horizontal external acceleration that
-  // low-pass let through, which tilts the estimate by itself over g (a vertical one only changes
-  // the magnitude, which the old term read). The frame's turn by past bias errors is taken out of
-  // both (external_accel_return; the estimate's own error from it is lag_cov's); what the present
-  // bias error turns, the reference lags more than the low-pass does, and that still counts. The
-  // low-pass is a twin of the tilt's (the tilt's own state is the estimate's, never turned); a
-  // first-order one (accel_lowpass_order 1) is the tilt's itself, not turned.
+  // accelerometer averaged there slowly is gravity: what the tilt's low-pass holds beyond it,
+  // across it, is the horizontal external acceleration that low-pass let through, which tilts the
+  // estimate by itself over g (a vertical one only changes the magnitude, which the old term read).
+  // The frame's turn by past bias errors is taken out of both (external_accel_return; the
+  // estimate's own error from it is lag_cov's). The present bias error turns the frame at a
+  // steady rate, a ramp, which the reference lags by tau as the tilt's low-pass does, so it
+  // cancels in their difference (a first-order reference of 30 s lagged it by 27 s more and held
+  // that as an acceleration). The low-pass is a twin of the tilt's (the tilt's own state is the
+  // estimate's, never turned); a first-order one (accel_lowpass_order 1) is the tilt's itself, not
+  // turned.
   const double tau = p_.accel_lowpass_tau_s;
-  const double tau_ref = kAccelReferenceTaus * tau;
-  // the mean of every sample so far until there are tau_ref seconds of them (a reference started on
-  // the first sample alone would hold its noise, e^(-t / tau_ref) of it, as a horizontal acceleration)
-  const double k_ref = dt / (std::min(s_.accel_ref_span_s, tau_ref) + dt);
-  s_.accel_ref_span_s += dt;
-  s_.accel_ref_i += k_ref * (a_i - s_.accel_ref_i);
-  // every held sample's integral of r_ib grows by r_ib dt (the weights sum to one), then the new
-  // sample (integral 0) takes its weight: the twin's mean age is its ramp lag tau
-  s_.accel_ref_age = (1.0 - k_ref) * (s_.accel_ref_age + dt * s_.r_ib);
-  s_.accel_twin_age = (1.0 - dt / (tau + dt)) * (s_.accel_twin_age + dt * s_.r_ib);
+  s_.accel_ref_sum_i += dt * accel_i;
+  s_.accel_ref_sum_s += dt;
+  if (s_.accel_ref_sum_s >= kBiasPeriodS) {
+    reference_step();
+  }
+  const Eigen::Vector3d& ref = s_.accel_ref_i;
+  const Eigen::Matrix3d step_age = dt * s_.r_ib;
+  s_.accel_twin_age = (1.0 - dt / (tau + dt)) * (s_.accel_twin_age + step_age);
   const Eigen::Vector3d& twin =
-      p_.accel_lowpass_order == 2 ? s_.accel_bw_twin.step(a_i, dt) : s_.lp_accel_i;
+      p_.accel_lowpass_order == 2 ? s_.accel_bw_twin.step(accel_i, dt) : s_.lp_accel_i;
   Eigen::Vector3d up;
-  if (!safe_normalize(s_.accel_ref_i, up)) {
+  if (!safe_normalize(ref, up)) {
     return;
   }
-  Eigen::Vector3d d = twin - s_.accel_ref_i;
+  Eigen::Vector3d d = twin - ref;
   d -= d.dot(up) * up;
+  d /= 1.0 - s_.accel_ref_g_ratio;  // what the reference let through in phase (reference_step)
   s_.accel_h_cov_i += (dt / (tau + dt)) * (d * d.transpose() - s_.accel_h_cov_i);
+  // KF2 pulls the heading towards -tan(dip) times the tilt error about magnetic north, with its
+  // lag: that error's horizontal acceleration low-passed over the lag (covariance_terms), stepped
+  // once per bias period on the period's mean (the lag is 10 s or more)
+  s_.accel_h_heading_sum_i += dt * d;
+  s_.accel_h_heading_span_s += dt;
+  if (s_.accel_h_heading_span_s >= kBiasPeriodS) {
+    const double h = s_.accel_h_heading_span_s;
+    const double k = h / (heading_lag_s(dt) + h);
+    s_.accel_h_heading_i += k * (s_.accel_h_heading_sum_i / h - s_.accel_h_heading_i);
+    s_.accel_h_heading_sum_i.setZero();
+    s_.accel_h_heading_span_s = 0.0;
+  }
+}
+
+void ParallelKf::reference_step() {
+  // The reference: three first-order stages of T each (the same 30 s memory as one of
+  // kAccelReferenceTaus tau), combined as (1 + b s) L3 = L3 + (b / T)(L2 - L3) (s L3 = (L2 - L3) / T)
+  // with b = 3 T - tau, so that a ramp lags it by 3 T - b = tau. An acceleration at w passes it as
+  // b / (T^3 w^2) (3 / (T w)^2 of it against the twin's 2 / (tau w)^2: 1.2 % at T = 10 tau / 3);
+  // a first-order reference passed it as 1 / (T w), as much as the twin at the tour's 0.8 Hz. It is
+  // stepped once per bias period h on the period's mean (T is 10 s).
+  const double tau = p_.accel_lowpass_tau_s;
+  const double t_stage = kAccelReferenceTaus * tau / 3.0;
+  const double h = s_.accel_ref_sum_s;
+  const Eigen::Vector3d in = s_.accel_ref_sum_i / h;
+  s_.accel_ref_sum_i.setZero();
+  s_.accel_ref_sum_s = 0.0;
+  // each stage the mean of every period it was given until there are T seconds of them (a
+  // reference started on the first sample alone would hold its noise as a horizontal acceleration)
+  const double t_now = std::min(s_.accel_ref_span_s, t_stage);  // each stage's time constant now
+  const double k = h / (t_now + h);
+  s_.accel_ref_span_s += h;
+  // every held sample's integral of r_ib grows by r_ib h (the weights sum to one), then the new
+  // input takes its weight with its own age (a period's mean: about h / 2): a stage's mean age is
+  // its T more than its input's; the scalar lags are the same for a ramp
+  const Eigen::Matrix3d step_age = h * s_.r_ib;
+  Eigen::Vector3d input = in;
+  Eigen::Matrix3d input_age = 0.5 * step_age;
+  double input_lag = 0.5 * h;
+  for (int i = 0; i < 3; ++i) {
+    Eigen::Matrix3d& age = s_.accel_ref_stage_age[static_cast<size_t>(i)];
+    s_.accel_ref_stages_i.col(i) += k * (input - s_.accel_ref_stages_i.col(i));
+    age = (1.0 - k) * (age + step_age) + k * input_age;
+    s_.accel_ref_stage_lag(i) = (1.0 - k) * (s_.accel_ref_stage_lag(i) + h) + k * input_lag;
+    input = s_.accel_ref_stages_i.col(i);
+    input_age = age;
+    input_lag = s_.accel_ref_stage_lag(i);
+  }
+  // ramp lag of L3 + c (L2 - L3) is l3 - c (l3 - l2): tau for c = (l3 - tau) / (l3 - l2), which is
+  // (3 T - tau) / T once the stages are full, and smaller while they are still means of their span
+  const Eigen::Vector3d& lag = s_.accel_ref_stage_lag;
+  const double c = lag(2) - lag(1) > 0.0 ? std::max(0.0, (lag(2) - tau) / (lag(2) - lag(1))) : 0.0;
+  s_.accel_ref_c = c;
+  s_.accel_ref_i = s_.accel_ref_stages_i.col(2) + c * (s_.accel_ref_stages_i.col(1) - s_.accel_ref_stages_i.col(2));
+  // Well above the reference's corner an acceleration passes both low-passes as G / s^2, in phase:
+  // the twin's G = 2 / tau^2 (the Butterworth's w_c^2), the reference's c / T^2 (its second stage's
+  // 1 / (T^2 s^2), times c), so their difference holds (1 - G_ref / G_twin) of what the twin let
+  // through (external_accel_step divides by it; at most twice, while the stages are short means)
+  s_.accel_ref_g_ratio =
+      p_.accel_lowpass_order == 2 && t_now > 0.0 ? std::min(0.5, c * tau * tau / (2.0 * t_now * t_now)) : 0.0;
 }
 
 void ParallelKf::external_accel_return(const Eigen::Vector3d& db) {
@@ -359,7 +428,12 @@ void ParallelKf::external_accel_return(const Eigen::Vector3d& db) {
     return;
   }
   s_.accel_bw_twin.transform(rot_exp(s_.accel_twin_age * db));
-  s_.accel_ref_i = rot_exp(s_.accel_ref_age * db) * s_.accel_ref_i;
+  for (int i = 0; i < 3; ++i) {
+    s_.accel_ref_stages_i.col(i) =
+        rot_exp(s_.accel_ref_stage_age[static_cast<size_t>(i)] * db) * s_.accel_ref_stages_i.col(i);
+  }
+  s_.accel_ref_i = s_.accel_ref_stages_i.col(2) +
+                  s_.accel_ref_c * (s_.accel_ref_stages_i.col(1) - s_.accel_ref_stages_i.col(2));
 }
 
 double ParallelKf::motion_bias_noise(double dt) const {
@@ -402,6 +476,7 @@ double ParallelKf::gyro_white_var(double t) const {
 Eigen::Matrix3d ParallelKf::reference_error_cov() const {
   const ParallelKfCovarianceTerms c = covariance_terms(output());
   Eigen::Matrix3d px = c.kf + c.external_accel + c.gyro_scale + c.field + c.hard_iron;
+  px(2, 2) -= c.external_accel(2, 2);  // carried in full below
   if (s_.gate.learnt) {
     // the heading is built from sZ (2): a tilt error a about magnetic north (ENU y) turns it by
     // -tan(dip) a, and KF2 pulls it there (propagate_lag_error)
@@ -890,6 +965,13 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
     tilt << m(1, 1), -m(0, 1), -m(0, 1), m(0, 0);
     tilt /= g * g;
     t.external_accel.topLeftCorner<2, 2>() = tilt;
+    if (s_.gate.learnt) {
+      // the tilt about magnetic north (ENU y) is the east acceleration over g; KF2 pulls the heading
+      // to -tan(dip) times it, low-passed over its lag
+      const double tan_dip = std::sin(s_.gate.dip_rad) / std::max(std::cos(s_.gate.dip_rad), std::sqrt(kMinCos2Dip));
+      const double a_north = (w * s_.accel_h_heading_i).x() / g;
+      t.external_accel(2, 2) = tan_dip * tan_dip * a_north * a_north;
+    }
   } else {
     // KF1 sees the raw accelerometer: the external acceleration's horizontal part taken as large
     // as the vertical one its magnitude shows

@@ -76,6 +76,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -373,24 +374,39 @@ struct ParallelKfState {
 
   // What the two KFs do not model, for the published covariance (attitude_covariance)
   double accel_dev2_lp = 0.0;  ///< without the low-pass: (|s_A| - g)^2, low-passed over rest_filter_tau_s, (m/s^2)^2
-  /// the accelerometer in the almost inertial frame low-passed over kAccelReferenceTaus tilt
-  /// low-pass time constants: gravity there, m/s^2
-  Eigen::Vector3d accel_ref_i{0, 0, 0};
-  /// the low-passed accelerometer's deviation from accel_ref_i across it (the horizontal external
+  /// The gravity reference: the accelerometer in the almost inertial frame through three
+  /// first-order stages of kAccelReferenceTaus / 3 tilt low-pass time constants each (columns 0-2,
+  /// m/s^2), combined as (1 + b s) / (1 + T s)^3 with b = 3 T - tau (external_accel_step): a ramp
+  /// lags it by tau, as it lags the tilt's low-pass, while an acceleration passes it as b / T^3
+  /// over s^2, not as 1 / T over s (a first-order reference)
+  Eigen::Matrix3d accel_ref_stages_i = Eigen::Matrix3d::Zero();
+  /// the low-passed accelerometer's deviation from the reference across it (the horizontal external
   /// acceleration the tilt's low-pass let through), its outer product low-passed over
   /// accel_lowpass_tau_s, inertial frame, (m/s^2)^2
   Eigen::Matrix3d accel_h_cov_i = Eigen::Matrix3d::Zero();
+  /// that deviation itself low-passed over KF2's lag (inertial frame, m/s^2): its part about magnetic
+  /// north is what KF2 pulls the heading with (-tan(dip) times the tilt)
+  Eigen::Vector3d accel_h_heading_i{0, 0, 0};
+  Eigen::Vector3d accel_h_heading_sum_i{0, 0, 0};  ///< the deviation's integral over the period so far, m/s
+  double accel_h_heading_span_s = 0.0;             ///< that period so far, s
   /// The tilt's low-pass run again on the same input (accel_bw's twin), for the external
-  /// acceleration term only: it and accel_ref_i are turned by each bias change into the frame the
+  /// acceleration term only: it and the reference are turned by each bias change into the frame the
   /// new bias would have propagated (external_accel_return), so their difference holds no turn of
   /// the frame by past bias errors (the estimate's own lag error from them is lag_cov's)
   Butterworth2<3> accel_bw_twin;
-  /// Per low-pass (the twin, with the tilt's time constant; the reference, kAccelReferenceTaus
-  /// times it): the sum over its samples of weight times the integral of r_ib from the sample to
-  /// now, s: a bias change db turns the low-passed vector y by (this db) x y
+  /// Per low-pass (the twin, with the tilt's time constant; each reference stage): the sum over its
+  /// samples of weight times the integral of r_ib from the sample to now, s: a bias change db turns
+  /// the low-passed vector y by (this db) x y
   Eigen::Matrix3d accel_twin_age = Eigen::Matrix3d::Zero();
-  Eigen::Matrix3d accel_ref_age = Eigen::Matrix3d::Zero();
-  double accel_ref_span_s = 0.0;  ///< time accel_ref_i has averaged (its window until kAccelReferenceTaus tau), s
+  std::array<Eigen::Matrix3d, 3> accel_ref_stage_age{Eigen::Matrix3d::Zero(), Eigen::Matrix3d::Zero(),
+                                                     Eigen::Matrix3d::Zero()};
+  Eigen::Vector3d accel_ref_i{0, 0, 0};      ///< the reference, L3 + c (L2 - L3) (reference_step), m/s^2
+  double accel_ref_c = 0.0;                   ///< its c, for a ramp lag of tau
+  double accel_ref_g_ratio = 0.0;             ///< what it lets through of an acceleration, in phase, over the twin's
+  Eigen::Vector3d accel_ref_sum_i{0, 0, 0};   ///< the accelerometer's integral over the bias period so far, m/s
+  double accel_ref_sum_s = 0.0;               ///< that period so far, s
+  Eigen::Vector3d accel_ref_stage_lag{0, 0, 0};  ///< each reference stage's ramp lag (its weights' mean age), s
+  double accel_ref_span_s = 0.0;  ///< time the reference has averaged (its stages' window until their time constant), s
   double field_dn_lp = 0.0;    ///< |s_M| - m of the fields used for heading, low-passed over KF2's lag, uT
   double field_dv_lp = 0.0;    ///< m (dip - alpha) of the same, low-passed the same way, uT
   /// The attitude error the bias error has left in the estimate (world frame x, y, z, rad; then
@@ -449,13 +465,18 @@ class ParallelKf {
   ///             error a bias left before it was learnt is forgotten with the lags, not at once;
   ///           + the horizontal external acceleration a_h the low-pass let through, tilting the
   ///             estimate by e_z x a_h / g: the low-passed vector's part across a slow gravity
-  ///             reference (the accelerometer averaged over kAccelReferenceTaus tau in the almost
-  ///             inertial frame; both it and the low-passed vector, a twin of the tilt's, turned by
-  ///             each bias change into the frame the new bias would have propagated, so the turn of
-  ///             the frame by past bias errors is not read as an acceleration: that error of the
-  ///             estimate is lag_cov's), its outer product low-passed over tau (external_accel_step); a
-  ///             vertical acceleration, which only changes the magnitude, does not count (without
-  ///             the low-pass: (|s_A| - g)^2 / g^2 per tilt axis, as before);
+  ///             reference (the accelerometer in the almost inertial frame through three stages of
+  ///             kAccelReferenceTaus tau / 3, combined so that a ramp lags it by tau as it lags the
+  ///             tilt's low-pass: the present bias error's steady turn cancels; reference_step; both
+  ///             it and the low-passed vector, a twin of the tilt's, turned by each bias change into
+  ///             the frame the new bias would have propagated, so the turn of the frame by past bias
+  ///             errors is not read as an acceleration: that error of the estimate is lag_cov's),
+  ///             divided by 1 - G_ref / G_twin (what the reference lets through of a fast
+  ///             acceleration, in phase with the twin), its outer product low-passed over tau
+  ///             (external_accel_step); a vertical acceleration, which only changes the magnitude,
+  ///             does not count (without the low-pass: (|s_A| - g)^2 / g^2 per tilt axis, as
+  ///             before); heading: tan^2(dip) times its tilt about magnetic north low-passed over
+  ///             KF2's lag, to which KF2 pulls the heading;
   ///           + s^2 dtheta_i^2 about each body axis i (world x, y part): a gyro scale error s
   ///             (motion_gyro_scale_error) turns the attitude by s times the rotation dtheta away
   ///             from the attitude low-passed over tau, which the tilt has not caught up with;
@@ -572,10 +593,13 @@ class ParallelKf {
   /// else null) for the real error's update (bias_error_update).
   void bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep, MotionNoise* mn);
   void motion_bias_measure();
-  /// The horizontal external acceleration the tilt's low-pass let through (accel_ref_i,
-  /// accel_h_cov_i), from the raw accelerometer in the almost inertial frame `a_i` (r_ib times the
-  /// body's, which step() computes once for the tilt's low-pass) of a step of dt; for the covariance.
-  void external_accel_step(const Eigen::Vector3d& a_i, double dt);
+  /// The horizontal external acceleration the tilt's low-pass let through (accel_h_cov_i), from
+  /// the raw accelerometer in the almost inertial frame `accel_i` (r_ib times the body's, which
+  /// step() computes once for the tilt's low-pass) of a step of dt; for the covariance.
+  void external_accel_step(const Eigen::Vector3d& accel_i, double dt);
+  /// Steps the gravity reference (accel_ref_i, its stages, ages and lags) over the bias period on
+  /// the period's mean of the accelerometer in the almost inertial frame.
+  void reference_step();
   /// The gyro-only attitude and its two low-passes (the gyro scale error's covariance term).
   void scale_error_step(const Eigen::Vector3d& w, double dt);
   /// Whether step() keeps the gyro-only frame r_ib (the accelerometer low-pass or the hard-iron estimate).
@@ -584,7 +608,7 @@ class ParallelKf {
   [[nodiscard]] Eigen::Quaterniond gyro_attitude() const;
   /// Turns the twin low-pass and the gravity reference of external_accel_step by a bias change
   /// db (body, rad/s): the frame the new bias would have propagated, the vectors' samples turned
-  /// by the integral of r_ib db from each sample to now (accel_twin_age, accel_ref_age).
+  /// by the integral of r_ib db from each sample to now (accel_twin_age, accel_ref_stage_age).
   void external_accel_return(const Eigen::Vector3d& db);
   [[nodiscard]] double motion_bias_noise(double dt) const;
   /// KF2's correction lag about the vertical for a step of dt, s (0 before a direction exists)
