@@ -125,6 +125,7 @@ TEST(CameraConfig, GivenTheShippedFileWhenLoadedThenOnlyItsOverridesDifferFromTh
   EXPECT_EQ(c.world_pose.max_reprojection_rms_px, d.world_pose.max_reprojection_rms_px);
   EXPECT_EQ(c.world_pose.pixel_sigma_px, d.world_pose.pixel_sigma_px);
   EXPECT_EQ(c.world_pose.pixel_sigma_dof, d.world_pose.pixel_sigma_dof);
+  EXPECT_EQ(c.world_pose.corner_noise, d.world_pose.corner_noise);
   EXPECT_EQ(c.world_pose.max_iterations, d.world_pose.max_iterations);
   EXPECT_EQ(c.unknown_tag_size_m, d.unknown_tag_size_m);
   EXPECT_FALSE(c.T_body_camera.has_value());
@@ -137,7 +138,7 @@ TEST(CameraConfig, ParsesSectionsAndExtrinsic) {
   const CameraConfig c = parse_camera_config(R"(
 capture: {delay_ms: 12.5}
 detector: {family: tag25h9, decimate: 1.5, threads: 2, refine_edges: false}
-pose: {ambiguity_ratio_max: 0.4, ambiguity_min_angle_deg: 5}
+pose: {ambiguity_ratio_max: 0.4, ambiguity_min_angle_deg: 5, corner_noise: white}
 extrinsic: {position_m: [0.05, 0, 0.02], q_body_camera: [1, 0, 0, 0]}
 )",
                                              "c.yaml");
@@ -146,6 +147,8 @@ extrinsic: {position_m: [0.05, 0, 0.02], q_body_camera: [1, 0, 0, 0]}
   EXPECT_FALSE(c.detector.refine_edges);
   EXPECT_NEAR(c.tag_pose.ambiguity_min_angle_rad, 5 * kDeg, kExact);
   EXPECT_NEAR(c.world_pose.ambiguity_ratio_max, 0.4, kExact);
+  EXPECT_EQ(c.world_pose.corner_noise, CornerNoise::kWhite);
+  EXPECT_EQ(CameraConfig{}.world_pose.corner_noise, CornerNoise::kEdgeLines);
   ASSERT_TRUE(c.T_body_camera.has_value());
   EXPECT_NEAR(c.T_body_camera->translation().x(), 0.05, kExact);
 }
@@ -159,6 +162,8 @@ TEST(CameraConfig, MistakesAreClearErrors) {
                       "unknown tag family");
   expect_config_error([] { (void)parse_camera_config("pose: {pixel_sigma_dof: 0}\n", "c.yaml"); },
                       "pose.pixel_sigma_dof must be in (0, 1e6]");
+  expect_config_error([] { (void)parse_camera_config("pose: {corner_noise: lines}\n", "c.yaml"); },
+                      "c.yaml: pose.corner_noise must be edges or white (got 'lines')");
   expect_config_error(
       [] { (void)parse_camera_config("extrinsic: {position_m: [0, 0, 0]}\n", "c.yaml"); },
       "q_body_camera");

@@ -56,6 +56,17 @@ CameraConfig parse_camera_config(const std::string& yaml_text, const std::string
   pose.get("max_world_reprojection_px", c.world_pose.max_reprojection_rms_px);
   pose.get("pixel_sigma_px", c.world_pose.pixel_sigma_px);
   pose.get("pixel_sigma_dof", c.world_pose.pixel_sigma_dof);
+  if (pose.given("corner_noise")) {
+    std::string model;
+    pose.get("corner_noise", model);
+    if (model == "edges") {
+      c.world_pose.corner_noise = CornerNoise::kEdgeLines;
+    } else if (model == "white") {
+      c.world_pose.corner_noise = CornerNoise::kWhite;
+    } else {
+      throw ConfigError(source + ": pose.corner_noise must be edges or white (got '" + model + "')");
+    }
+  }
   pose.get("max_iterations", c.world_pose.max_iterations);
   pose.get("unknown_tag_size_m", c.unknown_tag_size_m);
   pose.finish();

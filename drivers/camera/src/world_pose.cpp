@@ -130,6 +130,39 @@ Eigen::Isometry3d refine(const Problem& pb, const Eigen::Isometry3d& start, int 
   return t;
 }
 
+/// Relative covariance (8x8, [x0 y0 x1 y1 ...]) of one tag's four corners when they are the
+/// intersections of its four edge lines, each fitted by least squares to its edge (header): a line
+/// over L px has offset variance 1 / L at its middle and angle variance 12 / L^3 (unit noise per
+/// px of edge); a corner moves along both lines' normals.
+Eigen::Matrix<double, 8, 8> edge_line_corner_covariance(const Eigen::Vector2d* px) {
+  Eigen::Matrix<double, 8, 8> a = Eigen::Matrix<double, 8, 8>::Zero();  // [o0 a0 o1 a1 ...] -> corners
+  Eigen::Matrix<double, 8, 1> var;
+  std::array<Eigen::Vector2d, 4> normal;
+  std::array<Eigen::Vector2d, 4> middle;
+  for (std::size_t k = 0; k < 4; ++k) {
+    const Eigen::Vector2d d = px[(k + 1) % 4] - px[k];
+    const double len = std::max(d.norm(), 1.0);
+    normal[k] = Eigen::Vector2d(-d.y(), d.x()) / len;
+    middle[k] = 0.5 * (px[k] + px[(k + 1) % 4]);
+    var(static_cast<Eigen::Index>(2 * k)) = 1.0 / len;
+    var(static_cast<Eigen::Index>(2 * k + 1)) = 12.0 / (len * len * len);
+  }
+  for (std::size_t i = 0; i < 4; ++i) {
+    Eigen::Matrix2d m;
+    Eigen::Matrix<double, 2, 8> rows = Eigen::Matrix<double, 2, 8>::Zero();
+    const std::size_t edges[2] = {(i + 3) % 4, i};  // the two lines through corner i
+    for (Eigen::Index j = 0; j < 2; ++j) {
+      const std::size_t e = edges[j];
+      m.row(j) = normal[e].transpose();
+      const Eigen::Vector2d along(-normal[e].y(), normal[e].x());  // along the edge
+      rows(j, static_cast<Eigen::Index>(2 * e)) = 1.0;              // offset at the middle
+      rows(j, static_cast<Eigen::Index>(2 * e + 1)) = (px[i] - middle[e]).dot(along);  // angle
+    }
+    a.block<2, 8>(static_cast<Eigen::Index>(2 * i), 0) = m.inverse() * rows;
+  }
+  return a * var.asDiagonal() * a.transpose();
+}
+
 }  // namespace
 
 void validate_world_pose_params(const WorldPoseParams& p) {
@@ -239,13 +272,29 @@ WorldPoseResult estimate_world_pose(const std::vector<TagObservation>& observati
     out.reject_reason = "degenerate";
     return out;
   }
+  // The corners' relative covariance S (mean variance per pixel axis 1): white, or the edge
+  // lines' (header). The pose's: (J^T J)^-1 J^T S J (J^T J)^-1; the residual's degrees of freedom
+  // E[SSR] / sigma^2 = tr((I - H) S) = tr(S) - tr((J^T J)^-1 J^T S J) (2N - 6 when S = I).
+  const Matrix6d h_inv = lu.inverse();
+  Matrix6d pose_relative = h_inv;
+  double dof = 2.0 * n - 6.0;
+  if (params.corner_noise == CornerNoise::kEdgeLines) {
+    Eigen::MatrixXd s = Eigen::MatrixXd::Zero(jac.rows(), jac.rows());
+    for (Eigen::Index t = 0; t + 8 <= s.rows(); t += 8) {
+      s.block<8, 8>(t, t) = edge_line_corner_covariance(&pb.pixels[static_cast<std::size_t>(t / 2)]);
+    }
+    s *= static_cast<double>(s.rows()) / s.trace();
+    const Matrix6d jsj = jac.transpose() * s * jac;
+    pose_relative = h_inv * jsj * h_inv;
+    dof = s.trace() - (h_inv * jsj).trace();
+  }
   // The prior pooled with the fit, each by its degrees of freedom; a fit above the prior in full
-  // (header). N >= 4, so dof >= 2.
-  const double dof = std::max(0.0, 2.0 * n - 6.0);
+  // (header). N >= 4, so dof > 0.
+  dof = std::max(dof, 1e-9);
   const double nu0 = params.pixel_sigma_dof;
   const double sigma2 = std::max(
       ssr / dof, (nu0 * params.pixel_sigma_px * params.pixel_sigma_px + ssr) / (nu0 + dof));
-  out.covariance = sigma2 * lu.inverse();
+  out.covariance = sigma2 * pose_relative;
   out.covariance = 0.5 * (out.covariance + out.covariance.transpose()).eval();
   if (out.ambiguity_ratio > params.ambiguity_ratio_max) {
     out.reject_reason = "ambiguous";

@@ -32,12 +32,14 @@ struct SimCameraParams {
   double blackout_period_s = 30.0;
   double noise = 2.0;
   uint64_t seed = 1;
+  /// The pipeline's prior corner noise (pose.pixel_sigma_px; its default unless told).
+  double pixel_sigma_px = camera::WorldPoseParams{}.pixel_sigma_px;
 };
 
 SimCameraParams load(const runtime::ComponentSpec& spec) {
   runtime::check_known_params(spec, {"fps", "width_px", "height_px", "focal_px", "tag_size_m",
                                      "tag_spacing_m", "floor_z_m", "blackouts", "blackout_period_s",
-                                     "noise", "seed"});
+                                     "noise", "seed", "pixel_sigma_px"});
   SimCameraParams p;
   p.fps = runtime::param<double>(spec, "fps", p.fps);
   p.width_px = runtime::param<int>(spec, "width_px", p.width_px);
@@ -50,6 +52,7 @@ SimCameraParams load(const runtime::ComponentSpec& spec) {
   p.blackout_period_s = runtime::param<double>(spec, "blackout_period_s", p.blackout_period_s);
   p.noise = runtime::param<double>(spec, "noise", p.noise);
   p.seed = runtime::param<uint64_t>(spec, "seed", p.seed);
+  p.pixel_sigma_px = runtime::param<double>(spec, "pixel_sigma_px", p.pixel_sigma_px);
   if (!(p.fps > 0.0 && p.fps <= 120.0) || p.width_px < 64 || p.height_px < 48 || !(p.focal_px > 0.0) ||
       !(p.tag_size_m > 0.0) || !(p.floor_z_m < 0.0)) {
     throw runtime::ConfigError(spec.origin + ": sim_camera parameters out of range (fps (0,120], "
@@ -88,7 +91,9 @@ class SimCamera : public runtime::Component {
     camera::CameraConfig config;
     config.sensor_id = sensor_id_;
     config.T_body_camera = T_body_camera_;
+    config.world_pose.pixel_sigma_px = p_.pixel_sigma_px;
     try {
+      camera::validate_world_pose_params(config.world_pose);
       pipeline_ = std::make_unique<camera::CameraPipeline>(config, intrinsics_, map);
       renderer_ = std::make_unique<camera::SceneRenderer>(intrinsics_, "tag36h11", 2);
     } catch (const std::exception& e) {

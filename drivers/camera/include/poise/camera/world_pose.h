@@ -9,14 +9,21 @@
 // is refined with Levenberg-Marquardt. The best competing start whose rotation differs by more
 // than ambiguity_min_angle_rad is refined too: world ambiguity ratio = RMS(best)/RMS(competitor).
 // With a single tag the two IPPE solutions are the two minima: the tag's own ratio is used.
-// Covariance = sigma^2 (J^T J)^-1, sigma^2 the corner noise per pixel axis. A fit below the prior
-// is pooled with it, each by its degrees of freedom (the conjugate update of a
-// scaled-inverse-chi-square prior worth nu0 residuals); a fit above the prior is taken in full:
-//   sigma^2 = max(SSR / (2N - 6), (nu0 sigma0^2 + SSR) / (nu0 + 2N - 6)),
+// Covariance = sigma^2 (J^T J)^-1 J^T S J (J^T J)^-1: S the corners' relative covariance (mean
+// variance per pixel axis 1), sigma^2 the corner noise per pixel axis. S: the detector fits a line
+// to each tag edge and takes the corners as the lines' intersections, so the two corners on one
+// edge share its line's errors: a line over L px has offset variance 1 / L (its middle) and angle
+// variance 12 / L^3 (least squares, unit noise per px of edge), moving each corner along both of
+// its lines' normals (corner_noise = edges, the default). Those errors load the tag's rotation and
+// distortion modes more than its shift, so they show in the residual more than they move the pose
+// (issue 31); corner_noise = white: S = I, the classic sigma^2 (J^T J)^-1.
+// The residual's degrees of freedom: E[SSR] / sigma^2 = tr((I - H) S) = t (2N - 6 when S = I).
+// A fit below the prior is pooled with it, each by its degrees of freedom (the conjugate update
+// of a scaled-inverse-chi-square prior worth nu0 residuals); a fit above the prior is taken in full:
+//   sigma^2 = max(SSR / t, (nu0 sigma0^2 + SSR) / (nu0 + t)),
 //   nu0 = pixel_sigma_dof, sigma0 = pixel_sigma_px.
-// One tag (2N - 6 = 2) leans on the prior; nine tags (66) on the fit. A camera noisier than its
-// prior is covered as before (the fit); one cleaner than its prior is no longer held at the prior
-// however many corners show it (the old rule, max(sigma0^2, SSR / (2N - 6)); issue 31).
+// One tag leans on the prior; nine tags on the fit. A camera noisier than its prior is covered by
+// the fit; one cleaner than its prior is not held at the prior however many corners show it.
 #pragma once
 
 #include "poise/camera/detector.h"
@@ -32,6 +39,11 @@
 
 namespace poise::camera {
 
+/// The corners' noise model (pose.corner_noise): `edges` (default): the detector's corners are the
+/// intersections of least-squares lines fitted to the tag's edges, so the two corners on one edge
+/// share its line's offset and angle errors (header); `white`: independent per corner and axis.
+enum class CornerNoise { kEdgeLines, kWhite };
+
 struct WorldPoseParams {
   /// Prior corner noise per pixel axis, px: the camera's figure (docs/CAMERA.md "Covariance": the
   /// RMS of a calibration, or of a static tag's corners over frames). 0.25 px is the safe side
@@ -40,6 +52,7 @@ struct WorldPoseParams {
   /// How many residuals the prior is worth against the fit's 2N - 6 (dimensionless, > 0): 8 = two
   /// tags' corners. Raise it when the figure is measured well, lower it to trust the fit sooner.
   double pixel_sigma_dof = 8.0;
+  CornerNoise corner_noise = CornerNoise::kEdgeLines;
   double max_reprojection_rms_px = 2.0;  ///< reject the world pose above this RMS, px
   int max_iterations = 20;             ///< Levenberg-Marquardt iterations
   /// As TagPoseParams (its defaults; the camera configuration sets both from the same keys).

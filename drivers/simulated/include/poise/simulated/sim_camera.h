@@ -9,7 +9,9 @@
 // tag_spacing_m (0.7), floor_z_m (-1.2: tags on a 3x3 grid on the floor below the start),
 // blackouts ([[start_s, end_s], ...]: no frames, e.g. the tag leaving the view),
 // blackout_period_s (repeat the blackouts every period; 30 = the `tour` scenario cycle; 0 = once),
-// noise (grey levels, 2), seed (1).
+// noise (grey levels, 2), seed (1), pixel_sigma_px (the pipeline's prior corner noise, px; its
+// default 0.25 unless told: `poise demo` and config/hosts/simulated.yaml give this render's own
+// figure, 0.16 px, docs/CAMERA.md "Covariance").
 // Camera extrinsic: looking down through the body's -z (camera x = body x, y = -body y,
 // z = -body z).
 #pragma once
