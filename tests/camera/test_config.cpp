@@ -138,7 +138,7 @@ TEST(CameraConfig, ParsesSectionsAndExtrinsic) {
   const CameraConfig c = parse_camera_config(R"(
 capture: {delay_ms: 12.5}
 detector: {family: tag25h9, decimate: 1.5, threads: 2, refine_edges: false}
-pose: {ambiguity_ratio_max: 0.4, ambiguity_min_angle_deg: 5, corner_noise: white}
+pose: {ambiguity_ratio_max: 0.4, ambiguity_min_angle_deg: 5, corner_noise: edges}
 extrinsic: {position_m: [0.05, 0, 0.02], q_body_camera: [1, 0, 0, 0]}
 )",
                                              "c.yaml");
@@ -147,8 +147,8 @@ extrinsic: {position_m: [0.05, 0, 0.02], q_body_camera: [1, 0, 0, 0]}
   EXPECT_FALSE(c.detector.refine_edges);
   EXPECT_NEAR(c.tag_pose.ambiguity_min_angle_rad, 5 * kDeg, kExact);
   EXPECT_NEAR(c.world_pose.ambiguity_ratio_max, 0.4, kExact);
-  EXPECT_EQ(c.world_pose.corner_noise, CornerNoise::kWhite);
-  EXPECT_EQ(CameraConfig{}.world_pose.corner_noise, CornerNoise::kEdgeLines);
+  EXPECT_EQ(c.world_pose.corner_noise, CornerNoise::kEdgeLines);
+  EXPECT_EQ(CameraConfig{}.world_pose.corner_noise, CornerNoise::kWhite);
   ASSERT_TRUE(c.T_body_camera.has_value());
   EXPECT_NEAR(c.T_body_camera->translation().x(), 0.05, kExact);
 }

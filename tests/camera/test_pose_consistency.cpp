@@ -211,7 +211,7 @@ EdgeFitCorners corners_from_fitted_edges(const std::array<Eigen::Vector2d, 4>& t
 //   line-fitting detector displaces them (edges sampled per pixel with 0.25 px of noise across the
 //   edge, least-squares lines, corners at their intersections: the two corners of an edge share its
 //   line's errors), the prior pixel_sigma_px set to the frame's exact corner noise
-// WHEN the world pose and its covariance are estimated with the edge-line model (the default)
+// WHEN the world pose and its covariance are estimated with the edge-line model
 // THEN the 6-dof NEES averages inside the chi-square bounds; the white model's (which takes the
 //   residual for noise that moves the pose as much) averages below them.
 TEST(WorldPoseConsistency, GivenCornersFromFittedEdgeLinesWhenEstimatedThenNeesMatchesTheEdgeModel) {

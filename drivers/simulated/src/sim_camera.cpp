@@ -92,6 +92,9 @@ class SimCamera : public runtime::Component {
     config.sensor_id = sensor_id_;
     config.T_body_camera = T_body_camera_;
     config.world_pose.pixel_sigma_px = p_.pixel_sigma_px;
+    // its corners are libapriltag's fitted-line intersections on a clean render: measured to
+    // follow the edge-line model (docs/CAMERA.md "Covariance")
+    config.world_pose.corner_noise = camera::CornerNoise::kEdgeLines;
     try {
       camera::validate_world_pose_params(config.world_pose);
       pipeline_ = std::make_unique<camera::CameraPipeline>(config, intrinsics_, map);

@@ -14,9 +14,9 @@
 // to each tag edge and takes the corners as the lines' intersections, so the two corners on one
 // edge share its line's errors: a line over L px has offset variance 1 / L (its middle) and angle
 // variance 12 / L^3 (least squares, unit noise per px of edge), moving each corner along both of
-// its lines' normals (corner_noise = edges, the default). Those errors load the tag's rotation and
-// distortion modes more than its shift, so they show in the residual more than they move the pose
-// (issue 31); corner_noise = white: S = I, the classic sigma^2 (J^T J)^-1.
+// its lines' normals (corner_noise = edges). Those errors load the tag's rotation and distortion
+// modes more than its shift, so they show in the residual more than they move the pose (issue 31);
+// corner_noise = white (the default): S = I, the classic sigma^2 (J^T J)^-1.
 // The residual's degrees of freedom: E[SSR] / sigma^2 = tr((I - H) S) = t (2N - 6 when S = I).
 // A fit below the prior is pooled with it, each by its degrees of freedom (the conjugate update
 // of a scaled-inverse-chi-square prior worth nu0 residuals); a fit above the prior is taken in full:
@@ -39,10 +39,12 @@
 
 namespace poise::camera {
 
-/// The corners' noise model (pose.corner_noise): `edges` (default): the detector's corners are the
-/// intersections of least-squares lines fitted to the tag's edges, so the two corners on one edge
-/// share its line's offset and angle errors (header); `white`: independent per corner and axis.
-enum class CornerNoise { kEdgeLines, kWhite };
+/// The corners' noise model (pose.corner_noise): `white` (default): independent per corner and
+/// axis; `edges`: the detector's corners are the intersections of least-squares lines fitted to
+/// the tag's edges, so the two corners on one edge share its line's offset and angle errors
+/// (header). `edges` is measured on the synthetic camera's renders (which use it); on real images
+/// lens-model and blur errors may move a tag's corners together, which it would understate.
+enum class CornerNoise { kWhite, kEdgeLines };
 
 struct WorldPoseParams {
   /// Prior corner noise per pixel axis, px: the camera's figure (docs/CAMERA.md "Covariance": the
@@ -52,7 +54,7 @@ struct WorldPoseParams {
   /// How many residuals the prior is worth against the fit's 2N - 6 (dimensionless, > 0): 8 = two
   /// tags' corners. Raise it when the figure is measured well, lower it to trust the fit sooner.
   double pixel_sigma_dof = 8.0;
-  CornerNoise corner_noise = CornerNoise::kEdgeLines;
+  CornerNoise corner_noise = CornerNoise::kWhite;
   double max_reprojection_rms_px = 2.0;  ///< reject the world pose above this RMS, px
   int max_iterations = 20;             ///< Levenberg-Marquardt iterations
   /// As TagPoseParams (its defaults; the camera configuration sets both from the same keys).
