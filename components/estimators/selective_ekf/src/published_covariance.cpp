@@ -20,7 +20,11 @@
 //   following  tilt: the accelerometer's disturbance (external acceleration, its errors) that the
 //              tilt is still following: the tilt rows' innovation as a world-frame rotation,
 //              low-passed over the tilt's lag (what averages out within it is left out, what
-//              persists is what the estimate is being pulled by): share^2 i_lp i_lp^T (x, y)
+//              persists is what the estimate is being pulled by): share^2 i_lp i_lp^T (x, y).
+//              With accel_noise_density_mps2_per_sqrt_hz known, instead: the external
+//              acceleration's error z (SelectiveEkfState::ext_accel_error, the low-pass's error
+//              driven by the measured deviation d from it, through P's gains): its tilt part
+//              (R z_th) squared and low-passed over the tilt's lag (x, y)
 //   scale      tilt and heading: a gyro scale error s turns the estimate by s times the rotation
 //              the corrections have not caught up with: the world-frame rotation increments
 //              R w dt high-passed over each lag (X' = R w - X / tau), s^2 X_i^2 per world axis
@@ -135,6 +139,10 @@ void SelectiveEkf::track_unmodelled(const ImuInput& in, bool aided, double aidin
       const Eigen::Vector3d e2 = up.cross(e1);
       const Eigen::Vector3d innov_world = r * (e1 * tilt.innovation.x() + e2 * tilt.innovation.y());
       u.tilt_innovation_lp += lowpass_gain(aiding_dt_s, tau_tilt) * (innov_world - u.tilt_innovation_lp);
+      if (aids::accel_noise_known(p_)) {
+        const Eigen::Vector2d z = (r * x_.ext_accel_error.segment<3>(kTh)).head<2>();
+        u.ext_accel_power += lowpass_gain(aiding_dt_s, tau_tilt) * (z * z.transpose() - u.ext_accel_power);
+      }
     }
   }
   const SourceStatus& heading = status(SelectiveEkfAid::kMagHeading);
@@ -204,7 +212,12 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
                                 ? p_.accel_lowpass_tau_s * std::sqrt(q)
                                 : p_.sigma_tilt_rad_sqrt_s;
   const double r_tilt = tilt_sigma * tilt_sigma;
-  if (r_tilt > 0.0) {
+  if (aids::accel_noise_known(p_)) {
+    // the accelerometer's noise known (the tilt rows carry none in P_err): the external
+    // acceleration's error through the filter's own gains (ext_accel_error), its power over the
+    // tilt's lag; it holds what "following" below stands for
+    tilt_slow.topLeftCorner<2, 2>() += u.ext_accel_power;
+  } else if (r_tilt > 0.0) {
     const double share = std::min(1.0, p_tilt * p_tilt / (q * r_tilt));
     tilt_slow.topLeftCorner<2, 2>() +=
         share * share * u.tilt_innovation_lp.head<2>() * u.tilt_innovation_lp.head<2>().transpose();

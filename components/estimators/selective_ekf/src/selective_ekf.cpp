@@ -151,7 +151,6 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
   const Eigen::Quaterniond dq = quat_exp(wh);
   x_.q_world_body = (x_.q_world_body * dq).normalized();  // q <- q (x) exp(w h / 2) (3)
   x_.t_m += x_.v_mps * h;                                  // t <- t + v h (3)
-
   // P <- F P F^T + Q (4), F applied by blocks: F P F^T = F (F P)^T for symmetric P.
   // F is block-diagonal between [w, th, b] and [t, v]; while P has no cross-covariance between
   // the two (no lever-arm position fix yet, x_.coupled false) each block is propagated alone.
@@ -162,6 +161,7 @@ void SelectiveEkf::predict_to(int64_t stamp_ns) {
   x_.pre.q_ib = (x_.pre.q_ib * dq).normalized();
   const Eigen::Matrix3d r_ib = x_.pre.q_ib.toRotationMatrix();
   const Eigen::Matrix3d e_w = r_ib * b;  // J_de'_dw
+  propagate_ext_accel_error(a, b, e_w, h);  // (by the same F)
   if (x_.coupled) {
     auto apply_f = [&](const Mat& m) {
       Mat out = m;
@@ -308,6 +308,50 @@ void SelectiveEkf::learn_reference(const ImuSample& s) {
   }
 }
 
+namespace {
+constexpr double kChi2Dof2P95 = 5.991;  ///< the chi-square distribution's 95 % quantile, 2 degrees of freedom
+}  // namespace
+
+// The external acceleration's error (SelectiveEkfState::ext_accel_error, the accelerometer's
+// figure known) over a prediction, by P's F: th' = a th + b w, e' = e + e_w w, t' = t + h v.
+void SelectiveEkf::propagate_ext_accel_error(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b,
+                                             const Eigen::Matrix3d& e_w, double h) {
+  if (!aids::accel_noise_known(p_)) {
+    return;
+  }
+  Vec& z = x_.ext_accel_error;
+  z.segment<3>(kE) += e_w * z.segment<3>(kW);
+  z.segment<3>(kTh) = a * z.segment<3>(kTh) + b * z.segment<3>(kW);
+  z.segment<3>(kT) += h * z.segment<3>(kV);
+}
+
+// The external acceleration the low-pass lets through, as the accelerometer shows it
+// (SelectiveEkfState::ext_accel_error): `deviation` d is the sample less the low-pass (its frame),
+// k the low-pass's gain at this sample. P_err's model of the low-pass's noise (preprocess:
+// e <- (1 - k) e + k n_rot) driven by this sample's deviation d, n_rot = d x u / |lp| (the turn
+// of the low-passed vector it causes), instead of the noise's statistics. What P_err holds
+// already is left out: the deviation's slow part (its low-pass over the same tau: the low-pass's
+// lag behind a frame that turns with the bias error) and, across u, what the noise can explain
+// (shrunk by the noise's 95 % radius, 2 degrees of freedom, 5.991 N^2 / dt): a sensor at rest
+// drives none.
+void SelectiveEkf::drive_ext_accel_error(const Eigen::Vector3d& deviation, double k, double dt_s) {
+  SelectiveEkfPreState& pre = x_.pre;
+  const double g = pre.lp_accel_i.norm();
+  Vec& z = x_.ext_accel_error;
+  z.segment<3>(kE) *= 1.0 - k;
+  const Eigen::Vector3d fast = deviation - pre.deviation_lp;
+  pre.deviation_lp += k * fast;
+  if (g > 0.0) {
+    const Eigen::Vector3d across = fast.cross(pre.lp_accel_i / g);
+    const double n = p_.accel_noise_density_mps2_per_sqrt_hz;
+    const double radius = std::sqrt(kChi2Dof2P95 * n * n / dt_s);
+    const double size = across.norm();
+    if (size > radius) {
+      z.segment<3>(kE) += (k / g) * (1.0 - radius / size) * across;
+    }
+  }
+}
+
 void SelectiveEkf::preprocess(ImuInput& in) {
   // Part of the state (x_.pre), so a replay after a late vision frame re-derives it exactly.
   SelectiveEkfPreState& pre = x_.pre;
@@ -369,7 +413,11 @@ void SelectiveEkf::preprocess(ImuInput& in) {
       x_.P_err.block<3, 3>(kE, kTh) += noise_rot * a.transpose();
     }
   }
-  pre.lp_accel_i += k * (pre.q_ib * in.accel - pre.lp_accel_i);
+  const Eigen::Vector3d deviation = pre.q_ib * in.accel - pre.lp_accel_i;  // the sample less the low-pass
+  if (aids::accel_noise_known(p_)) {
+    drive_ext_accel_error(deviation, k, dt_s);
+  }
+  pre.lp_accel_i += k * deviation;
   // its error: the frame's error less the low-passed past of it, e <- (1 - k) e (rows and
   // columns of P)
   for (Mat* pm : {&x_.P, &x_.P_err}) {

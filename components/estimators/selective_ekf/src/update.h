@@ -96,8 +96,8 @@ inline void inject(SelectiveEkfState& x, const SelectiveEkf::Vec& dx) {
   x.v_mps += dx.segment<3>(SelectiveEkf::kV);
 }
 
-/// The estimate's error covariance (SelectiveEkfState::P_err) after rows H with the gain K (from
-/// P) and diagonal R: the Joseph form, exact for any gain, (I - K H) C (I - K H)^T + K R K^T =
+/// The estimate's error covariance (SelectiveEkfState::P_err), and the external acceleration's
+/// error ext_accel_error, after rows H with the gain K (from P) and diagonal R: the Joseph form, exact for any gain, (I - K H) C (I - K H)^T + K R K^T =
 /// C - K A^T - A K^T + K S K^T with A = C H^T, S = H A + R (symmetric) = C + G K^T + K G^T with
 /// G = K S / 2 - A: one N x M x N product, and symmetric to the bit by construction (m_ij + m_ji).
 /// On the diagonal block [Off, Off + NB) alone when the caller knows that K, H and C's cross terms
@@ -110,6 +110,10 @@ void update_error_covariance_block(SelectiveEkfState& x, const Eigen::Matrix<dou
   auto c = x.P_err.template block<NB, NB>(Off, Off);
   const Eigen::Matrix<double, NB, M> k = k_full.template middleRows<NB>(Off);
   const Eigen::Matrix<double, M, NB> h = h_full.template middleCols<NB>(Off);
+  // the external acceleration's error (SelectiveEkfState::ext_accel_error): the same gain, z <- (I - K H) z
+  auto z = x.ext_accel_error.template segment<NB>(Off);
+  const Eigen::Matrix<double, M, 1> hz = h * z;
+  z -= k * hz;
   const Eigen::Matrix<double, NB, M> a = c.lazyProduct(h.transpose());
   Eigen::Matrix<double, M, M> s = h.lazyProduct(a);
   s.diagonal() += r_diag;

@@ -411,6 +411,10 @@ struct SelectiveEkfPreState {
   Eigen::Quaterniond q_ib = Eigen::Quaterniond::Identity();
   Eigen::Vector3d lp_accel_i{0, 0, 0};  ///< low-passed accelerometer in that frame, m/s^2
   double ext_accel_ms = 0.0;            ///< low-passed (|a| - g)^2, (m/s^2)^2
+  /// the samples' deviation from the low-pass (in its frame), itself low-passed over
+  /// accel_lowpass_tau_s: the slow part (the low-pass's lag behind a frame that turns with the
+  /// bias error) that ext_accel_error leaves to P_err, m/s^2
+  Eigen::Vector3d deviation_lp{0, 0, 0};
   /// the first sample was not at rest (the rest detector's thresholds): the low-pass carries its
   /// external acceleration, as the initial attitude does (a start in motion)
   bool moving_start = false;
@@ -432,6 +436,10 @@ struct SelectiveEkfUnmodelled {
   /// the tilt rows' innovation as a world-frame rotation, low-passed over the tilt's correction
   /// lag: the accelerometer's disturbance the tilt is still following, rad
   Eigen::Vector3d tilt_innovation_lp{0.0, 0.0, 0.0};
+  /// the tilt's error from the external acceleration the accelerometer low-pass lets through
+  /// (ext_accel_error's attitude part, world x, y) squared, low-passed over the tilt's lag: its
+  /// variance, rad^2 (accel_noise_density_mps2_per_sqrt_hz known; else zero)
+  Eigen::Matrix2d ext_accel_power = Eigen::Matrix2d::Zero();
   double field_dn_lp = 0.0;    ///< |m| - reference of the fields used, low-passed over the heading lag, uT
   double field_dv_lp = 0.0;    ///< reference |m| (dip - reference dip), the same, uT
   double last_dt_s = 0.0;      ///< the last sample interval, s
@@ -460,6 +468,14 @@ struct SelectiveEkfState {
   /// sees, which keeps the gains as they were tuned and is not an error of the estimate. Updated
   /// with the Joseph form for P's gain, exact for any gain.
   Eigen::Matrix<double, 18, 18> P_err = Eigen::Matrix<double, 18, 18>::Identity();
+  /// With accel_noise_density_mps2_per_sqrt_hz known: the error state [w, th, b, e, t, v] that the
+  /// external acceleration the low-pass lets through causes, as the accelerometer shows it. P_err's
+  /// model of the low-pass's noise (e <- (1 - k) e + k n_rot, preprocess) driven by the measured
+  /// sample instead of the noise's statistics: n_rot = d x u / |lp|, d the gyro-carried sample
+  /// less the low-pass; propagated with F and updated with P's gains like P_err (z <- z - K H z),
+  /// so the filter's own response to it (docs/SELECTIVE_EKF.md "External acceleration"). Zero
+  /// when the figure is not known.
+  Eigen::Matrix<double, 18, 1> ext_accel_error = Eigen::Matrix<double, 18, 1>::Zero();
   int64_t stamp_ns = -1;                 ///< time of the state
   int64_t untrusted_until_ns = -1;       ///< magnetometer untrusted until (hold)
   int64_t q_error_fail_since_ns = -1;    ///< start of the current quaternion-error failure run
@@ -653,6 +669,12 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// The published covariance's tracked terms after a step (SelectiveEkfUnmodelled); `aided`:
   /// tilt and heading were fused at this step over `aiding_dt_s`.
   void track_unmodelled(const ImuInput& in, bool aided, double aiding_dt_s);
+  /// preprocess: the external acceleration's error (SelectiveEkfState::ext_accel_error) driven by a
+  /// sample's deviation from the accelerometer low-pass (its gain k), with the accelerometer's figure
+  void drive_ext_accel_error(const Eigen::Vector3d& deviation, double k, double dt_s);
+  /// predict_to: the external acceleration's error by the prediction's F (a, b, e_w, interval h)
+  void propagate_ext_accel_error(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b, const Eigen::Matrix3d& e_w,
+                                 double h);
   // process_imu / process_vision run the aid sources (one file each: src/aid_*.cpp, shape and
   // declarations in the private header src/aid.h) on the state.
   SourceStatus& status_of(SelectiveEkfAid a);
