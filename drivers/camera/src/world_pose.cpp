@@ -296,6 +296,10 @@ WorldPoseResult estimate_world_pose(const std::vector<TagObservation>& observati
       ssr / dof, (nu0 * params.pixel_sigma_px * params.pixel_sigma_px + ssr) / (nu0 + dof));
   out.covariance = sigma2 * pose_relative;
   out.covariance = 0.5 * (out.covariance + out.covariance.transpose()).eval();
+  if (!out.covariance.allFinite()) {
+    out.reject_reason = "degenerate";  // e.g. a quad too thin for its edge lines: never a NaN published
+    return out;
+  }
   if (out.ambiguity_ratio > params.ambiguity_ratio_max) {
     out.reject_reason = "ambiguous";
     return out;
