@@ -190,6 +190,22 @@ TEST(CameraCli, SyntheticRunEndsWithTheSource) {
       << r.output;
 }
 
+// GIVEN a host file whose synthetic camera states a hostile corner noise (pixel_sigma_px)
+// WHEN `poise run` loads it
+// THEN it exits non-zero with a message naming the parameter, and no camera runs on it.
+TEST(CameraCli, GivenAHostileSimCameraPixelSigmaWhenRunThenTheErrorNamesIt) {
+  const fs::path dir = fresh_dir("sim_sigma");
+  DomainLease domain;
+  for (const char* value : {"-1", "0", "1e308", ".inf", ".nan", "fast"}) {
+    const std::string host = (dir / "host.yaml").string();
+    std::ofstream(host) << "components:\n  - {type: sim_camera, name: camera0, params: {pixel_sigma_px: " << value
+                        << "}}\n";
+    const auto r = run({bin("poise"), "run", host, "--domain", std::to_string(domain.id())}, 30s);
+    EXPECT_NE(r.exit_code, 0) << value << ": " << r.output;
+    EXPECT_NE(r.output.find("pixel_sigma_px"), std::string::npos) << value << ": " << r.output;
+  }
+}
+
 TEST(CameraCli, HelpWorksEverywhere) {
   for (const auto& args : std::vector<std::vector<std::string>>{
            {"camera", "--help"}, {"tags", "--help"}, {"tags", "detect", "--help"},
