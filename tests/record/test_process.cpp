@@ -537,6 +537,18 @@ void check_known_differences(int64_t step_ns) {
     EXPECT_NE(text.find("0.03-0.04 s 0.08-0.08 s"), std::string::npos) << text;
   }
   EXPECT_NE(text.find("1 live estimate(s) without a processed one"), std::string::npos) << text;
+  // A window (`poise process --window`) scores only the processed estimates inside it: seq 5-8,
+  // whose errors against truth are 0.5, 0.5, 1.5 and 0.5 deg of yaw.
+  const CompareWindow window{0.045 * k, 0.085 * k};
+  const std::vector<SeriesComparison> windowed = compare_processed(path, "processed/", window);
+  ASSERT_EQ(windowed.size(), 1U);
+  EXPECT_EQ(windowed[0].in_window.samples, 4U);
+  EXPECT_NEAR(windowed[0].in_window.heading_rmse, std::sqrt(3.0 / 4.0), kDegTolerance);
+  EXPECT_NEAR(windowed[0].in_window.rmse, std::sqrt(3.0 / 4.0), kDegTolerance);
+  EXPECT_NE(format_comparison(windowed).find("(4 samples): RMSE 0.866 deg, heading RMSE 0.866 deg"),
+            std::string::npos)
+      << format_comparison(windowed);
+  EXPECT_EQ(all[0].in_window.samples, 0U) << "no window given: nothing scored in one";
 }
 
 TEST(Compare, GivenKnownDifferencesThenRmseLargestAndTrustIntervalsAreExact) {

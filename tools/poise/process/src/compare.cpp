@@ -179,6 +179,8 @@ struct Running {
   double sum_sq = 0.0;
   double truth_sq = 0.0;
   double truth_heading_sq = 0.0;
+  double window_sq = 0.0;
+  double window_heading_sq = 0.0;
 };
 
 /// Per live topic and sensor: its estimates and their error against truth.
@@ -205,7 +207,7 @@ namespace {
 /// kHorizonNs past them, then are compared and dropped.
 class StreamComparison {
  public:
-  explicit StreamComparison(std::string prefix) : prefix_(std::move(prefix)) {}
+  StreamComparison(std::string prefix, const CompareWindow& window) : prefix_(std::move(prefix)), window_(window) {}
 
   /// One decoded estimate or truth sample of `topic`.
   void add(const std::string& topic, const std::string& kind, const std::string& sensor, uint32_t seq,
@@ -255,6 +257,10 @@ class StreamComparison {
         const double n_truth = static_cast<double>(c.truth_matched);
         c.processed_truth_rmse = n_truth > 0 ? std::sqrt(r.truth_sq / n_truth) : 0.0;
         c.processed_truth_heading_rmse = n_truth > 0 ? std::sqrt(r.truth_heading_sq / n_truth) : 0.0;
+        c.window = window_;
+        const double n_window = static_cast<double>(c.in_window.samples);
+        c.in_window.rmse = n_window > 0 ? std::sqrt(r.window_sq / n_window) : 0.0;
+        c.in_window.heading_rmse = n_window > 0 ? std::sqrt(r.window_heading_sq / n_window) : 0.0;
         out.push_back(c);
       }
     }
@@ -324,6 +330,12 @@ class StreamComparison {
             const TruthError te = truth_error(s, t->second);
             r.truth_heading_sq += te.heading_deg * te.heading_deg;
             c.processed_nees.add(te.nees);
+            if (window_.enabled() && window_.contains(t_s)) {
+              ++c.in_window.samples;
+              r.window_sq += e * e;
+              r.window_heading_sq += te.heading_deg * te.heading_deg;
+              c.in_window.nees.add(te.nees);
+            }
           }
         }
       }
@@ -375,6 +387,7 @@ class StreamComparison {
   }
 
   const std::string prefix_;
+  const CompareWindow window_;
   std::map<std::string, Series> series_;  // by topic: the estimates not yet compared
   std::map<std::string, std::map<std::string, Running>> running_;  // by processed topic, sensor
   std::map<std::string, std::map<std::string, LiveRunning>> live_running_;  // by live topic, sensor
@@ -385,8 +398,9 @@ class StreamComparison {
 
 }  // namespace
 
-std::vector<SeriesComparison> compare_processed(const std::string& file, const std::string& prefix) {
-  StreamComparison comparison(prefix);
+std::vector<SeriesComparison> compare_processed(const std::string& file, const std::string& prefix,
+                                               const CompareWindow& window) {
+  StreamComparison comparison(prefix, window);
   const McapReader reader = McapReader::open_file(file);
   MessageCursor cursor = reader.messages();
   while (const MessageView* m = cursor.next()) {
@@ -453,6 +467,13 @@ std::string format_comparison(const std::vector<SeriesComparison>& series) {
                       c.processed_truth_heading_rmse, c.live_truth_heading_rmse);
         os << buf << "      covariance: processed " << format_nees(c.processed_nees) << "; live "
            << format_nees(c.live_nees) << "\n";
+        if (c.window.enabled()) {
+          std::snprintf(buf, sizeof(buf),
+                        "      processed from %.3g to %.3g s (%llu samples): RMSE %.4g deg, heading RMSE %.4g deg, ",
+                        c.window.from_s, c.window.to_s, static_cast<unsigned long long>(c.in_window.samples),
+                        c.in_window.rmse, c.in_window.heading_rmse);
+          os << buf << format_nees(c.in_window.nees) << "\n";
+        }
       }
     }
     if (c.kind == "attitude" && c.matched > 0) {

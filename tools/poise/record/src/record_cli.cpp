@@ -66,6 +66,7 @@ struct ProcessArgs {
   std::string order = "stamp";
   double start_s = 0.0;
   double end_s = std::numeric_limits<double>::infinity();
+  std::vector<double> window;  // FROM, TO: seconds from each processed series' first estimate
   bool compare = true;
   bool allow_damaged = false;
 };
@@ -258,6 +259,14 @@ void run_process(const ProcessArgs& a) {
   if (!(a.end_s > a.start_s)) {
     throw Error("--end must be later than --start", kUsageExitCode);
   }
+  record::CompareWindow window;
+  if (!a.window.empty()) {
+    if (a.window.size() != 2 || !(a.window[1] > a.window[0])) {
+      throw Error("--window FROM,TO needs two numbers with TO later than FROM (seconds)", kUsageExitCode);
+    }
+    window.from_s = a.window[0];
+    window.to_s = a.window[1];
+  }
   o.start_s = a.start_s;
   o.end_s = a.end_s;
   ProcessSets sets = split_process_sets(a);
@@ -302,7 +311,7 @@ void run_process(const ProcessArgs& a) {
   }
   if (a.compare) {
     try {
-      std::cout << record::format_comparison(record::compare_processed(a.output, o.output_prefix));
+      std::cout << record::format_comparison(record::compare_processed(a.output, o.output_prefix, window));
     } catch (const record::ReadError& e) {
       throw Error(std::string("comparison: ") + e.what());
     }
@@ -544,6 +553,13 @@ void add_record_commands(CLI::App& app) {
                           "cold start mid-run)")
       ->check(CLI::Range(0.0, 1e9));
   process_cmd->add_option("--end", proc->end_s, "stop S seconds into the recording (log time)")
+      ->check(CLI::Range(0.0, 1e9));
+  process_cmd->add_option("--window", proc->window,
+                          "FROM,TO: also score each processed attitude against truth between FROM and TO "
+                          "seconds after its first estimate (RMSE, heading RMSE, NEES), e.g. the heading once "
+                          "a disturbance has left a cold start")
+      ->delimiter(',')
+      ->expected(2)
       ->check(CLI::Range(0.0, 1e9));
   process_cmd->add_flag("!--no-compare", proc->compare, "do not print the comparison");
   process_cmd->add_flag("--allow-damaged", proc->allow_damaged,

@@ -31,6 +31,23 @@ struct FlagDifference {
   std::vector<Interval> intervals;
 };
 
+/// A part of each processed series scored on its own (`poise process --window FROM,TO`): e.g. the
+/// heading once a disturbance has left, in a cold start. Seconds from the series' first stamp.
+struct CompareWindow {
+  double from_s = 0.0;
+  double to_s = -1.0;  ///< below from_s: no window
+  [[nodiscard]] bool enabled() const { return to_s > from_s; }
+  [[nodiscard]] bool contains(double t_s) const { return t_s >= from_s && t_s <= to_s; }
+};
+
+/// Attitude against truth inside the window.
+struct WindowFigures {
+  uint64_t samples = 0;         ///< processed estimates inside it with a truth sample
+  double heading_rmse = 0.0;    ///< deg
+  double rmse = 0.0;            ///< deg, the whole rotation
+  NeesSummary nees;
+};
+
 struct SeriesComparison {
   std::string kind;       ///< "attitude", "pose", "altitude"
   std::string topic;      ///< the live topic, e.g. attitude/selective_ekf
@@ -55,11 +72,15 @@ struct SeriesComparison {
   NeesSummary live_nees;
   FlagDifference mag_trust;     ///< attitude only
   FlagDifference vision_fused;  ///< attitude only
+  CompareWindow window;         ///< the window scored (enabled() false: none)
+  WindowFigures in_window;      ///< attitude only, processed against truth
 };
 
 /// Compares every processed/<topic> of `file` (what `poise process` wrote) with <topic> and truth.
+/// With an enabled `window`, each processed attitude series is also scored inside it.
 std::vector<SeriesComparison> compare_processed(const std::string& file,
-                                               const std::string& prefix = "processed/");
+                                               const std::string& prefix = "processed/",
+                                               const CompareWindow& window = {});
 /// "median NEES x, y % inside the 95 % ellipsoid" (or that there was no usable covariance).
 std::string format_nees(const NeesSummary& nees);
 /// The printed summary (one block per series).
