@@ -4,6 +4,7 @@
 // is driven with an injected clock and a fake step, no DDS.
 #include "poise/nodes/estimator_step.h"
 #include "poise/testing/testing.h"
+#include "node_spec.h"
 
 #include <gtest/gtest.h>
 
@@ -52,15 +53,6 @@ uint64_t counter(const msg::FilterDiagnostics& m, const std::string& name) {
   }
   ADD_FAILURE() << "no counter " << name;
   return 0;
-}
-
-runtime::ComponentSpec spec_with(const std::string& params) {
-  runtime::ComponentSpec spec;
-  spec.type = "parallel_kf";
-  spec.name = "pkf";
-  spec.origin = "test.yaml";
-  spec.params = YAML::Load(params);
-  return spec;
 }
 
 /// A runner on a clock the test moves, fed `n` samples at 200 Hz from t = 0.

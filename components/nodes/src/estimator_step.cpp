@@ -10,8 +10,8 @@
 namespace poise::nodes {
 
 const std::vector<std::string>& NodeParams::keys() {
-  static const std::vector<std::string> k{"diagnostics_rate_hz", "diagnostics_every",
-                                          "diagnostics_period_s", "input_deadline_s", "input_age"};
+  static const std::vector<std::string> k{"diagnostics_rate_hz", "diagnostics_every", "diagnostics_period_s",
+                                          "input_deadline_s", "input_age", "imu_sensor_id"};
   return k;
 }
 
@@ -39,6 +39,14 @@ NodeParams node_params(const runtime::ComponentSpec& spec) {
     p.input_age = parse_age_method(age);
   } catch (const std::invalid_argument& e) {
     throw runtime::ConfigError(spec.origin + ": input_age: " + e.what());
+  }
+  p.imu_sensor_id = runtime::param<std::string>(spec, "imu_sensor_id", p.imu_sensor_id);
+  if (!p.imu_sensor_id.empty()) {
+    try {
+      dds::checked_sensor_id(p.imu_sensor_id, spec.origin + ": imu_sensor_id");
+    } catch (const std::invalid_argument& e) {
+      throw runtime::ConfigError(e.what());
+    }
   }
   return p;
 }
@@ -86,6 +94,9 @@ StepRunner::StepRunner(std::unique_ptr<EstimatorStep> step, const NodeParams& pa
 
 void StepRunner::imu(const ImuSample& sample, const std::string& source, const std::string& writer,
                      StepOutputs& out) {
+  if (!follows(source)) {
+    return;
+  }
   ++received_;
   if (!imu_infos_.empty()) {
     const auto it = imu_infos_.find(source);
@@ -96,7 +107,7 @@ void StepRunner::imu(const ImuSample& sample, const std::string& source, const s
                     info.chip().c_str(), info.filter_setting(), info.gyro_delay_s() * 1e3,
                     info.accel_delay_s() * 1e3, info.origin().c_str());
       if (step_->published_imu_delay(info.gyro_delay_s(), what) && step_->imu_delay() != nullptr) {
-        pending_delay_message_ = step_->imu_delay()->describe();
+        pending_log_message_ = step_->imu_delay()->describe();
       }
       imu_infos_.erase(it);
     }
@@ -184,10 +195,52 @@ std::string StepRunner::imu_info(const msg::ImuSensorInfo& m) {
   return {};
 }
 
-std::string StepRunner::take_imu_delay_message() {
+std::string StepRunner::take_log_message() {
   std::string m;
-  m.swap(pending_delay_message_);
+  m.swap(pending_log_message_);
   return m;
+}
+
+namespace {
+/// A name from the network, printable: every byte outside ' '..'~' as \xNN.
+std::string printable(const std::string& s) {
+  std::string out;
+  for (const char c : s) {
+    if (c >= ' ' && c <= '~') {
+      out += c;
+    } else {
+      char hex[8];
+      std::snprintf(hex, sizeof hex, "\\x%02X", static_cast<unsigned>(static_cast<unsigned char>(c)));
+      out += hex;
+    }
+  }
+  return out;
+}
+}  // namespace
+
+std::string StepRunner::other_imu_summary() const {
+  if (imu_other_sensor_ == 0) {
+    return {};
+  }
+  return "followed IMU '" + printable(followed_imu_) + "', " + std::to_string(imu_other_sensor_) +
+         " sample(s) of other IMUs on " + topics_.imu + " not run (imu_sensor_id chooses)";
+}
+
+bool StepRunner::follows(const std::string& source) {
+  if (followed_imu_.empty()) {
+    followed_imu_ = params_.imu_sensor_id.empty() ? source : params_.imu_sensor_id;
+  }
+  if (source == followed_imu_) {
+    return true;
+  }
+  if (imu_other_sensor_++ == 0) {
+    pending_log_message_ = "ignoring the samples of IMU '" + printable(source) + "' on " + topics_.imu +
+                           ": this component follows '" + printable(followed_imu_) + "' (" +
+                           (params_.imu_sensor_id.empty() ? "the first one heard; imu_sensor_id chooses"
+                                                          : "imu_sensor_id") +
+                           "); counted as imu_other_sensor";
+  }
+  return false;
 }
 
 bool StepRunner::periodic_diagnostics(StepOutputs& out) {
@@ -212,6 +265,9 @@ void StepRunner::publish_diagnostics(int64_t stamp_ns, uint32_t seq, int64_t now
   diag.counters["samples_rejected"] = rejected_;
   diag.counters["samples_malformed"] = imu_malformed_.load();
   diag.counters["estimates_published"] = published_;
+  if (imu_other_sensor_ > 0) {  // another IMU on the topic: never stepped
+    diag.counters["imu_other_sensor"] = imu_other_sensor_;
+  }
   if (imu_info_seen_ || imu_info_refused_ > 0) {  // only with an IMU that publishes its delay
     diag.counters["imu_info_refused"] = imu_info_refused_;
     if (const ImuDelayChoice* d = step_->imu_delay()) {

@@ -141,10 +141,10 @@ void ImuEstimatorNode::on_imu(const msg::ImuSample& m, const eprosima::fastdds::
   const ImuSample sample = dds::from_msg(m);
   std::lock_guard<std::mutex> lock(mutex_);
   runner_.imu(sample, m.sensor_id().to_string(), dds::writer_key(info), writers_);
-  const std::string delay = runner_.take_imu_delay_message();
-  if (!delay.empty()) {
+  const std::string said = runner_.take_log_message();
+  if (!said.empty()) {
     std::fprintf(stderr, "%s %s: %s\n", runner_.step().component().c_str(), runner_.step().sensor_id().c_str(),
-                 delay.c_str());
+                 said.c_str());
   }
 }
 

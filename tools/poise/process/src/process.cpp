@@ -612,6 +612,9 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
     if (const nodes::ImuDelayChoice* d = r->step().imu_delay()) {
       stats.imu_delay_notes.push_back(r->step().sensor_id() + ": " + d->describe());
     }
+    if (const std::string other = r->other_imu_summary(); !other.empty()) {
+      stats.imu_delay_notes.push_back(r->step().sensor_id() + ": " + other);
+    }
   }
   for (const auto& r : runners) {
     const std::string& name = r->step().sensor_id();

@@ -56,6 +56,11 @@ struct NodeParams {
   /// publisher's clock), `host_clock` (stamps on this host's clock only), `off`. Live only: `poise
   /// process` has no arrival times (its clock is the stamps) and runs with `off`.
   AgeMethod input_age = AgeMethod::kRelative;
+  /// The IMU this component follows (its samples' sensor_id); empty: the first one heard. Samples
+  /// of any other sensor on the topic are never stepped (a filter fed two interleaved sensors, or
+  /// anyone else publishing on the topic, would fuse both): counted (`imu_other_sensor`), and
+  /// said once in the log.
+  std::string imu_sensor_id;
   static const std::vector<std::string>& keys();
 };
 NodeParams node_params(const runtime::ComponentSpec& spec);
@@ -173,9 +178,15 @@ class StepRunner {
   /// waits for their samples, is refused and counted (`imu_info_refused`); returns the refusal's
   /// message ("" when kept).
   std::string imu_info(const msg::ImuSensorInfo& m);
-  /// The step's imu_delay()->describe() once after the delay in use changed (for the node's log),
-  /// "" otherwise.
-  std::string take_imu_delay_message();
+  /// What the node should log once (the step's imu_delay()->describe() after the delay in use
+  /// changed; the first sample of an IMU this component does not follow), "" otherwise.
+  std::string take_log_message();
+  /// The sensor_id of the IMU followed ("" before the first sample when none is configured).
+  [[nodiscard]] const std::string& followed_imu() const { return followed_imu_; }
+  [[nodiscard]] uint64_t imu_other_sensor() const { return imu_other_sensor_; }
+  /// "" when every IMU sample was the followed IMU's; else which one was followed and how many
+  /// samples of others were not run.
+  [[nodiscard]] std::string other_imu_summary() const;
   /// The periodic diagnostics (the live timer): the core's last report, counters, input health,
   /// when none were published in the last half `diagnostics_period_s` (a silent input); true
   /// when published.
@@ -232,7 +243,11 @@ class StepRunner {
   /// At most this many sensors' info waits (the QoS profiles' instances per endpoint): more is
   /// refused and counted.
   static constexpr size_t kMaxPendingImuInfos = 256;
-  std::string pending_delay_message_;
+  /// false (counted, said once) when `source` is not the IMU this component follows
+  bool follows(const std::string& source);
+  std::string pending_log_message_;
+  std::string followed_imu_;
+  uint64_t imu_other_sensor_ = 0;
   bool imu_info_seen_ = false;
   uint64_t imu_info_refused_ = 0;
   InputAge ages_;
