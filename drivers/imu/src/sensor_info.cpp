@@ -68,4 +68,12 @@ InfoResolution resolve_sensor_info(const SensorInfoLine& line) {
   return r;
 }
 
+std::string simulated_sensor_info_line() {
+  SensorInfoLine info;
+  info.version = 1;
+  info.chip = "SIM";
+  info.has_delays = true;  // both 0 us
+  return format_info_line(info);
+}
+
 }  // namespace poise::imu

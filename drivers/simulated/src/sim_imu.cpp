@@ -5,11 +5,13 @@
 #include "poise/imu/faults.h"
 #include "poise/imu/protocol.h"
 #include "poise/imu/pty_link.h"
+#include "poise/imu/sensor_info.h"
 #include "poise/nodes/imu_estimator_node.h"
 #include "poise/nodes/reports.h"
 
 #include <poise/msg/estimatesPubSubTypes.h>
 
+#include <algorithm>
 #include <cmath>
 #include <ctime>
 #include <sstream>
@@ -91,12 +93,17 @@ class SimImu : public runtime::Component {
     imu::FaultInjector injector(faults_);
     const auto period_ns = static_cast<int64_t>(std::llround(1e9 / params_.rate_hz));
     const int64_t start_ns = nodes::monotonic_ns();
+    const std::string info_line = params_.sensor_info ? imu::simulated_sensor_info_line() : std::string();
+    const auto info_every = static_cast<int64_t>(std::max(1.0, std::round(params_.rate_hz)));  // 1 s
     uint32_t seq = 0;
     for (int64_t k = 0; !stop_.load() && !simulator_->done(); ++k) {
       const int64_t t_ns = start_ns + k * period_ns;
       sleep_until_ns(t_ns, stop_);
       if (stop_.load()) {
         break;
+      }
+      if (!info_line.empty() && k % info_every == 0) {
+        (void)link_->write(info_line);  // no reader yet: the next one tells it
       }
       const sim::SimSample s = simulator_->next();
       imu::RawSample line;
@@ -177,7 +184,7 @@ class SimImu : public runtime::Component {
 
 SimImuParams sim_imu_params(const runtime::ComponentSpec& spec) {
   runtime::check_known_params(spec, {"link", "scenario", "rate_hz", "seed", "faults", "duration_s",
-                                     "publish_truth"});
+                                     "publish_truth", "sensor_info"});
   SimImuParams p;
   p.link = runtime::param<std::string>(spec, "link", "");
   if (p.link.empty()) {
@@ -190,6 +197,7 @@ SimImuParams sim_imu_params(const runtime::ComponentSpec& spec) {
   p.faults = runtime::param<std::string>(spec, "faults", p.faults);
   p.duration_s = runtime::param<double>(spec, "duration_s", p.duration_s);
   p.publish_truth = runtime::param<bool>(spec, "publish_truth", p.publish_truth);
+  p.sensor_info = runtime::param<bool>(spec, "sensor_info", p.sensor_info);
   if (!(p.rate_hz > 0.0 && p.rate_hz <= 10000.0)) {
     throw runtime::ConfigError(spec.origin + ": rate_hz must be in (0, 10000]");
   }

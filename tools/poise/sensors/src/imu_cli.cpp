@@ -117,6 +117,7 @@ struct SimImuOptions {
   bool loop = false;
   bool quiet = false;
   int dlpf = -1;  // MPU6050 DLPF_CFG to model (its datasheet delay + the $INF line); -1: none
+  bool sensor_info = true;  // without --dlpf, the trajectory says its delay (0); false: says nothing
 };
 
 /// A still start then tumbling through every orientation, no magnets: for `poise calibrate imu`.
@@ -289,6 +290,10 @@ void run_sim_imu(const SimImuOptions& o) {
     info.chip = "MPU6050";
     info.setting = o.dlpf;
     info_line = imu::format_info_line(info);
+  } else if (o.source == "trajectory" && o.sensor_info) {
+    // the simulator's samples at their stamps, no low-pass modelled: delay 0 (a BROAD file's
+    // samples carry that sensor's own delay, which this line must not claim)
+    info_line = imu::simulated_sensor_info_line();
   }
   const auto info_every = static_cast<uint64_t>(std::max(1.0, std::round(rate)));
   imu::FaultInjector injector(spec);
@@ -455,6 +460,10 @@ void register_imu_cli(CLI::App& app) {
                       "Model the MPU6050's digital low-pass filter DLPF_CFG N (0..6): delay accel and "
                       "gyro by its datasheet figure and send the firmware's $INF line")
       ->check(CLI::Range(0, 6));
+  sim_cmd->add_flag("!--no-sensor-info", so->sensor_info,
+                    "Without --dlpf the trajectory sends $INF,1,SIM,,0,0 (its samples have no delay), so "
+                    "filters use 0; this flag sends no $INF line: a sensor that says nothing about its "
+                    "delay (a BROAD file never sends one)");
   sim_cmd->add_flag("--loop", so->loop, "Repeat a BROAD file forever");
   sim_cmd->add_flag("--quiet", so->quiet, "No progress messages");
   sim_cmd->callback([so] { run_sim_imu(*so); });

@@ -77,4 +77,9 @@ InfoResolution resolve_sensor_info(const SensorInfoLine& line);
 /// Tolerance of a delay given on the line against the table, s (the table's resolution).
 inline constexpr double kInfoDelayToleranceS = 0.1e-3;
 
+/// The $INF line of a simulated sensor that models no low-pass: its samples are the simulator's
+/// values at their own stamps, so both delays are 0 (`$INF,1,SIM,,0,0`). Said so that every filter
+/// uses 0 instead of assuming half a sample, as it would for a sensor that says nothing.
+std::string simulated_sensor_info_line();
+
 }  // namespace poise::imu

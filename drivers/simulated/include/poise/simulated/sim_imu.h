@@ -31,6 +31,10 @@ struct SimImuParams {
   std::string faults;
   double duration_s = 0.0;
   bool publish_truth = true;
+  /// Send the $INF line of a sensor without delay (`$INF,1,SIM,,0,0`, at start and once a second,
+  /// as the GY-87 firmware sends its own), so the driver publishes delay 0 on imu_info and every
+  /// filter uses it; false: a sensor that says nothing (filters assume half a sample).
+  bool sensor_info = true;
 };
 SimImuParams sim_imu_params(const runtime::ComponentSpec& spec);
 
