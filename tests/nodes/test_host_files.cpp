@@ -93,11 +93,13 @@ void expect_sensor_figure_params(const std::string& type, const std::vector<std:
   }
 }
 
-// The parallel KF component's gyro_bias_walk_rps_per_sqrt_s (the gyro's own bias random walk) and
-// gyro_noise_density_rps_per_sqrt_hz (its white noise density), both for the published
-// covariance: a figure in range is taken, anything else is a ConfigError naming the key.
+// The parallel KF component's gyro_bias_walk_rps_per_sqrt_s (the gyro's own bias random walk),
+// gyro_noise_density_rps_per_sqrt_hz (its white noise density) and gyro_scale_error (its
+// scale-factor error), all for the published covariance: a figure in range is taken, anything
+// else is a ConfigError naming the key.
 TEST(HostFiles, GivenAGyroFigureParamWhenTheParallelKfIsCreatedThenARangeFigureIsTakenAndAHostileOneNamed) {
-  expect_sensor_figure_params("parallel_kf", {"gyro_bias_walk_rps_per_sqrt_s", "gyro_noise_density_rps_per_sqrt_hz"},
+  expect_sensor_figure_params("parallel_kf",
+                              {"gyro_bias_walk_rps_per_sqrt_s", "gyro_noise_density_rps_per_sqrt_hz", "gyro_scale_error"},
                               {"0.0", "2.0e-5"});
 }
 

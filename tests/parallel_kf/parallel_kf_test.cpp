@@ -589,7 +589,9 @@ TEST(ParallelKfParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorNames
     {"gyro_noise_density_rps_per_sqrt_hz", [](ParallelKfParams& p) { p.gyro_noise_density_rps_per_sqrt_hz = -1e-5; }},
     {"gyro_noise_density_rps_per_sqrt_hz", [](ParallelKfParams& p) { p.gyro_noise_density_rps_per_sqrt_hz = 1e308; }},
     {"gyro_noise_density_rps_per_sqrt_hz",
-     [](ParallelKfParams& p) { p.gyro_noise_density_rps_per_sqrt_hz = std::numeric_limits<double>::infinity(); }}
+     [](ParallelKfParams& p) { p.gyro_noise_density_rps_per_sqrt_hz = std::numeric_limits<double>::infinity(); }},
+    {"gyro_scale_error", [](ParallelKfParams& p) { p.gyro_scale_error = -1e-6; }},
+    {"gyro_scale_error", [](ParallelKfParams& p) { p.gyro_scale_error = 1.0; }}
   }, [](const ParallelKfParams& p) { ParallelKf f(p); });
 }
 
@@ -651,6 +653,15 @@ TEST(ParallelKfParams, GivenTheGyroNoiseDensityInAFileWhenLoadedThenNullIsNotKno
       "gyro_noise_density_rps_per_sqrt_hz", &ParallelKfParams::gyro_noise_density_rps_per_sqrt_hz, 6.2e-5, 0.05, 5);
   // and a far noisier gyro than the simulated one leaves a less certain bias: more heading variance
   EXPECT_GT(noisy, unknown);
+}
+
+// The gyro's scale-factor error is the sensor's figure too: in [0, 1), the estimate the same bit
+// for bit whatever its value (the bias filter keeps motion_gyro_scale_error, its design).
+TEST(ParallelKfParams, GivenTheGyroScaleErrorInAFileWhenLoadedThenNullIsNotKnownAHostileValueIsRefusedAndTheEstimateIgnoresIt) {
+  const auto [unknown, none] =
+      expect_a_sensor_figure("gyro_scale_error", &ParallelKfParams::gyro_scale_error, 0.002, 0.0, 6);
+  // and a gyro without scale error publishes less heading variance than one of unknown scale
+  EXPECT_LT(none, unknown);
 }
 
 }  // namespace

@@ -90,6 +90,8 @@ void ParallelKfParams::validate() const {
   check.non_negative(motion_bias_sigma_rps, "motion_bias_sigma_rps", "rad/s, 0 = off");
   check.positive(motion_bias_clip_rps, "motion_bias_clip_rps", "rad/s");
   check.require(motion_gyro_scale_error >= 0.0 && motion_gyro_scale_error < 1.0, "motion_gyro_scale_error", "in [0, 1)");
+  check.require(std::isnan(gyro_scale_error) || (gyro_scale_error >= 0.0 && gyro_scale_error < 1.0), "gyro_scale_error",
+                "in [0, 1), or null (not known: motion_gyro_scale_error)");
   check.positive(max_bias_rps, "max_bias_rps", "rad/s");
   check.require(gyro_current_weight >= 0.0 && gyro_current_weight <= 1.0, "gyro_current_weight", "in [0, 1]");
   check.require(std::isnan(imu_delay_s) || (imu_delay_s >= 0.0 && imu_delay_s <= 0.05), "imu_delay_s",
@@ -199,7 +201,7 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   }
   s_.last_dt_s = dt;
   s_.since_mag_s += dt;
-  if (p_.motion_gyro_scale_error > 0.0) {
+  if (gyro_scale_error() > 0.0) {
     scale_error_step(w, dt);
   }
   const bool motion_bias = p_.bias_estimation && p_.motion_bias_sigma_rps > 0.0;
@@ -434,6 +436,10 @@ void ParallelKf::external_accel_return(const Eigen::Vector3d& db) {
   }
   s_.accel_ref_i = s_.accel_ref_stages_i.col(2) +
                   s_.accel_ref_c * (s_.accel_ref_stages_i.col(1) - s_.accel_ref_stages_i.col(2));
+}
+
+double ParallelKf::gyro_scale_error() const {
+  return std::isnan(p_.gyro_scale_error) ? p_.motion_gyro_scale_error : p_.gyro_scale_error;
 }
 
 double ParallelKf::motion_bias_noise(double dt) const {
@@ -977,10 +983,10 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
     // as the vertical one its magnitude shows
     t.external_accel.topLeftCorner<2, 2>().diagonal().array() += s_.accel_dev2_lp / (g * g);
   }
-  if (p_.motion_gyro_scale_error > 0.0) {
+  if (gyro_scale_error() > 0.0) {
     // scale errors of the three gyro axes, independent, each s: the error about body axis i is
     // s times the rotation about it since the low-passed attitude
-    const double s2 = p_.motion_gyro_scale_error * p_.motion_gyro_scale_error;
+    const double s2 = gyro_scale_error() * gyro_scale_error();
     const Eigen::Quaterniond q_ib = gyro_attitude();
     const Eigen::Vector3d d_tilt = quat_log(s_.q_lp_tilt.conjugate() * q_ib);
     const Eigen::Vector3d d_heading = quat_log(s_.q_lp_heading.conjugate() * q_ib);

@@ -48,6 +48,7 @@ ParallelKfParams load_parallel_kf_params(const std::string& path, const Parallel
     r.get("motion_bias_heading", p.motion_bias_heading);
     r.get("motion_bias_clip_rps", p.motion_bias_clip_rps);
     r.get("motion_gyro_scale_error", p.motion_gyro_scale_error);
+    r.get_nullable("gyro_scale_error", p.gyro_scale_error);
     r.get("max_bias_rps", p.max_bias_rps);
     r.get("mag_gating", p.mag_gating);
     r.get("mag_norm_tol", p.mag_norm_tol);

@@ -201,6 +201,12 @@ struct ParallelKfParams {
   /// (motion_gyro_scale_error * |w|)^2 (|w|^2 low-passed over accel_lowpass_tau_s, the window
   /// the measurement sees), so fast rotation barely moves the bias while slow motion still does.
   double motion_gyro_scale_error = 0.005;
+  /// The gyro's own scale-factor error (relative, after calibration): a property of the sensor (a
+  /// simulated gyro has none), not of the filter. Only the published covariance uses it: the
+  /// attitude error s dtheta a scale error s leaves (the `gyro_scale` term). NaN (the default;
+  /// `null` in YAML) = not known: motion_gyro_scale_error, the bias filter's design figure, taken
+  /// as the sensor's. In [0, 1) otherwise. The estimate is the same whatever its value.
+  double gyro_scale_error = std::nan("");
   double max_bias_rps = 3.0 * kRadPerDeg;       ///< clamp of the bias estimate, rad/s
 
   // --- magnetic disturbance gating of the heading update (extension)
@@ -291,7 +297,7 @@ struct ParallelKfCovarianceTerms {
   Eigen::Matrix3d kf = Eigen::Matrix3d::Zero();              ///< the two KFs' own covariances
   Eigen::Matrix3d bias_lag = Eigen::Matrix3d::Zero();        ///< the attitude error the bias error left
   Eigen::Matrix3d external_accel = Eigen::Matrix3d::Zero();  ///< external acceleration in the low-passed vector
-  Eigen::Matrix3d gyro_scale = Eigen::Matrix3d::Zero();      ///< a gyro scale error (motion_gyro_scale_error)
+  Eigen::Matrix3d gyro_scale = Eigen::Matrix3d::Zero();      ///< a gyro scale error (gyro_scale_error)
   Eigen::Matrix3d field = Eigen::Matrix3d::Zero();           ///< the disturbance of the fields used
   Eigen::Matrix3d delay = Eigen::Matrix3d::Zero();           ///< the output's prediction over an unknown delay
   Eigen::Matrix3d hard_iron = Eigen::Matrix3d::Zero();       ///< the removed hard-iron offset's error
@@ -478,7 +484,8 @@ class ParallelKf {
   ///             before); heading: tan^2(dip) times its tilt about magnetic north low-passed over
   ///             KF2's lag, to which KF2 pulls the heading;
   ///           + s^2 dtheta_i^2 about each body axis i (world x, y part): a gyro scale error s
-  ///             (motion_gyro_scale_error) turns the attitude by s times the rotation dtheta away
+  ///             (gyro_scale_error, the sensor's; not known: motion_gyro_scale_error) turns the
+  ///             attitude by s times the rotation dtheta away
   ///             from the attitude low-passed over tau, which the tilt has not caught up with;
   ///             each accepted field removes the share dt / tau_2 of the heading's (tau_2 KF2's
   ///             lag about the vertical), so a field accepted now and then amid gated ones leaves
@@ -611,6 +618,9 @@ class ParallelKf {
   /// by the integral of r_ib db from each sample to now (accel_twin_age, accel_ref_stage_age).
   void external_accel_return(const Eigen::Vector3d& db);
   [[nodiscard]] double motion_bias_noise(double dt) const;
+  /// The gyro's scale error the published covariance takes: gyro_scale_error, or not known
+  /// (NaN), motion_gyro_scale_error
+  [[nodiscard]] double gyro_scale_error() const;
   /// KF2's correction lag about the vertical for a step of dt, s (0 before a direction exists)
   [[nodiscard]] double heading_lag_s(double dt) const;
   /// Propagates the attitude error the bias error leaves (lag_cov, lag_bias_cov) over t seconds.
