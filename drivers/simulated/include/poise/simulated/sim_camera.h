@@ -11,7 +11,7 @@
 // blackout_period_s (repeat the blackouts every period; 30 = the `tour` scenario cycle; 0 = once),
 // noise (grey levels, 2), seed (1), pixel_sigma_px (the pipeline's prior corner noise, px; its
 // default 0.25 unless told: `poise demo` and config/hosts/simulated.yaml give this render's own
-// figure, 0.16 px, docs/CAMERA.md "Covariance"). Its pipeline takes the corners' edge-line noise
+// figure, 0.08 px, docs/CAMERA.md "Finding pixel_sigma_px"). Its pipeline takes the corners' edge-line noise
 // model (pose.corner_noise edges: measured on its renders).
 // Camera extrinsic: looking down through the body's -z (camera x = body x, y = -body y,
 // z = -body z).
