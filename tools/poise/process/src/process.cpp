@@ -206,6 +206,24 @@ std::unique_ptr<nodes::EstimatorStep> filter_step(ProcessFilter filter) {
   return std::make_unique<FilterStep>(std::move(filter));
 }
 
+namespace {
+/// Each component's notes (the IMU delay it used, other IMUs it did not follow) and counts.
+void add_runner_totals(const std::vector<std::unique_ptr<nodes::StepRunner>>& runners, ProcessStats& stats) {
+  for (const auto& r : runners) {
+    const std::string& name = r->step().sensor_id();
+    if (const nodes::ImuDelayChoice* d = r->step().imu_delay()) {
+      stats.imu_delay_notes.push_back(name + ": " + d->describe());
+    }
+    if (const std::string other = r->other_imu_summary(); !other.empty()) {
+      stats.imu_delay_notes.push_back(name + ": " + other);
+    }
+    stats.estimates[name] += r->published();
+    stats.rejected[name] += r->rejected();
+    stats.diagnostics[name] += r->diagnostics_published();
+  }
+}
+}  // namespace
+
 ProcessStats process_recording(const ProcessOptions& options, std::vector<ProcessFilter>& filters) {
   std::vector<ProcessComponent> components;
   for (ProcessFilter& f : filters) {
@@ -608,20 +626,7 @@ ProcessStats process_recording(const ProcessOptions& options, std::vector<Proces
     run.add(*m, index, channel_map, valid_input ? std::optional<Input>(std::move(in)) : std::nullopt);
   }
   run.finish();
-  for (const auto& r : runners) {
-    if (const nodes::ImuDelayChoice* d = r->step().imu_delay()) {
-      stats.imu_delay_notes.push_back(r->step().sensor_id() + ": " + d->describe());
-    }
-    if (const std::string other = r->other_imu_summary(); !other.empty()) {
-      stats.imu_delay_notes.push_back(r->step().sensor_id() + ": " + other);
-    }
-  }
-  for (const auto& r : runners) {
-    const std::string& name = r->step().sensor_id();
-    stats.estimates[name] += r->published();
-    stats.rejected[name] += r->rejected();
-    stats.diagnostics[name] += r->diagnostics_published();
-  }
+  add_runner_totals(runners, stats);
   writer.close();
   try {
     output->commit();
