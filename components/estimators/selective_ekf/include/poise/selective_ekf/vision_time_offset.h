@@ -18,8 +18,9 @@
 // (NIS above gate_sigma^2 rejected); |J| below min_rate_change_rps skips the pair (no
 // information). The bias removed from the gyro is the filter's estimate: its error covariance
 // (add_gyro) enters each pair's rows as T^2 P_bb (T the pair's length), so a bias not yet learnt
-// (a cold start) cannot pull the offset while claiming a small sigma. The filter state never feeds back: the estimate uses only the gyro and the
-// camera, so a filter pulled off by mis-timed frames cannot bias it.
+// (a cold start) cannot pull the offset while claiming a small sigma. The filter's attitude never
+// feeds back: the estimate uses only the gyro (less the filter's bias) and the camera, so a filter
+// pulled off by mis-timed frames cannot bias it.
 // No clocks, no logging: the stamps are the only time.
 #pragma once
 
