@@ -165,7 +165,9 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const Eigen::Matrix3d b = so3_right_jacobian(wd) * d;
   // (the estimate's error covariance: P's gains, the process noise of a gyro sample that is the
   // rate's mean over its interval; SelectiveEkfState::P_err)
-  const Eigen::Matrix3d p_tt = x_.P_err.block<3, 3>(kTh, kTh);
+  // (a start at rest whose first sample's noise awaits an interval: the tilt's prior in its place)
+  const Eigen::Matrix3d p_tt = x_.P_err.block<3, 3>(kTh, kTh) +
+                               (x_.pre.start_noise_pending ? x_.pre.start_tilt_prior : Eigen::Matrix3d::Zero());
   const Eigen::Matrix3d p_tw = x_.P_err.block<3, 3>(kTh, kW);
   const Eigen::Matrix3d p_ww = x_.P_err.block<3, 3>(kW, kW);
   const Eigen::Matrix3d body = a * p_tt * a.transpose() + a * p_tw * b.transpose() +

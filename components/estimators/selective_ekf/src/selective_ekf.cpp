@@ -374,7 +374,11 @@ void SelectiveEkf::preprocess(ImuInput& in) {
       // noise, not init_sigma_attitude_deg (a bound for a start in motion, whose sample carries
       // external acceleration). Its variance needs the sample's interval, so it is added at the
       // next sample (start_noise_pending); here the tilt directions start known (the heading's
-      // start kept).
+      // start kept) in P_err, and the prior they had is published until then (start_tilt_prior):
+      // without an interval the sample's noise has no figure, and one sample's rest test (the
+      // norm within rest_accel_max_mps2) lets through an acceleration across gravity of up to
+      // sqrt(2 g rest_accel_max_mps2) (3.1 m/s^2, 18 deg), so it does not bound the tilt better.
+      pre.start_tilt_prior = tilt * x_.P_err.block<3, 3>(kTh, kTh) * tilt;
       Mat keep = Mat::Identity();
       keep.block<3, 3>(kTh, kTh) = u0 * u0.transpose();
       x_.P_err = keep * x_.P_err * keep.transpose();
@@ -490,7 +494,7 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
     preprocess(in);  // starts the low-pass and rest detector
     initialized_ = true;
     history_.push_back({in, x_});
-    time_offset_.add_gyro(in.stamp_ns, in.gyro - x_.b_rps);
+    time_offset_.add_gyro(in.stamp_ns, in.gyro - x_.b_rps, x_.P_err.block<3, 3>(kB, kB));
     return true;
   }
   // Queued (future-stamped) vision strictly before this sample goes first, in stamp order. After a
@@ -505,7 +509,7 @@ bool SelectiveEkf::update_imu(const ImuSample& s) {
   predict_to(in.stamp_ns);
   process_imu(in, true);
   history_.push_back({in, x_});
-  time_offset_.add_gyro(in.stamp_ns, in.gyro - x_.b_rps);
+  time_offset_.add_gyro(in.stamp_ns, in.gyro - x_.b_rps, x_.P_err.block<3, 3>(kB, kB));
   for (; it != vision_log_.end() && it->capture_stamp_ns == in.stamp_ns; ++it) {
     process_vision(*it, true);
   }

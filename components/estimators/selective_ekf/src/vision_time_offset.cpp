@@ -65,6 +65,7 @@ void VisionTimeOffsetEstimator::reset() {
   st_.estimating = p_.prior_sigma_s > 0.0;
   st_.converged = !st_.estimating || st_.sigma_s <= p_.converged_sigma_s;
   var_s2_ = p_.prior_sigma_s * p_.prior_sigma_s;
+  bias_cov_.setZero();
   last_update_ns_ = -1;
   gyro_.clear();
   frames_.clear();
@@ -73,9 +74,13 @@ void VisionTimeOffsetEstimator::reset() {
 
 int64_t VisionTimeOffsetEstimator::offset_ns() const { return to_ns(st_.offset_s); }
 
-void VisionTimeOffsetEstimator::add_gyro(int64_t t_ns, const Eigen::Vector3d& w_rps) {
+void VisionTimeOffsetEstimator::add_gyro(int64_t t_ns, const Eigen::Vector3d& w_rps,
+                                         const Eigen::Matrix3d& bias_cov) {
   if (!st_.estimating || !w_rps.allFinite()) {
     return;
+  }
+  if (bias_cov.allFinite()) {
+    bias_cov_ = 0.5 * (bias_cov + bias_cov.transpose());
   }
   if (!gyro_.empty() && (t_ns <= gyro_.back().first || t_ns - gyro_.back().first > to_ns(kMaxGyroGapS))) {
     gyro_.clear();  // time went back or jumped (the filter re-anchored): start the buffer again
@@ -209,7 +214,9 @@ TimeOffsetDecision VisionTimeOffsetEstimator::process(const Frame& f) {
   // both frames' noise, doubled (each frame is in about two pairs), plus the gyro's white noise
   const double r_var = 2.0 * (a->sigma_rad * a->sigma_rad + f.sigma_rad * f.sigma_rad) +
                        p_.sigma_gyro_rps * p_.sigma_gyro_rps * dt_gyro_s * pair_s;
-  const Eigen::Matrix3d s = jac * jac.transpose() * var_s2_ + Eigen::Matrix3d::Identity() * r_var;
+  // and the removed bias's error over the pair (a rotation db T)
+  const Eigen::Matrix3d s = jac * jac.transpose() * var_s2_ + Eigen::Matrix3d::Identity() * r_var +
+                            (pair_s * pair_s) * bias_cov_;
   const Eigen::Matrix3d s_inv = s.inverse();
   const Eigen::Vector3d y = -r0;
   const double nis = y.dot(s_inv * y);

@@ -422,6 +422,10 @@ struct SelectiveEkfPreState {
   /// the first sample's accelerometer noise is still to be added to P_err's tilt and e (a start
   /// at rest with accel_noise_density_mps2_per_sqrt_hz known: it needs an interval)
   bool start_noise_pending = false;
+  /// the tilt part of P_err's prior that such a start removed (body frame of the first sample,
+  /// rad^2): until the interval is known the sample's noise has no figure, so the published
+  /// covariance carries this prior in its place (attitude_covariance())
+  Eigen::Matrix3d start_tilt_prior = Eigen::Matrix3d::Zero();
   RestDetector rest_detector;           ///< rest detected at the last sample: rest_detector.rest
 };
 

@@ -16,8 +16,11 @@
 // motion does all the time. n: both frames' attitude noise (doubled: each frame is in two pairs)
 // plus the gyro's white noise over the pair. A scalar Kalman update over the three rows, gated
 // (NIS above gate_sigma^2 rejected); |J| below min_rate_change_rps skips the pair (no
-// information). The filter state never feeds back: the estimate uses only the gyro and the
-// camera, so a filter pulled off by mis-timed frames cannot bias it.
+// information). The bias removed from the gyro is the filter's estimate: its error covariance
+// (add_gyro) enters each pair's rows as T^2 P_bb (T the pair's length), so a bias not yet learnt
+// (a cold start) cannot pull the offset while claiming a small sigma. The filter's attitude never
+// feeds back: the estimate uses only the gyro (less the filter's bias) and the camera, so a filter
+// pulled off by mis-timed frames cannot bias it.
 // No clocks, no logging: the stamps are the only time.
 #pragma once
 
@@ -74,8 +77,12 @@ class VisionTimeOffsetEstimator {
   /// Throws std::invalid_argument when a parameter is not finite or out of its range.
   explicit VisionTimeOffsetEstimator(const VisionTimeOffsetParams& p = {});
   void reset();
-  /// One gyro sample, bias removed, at the filter's time t_ns (increasing).
-  void add_gyro(int64_t t_ns, const Eigen::Vector3d& w_rps);
+  /// One gyro sample, bias removed, at the filter's time t_ns (increasing), with the removed
+  /// bias's error covariance ((rad/s)^2, body frame; zero: the bias known): a bias error db turns
+  /// the gyro's rotation over a pair of length T by about db T, the same for every pair while it
+  /// lasts, so the pairs' rows carry T^2 bias_cov (a cold start has not learnt the bias).
+  void add_gyro(int64_t t_ns, const Eigen::Vector3d& w_rps,
+                const Eigen::Matrix3d& bias_cov = Eigen::Matrix3d::Zero());
   /// One camera frame: its stamp (camera clock) and the body attitude it shows, per-axis sigma.
   /// Waits (queued) until the gyro covers it.
   void add_frame(int64_t stamp_ns, const Eigen::Quaterniond& q_world_body, double sigma_rad);
@@ -101,6 +108,7 @@ class VisionTimeOffsetEstimator {
   VisionTimeOffsetParams p_;
   VisionTimeOffsetStatus st_;
   double var_s2_ = 0.0;
+  Eigen::Matrix3d bias_cov_ = Eigen::Matrix3d::Zero();  ///< the newest gyro sample's, (rad/s)^2
   int64_t last_update_ns_ = -1;
   std::deque<std::pair<int64_t, Eigen::Vector3d>> gyro_;  ///< (t, rate)
   std::deque<Frame> frames_;   ///< processed frames (anchors), newest last
