@@ -20,8 +20,11 @@
 #include <iterator>
 #include <limits>
 #include <sstream>
+#include <thread>
 
+#include <fcntl.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 namespace poise::record {
 namespace {
@@ -839,6 +842,47 @@ TEST(ReplacingFile, GivenNoCommitThenThePathKeepsItsBytesAndTheTemporaryIsRemove
     f.commit();
   }
   EXPECT_EQ(read_bytes(path), (std::vector<uint8_t>{'n', 'e', 'w'}));
+}
+
+// An output that is not a regular file (a device such as /dev/null, a FIFO) is written in place:
+// renamed onto, it was replaced by a regular file (as root, `-o /dev/null` destroyed /dev/null).
+// Oracle: the FIFO is still a FIFO and its reader received a whole MCAP file (its magic at both ends).
+TEST(Process, GivenAFifoAsTheOutputThenItIsWrittenInPlaceAndStaysAFifo) {
+  const std::string dir = testing::cases_dir("fifo-output");
+  const std::string input = dir + "/input.mcap";
+  write_input(input);
+  const std::string fifo = dir + "/out.fifo";
+  std::filesystem::remove(fifo);
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  std::string received;
+  std::thread reader([&] {
+    const int fd = ::open(fifo.c_str(), O_RDONLY);  // returns once the writer opens
+    char buf[65536];
+    for (ssize_t n = 0; fd >= 0 && (n = ::read(fd, buf, sizeof buf)) > 0;) {
+      received.append(buf, static_cast<std::size_t>(n));
+    }
+    if (fd >= 0) {
+      ::close(fd);
+    }
+  });
+  const auto r = poise::testing::run(
+      {std::string(POISE_RECORD_TOOL), "process", input, "-o", fifo, "--filter", "parallel_kf"}, 60s);
+  if (r.exit_code != 0) {
+    std::ofstream(fifo).flush();  // never leave the reader waiting for a writer
+  }
+  reader.join();
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("no comparison: the output"), std::string::npos) << r.output;
+  struct stat st {};
+  ASSERT_EQ(::stat(fifo.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISFIFO(st.st_mode)) << "the FIFO was replaced";
+  const std::string magic = "\x89MCAP0\r\n";
+  ASSERT_GT(received.size(), 2 * magic.size());
+  EXPECT_EQ(received.substr(0, magic.size()), magic);
+  EXPECT_EQ(received.substr(received.size() - magic.size()), magic);
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    EXPECT_EQ(e.path().filename().string().find(".partial-"), std::string::npos) << e.path();
+  }
 }
 
 // A FIFO (or any file that is not a regular file) is refused at once by every command that reads

@@ -171,16 +171,30 @@ void refuse_output_over_input(const std::string& output, const std::vector<std::
   }
 }
 
+namespace {
+/// PATH exists and is something other than a regular file (a device, a FIFO, a socket): written
+/// in place, never renamed onto. A directory is left to the open, which names it.
+bool written_in_place(const std::string& path) {
+  struct stat st {};
+  return ::stat(path.c_str(), &st) == 0 && !S_ISREG(st.st_mode) && !S_ISDIR(st.st_mode);
+}
+}  // namespace
+
 ReplacingFile::ReplacingFile(std::string path)
-    : path_(std::move(path)), temporary_(path_ + ".partial-" + std::to_string(::getpid())) {}
+    : path_(std::move(path)),
+      temporary_(written_in_place(path_) ? path_ : path_ + ".partial-" + std::to_string(::getpid())) {}
 
 ReplacingFile::~ReplacingFile() {
-  if (!committed_) {
+  if (!committed_ && temporary_ != path_) {
     ::unlink(temporary_.c_str());
   }
 }
 
 void ReplacingFile::commit() {
+  if (temporary_ == path_) {  // written in place
+    committed_ = true;
+    return;
+  }
   if (::rename(temporary_.c_str(), path_.c_str()) != 0) {
     const int err = errno;
     ::unlink(temporary_.c_str());

@@ -6,6 +6,8 @@
 #include "poise/eval/north_filter.h"
 #include "poise/nodes/register.h"
 #include "poise/process/compare.h"
+
+#include <sys/stat.h>
 #include "poise/process/process.h"
 #include "poise/record/info.h"
 #include "poise/record/recorder.h"
@@ -309,7 +311,11 @@ void run_process(const ProcessArgs& a) {
     throw Error("no ImuSample messages on topic '" + o.topics.imu +
                 "' in the recording (use --imu-topic; `poise info` lists the topics)");
   }
-  if (a.compare) {
+  struct stat out_stat {};
+  if (a.compare && ::stat(a.output.c_str(), &out_stat) == 0 && !S_ISREG(out_stat.st_mode)) {
+    // written in place (a device such as /dev/null, a FIFO): nothing to read back
+    std::cerr << "poise process: no comparison: the output '" << a.output << "' is not a regular file\n";
+  } else if (a.compare) {
     try {
       std::cout << record::format_comparison(record::compare_processed(a.output, o.output_prefix, window));
     } catch (const record::ReadError& e) {

@@ -73,7 +73,10 @@ void refuse_output_over_input(const std::string& output, const std::vector<std::
 
 /// An output written under a temporary name beside PATH (PATH.partial-PID) and renamed onto PATH
 /// by commit(): PATH is never truncated, and holds either what it held before or the whole new
-/// file. Destroyed without commit(), the temporary file is removed.
+/// file. Destroyed without commit(), the temporary file is removed. When PATH exists and is not a
+/// regular file (a device such as /dev/null or /dev/full, a FIFO), it is written in place and
+/// commit() renames nothing: renaming onto it would replace the device with a file (as root,
+/// `-o /dev/null` used to turn the system's /dev/null into a regular file).
 class ReplacingFile {
  public:
   explicit ReplacingFile(std::string path);
