@@ -402,6 +402,79 @@ TEST(Process, GivenADeclinationForAFilterThenItsHeadingTurnsByItAndItsFrameIsEnu
   EXPECT_NE(none.output.find("applies to the --filter filters"), std::string::npos) << none.output;
 }
 
+// `process --filter` follows one IMU, as a live node does (issue 31's "noticed": imu_sensor_id was
+// a host-file parameter only). Two stationary IMUs interleaved on `imu`: imu0's field lies along
+// body y (yaw 0 in ENU: y points north), imu1's along body x (x points north: yaw +90 deg). Oracle:
+// that geometry; a filter that fused both would sit between them or jump.
+TEST(Process, GivenTwoImusOnOneTopicWhenAFilterIsToldWhichToFollowThenItRunsOnlyThatOne) {
+  constexpr int kPerImu = 300;
+  constexpr double kYawTolDeg = 1.0;  // noise-free samples: the field's heading, to the filter's convergence
+  const std::string dir = testing::cases_dir("process-imu-id");
+  const std::string input = dir + "/input.mcap";
+  {
+    ClockedRecording r(input);
+    const uint16_t s = add_idl_schema(r.writer, "poise::msg::ImuSample");
+    const uint16_t imu = r.writer.add_channel(s, "imu", "cdr", {{"qos_profile", "sensor"}});
+    for (int i = 0; i < kPerImu; ++i) {
+      for (int k = 0; k < 2; ++k) {
+        const int64_t stamp = 1'000'000'000LL + i * 10'000'000LL + k * 5'000'000LL;
+        r.clock = stamp;
+        auto m = testing::make_imu(static_cast<uint32_t>(i), stamp);
+        m.sensor_id(k == 0 ? "imu0" : "imu1");
+        m.accel_mps2(testing::vec3(0.0, 0.0, 9.81));
+        m.gyro_rps(testing::vec3(0.0, 0.0, 0.0));
+        m.mag_ut(k == 0 ? testing::vec3(0.0, 20.0, -40.0) : testing::vec3(20.0, 0.0, -40.0));
+        m.valid().mag(true);
+        const auto bytes = testing::serialize<msg::ImuSamplePubSubType>(m);
+        r.writer.write(imu, static_cast<uint32_t>(2 * i + k), static_cast<uint64_t>(stamp + 1000),
+                       static_cast<uint64_t>(stamp), bytes.data(), bytes.size());
+      }
+    }
+    r.writer.close();
+  }
+  auto process = [&](const std::string& out, const std::vector<std::string>& extra) {
+    std::vector<std::string> argv{std::string(POISE_RECORD_TOOL), "process", input, "-o", dir + "/" + out,
+                                  "--filter", "parallel_kf", "--no-compare"};
+    argv.insert(argv.end(), extra.begin(), extra.end());
+    return poise::testing::run(argv, 60s);
+  };
+  const auto yaws_deg = [&](const std::string& out) {
+    std::vector<double> y;
+    for (const auto& e : read_attitudes(dir + "/" + out, "processed/attitude/parallel_kf")) {
+      y.push_back(e.yaw_rad() / kRadPerDeg);
+    }
+    return y;
+  };
+  const struct {
+    const char* out;
+    std::vector<std::string> extra;
+    double yaw_deg;
+    const char* followed;
+  } cases[] = {{"first.mcap", {}, 0.0, "imu0"},  // the first one heard
+               {"imu1.mcap", {"--set", "imu_sensor_id=imu1"}, 90.0, "imu1"},
+               {"imu1_named.mcap", {"--set", "parallel_kf.imu_sensor_id=imu1"}, 90.0, "imu1"}};
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.out);
+    const auto r = process(c.out, c.extra);
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_NE(r.output.find(std::to_string(kPerImu) + " sample(s) of other IMUs"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("followed IMU '" + std::string(c.followed) + "'"), std::string::npos) << r.output;
+    const std::vector<double> y = yaws_deg(c.out);
+    ASSERT_GT(y.size(), static_cast<size_t>(kPerImu) * 9 / 10);
+    ASSERT_LE(y.size(), static_cast<size_t>(kPerImu)) << "one estimate per sample of the followed IMU";
+    for (double v : y) {
+      ASSERT_NEAR(v, c.yaw_deg, kYawTolDeg);
+    }
+  }
+  // hostile values are refused as a host file's are, naming the key; a key given twice too
+  const auto too_long = process("bad1.mcap", {"--set", "imu_sensor_id=" + std::string(300, 'x')});
+  EXPECT_EQ(too_long.exit_code, 2) << too_long.output;
+  EXPECT_NE(too_long.output.find("imu_sensor_id"), std::string::npos) << too_long.output;
+  const auto twice = process("bad2.mcap", {"--set", "imu_sensor_id=imu0", "--set", "parallel_kf.imu_sensor_id=imu1"});
+  EXPECT_EQ(twice.exit_code, 2) << twice.output;
+  EXPECT_NE(twice.output.find("given twice"), std::string::npos) << twice.output;
+}
+
 // A selective_ekf component runs as its live node does: attitude, pose and diagnostics, with the
 // host's parameters (an unknown one is refused as the node refuses it); --set changes one.
 TEST(Process, SelectiveEkfComponentPublishesWhatItsLiveNodePublishes) {

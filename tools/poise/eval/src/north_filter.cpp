@@ -40,7 +40,8 @@ class NorthFilter : public AttitudeFilter, public TrialInputs {
 
 }  // namespace
 
-NorthReference north_from_sets(const std::vector<std::string>& sets, const std::string& today) {
+NorthReference north_from_sets(const std::vector<std::string>& sets, const std::string& today,
+                               const std::vector<std::string>& also_known) {
   YAML::Node params(YAML::NodeType::Map);
   const std::vector<std::string>& keys = north_param_keys();
   std::string known;
@@ -54,8 +55,11 @@ NorthReference north_from_sets(const std::vector<std::string>& sets, const std::
     }
     const std::string key = set.substr(0, eq);
     if (std::find(keys.begin(), keys.end(), key) == keys.end()) {
-      throw std::invalid_argument(unknown_key_message("--set " + set, key, keys) +
-                                  ": only the north keys; filter parameters go in the filter's YAML (--config FILE)");
+      std::vector<std::string> listed = keys;
+      listed.insert(listed.end(), also_known.begin(), also_known.end());
+      throw std::invalid_argument(unknown_key_message("--set " + set, key, listed) +
+                                  (also_known.empty() ? ": only the north keys" : "") +
+                                  "; filter parameters go in the filter's YAML (--config FILE)");
     }
     if (params[key]) {
       throw std::invalid_argument("--set " + set + ": '" + key + "' is given twice");

@@ -4,6 +4,8 @@
 #include "poise/dds/participant.h"
 #include "poise/eval/filter_registry.h"
 #include "poise/eval/north_filter.h"
+#include "poise/core/yaml_params.h"
+#include "poise/nodes/estimator_step.h"
 #include "poise/nodes/register.h"
 #include "poise/process/compare.h"
 
@@ -101,7 +103,8 @@ std::unique_ptr<AttitudeFilter> make_offline_filter(const std::string& name, con
 }
 
 /// --set for `poise process`: NAME.key=VALUE changes the host's component NAME; for a --filter
-/// NAME, and KEY=VALUE without NAME for every --filter filter, the north keys (eval::north_from_sets).
+/// NAME, and KEY=VALUE without NAME for every --filter filter, the node keys (imu_sensor_id, ...:
+/// filter_node_params) and the north keys (eval::north_from_sets).
 struct ProcessSets {
   std::vector<std::string> host;
   std::vector<std::string> every_filter;
@@ -186,7 +189,38 @@ void add_host_components(const ProcessArgs& a, const std::vector<std::string>& h
   }
 }
 
-/// The --filter NAME[=CONFIG] filters, each with its north from --set.
+/// A --filter's node keys (nodes::NodeParams::keys(): imu_sensor_id, diagnostics_*, input_*),
+/// taken out of its --set assignments and checked as a host file's component params are; the rest
+/// (the north keys) stay in `sets`. Throws Error (usage) naming the assignment.
+nodes::NodeParams filter_node_params(const std::string& name, std::vector<std::string>& sets) {
+  const std::vector<std::string>& keys = nodes::NodeParams::keys();
+  runtime::ComponentSpec spec{name, name, YAML::Node(YAML::NodeType::Map), "--set for filter '" + name + "'"};
+  std::vector<std::string> rest;
+  for (const std::string& set : sets) {
+    const size_t eq = set.find('=');
+    const std::string key = set.substr(0, eq);
+    if (eq == std::string::npos || std::find(keys.begin(), keys.end(), key) == keys.end()) {
+      rest.push_back(set);
+      continue;
+    }
+    if (spec.params[key]) {
+      throw Error("--set " + set + ": '" + key + "' is given twice for filter '" + name + "'", kUsageExitCode);
+    }
+    try {
+      spec.params[key] = parse_yaml(set.substr(eq + 1), "--set " + set);
+    } catch (const std::exception& e) {
+      throw Error(e.what(), kUsageExitCode);
+    }
+  }
+  sets = rest;
+  try {
+    return nodes::node_params(spec);
+  } catch (const std::exception& e) {
+    throw Error(e.what(), kUsageExitCode);
+  }
+}
+
+/// The --filter NAME[=CONFIG] filters, each with its node keys and its north from --set.
 void add_filter_components(const ProcessArgs& a, ProcessSets& sets_in,
                            std::vector<record::ProcessComponent>& components, std::vector<std::string>& labels) {
   const std::vector<std::string>& every_filter_sets = sets_in.every_filter;
@@ -197,14 +231,15 @@ void add_filter_components(const ProcessArgs& a, ProcessSets& sets_in,
     const std::string config = eq == std::string::npos ? std::string() : f.substr(eq + 1);
     std::vector<std::string> sets = every_filter_sets;
     sets.insert(sets.end(), filter_sets[name].begin(), filter_sets[name].end());
+    const nodes::NodeParams params = filter_node_params(name, sets);
     NorthReference north;
     try {
-      north = eval::north_from_sets(sets, runtime::utc_today());
+      north = eval::north_from_sets(sets, runtime::utc_today(), nodes::NodeParams::keys());
     } catch (const std::invalid_argument& e) {
       throw Error("filter '" + name + "': " + e.what(), kUsageExitCode);
     }
     labels.push_back(name + " (--filter" + (north.true_north ? ", " + std::string(north.frame_id()) : "") + ")");
-    components.push_back({record::filter_step({name, make_offline_filter(name, config), north}), {}});
+    components.push_back({record::filter_step({name, make_offline_filter(name, config), north}), params});
   }
 }
 
@@ -539,7 +574,8 @@ void add_record_commands(CLI::App& app) {
                           "NAME.KEY=VALUE: change a parameter of the host's component NAME (as in "
                           "its params map; VALUE is YAML, e.g. imu_delay_s=0.01, "
                           "q_body_camera=[1,0,0,0], filter_file=other.yaml); for a --filter NAME, and "
-                          "KEY=VALUE without NAME for every --filter filter, the north keys "
+                          "KEY=VALUE without NAME for every --filter filter, the IMU it follows "
+                          "(imu_sensor_id=ID; default: the first sensor heard) and the north keys "
                           "(declination_deg=D, location={lat_deg: .., lon_deg: ..}, date=...): "
                           "output in true ENU, frame id enu_true; repeatable")
       ->allow_extra_args(false)

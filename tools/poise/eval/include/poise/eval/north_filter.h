@@ -17,8 +17,10 @@ namespace poise::eval {
 /// `location={lat_deg: 48.1, lon_deg: 11.6}`, `date=2026-11-24`), resolved on `today`
 /// (YYYY-MM-DD). No assignment: magnetic ENU. Throws std::invalid_argument naming the assignment:
 /// a key that is not a north key (filter parameters belong in the filter's YAML), a value that is
-/// not YAML or of the wrong type, and every refusal of resolve_north().
-NorthReference north_from_sets(const std::vector<std::string>& sets, const std::string& today);
+/// not YAML or of the wrong type, and every refusal of resolve_north(). `also_known`: keys the
+/// caller takes out before (e.g. `poise process`'s node keys), listed in the unknown-key message.
+NorthReference north_from_sets(const std::vector<std::string>& sets, const std::string& today,
+                               const std::vector<std::string>& also_known = {});
 
 /// `filter` with its q_world_body turned into true ENU when `north.true_north` (else `filter`
 /// itself, unchanged). Trial inputs (eval::TrialInputs) are passed on.
