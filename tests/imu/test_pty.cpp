@@ -2,6 +2,9 @@
 #include <gtest/gtest.h>
 
 #include <unistd.h>
+#include <termios.h>
+#include <poll.h>
+#include <fcntl.h>
 
 #include <atomic>
 #include <chrono>
@@ -225,6 +228,57 @@ TEST(ImuPtyLink, RemovesItsSymlinkAndRefusesToReplaceAFile) {
   { FILE* f = std::fopen(file.c_str(), "w"); ASSERT_NE(f, nullptr); std::fclose(f); }
   EXPECT_THROW(PtyLink{file}, std::runtime_error);
   ::unlink(file.c_str());
+}
+
+// A simulated board whose own process stalled (a loaded host) writes its overdue lines in a burst;
+// a real board never bursts, so the burst must wait for the reader, not be lost. Oracle: every
+// line written arrives, counted by its newline; the burst is larger than the pty can hold (checked:
+// without the wait the same burst is refused in part).
+TEST(ImuPtyLink, GivenABurstLargerThanThePtyHoldsWhenTheReaderCatchesUpWithinTheWaitThenNoLineIsLost) {
+  constexpr int kLines = 600;                              // ~60 kB, far over the pty's buffer
+  constexpr auto kReaderStall = std::chrono::milliseconds(300);  // < kSimulatedBoardWaitMs
+  const std::string path = temp_link("burst");
+  PtyLink link(path);
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NOCTTY);
+  ASSERT_GE(fd, 0);
+  termios t{};
+  ASSERT_EQ(::tcgetattr(fd, &t), 0);
+  ::cfmakeraw(&t);
+  ASSERT_EQ(::tcsetattr(fd, TCSANOW, &t), 0);
+  auto burst = [&](int wait_ms) {
+    int written = 0;
+    for (int i = 0; i < kLines; ++i) {
+      written += link.write(format_imu_line(sample(static_cast<uint32_t>(i))), wait_ms) == PtyLink::WriteStatus::kWritten;
+    }
+    return written;
+  };
+  auto drain = [&](int expect_lines) {
+    int lines = 0;
+    char buf[4096];
+    const auto deadline = std::chrono::steady_clock::now() + kWait;
+    while (lines < expect_lines && std::chrono::steady_clock::now() < deadline) {
+      pollfd p{fd, POLLIN, 0};
+      if (::poll(&p, 1, 100) <= 0) continue;
+      const ssize_t n = ::read(fd, buf, sizeof buf);
+      for (ssize_t k = 0; k < n; ++k) lines += buf[k] == '\n';
+    }
+    return lines;
+  };
+  // without a wait, a reader that is not reading refuses most of the burst (what was lost before)
+  const int refused_without_wait = kLines - burst(0);
+  EXPECT_GT(refused_without_wait, 0) << "the burst must exceed what the pty holds for this test to mean anything";
+  (void)drain(kLines - refused_without_wait);
+  // with the board's wait, the reader stalls 300 ms and then catches up: all of it arrives
+  std::atomic<int> received{0};
+  std::thread reader([&] {
+    std::this_thread::sleep_for(kReaderStall);
+    received = drain(kLines);
+  });
+  const int written = burst(kSimulatedBoardWaitMs);
+  reader.join();
+  EXPECT_EQ(written, kLines);
+  EXPECT_EQ(received.load(), kLines);
+  ::close(fd);
 }
 
 }  // namespace

@@ -1,5 +1,7 @@
 #include "poise/imu/pty_link.h"
 
+#include <algorithm>
+
 #include <fcntl.h>
 #include <poll.h>
 #include <pty.h>
@@ -79,10 +81,10 @@ bool PtyLink::has_reader() const {
   return (p.revents & POLLHUP) == 0;
 }
 
-PtyLink::WriteStatus PtyLink::write(std::string_view data) {
+PtyLink::WriteStatus PtyLink::write(std::string_view data, int full_wait_ms) {
   if (master_ < 0) return WriteStatus::kDisconnected;
   pollfd p{master_, POLLOUT, 0};
-  ::poll(&p, 1, 0);
+  ::poll(&p, 1, had_reader_ ? std::max(0, full_wait_ms) : 0);
   if ((p.revents & POLLHUP) != 0) {
     had_reader_ = false;
     return WriteStatus::kNoReader;

@@ -79,12 +79,15 @@ class SimImu : public runtime::Component {
   }
 
   /// Lines sent, read or not (the service watchdog's health check): stops when the scenario ends.
-  [[nodiscard]] std::optional<uint64_t> produced() const override { return written_.load() + no_reader_.load(); }
+  [[nodiscard]] std::optional<uint64_t> produced() const override {
+    return written_.load() + no_reader_.load() + reader_full_.load();
+  }
 
   [[nodiscard]] std::string status() const override {
     std::ostringstream os;
     os << "lines written " << written_.load() << " (" << params_.rate_hz << " Hz, scenario "
-       << params_.scenario << "), without reader " << no_reader_.load();
+       << params_.scenario << "), without reader " << no_reader_.load() << ", lost to a reader stalled over "
+       << imu::kSimulatedBoardWaitMs << " ms " << reader_full_.load();
     return os.str();
   }
 
@@ -119,10 +122,10 @@ class SimImu : public runtime::Component {
       line.temperature_c = s.imu.temperature_c;
       const std::string bytes = injector.apply(imu::format_imu_line(line));
       if (!bytes.empty()) {
-        if (link_->write(bytes) == imu::PtyLink::WriteStatus::kWritten) {
-          written_.fetch_add(1);
-        } else {
-          no_reader_.fetch_add(1);
+        switch (link_->write(bytes, imu::kSimulatedBoardWaitMs)) {
+          case imu::PtyLink::WriteStatus::kWritten: written_.fetch_add(1); break;
+          case imu::PtyLink::WriteStatus::kFull: reader_full_.fetch_add(1); break;
+          default: no_reader_.fetch_add(1); break;
         }
       }
       if (params_.publish_truth) {
@@ -177,6 +180,7 @@ class SimImu : public runtime::Component {
   std::atomic<bool> stop_{false};
   std::atomic<uint64_t> written_{0};
   std::atomic<uint64_t> no_reader_{0};
+  std::atomic<uint64_t> reader_full_{0};
   std::thread thread_;
 };
 

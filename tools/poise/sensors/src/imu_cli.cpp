@@ -372,7 +372,7 @@ void run_sim_imu(const SimImuOptions& o) {
     const std::string line = make_line(s, seq++, t_us, raw_format);
     const std::string bytes = injector.apply(line);
     if (bytes.empty()) continue;
-    switch (link->write(bytes)) {
+    switch (link->write(bytes, imu::kSimulatedBoardWaitMs)) {
       case imu::PtyLink::WriteStatus::kWritten: ++sent; break;
       case imu::PtyLink::WriteStatus::kNoReader: ++no_reader; break;
       case imu::PtyLink::WriteStatus::kFull: ++full; break;
