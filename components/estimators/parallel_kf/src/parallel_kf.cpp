@@ -208,6 +208,7 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   if (motion_bias) {
     s_.mb_corr += s_.kf1.last_correction_rotvec();
     s_.mb_rate2 += w.squaredNorm() * dt;
+    s_.mb_rate_i += (s_.r_ib * w) * dt;  // the rate in the almost inertial frame (accel_lowpass_tau_s > 0)
   }
   if (s_.heading_initialized) {
     // KF2 predicted to this sample's body frame (9a), (9b), (11a)-(11e), where KF1's correction is;
@@ -560,6 +561,10 @@ void ParallelKf::motion_bias_measure() {
     // first order with the same lag for a ramp (tau) as the accelerometer's low-pass
     const double k = t / (p_.accel_lowpass_tau_s + t);
     s_.rate2_lp += k * (s_.mb_rate2 / t - s_.rate2_lp);
+    // a scale error s turns the attitude by s times the rotation; KF1 removes its tilt through the
+    // accelerometer low-pass, so its correction rate carries s times the rate low-passed over tau
+    // in the inertial frame (a rotation back and forth averages out there), not s times its rms
+    s_.rate_lp_i += k * (s_.mb_rate_i / t - s_.rate_lp_i);
     s_.bias_lp_i += k * (s_.r_ib * s_.bias - s_.bias_lp_i);
     m += s_.r_ib.transpose() * s_.bias_lp_i;
   } else {
@@ -574,7 +579,8 @@ void ParallelKf::motion_bias_measure() {
     const Eigen::Vector3d h2 = up.cross(h1);
     const double scale_rps = p_.motion_gyro_scale_error / p_.motion_bias_sigma_rps;
     const double w_motion = motion_bias_noise(t);
-    const double w = w_motion * (1.0 + scale_rps * scale_rps * s_.rate2_lp);
+    const double rate2 = p_.accel_lowpass_tau_s > 0.0 ? s_.rate_lp_i.squaredNorm() : s_.rate2_lp;
+    const double w = w_motion * (1.0 + scale_rps * scale_rps * rate2);
     MotionNoise mn = motion_noise_window(t);
     bias_measure(h1, h1.dot(m), w, &up, &mn);  // the vertical part is unobservable from gravity
     bias_measure(h2, h2.dot(m), w, &up, &mn);
@@ -637,6 +643,7 @@ void ParallelKf::bias_update() {
   }
   s_.mb_corr.setZero();
   s_.mb_rate2 = 0.0;
+  s_.mb_rate_i.setZero();
   s_.mb_head = 0.0;
   s_.mb_time = 0.0;
   s_.mb_head_used = false;

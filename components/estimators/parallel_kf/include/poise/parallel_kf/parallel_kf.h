@@ -200,6 +200,8 @@ struct ParallelKfParams {
   /// error shows as a "bias" of up to scale * |w|: the motion measurement's noise grows by
   /// (motion_gyro_scale_error * |w|)^2 (|w|^2 low-passed over accel_lowpass_tau_s, the window
   /// the measurement sees), so fast rotation barely moves the bias while slow motion still does.
+  /// With the accelerometer low-pass, |w|^2 is |LP(R_ib w)|^2: the rate vector low-passed over
+  /// tau in the almost inertial frame (what KF1's correction carries of a scale error).
   double motion_gyro_scale_error = 0.005;
   /// The gyro's own scale-factor error (relative, after calibration): a property of the sensor (a
   /// simulated gyro has none), not of the filter. Only the published covariance uses it: the
@@ -355,6 +357,8 @@ struct ParallelKfState {
   // motion bias window (summed between updates)
   Eigen::Vector3d mb_corr{0, 0, 0};  ///< KF1's correction rotations, rad (body)
   double mb_rate2 = 0.0;             ///< integral of |s_G|^2 dt, rad^2/s
+  Eigen::Vector3d mb_rate_i{0, 0, 0};  ///< integral of R_ib s_G dt (almost inertial frame), rad
+  Eigen::Vector3d rate_lp_i{0, 0, 0};  ///< R_ib s_G low-passed over accel_lowpass_tau_s, rad/s
   double mb_head = 0.0;              ///< KF2's heading corrections about sZ / cos^2(dip), rad
   double mb_time = 0.0;              ///< s
   bool mb_head_used = false;         ///< an accepted magnetometer update in the window
