@@ -464,6 +464,10 @@ void ParallelKf::bias_measure(const Eigen::Vector3d& h, double z, double w, cons
   }
   s_.bias += k * innovation;
   s_.lag_bias_cov -= (s_.lag_bias_cov * h) * k.transpose();  // b_err -= k (h^T b_err + noise)
+  if (mn != nullptr) {
+    // a motion measurement's noise holds -g^T d_lag / t (g = R h): E[x_lag n] = -E[x_lag d^T] g / t
+    s_.lag_bias_cov += (mn->lag_x_d * (mn->r * h) / mn->t) * k.transpose();
+  }
   // Joseph form (valid for any gain): P - k ph^T - ph k^T + s k k^T
   s_.bias_cov += s * k * k.transpose() - k * ph.transpose() - ph * k.transpose();
   bias_error_update(h, k, gyro_white_var(s_.mb_time), mn);
@@ -500,7 +504,7 @@ Eigen::Vector3d ParallelKf::reference_error_decay(double t) const {
   return {std::exp(-t / tau_tilt), std::exp(-t / tau_tilt), tau_heading > 0.0 ? std::exp(-t / tau_heading) : 0.0};
 }
 
-ParallelKf::MotionNoise ParallelKf::motion_noise_window(double t) const {
+ParallelKf::MotionNoise ParallelKf::motion_noise_window(double t, const LagIncrement& lag) const {
   // x_j = A x_{j-1} + w per axis, a = e^(-t / tau), stationary at P_x: E[x_j x_{j-1}^T] = A P_x, so
   // d = x_j - x_{j-1} has E[d d^T] = 2 P_x - A P_x - P_x A and E[d x_j^T] = P_x - P_x A; the bias
   // error (correlated with x_{j-1} by earlier windows, C) has E[b_err x_j^T] = C A and
@@ -515,6 +519,10 @@ ParallelKf::MotionNoise ParallelKf::motion_noise_window(double t) const {
   mn.d_x = px - pa;
   mn.e_x = s_.bias_err_att_cov * a.asDiagonal();
   mn.e_d = mn.e_x - s_.bias_err_att_cov;
+  // and the bias's lag error's increment (independent of x): d = d_x + d_lag
+  mn.d_d += lag.d_d;
+  mn.e_d += lag.b_d;
+  mn.lag_x_d = lag.x_d;
   return mn;
 }
 
@@ -548,7 +556,7 @@ void ParallelKf::bias_error_update(const Eigen::Vector3d& h, const Eigen::Vector
   }
 }
 
-void ParallelKf::motion_bias_measure() {
+void ParallelKf::motion_bias_measure(const LagIncrement& lag) {
   // KF1 turned sZ by dtheta (perpendicular to sZ) that the gyro did not explain: a bias error
   // db = b_true - b drifts the attitude at -db, so y = -sum(dtheta) / t over the window measures
   // db's horizontal part, seen through the accelerometer's low-pass. The bias itself went through
@@ -575,7 +583,7 @@ void ParallelKf::motion_bias_measure() {
     const double scale_rps = p_.motion_gyro_scale_error / p_.motion_bias_sigma_rps;
     const double w_motion = motion_bias_noise(t);
     const double w = w_motion * (1.0 + scale_rps * scale_rps * s_.rate2_lp);
-    MotionNoise mn = motion_noise_window(t);
+    MotionNoise mn = motion_noise_window(t, lag);
     bias_measure(h1, h1.dot(m), w, &up, &mn);  // the vertical part is unobservable from gravity
     bias_measure(h2, h2.dot(m), w, &up, &mn);
     if (s_.mb_head_used && s_.mb_head_trusted) {
@@ -593,7 +601,7 @@ void ParallelKf::bias_update() {
   // bias Kalman filter over the window t: predict (random walk), then measure at rest (the
   // low-passed gyro) or in motion (motion_bias_measure)
   const double t = s_.mb_time;
-  propagate_lag_error(t);
+  const LagIncrement lag = propagate_lag_error(t);
   const double v = p_.bias_drift_rps * p_.bias_drift_rps * t / p_.bias_forgetting_time_s;
   const double var_max = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
   s_.bias_cov.diagonal().array() += v;
@@ -633,7 +641,7 @@ void ParallelKf::bias_update() {
     }
   }
   if (p_.motion_bias_sigma_rps > 0.0) {
-    motion_bias_measure();  // keeps its low-passes running at rest too
+    motion_bias_measure(lag);  // keeps its low-passes running at rest too
   }
   s_.mb_corr.setZero();
   s_.mb_rate2 = 0.0;
@@ -643,7 +651,7 @@ void ParallelKf::bias_update() {
   s_.mb_head_trusted = true;
 }
 
-void ParallelKf::propagate_lag_error(double t) {
+ParallelKf::LagIncrement ParallelKf::propagate_lag_error(double t) {
   // Over the window t the estimate drifts at beta = R b_err (b_err = b_true - b, the gyro's error
   // after the bias is removed). The tilt is the low-passed accelerometer's, so its error about
   // each world horizontal axis is beta through (1 - H(s)) / s, H the low-pass: first order
@@ -706,10 +714,21 @@ void ParallelKf::propagate_lag_error(double t) {
   const Matrix53 c = s_.lag_bias_cov;
   const Matrix53 gp = g * s_.bias_err_cov;
   const Matrix5 pc = phi * c * g.transpose();
+  // the increment d = (Phi - I) x + G b_err (LagIncrement, its first three rows), from the moments
+  // before the step: E[d b^T] = (Phi - I) C + G B, E[y d^T] = Y X (Phi - I)^T + Y C G^T + G C^T
+  // (Phi - I)^T + G B G^T for y = Y x + G b_err (Y = Phi: x_j; Y = Phi - I: d)
+  const Matrix5 pm = phi - Matrix5::Identity();
+  const Matrix5 common = (g * c.transpose()) * pm.transpose() + gp * g.transpose();
+  const Matrix5 x_d = phi * s_.lag_cov * pm.transpose() + pc + common;
+  LagIncrement inc;
+  inc.x_d = x_d.leftCols<3>();
+  inc.d_d = (x_d - s_.lag_cov * pm.transpose() - c * g.transpose()).topLeftCorner<3, 3>();
+  inc.b_d = (pm * c + gp).topRows<3>().transpose();
   Matrix5 p = phi * s_.lag_cov * phi.transpose() + pc + pc.transpose() + gp * g.transpose();
   s_.lag_cov = 0.5 * (p + p.transpose());
   s_.lag_bias_cov = phi * c + gp;
   s_.lag_keep_z = 1.0;
+  return inc;
 }
 
 FieldGateParams ParallelKfParams::field_gate() const {

@@ -574,7 +574,10 @@ class ParallelKf {
   /// the bias's over it, -(x_j - x_{j-1}) / t. x (world rotation vector) is taken as first-order
   /// Gauss-Markov per axis: its covariance the published terms that are not the bias's
   /// (reference_error_cov), its time constant the lag of the KF that follows it (the
-  /// accelerometer low-pass's tau for the tilt, KF2's for the heading).
+  /// accelerometer low-pass's tau for the tilt, KF2's for the heading). d and its moments also
+  /// carry the bias's own lag error's increment (LagIncrement, independent of x): the correction
+  /// rate a window measures is the rate of the whole error, whose lag part follows the bias error
+  /// itself (at a start the correction has not yet turned, and the window tells little of b).
   struct MotionNoise {
     Eigen::Matrix3d e_d = Eigen::Matrix3d::Zero();   ///< E[b_err d^T], d = x_j - x_{j-1}, body x world
     Eigen::Matrix3d e_x = Eigen::Matrix3d::Zero();   ///< E[b_err x_j^T], body x world
@@ -582,6 +585,16 @@ class ParallelKf {
     Eigen::Matrix3d d_x = Eigen::Matrix3d::Zero();   ///< E[d x_j^T], world
     Eigen::Matrix3d r = Eigen::Matrix3d::Identity();  ///< R_world_body
     double t = 0.0;                                   ///< the window, s
+    /// E[x_lag,j d^T] (5 x world): the lag error (lag_cov) against the window's increment
+    Eigen::Matrix<double, 5, 3> lag_x_d = Eigen::Matrix<double, 5, 3>::Zero();
+  };
+  /// The bias's own lag error's increment over the window just propagated, d = x_j - x_{j-1}
+  /// (lag_cov's world x, y, z): a motion measurement is the rate of the estimate's whole attitude
+  /// error, so it carries this too (propagate_lag_error computes it, motion_noise_window adds it).
+  struct LagIncrement {
+    Eigen::Matrix3d d_d = Eigen::Matrix3d::Zero();  ///< E[d d^T], world
+    Eigen::Matrix3d b_d = Eigen::Matrix3d::Zero();  ///< E[b_err d^T], body x world
+    Eigen::Matrix<double, 5, 3> x_d = Eigen::Matrix<double, 5, 3>::Zero();  ///< E[x_j d^T]
   };
   bool step(const ImuSample& s, SampleCheck& c);  ///< update() without the reporting
   void initialize(const ImuSample& s, bool mag_ok);
@@ -599,7 +612,7 @@ class ParallelKf {
   /// component along unit *keep (if given) is left as it is; `mn` (a motion measurement's window,
   /// else null) for the real error's update (bias_error_update).
   void bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep, MotionNoise* mn);
-  void motion_bias_measure();
+  void motion_bias_measure(const LagIncrement& lag);
   /// The horizontal external acceleration the tilt's low-pass let through (accel_h_cov_i), from
   /// the raw accelerometer in the almost inertial frame `accel_i` (r_ib times the body's, which
   /// step() computes once for the tilt's low-pass) of a step of dt; for the covariance.
@@ -624,8 +637,10 @@ class ParallelKf {
   /// KF2's correction lag about the vertical for a step of dt, s (0 before a direction exists)
   [[nodiscard]] double heading_lag_s(double dt) const;
   /// Propagates the attitude error the bias error leaves (lag_cov, lag_bias_cov) over t seconds.
-  void propagate_lag_error(double t);
-  [[nodiscard]] MotionNoise motion_noise_window(double t) const;
+  /// Returns the lag error's increment over the window (LagIncrement).
+  LagIncrement propagate_lag_error(double t);
+  /// x's statistics over a window of t seconds, with the bias's lag error's increment `lag` added
+  [[nodiscard]] MotionNoise motion_noise_window(double t, const LagIncrement& lag) const;
   /// x's decay over a window of t seconds per world axis, e^(-t / tau) (motion_noise_window's A).
   [[nodiscard]] Eigen::Vector3d reference_error_decay(double t) const;
   /// The covariance of the estimate's attitude error that is not the bias's (world, rad^2): the
