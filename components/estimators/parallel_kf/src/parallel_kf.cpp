@@ -12,6 +12,7 @@ namespace {
 constexpr double kInitVarDirection = 1e-2;  // P11 / P21 at (re)initialisation, unit-vector comps^2
 constexpr double kInitVarDisturbanceUt2 = 4.0;  // P22 of KF2 at initialisation, uT^2
 constexpr double kMinCos2Dip = 0.05;        // guard for the heading part of the KF2 correction
+constexpr double kMinTiltVarRad2 = 1e-14;   // numerical guard for an inverse-variance weight
 constexpr double kBiasPeriodS = 0.04;  // the bias filter runs once per window of this length, s (25 Hz)
 // The gravity reference of the external-acceleration term follows the accelerometer with a time
 // constant of this many tilt low-pass time constants: a horizontal acceleration integrates to a
@@ -360,6 +361,7 @@ void ParallelKf::external_accel_step(const Eigen::Vector3d& accel_i, double dt) 
   d -= d.dot(up) * up;
   d /= 1.0 - s_.accel_ref_g_ratio;  // what the reference let through in phase (reference_step)
   s_.accel_h_cov_i += (dt / (tau + dt)) * (d * d.transpose() - s_.accel_h_cov_i);
+  s_.accel_h_cross_i += (dt / (tau + dt)) * (d * s_.accel_h_heading_i.transpose() - s_.accel_h_cross_i);
   // KF2 pulls the heading towards -tan(dip) times the tilt error about magnetic north, with its
   // lag: that error's horizontal acceleration low-passed over the lag (covariance_terms), stepped
   // once per bias period on the period's mean (the lag is 10 s or more)
@@ -487,6 +489,8 @@ Eigen::Matrix3d ParallelKf::reference_error_cov() const {
   const ParallelKfCovarianceTerms c = covariance_terms(output());
   Eigen::Matrix3d px = c.kf + c.external_accel + c.gyro_scale + c.field + c.hard_iron;
   px(2, 2) -= c.external_accel(2, 2);  // carried in full below
+  px.block<2, 1>(0, 2) -= c.external_accel.block<2, 1>(0, 2);
+  px.block<1, 2>(2, 0) -= c.external_accel.block<1, 2>(2, 0);
   if (s_.gate.learnt) {
     // the heading is built from sZ (2): a tilt error a about magnetic north (ENU y) turns it by
     // -tan(dip) a, and KF2 pulls it there (propagate_lag_error)
@@ -802,14 +806,7 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
   s_.since_mag_s *= 1.0 - share;
   s_.lag_keep_z *= 1.0 - share;
   if (s_.gate.learnt && s_.gate.m_ut > 0.0) {
-    // The heading follows the field with KF2's lag, so what moves it is the disturbance averaged
-    // over that lag: its part along the reference (norm) and across it in the vertical plane
-    // (dip), each low-passed over the lag, are what the gate can see of it.
-    const double m = s_.gate.m_ut;
-    const double sin_dip = -s_.kf1.up_body().dot(mag) / mag.norm();
-    const double k = dt / (lag + dt);
-    s_.field_dn_lp += k * (mag.norm() - m - s_.field_dn_lp);
-    s_.field_dv_lp += k * (m * (std::asin(std::clamp(sin_dip, -1.0, 1.0)) - s_.gate.dip_rad) - s_.field_dv_lp);
+    field_deviation_step(mag, lag, dt);
   }
   if (p_.bias_estimation && p_.motion_bias_sigma_rps > 0.0 && p_.motion_bias_heading && s_.gate.learnt) {
     if (s_.mag_use == MagUse::kForced) {
@@ -830,6 +827,54 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
   }
 }
 
+void ParallelKf::field_deviation_step(const Eigen::Vector3d& mag, double lag, double dt) {
+  // The heading follows the field with KF2's lag, so what moves it is the disturbance averaged
+  // over that lag: its part along the reference (norm) and across it in the vertical plane
+  // (dip), each low-passed over the lag, are what the gate can see of it.
+  const double m = s_.gate.m_ut;
+  const double dip = std::asin(std::clamp(-s_.kf1.up_body().dot(mag) / mag.norm(), -1.0, 1.0));
+  const double k = dt / (lag + dt);
+  s_.field_dn_lp += k * (mag.norm() - m - s_.field_dn_lp);
+  s_.field_dv_lp += k * (m * (dip - field_dip_reference(dip, dt)) - s_.field_dv_lp);
+}
+
+double ParallelKf::field_dip_reference(double dip, double dt) {
+  // A dip measured against sZ carries sZ's tilt error about magnetic east, which does not turn
+  // the heading (sY = sZ x sX' keeps its direction), yet dv would read it as a disturbance: the
+  // present one (against any reference) and, for a reference learnt while the tilt was poor (the
+  // bias not yet known), the learning window's for good. So the term measures against the
+  // accepted fields' dips, each measured against sZ as the present one is, weighted by the
+  // inverse of the published tilt variance about magnetic east (each dip's error variance): the
+  // minimum-variance estimate of the dip as sZ shows it, which the slow tilt error moves with
+  // the present dip. It starts on the gate's reference (learnt or configured) and forgets as the
+  // gate's reference follows (mag_reference_tau_s). The gate's own reference, and so the
+  // estimate, is untouched.
+  const uint64_t epoch = s_.gate.reacquired + s_.gate.relearnt;
+  if (!s_.initialized) {
+    return s_.gate.dip_rad;
+  }
+  const ParallelKfOutput out = output();
+  const Eigen::Matrix3d cov = covariance_terms(out).sum();
+  Eigen::Vector3d east;
+  if (!safe_normalize(Eigen::Vector3d::UnitZ().cross(out.q_world_body * s_.kf2.u()), east, 1e-9)) {
+    return s_.gate.dip_rad;
+  }
+  const double var = std::max(east.dot(cov * east), kMinTiltVarRad2);
+  if (!std::isfinite(s_.field_dip_ref) || s_.field_dip_epoch != epoch) {
+    // the learning window's dips, as one weight: startup_s at the present variance
+    s_.field_dip_ref = s_.gate.dip_rad;
+    s_.field_dip_weight = gp_.startup_s / var;
+    s_.field_dip_epoch = epoch;
+  }
+  if (gp_.reference_tau_s > 0.0) {
+    s_.field_dip_weight *= std::exp(-dt / gp_.reference_tau_s);
+  }
+  const double w = dt / var;
+  s_.field_dip_weight += w;
+  s_.field_dip_ref += (w / s_.field_dip_weight) * (dip - s_.field_dip_ref);
+  return s_.field_dip_ref;
+}
+
 void ParallelKf::restart_heading(const Eigen::Vector3d& mag) {
   s_.kf2.reset(mag.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
   s_.heading_anchored = true;
@@ -842,6 +887,7 @@ void ParallelKf::restart_heading(const Eigen::Vector3d& mag) {
   s_.bias_err_att_cov.col(2).setZero();  // and no error the bias filter has seen the rate of
   s_.field_dn_lp = 0.0;  // deviations from the reference it replaced
   s_.field_dv_lp = 0.0;
+  s_.field_dip_ref = std::nan("");
   s_.mb_head_trusted = false;  // a jump of the heading, not a measurement of the bias
   s_.q_lp_heading = gyro_attitude();  // the heading's low-passed attitude (gyro scale error) starts again
 }
@@ -996,6 +1042,22 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
       const double tan_dip = std::sin(s_.gate.dip_rad) / std::max(std::cos(s_.gate.dip_rad), std::sqrt(kMinCos2Dip));
       const double a_north = (w * s_.accel_h_heading_i).x() / g;
       t.external_accel(2, 2) = tan_dip * tan_dip * a_north * a_north;
+      // One acceleration tilts the estimate now, (-a_y, a_x) / g, and pulls the heading, -tan(dip)
+      // A_x / g with A low-passed over KF2's lag: their cross-covariance is the cross moment of a
+      // and A times those factors. At most full correlation (a slowly varying acceleration, as a
+      // start's turning frame, gives it): xc^T T^-1 xc <= the heading's share, T the tilt's block.
+      const Eigen::Matrix3d x = w * s_.accel_h_cross_i * w.transpose() / (g * g);
+      Eigen::Vector2d xc(tan_dip * x(1, 0), -tan_dip * x(0, 0));
+      const double det = tilt.determinant();
+      if (det > 0.0) {
+        const double q = xc.dot(tilt.inverse() * xc);
+        const double h = t.external_accel(2, 2);
+        if (q > h) {
+          xc *= std::sqrt(h / q);
+        }
+        t.external_accel.block<2, 1>(0, 2) = xc;
+        t.external_accel.block<1, 2>(2, 0) = xc.transpose();
+      }
     }
   } else {
     // KF1 sees the raw accelerometer: the external acceleration's horizontal part taken as large

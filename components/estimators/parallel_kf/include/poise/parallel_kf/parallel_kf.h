@@ -393,6 +393,10 @@ struct ParallelKfState {
   /// that deviation itself low-passed over KF2's lag (inertial frame, m/s^2): its part about magnetic
   /// north is what KF2 pulls the heading with (-tan(dip) times the tilt)
   Eigen::Vector3d accel_h_heading_i{0, 0, 0};
+  /// the deviation times that low-passed one (d accel_h_heading_i^T), low-passed over
+  /// accel_lowpass_tau_s as accel_h_cov_i (inertial frame, (m/s^2)^2): the tilt's and the heading's
+  /// shares of the acceleration come from one realisation, and this is their cross moment
+  Eigen::Matrix3d accel_h_cross_i = Eigen::Matrix3d::Zero();
   Eigen::Vector3d accel_h_heading_sum_i{0, 0, 0};  ///< the deviation's integral over the period so far, m/s
   double accel_h_heading_span_s = 0.0;             ///< that period so far, s
   /// The tilt's low-pass run again on the same input (accel_bw's twin), for the external
@@ -415,6 +419,11 @@ struct ParallelKfState {
   double accel_ref_span_s = 0.0;  ///< time the reference has averaged (its stages' window until their time constant), s
   double field_dn_lp = 0.0;    ///< |s_M| - m of the fields used for heading, low-passed over KF2's lag, uT
   double field_dv_lp = 0.0;    ///< m (dip - alpha) of the same, low-passed the same way, uT
+  /// alpha for field_dv_lp with a learnt reference: the accepted dips' mean weighted by the inverse
+  /// published tilt variance about magnetic east (field_dip_reference), rad; NaN = not started
+  double field_dip_ref = std::nan("");
+  double field_dip_weight = 0.0;  ///< its sum of weights, s/rad^2
+  uint64_t field_dip_epoch = 0;   ///< the gate's reacquired + relearnt when it started
   /// The attitude error the bias error has left in the estimate (world frame x, y, z, rad; then
   /// the second state of the tilt low-pass's error about x and y, rad/s, for a second-order
   /// low-pass): it drifts by R (b_true - b), the tilt forgets the drift through the accelerometer
@@ -658,6 +667,10 @@ class ParallelKf {
   /// KF2 restarted on the field `mag` (a relearnt reference, or the first accepted field after a
   /// start on a gated one): the heading jumps to it, as at a start
   void restart_heading(const Eigen::Vector3d& mag);
+  /// field_dn_lp / field_dv_lp from an accepted field, after KF2's correction (lag: KF2's, s)
+  void field_deviation_step(const Eigen::Vector3d& mag, double lag, double dt);
+  /// The dip the field term measures dv against (updated with the accepted dip `dip`), rad
+  double field_dip_reference(double dip, double dt);
 
   /// The delay the output is predicted over, s: imu_delay_s, or half the last step when not known.
   [[nodiscard]] double output_delay_s() const;
