@@ -504,8 +504,8 @@ class ParallelKf {
   ///             bias filter's gains with the noise its measurements really have, not the larger
   ///             one the filter is designed with: the gyro's white noise over the window
   ///             (gyro_noise_density_rps_per_sqrt_hz when the sensor says it) and, in motion, the
-  ///             rate of the estimate's own attitude error that is not the bias's
-  ///             (motion_noise_window); growing by the gyro's own bias walk
+  ///             rate of the estimate's own attitude error, the bias's lag error's included
+  ///             (motion_noise_window, LagIncrement); growing by the gyro's own bias walk
   ///             gyro_bias_walk_rps_per_sqrt_s when the sensor says it)
   ///           each diagonal term at least tau^2 P_b (tilt) and P_b,z t^2 (heading; t the time
   ///             since fields last held the heading, each accepted field removing dt / tau_2 of
@@ -513,7 +513,8 @@ class ParallelKf {
   ///             P_b decorrelates from that error faster than the error does;
   ///           + the scale error's part about the vertical, with the attitude low-passed over tau_2;
   ///           + the disturbance of the fields used, averaged over KF2's lag (the norm and dip
-  ///             deviations from the reference, low-passed), over (m cos(dip))^2: its horizontal
+  ///             deviations from the reference, low-passed; the dip's against the accepted dips' mean weighted
+  ///             by the inverse tilt variance about magnetic east, field_dip_reference), over (m cos(dip))^2: its horizontal
   ///             part across the field, which moves the heading, is taken as large as the two the
   ///             gate can see (the mean of their squares);
   ///   both    + (dt^2 / 12) (R w)(R w)^T while imu_delay_s is not known (NaN): the output is
