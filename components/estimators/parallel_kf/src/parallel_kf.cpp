@@ -859,7 +859,11 @@ double ParallelKf::field_dip_reference(double dip, double dt) {
   if (!safe_normalize(Eigen::Vector3d::UnitZ().cross(out.q_world_body * s_.kf2.u()), east, 1e-9)) {
     return s_.gate.dip_rad;
   }
-  const double var = std::max(east.dot(cov * east), kMinTiltVarRad2);
+  // each dip's error: the tilt about magnetic east (slow, shared by neighbouring dips) and the
+  // magnetometer's white noise across the field in the vertical plane, sigma_M / m (independent
+  // from dip to dip), so the mean does not run after the last few dips when the tilt is well known
+  const double noise = p_.sigma_mag_ut / s_.gate.m_ut;
+  const double var = std::max(east.dot(cov * east) + noise * noise, kMinTiltVarRad2);
   if (!std::isfinite(s_.field_dip_ref) || s_.field_dip_epoch != epoch) {
     // the learning window's dips, as one weight: startup_s at the present variance
     s_.field_dip_ref = s_.gate.dip_rad;
