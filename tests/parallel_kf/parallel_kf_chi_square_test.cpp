@@ -31,15 +31,17 @@ constexpr double kEveryS = 0.5;   // ... every, s
 // While the bias is learnt (the rest is detected after about 2 s) and the low-pass carries what
 // the unknown bias left (2-4 s), each instant's average lies outside its two-sided 95 % bounds with
 // probability 5 %: of those 5 instants at most 1 may (P(more | consistent) = 2.3 %, binomial;
-// measured: none, 2.41-2.69, the tilt 2.13-2.34 for 2 dof). Later the tilt is conservative
+// measured: none, 2.39-2.46, the tilt 2.03-2.16 for 2 dof; session 16: 2.41-2.69, the tilt
+// 2.13-2.34, when the bias error before the first rest was under-counted). Later the tilt is conservative
 // (averaged tilt NEES, 2 dof, 0.66-1.84 over 5-12 s: the Butterworth's error crosses zero while the
 // covariance keeps its floor tau^2 P_b), so over all 21 instants only the side a consumer relies
 // on is asserted: at most 3 above the upper bound (P(more | consistent) below 1.6 %).
 constexpr double kTwoSidedUntilS = 4.0;
 constexpr int kMaxOutside = 1;
 constexpr int kMaxAbove = 3;
-// The heading alone (1 degree of freedom) is consistent at every instant (averaged 0.92-1.01,
-// its bias error taken from the bias filter's own error model): two-sided over all 21 instants,
+// The heading alone (1 degree of freedom) is consistent at every instant (averaged 0.80-1.07,
+// its bias error taken from the bias filter's own error model, the field term's dip measured
+// against the accepted dips so that it no longer reads the tilt error): two-sided over all 21 instants,
 // at most 3 outside (P(more | consistent) = 1.9 %, binomial).
 constexpr int kMaxOutsideHeading = 3;
 
@@ -83,13 +85,20 @@ Eigen::Vector3d bias_from_the_prior(const ParallelKfParams& p, uint64_t seed) {
 /// kRuns runs of the static scenario, each with a bias drawn from the filter's prior walking at
 /// `sensor_walk` (rad/s/sqrt(s)); the filter told the sensor (told_the_simulated_sensor) and,
 /// unless NaN, that walk as gyro_bias_walk_rps_per_sqrt_s.
-testing::AveragedNees run_at_rest(double sensor_walk, double told_walk) {
-  testing::AveragedNees a(kFirstS, kLastS, kEveryS, kRuns);
+/// `learn_field`: the field reference (magnitude, dip) not told, learnt at start-up; from
+/// `first_s` (s).
+testing::AveragedNees run_at_rest(double sensor_walk, double told_walk, bool learn_field = false,
+                                  double first_s = kFirstS) {
+  testing::AveragedNees a(first_s, kLastS, kEveryS, kRuns);
   for (int run = 0; run < kRuns; ++run) {
     // GIVEN the simulator's static scenario with a bias drawn from the filter's prior
     sim::SimConfig cfg = sim::make_scenario("static_magnet", kRateHz, 2000 + static_cast<uint64_t>(run));
     ParallelKfParams p = told_the_simulated_sensor(cfg);
     p.gyro_bias_walk_rps_per_sqrt_s = told_walk;
+    if (learn_field) {
+      p.field_magnitude_ut = std::nan("");
+      p.dip_deg = std::nan("");
+    }
     cfg.noise.gyro_bias_rps = bias_from_the_prior(p, 7000 + static_cast<uint64_t>(run));
     cfg.noise.gyro_bias_walk_rps_per_sqrt_s = sensor_walk;
     add_run(cfg, p, a);
@@ -116,6 +125,30 @@ TEST(ParallelKfChiSquare, GivenASensorAtRestWithKnownNoiseAndABiasFromThePriorWh
   EXPECT_LE(outside, kMaxOutside);
   EXPECT_LE(above, kMaxAbove);
   EXPECT_LE(outside_heading, kMaxOutsideHeading);
+}
+
+// The same rest with the field reference learnt at start-up (not told): the heading is unknown
+// (a provisional reference, variance pi^2 / 3) until the reference is verified, startup_s +
+// mag_verify_s = 6 s, so the heading alone is evaluated from 6.5 s, two-sided at each of its 12
+// instants: at most 2 outside (P(more | consistent) = 2.0 %, binomial). The learnt reference holds
+// the tilt error of its learning window (the bias still unknown), which the field term's dip
+// deviation reads; this guards the heading against a covariance that leans on it (measured:
+// 0.79-1.19, none outside; the field term's reference weighted by the tilt variance alone and the
+// bias error before the first rest under-counted, session 16: 1.46-1.69 at 6.5-9 s).
+constexpr double kLearntFirstS = 6.5;
+constexpr int kMaxOutsideLearnt = 2;
+
+TEST(ParallelKfChiSquare, GivenASensorAtRestWhoseFieldReferenceIsLearntWhenRunManyTimesThenTheHeadingsAveragedNeesLiesInsideTheChiSquareBoundsOnceItIsKnown) {
+  const ParallelKfParams d;
+  const testing::AveragedNees a =
+      run_at_rest(d.bias_drift_rps / std::sqrt(d.bias_forgetting_time_s), std::nan(""), true, kLearntFirstS);
+  const testing::AveragedNeesBounds bh = testing::averaged_nees_bounds_95(1, kRuns);
+  const int outside_heading = a.outside(a.heading, bh);
+  a.print();
+  std::printf("learnt field, heading alone: bounds [%.3f, %.3f], %d of %d instants outside\n", bh.lo, bh.hi,
+              outside_heading, a.instants());
+  // THEN the heading alone lies inside its bounds at all but a few instants
+  EXPECT_LE(outside_heading, kMaxOutsideLearnt);
 }
 
 // The gyro's own bias walk (gyro_bias_walk_rps_per_sqrt_s, a property of the sensor) against the

@@ -12,6 +12,7 @@ namespace {
 constexpr double kInitVarDirection = 1e-2;  // P11 / P21 at (re)initialisation, unit-vector comps^2
 constexpr double kInitVarDisturbanceUt2 = 4.0;  // P22 of KF2 at initialisation, uT^2
 constexpr double kMinCos2Dip = 0.05;        // guard for the heading part of the KF2 correction
+constexpr double kMinTiltVarRad2 = 1e-14;   // numerical guard for an inverse-variance weight
 constexpr double kBiasPeriodS = 0.04;  // the bias filter runs once per window of this length, s (25 Hz)
 // The gravity reference of the external-acceleration term follows the accelerometer with a time
 // constant of this many tilt low-pass time constants: a horizontal acceleration integrates to a
@@ -361,6 +362,7 @@ void ParallelKf::external_accel_step(const Eigen::Vector3d& accel_i, double dt) 
   d -= d.dot(up) * up;
   d /= 1.0 - s_.accel_ref_g_ratio;  // what the reference let through in phase (reference_step)
   s_.accel_h_cov_i += (dt / (tau + dt)) * (d * d.transpose() - s_.accel_h_cov_i);
+  s_.accel_h_cross_i += (dt / (tau + dt)) * (d * s_.accel_h_heading_i.transpose() - s_.accel_h_cross_i);
   // KF2 pulls the heading towards -tan(dip) times the tilt error about magnetic north, with its
   // lag: that error's horizontal acceleration low-passed over the lag (covariance_terms), stepped
   // once per bias period on the period's mean (the lag is 10 s or more)
@@ -465,6 +467,10 @@ void ParallelKf::bias_measure(const Eigen::Vector3d& h, double z, double w, cons
   }
   s_.bias += k * innovation;
   s_.lag_bias_cov -= (s_.lag_bias_cov * h) * k.transpose();  // b_err -= k (h^T b_err + noise)
+  if (mn != nullptr) {
+    // a motion measurement's noise holds -g^T d_lag / t (g = R h): E[x_lag n] = -E[x_lag d^T] g / t
+    s_.lag_bias_cov += (mn->lag_x_d * (mn->r * h) / mn->t) * k.transpose();
+  }
   // Joseph form (valid for any gain): P - k ph^T - ph k^T + s k k^T
   s_.bias_cov += s * k * k.transpose() - k * ph.transpose() - ph * k.transpose();
   bias_error_update(h, k, gyro_white_var(s_.mb_time), mn);
@@ -484,6 +490,8 @@ Eigen::Matrix3d ParallelKf::reference_error_cov() const {
   const ParallelKfCovarianceTerms c = covariance_terms(output());
   Eigen::Matrix3d px = c.kf + c.external_accel + c.gyro_scale + c.field + c.hard_iron;
   px(2, 2) -= c.external_accel(2, 2);  // carried in full below
+  px.block<2, 1>(0, 2) -= c.external_accel.block<2, 1>(0, 2);
+  px.block<1, 2>(2, 0) -= c.external_accel.block<1, 2>(2, 0);
   if (s_.gate.learnt) {
     // the heading is built from sZ (2): a tilt error a about magnetic north (ENU y) turns it by
     // -tan(dip) a, and KF2 pulls it there (propagate_lag_error)
@@ -501,7 +509,7 @@ Eigen::Vector3d ParallelKf::reference_error_decay(double t) const {
   return {std::exp(-t / tau_tilt), std::exp(-t / tau_tilt), tau_heading > 0.0 ? std::exp(-t / tau_heading) : 0.0};
 }
 
-ParallelKf::MotionNoise ParallelKf::motion_noise_window(double t) const {
+ParallelKf::MotionNoise ParallelKf::motion_noise_window(double t, const LagIncrement& lag) const {
   // x_j = A x_{j-1} + w per axis, a = e^(-t / tau), stationary at P_x: E[x_j x_{j-1}^T] = A P_x, so
   // d = x_j - x_{j-1} has E[d d^T] = 2 P_x - A P_x - P_x A and E[d x_j^T] = P_x - P_x A; the bias
   // error (correlated with x_{j-1} by earlier windows, C) has E[b_err x_j^T] = C A and
@@ -516,6 +524,10 @@ ParallelKf::MotionNoise ParallelKf::motion_noise_window(double t) const {
   mn.d_x = px - pa;
   mn.e_x = s_.bias_err_att_cov * a.asDiagonal();
   mn.e_d = mn.e_x - s_.bias_err_att_cov;
+  // and the bias's lag error's increment (independent of x): d = d_x + d_lag
+  mn.d_d += lag.d_d;
+  mn.e_d += lag.b_d;
+  mn.lag_x_d = lag.x_d;
   return mn;
 }
 
@@ -549,7 +561,7 @@ void ParallelKf::bias_error_update(const Eigen::Vector3d& h, const Eigen::Vector
   }
 }
 
-void ParallelKf::motion_bias_measure() {
+void ParallelKf::motion_bias_measure(const LagIncrement& lag) {
   // KF1 turned sZ by dtheta (perpendicular to sZ) that the gyro did not explain: a bias error
   // db = b_true - b drifts the attitude at -db, so y = -sum(dtheta) / t over the window measures
   // db's horizontal part, seen through the accelerometer's low-pass. The bias itself went through
@@ -581,7 +593,7 @@ void ParallelKf::motion_bias_measure() {
     const double w_motion = motion_bias_noise(t);
     const double rate2 = p_.accel_lowpass_tau_s > 0.0 ? s_.rate_lp_i.squaredNorm() : s_.rate2_lp;
     const double w = w_motion * (1.0 + scale_rps * scale_rps * rate2);
-    MotionNoise mn = motion_noise_window(t);
+    MotionNoise mn = motion_noise_window(t, lag);
     bias_measure(h1, h1.dot(m), w, &up, &mn);  // the vertical part is unobservable from gravity
     bias_measure(h2, h2.dot(m), w, &up, &mn);
     if (s_.mb_head_used && s_.mb_head_trusted) {
@@ -599,7 +611,7 @@ void ParallelKf::bias_update() {
   // bias Kalman filter over the window t: predict (random walk), then measure at rest (the
   // low-passed gyro) or in motion (motion_bias_measure)
   const double t = s_.mb_time;
-  propagate_lag_error(t);
+  const LagIncrement lag = propagate_lag_error(t);
   const double v = p_.bias_drift_rps * p_.bias_drift_rps * t / p_.bias_forgetting_time_s;
   const double var_max = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
   s_.bias_cov.diagonal().array() += v;
@@ -639,7 +651,7 @@ void ParallelKf::bias_update() {
     }
   }
   if (p_.motion_bias_sigma_rps > 0.0) {
-    motion_bias_measure();  // keeps its low-passes running at rest too
+    motion_bias_measure(lag);  // keeps its low-passes running at rest too
   }
   s_.mb_corr.setZero();
   s_.mb_rate2 = 0.0;
@@ -650,7 +662,7 @@ void ParallelKf::bias_update() {
   s_.mb_head_trusted = true;
 }
 
-void ParallelKf::propagate_lag_error(double t) {
+ParallelKf::LagIncrement ParallelKf::propagate_lag_error(double t) {
   // Over the window t the estimate drifts at beta = R b_err (b_err = b_true - b, the gyro's error
   // after the bias is removed). The tilt is the low-passed accelerometer's, so its error about
   // each world horizontal axis is beta through (1 - H(s)) / s, H the low-pass: first order
@@ -713,10 +725,21 @@ void ParallelKf::propagate_lag_error(double t) {
   const Matrix53 c = s_.lag_bias_cov;
   const Matrix53 gp = g * s_.bias_err_cov;
   const Matrix5 pc = phi * c * g.transpose();
+  // the increment d = (Phi - I) x + G b_err (LagIncrement, its first three rows), from the moments
+  // before the step: E[d b^T] = (Phi - I) C + G B, E[y d^T] = Y X (Phi - I)^T + Y C G^T + G C^T
+  // (Phi - I)^T + G B G^T for y = Y x + G b_err (Y = Phi: x_j; Y = Phi - I: d)
+  const Matrix5 pm = phi - Matrix5::Identity();
+  const Matrix5 common = (g * c.transpose()) * pm.transpose() + gp * g.transpose();
+  const Matrix5 x_d = phi * s_.lag_cov * pm.transpose() + pc + common;
+  LagIncrement inc;
+  inc.x_d = x_d.leftCols<3>();
+  inc.d_d = (x_d - s_.lag_cov * pm.transpose() - c * g.transpose()).topLeftCorner<3, 3>();
+  inc.b_d = (pm * c + gp).topRows<3>().transpose();
   Matrix5 p = phi * s_.lag_cov * phi.transpose() + pc + pc.transpose() + gp * g.transpose();
   s_.lag_cov = 0.5 * (p + p.transpose());
   s_.lag_bias_cov = phi * c + gp;
   s_.lag_keep_z = 1.0;
+  return inc;
 }
 
 FieldGateParams ParallelKfParams::field_gate() const {
@@ -790,14 +813,7 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
   s_.since_mag_s *= 1.0 - share;
   s_.lag_keep_z *= 1.0 - share;
   if (s_.gate.learnt && s_.gate.m_ut > 0.0) {
-    // The heading follows the field with KF2's lag, so what moves it is the disturbance averaged
-    // over that lag: its part along the reference (norm) and across it in the vertical plane
-    // (dip), each low-passed over the lag, are what the gate can see of it.
-    const double m = s_.gate.m_ut;
-    const double sin_dip = -s_.kf1.up_body().dot(mag) / mag.norm();
-    const double k = dt / (lag + dt);
-    s_.field_dn_lp += k * (mag.norm() - m - s_.field_dn_lp);
-    s_.field_dv_lp += k * (m * (std::asin(std::clamp(sin_dip, -1.0, 1.0)) - s_.gate.dip_rad) - s_.field_dv_lp);
+    field_deviation_step(mag, lag, dt);
   }
   if (p_.bias_estimation && p_.motion_bias_sigma_rps > 0.0 && p_.motion_bias_heading && s_.gate.learnt) {
     if (s_.mag_use == MagUse::kForced) {
@@ -818,6 +834,58 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
   }
 }
 
+void ParallelKf::field_deviation_step(const Eigen::Vector3d& mag, double lag, double dt) {
+  // The heading follows the field with KF2's lag, so what moves it is the disturbance averaged
+  // over that lag: its part along the reference (norm) and across it in the vertical plane
+  // (dip), each low-passed over the lag, are what the gate can see of it.
+  const double m = s_.gate.m_ut;
+  const double dip = std::asin(std::clamp(-s_.kf1.up_body().dot(mag) / mag.norm(), -1.0, 1.0));
+  const double k = dt / (lag + dt);
+  s_.field_dn_lp += k * (mag.norm() - m - s_.field_dn_lp);
+  s_.field_dv_lp += k * (m * (dip - field_dip_reference(dip, dt)) - s_.field_dv_lp);
+}
+
+double ParallelKf::field_dip_reference(double dip, double dt) {
+  // A dip measured against sZ carries sZ's tilt error about magnetic east, which does not turn
+  // the heading (sY = sZ x sX' keeps its direction), yet dv would read it as a disturbance: the
+  // present one (against any reference) and, for a reference learnt while the tilt was poor (the
+  // bias not yet known), the learning window's for good. So the term measures against the
+  // accepted fields' dips, each measured against sZ as the present one is, weighted by the
+  // inverse of the published tilt variance about magnetic east (each dip's error variance): the
+  // minimum-variance estimate of the dip as sZ shows it, which the slow tilt error moves with
+  // the present dip. It starts on the gate's reference (learnt or configured) and forgets as the
+  // gate's reference follows (mag_reference_tau_s). The gate's own reference, and so the
+  // estimate, is untouched.
+  const uint64_t epoch = s_.gate.reacquired + s_.gate.relearnt;
+  if (!s_.initialized) {
+    return s_.gate.dip_rad;
+  }
+  const ParallelKfOutput out = output();
+  const Eigen::Matrix3d cov = covariance_terms(out).sum();
+  Eigen::Vector3d east;
+  if (!safe_normalize(Eigen::Vector3d::UnitZ().cross(out.q_world_body * s_.kf2.u()), east, 1e-9)) {
+    return s_.gate.dip_rad;
+  }
+  // each dip's error: the tilt about magnetic east (slow, shared by neighbouring dips) and the
+  // magnetometer's white noise across the field in the vertical plane, sigma_M / m (independent
+  // from dip to dip), so the mean does not run after the last few dips when the tilt is well known
+  const double noise = p_.sigma_mag_ut / s_.gate.m_ut;
+  const double var = std::max(east.dot(cov * east) + noise * noise, kMinTiltVarRad2);
+  if (!std::isfinite(s_.field_dip_ref) || s_.field_dip_epoch != epoch) {
+    // the learning window's dips, as one weight: startup_s at the present variance
+    s_.field_dip_ref = s_.gate.dip_rad;
+    s_.field_dip_weight = gp_.startup_s / var;
+    s_.field_dip_epoch = epoch;
+  }
+  if (gp_.reference_tau_s > 0.0) {
+    s_.field_dip_weight *= std::exp(-dt / gp_.reference_tau_s);
+  }
+  const double w = dt / var;
+  s_.field_dip_weight += w;
+  s_.field_dip_ref += (w / s_.field_dip_weight) * (dip - s_.field_dip_ref);
+  return s_.field_dip_ref;
+}
+
 void ParallelKf::restart_heading(const Eigen::Vector3d& mag) {
   s_.kf2.reset(mag.normalized(), kInitVarDirection, kInitVarDisturbanceUt2);
   s_.heading_anchored = true;
@@ -830,6 +898,7 @@ void ParallelKf::restart_heading(const Eigen::Vector3d& mag) {
   s_.bias_err_att_cov.col(2).setZero();  // and no error the bias filter has seen the rate of
   s_.field_dn_lp = 0.0;  // deviations from the reference it replaced
   s_.field_dv_lp = 0.0;
+  s_.field_dip_ref = std::nan("");
   s_.mb_head_trusted = false;  // a jump of the heading, not a measurement of the bias
   s_.q_lp_heading = gyro_attitude();  // the heading's low-passed attitude (gyro scale error) starts again
 }
@@ -984,6 +1053,22 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
       const double tan_dip = std::sin(s_.gate.dip_rad) / std::max(std::cos(s_.gate.dip_rad), std::sqrt(kMinCos2Dip));
       const double a_north = (w * s_.accel_h_heading_i).x() / g;
       t.external_accel(2, 2) = tan_dip * tan_dip * a_north * a_north;
+      // One acceleration tilts the estimate now, (-a_y, a_x) / g, and pulls the heading, -tan(dip)
+      // A_x / g with A low-passed over KF2's lag: their cross-covariance is the cross moment of a
+      // and A times those factors. At most full correlation (a slowly varying acceleration, as a
+      // start's turning frame, gives it): xc^T T^-1 xc <= the heading's share, T the tilt's block.
+      const Eigen::Matrix3d x = w * s_.accel_h_cross_i * w.transpose() / (g * g);
+      Eigen::Vector2d xc(tan_dip * x(1, 0), -tan_dip * x(0, 0));
+      const double det = tilt.determinant();
+      if (det > 0.0) {
+        const double q = xc.dot(tilt.inverse() * xc);
+        const double h = t.external_accel(2, 2);
+        if (q > h) {
+          xc *= std::sqrt(h / q);
+        }
+        t.external_accel.block<2, 1>(0, 2) = xc;
+        t.external_accel.block<1, 2>(2, 0) = xc.transpose();
+      }
     }
   } else {
     // KF1 sees the raw accelerometer: the external acceleration's horizontal part taken as large

@@ -397,6 +397,10 @@ struct ParallelKfState {
   /// that deviation itself low-passed over KF2's lag (inertial frame, m/s^2): its part about magnetic
   /// north is what KF2 pulls the heading with (-tan(dip) times the tilt)
   Eigen::Vector3d accel_h_heading_i{0, 0, 0};
+  /// the deviation times that low-passed one (d accel_h_heading_i^T), low-passed over
+  /// accel_lowpass_tau_s as accel_h_cov_i (inertial frame, (m/s^2)^2): the tilt's and the heading's
+  /// shares of the acceleration come from one realisation, and this is their cross moment
+  Eigen::Matrix3d accel_h_cross_i = Eigen::Matrix3d::Zero();
   Eigen::Vector3d accel_h_heading_sum_i{0, 0, 0};  ///< the deviation's integral over the period so far, m/s
   double accel_h_heading_span_s = 0.0;             ///< that period so far, s
   /// The tilt's low-pass run again on the same input (accel_bw's twin), for the external
@@ -419,6 +423,11 @@ struct ParallelKfState {
   double accel_ref_span_s = 0.0;  ///< time the reference has averaged (its stages' window until their time constant), s
   double field_dn_lp = 0.0;    ///< |s_M| - m of the fields used for heading, low-passed over KF2's lag, uT
   double field_dv_lp = 0.0;    ///< m (dip - alpha) of the same, low-passed the same way, uT
+  /// alpha for field_dv_lp with a learnt reference: the accepted dips' mean weighted by the inverse
+  /// published tilt variance about magnetic east (field_dip_reference), rad; NaN = not started
+  double field_dip_ref = std::nan("");
+  double field_dip_weight = 0.0;  ///< its sum of weights, s/rad^2
+  uint64_t field_dip_epoch = 0;   ///< the gate's reacquired + relearnt when it started
   /// The attitude error the bias error has left in the estimate (world frame x, y, z, rad; then
   /// the second state of the tilt low-pass's error about x and y, rad/s, for a second-order
   /// low-pass): it drifts by R (b_true - b), the tilt forgets the drift through the accelerometer
@@ -499,8 +508,8 @@ class ParallelKf {
   ///             bias filter's gains with the noise its measurements really have, not the larger
   ///             one the filter is designed with: the gyro's white noise over the window
   ///             (gyro_noise_density_rps_per_sqrt_hz when the sensor says it) and, in motion, the
-  ///             rate of the estimate's own attitude error that is not the bias's
-  ///             (motion_noise_window); growing by the gyro's own bias walk
+  ///             rate of the estimate's own attitude error, the bias's lag error's included
+  ///             (motion_noise_window, LagIncrement); growing by the gyro's own bias walk
   ///             gyro_bias_walk_rps_per_sqrt_s when the sensor says it)
   ///           each diagonal term at least tau^2 P_b (tilt) and P_b,z t^2 (heading; t the time
   ///             since fields last held the heading, each accepted field removing dt / tau_2 of
@@ -508,7 +517,8 @@ class ParallelKf {
   ///             P_b decorrelates from that error faster than the error does;
   ///           + the scale error's part about the vertical, with the attitude low-passed over tau_2;
   ///           + the disturbance of the fields used, averaged over KF2's lag (the norm and dip
-  ///             deviations from the reference, low-passed), over (m cos(dip))^2: its horizontal
+  ///             deviations from the reference, low-passed; the dip's against the accepted dips' mean weighted
+  ///             by the inverse tilt variance about magnetic east, field_dip_reference), over (m cos(dip))^2: its horizontal
   ///             part across the field, which moves the heading, is taken as large as the two the
   ///             gate can see (the mean of their squares);
   ///   both    + (dt^2 / 12) (R w)(R w)^T while imu_delay_s is not known (NaN): the output is
@@ -578,7 +588,10 @@ class ParallelKf {
   /// the bias's over it, -(x_j - x_{j-1}) / t. x (world rotation vector) is taken as first-order
   /// Gauss-Markov per axis: its covariance the published terms that are not the bias's
   /// (reference_error_cov), its time constant the lag of the KF that follows it (the
-  /// accelerometer low-pass's tau for the tilt, KF2's for the heading).
+  /// accelerometer low-pass's tau for the tilt, KF2's for the heading). d and its moments also
+  /// carry the bias's own lag error's increment (LagIncrement, independent of x): the correction
+  /// rate a window measures is the rate of the whole error, whose lag part follows the bias error
+  /// itself (at a start the correction has not yet turned, and the window tells little of b).
   struct MotionNoise {
     Eigen::Matrix3d e_d = Eigen::Matrix3d::Zero();   ///< E[b_err d^T], d = x_j - x_{j-1}, body x world
     Eigen::Matrix3d e_x = Eigen::Matrix3d::Zero();   ///< E[b_err x_j^T], body x world
@@ -586,6 +599,16 @@ class ParallelKf {
     Eigen::Matrix3d d_x = Eigen::Matrix3d::Zero();   ///< E[d x_j^T], world
     Eigen::Matrix3d r = Eigen::Matrix3d::Identity();  ///< R_world_body
     double t = 0.0;                                   ///< the window, s
+    /// E[x_lag,j d^T] (5 x world): the lag error (lag_cov) against the window's increment
+    Eigen::Matrix<double, 5, 3> lag_x_d = Eigen::Matrix<double, 5, 3>::Zero();
+  };
+  /// The bias's own lag error's increment over the window just propagated, d = x_j - x_{j-1}
+  /// (lag_cov's world x, y, z): a motion measurement is the rate of the estimate's whole attitude
+  /// error, so it carries this too (propagate_lag_error computes it, motion_noise_window adds it).
+  struct LagIncrement {
+    Eigen::Matrix3d d_d = Eigen::Matrix3d::Zero();  ///< E[d d^T], world
+    Eigen::Matrix3d b_d = Eigen::Matrix3d::Zero();  ///< E[b_err d^T], body x world
+    Eigen::Matrix<double, 5, 3> x_d = Eigen::Matrix<double, 5, 3>::Zero();  ///< E[x_j d^T]
   };
   bool step(const ImuSample& s, SampleCheck& c);  ///< update() without the reporting
   void initialize(const ImuSample& s, bool mag_ok);
@@ -603,7 +626,7 @@ class ParallelKf {
   /// component along unit *keep (if given) is left as it is; `mn` (a motion measurement's window,
   /// else null) for the real error's update (bias_error_update).
   void bias_measure(const Eigen::Vector3d& h, double z, double w, const Eigen::Vector3d* keep, MotionNoise* mn);
-  void motion_bias_measure();
+  void motion_bias_measure(const LagIncrement& lag);
   /// The horizontal external acceleration the tilt's low-pass let through (accel_h_cov_i), from
   /// the raw accelerometer in the almost inertial frame `accel_i` (r_ib times the body's, which
   /// step() computes once for the tilt's low-pass) of a step of dt; for the covariance.
@@ -628,8 +651,10 @@ class ParallelKf {
   /// KF2's correction lag about the vertical for a step of dt, s (0 before a direction exists)
   [[nodiscard]] double heading_lag_s(double dt) const;
   /// Propagates the attitude error the bias error leaves (lag_cov, lag_bias_cov) over t seconds.
-  void propagate_lag_error(double t);
-  [[nodiscard]] MotionNoise motion_noise_window(double t) const;
+  /// Returns the lag error's increment over the window (LagIncrement).
+  LagIncrement propagate_lag_error(double t);
+  /// x's statistics over a window of t seconds, with the bias's lag error's increment `lag` added
+  [[nodiscard]] MotionNoise motion_noise_window(double t, const LagIncrement& lag) const;
   /// x's decay over a window of t seconds per world axis, e^(-t / tau) (motion_noise_window's A).
   [[nodiscard]] Eigen::Vector3d reference_error_decay(double t) const;
   /// The covariance of the estimate's attitude error that is not the bias's (world, rad^2): the
@@ -647,6 +672,10 @@ class ParallelKf {
   /// KF2 restarted on the field `mag` (a relearnt reference, or the first accepted field after a
   /// start on a gated one): the heading jumps to it, as at a start
   void restart_heading(const Eigen::Vector3d& mag);
+  /// field_dn_lp / field_dv_lp from an accepted field, after KF2's correction (lag: KF2's, s)
+  void field_deviation_step(const Eigen::Vector3d& mag, double lag, double dt);
+  /// The dip the field term measures dv against (updated with the accepted dip `dip`), rad
+  double field_dip_reference(double dip, double dt);
 
   /// The delay the output is predicted over, s: imu_delay_s, or half the last step when not known.
   [[nodiscard]] double output_delay_s() const;
