@@ -860,17 +860,24 @@ double ParallelKf::field_dip_reference(double dip, double dt) {
   if (!s_.initialized) {
     return s_.gate.dip_rad;
   }
-  const ParallelKfOutput out = output();
-  const Eigen::Matrix3d cov = covariance_terms(out).sum();
-  Eigen::Vector3d east;
-  if (!safe_normalize(Eigen::Vector3d::UnitZ().cross(out.q_world_body * s_.kf2.u()), east, 1e-9)) {
-    return s_.gate.dip_rad;
+  // The published tilt variance about magnetic east changes over the bias filter's and the
+  // low-pass's seconds, not from sample to sample: it is taken once per bias window (kBiasPeriodS),
+  // which keeps the whole covariance (about 1800 instructions) out of the per-sample cost.
+  s_.field_dip_var_age_s += dt;
+  if (!(s_.field_dip_tilt_var >= 0.0) || s_.field_dip_var_age_s >= kBiasPeriodS) {
+    const ParallelKfOutput out = output();
+    Eigen::Vector3d east;
+    if (!safe_normalize(Eigen::Vector3d::UnitZ().cross(out.q_world_body * s_.kf2.u()), east, 1e-9)) {
+      return s_.gate.dip_rad;
+    }
+    s_.field_dip_tilt_var = east.dot(covariance_terms(out).sum() * east);
+    s_.field_dip_var_age_s = 0.0;
   }
   // each dip's error: the tilt about magnetic east (slow, shared by neighbouring dips) and the
   // magnetometer's white noise across the field in the vertical plane, sigma_M / m (independent
   // from dip to dip), so the mean does not run after the last few dips when the tilt is well known
   const double noise = p_.sigma_mag_ut / s_.gate.m_ut;
-  const double var = std::max(east.dot(cov * east) + noise * noise, kMinTiltVarRad2);
+  const double var = std::max(s_.field_dip_tilt_var + noise * noise, kMinTiltVarRad2);
   if (!std::isfinite(s_.field_dip_ref) || s_.field_dip_epoch != epoch) {
     // the learning window's dips, as one weight: startup_s at the present variance
     s_.field_dip_ref = s_.gate.dip_rad;
@@ -899,6 +906,7 @@ void ParallelKf::restart_heading(const Eigen::Vector3d& mag) {
   s_.field_dn_lp = 0.0;  // deviations from the reference it replaced
   s_.field_dv_lp = 0.0;
   s_.field_dip_ref = std::nan("");
+  s_.field_dip_tilt_var = std::nan("");  // the covariance jumps with the heading: taken again
   s_.mb_head_trusted = false;  // a jump of the heading, not a measurement of the bias
   s_.q_lp_heading = gyro_attitude();  // the heading's low-passed attitude (gyro scale error) starts again
 }

@@ -428,6 +428,10 @@ struct ParallelKfState {
   double field_dip_ref = std::nan("");
   double field_dip_weight = 0.0;  ///< its sum of weights, s/rad^2
   uint64_t field_dip_epoch = 0;   ///< the gate's reacquired + relearnt when it started
+  /// the published tilt variance about magnetic east those weights use, rad^2 (NaN = not taken
+  /// yet), and the time since it was taken, s: refreshed once per bias window
+  double field_dip_tilt_var = std::nan("");
+  double field_dip_var_age_s = 0.0;
   /// The attitude error the bias error has left in the estimate (world frame x, y, z, rad; then
   /// the second state of the tilt low-pass's error about x and y, rad/s, for a second-order
   /// low-pass): it drifts by R (b_true - b), the tilt forgets the drift through the accelerometer
