@@ -296,6 +296,11 @@ void SelectiveEkf::process_imu(const ImuInput& in_raw, bool first_pass) {
 }
 
 void SelectiveEkf::process_vision(const VisionPose& v, bool first_pass) {
+  if (x_.pre.start_pending) {
+    // a start at rest not yet settled (settle_start): its tilt bound joins P_err, which the
+    // frame's rows shrink by their own gain (the low-pass's part stays until it forgets it)
+    add_start_bound(1.0);
+  }
   const aids::AidContext c{x_, p_, first_pass};
   const aids::VisionMeasurement m = aids::vision_measurement(p_, v);
   aids::aid_vision_attitude(c, m, status_of(SelectiveEkfAid::kVisionAttitude));
