@@ -394,7 +394,6 @@ void SelectiveEkf::drive_ext_accel_error(const Eigen::Vector3d& deviation, doubl
 // sample is taken as gravity (docs/SELECTIVE_EKF.md).
 void SelectiveEkf::settle_start(const ImuInput& in, const Eigen::Vector3d& deviation, double k, double dt_s) {
   SelectiveEkfPreState& pre = x_.pre;
-  pre.start_lp_weight *= 1.0 - k;
   if (deviation.norm() > p_.rest_accel_max_mps2 || (in.gyro - x_.b_rps).norm() > p_.rest_gyro_max_rps) {
     add_start_bound(1.0);
     return;
@@ -405,6 +404,7 @@ void SelectiveEkf::settle_start(const ImuInput& in, const Eigen::Vector3d& devia
   pre.start_t_1 += t * dt_s;
   pre.start_t_2 += t * t * dt_s;
   if (t < p_.rest_filter_tau_s) {
+    pre.start_lp_weight *= 1.0 - k;  // (a merge above comes before this sample's e <- (1 - k) e)
     return;
   }
   const double g = pre.lp_accel_i.norm();
