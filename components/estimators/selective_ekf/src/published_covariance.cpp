@@ -165,9 +165,13 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const Eigen::Matrix3d b = so3_right_jacobian(wd) * d;
   // (the estimate's error covariance: P's gains, the process noise of a gyro sample that is the
   // rate's mean over its interval; SelectiveEkfState::P_err)
-  // (a start at rest whose first sample's noise awaits an interval: the tilt's prior in its place)
-  const Eigen::Matrix3d p_tt = x_.P_err.block<3, 3>(kTh, kTh) +
-                               (x_.pre.start_noise_pending ? x_.pre.start_tilt_prior : Eigen::Matrix3d::Zero());
+  // (a start at rest whose first sample's external acceleration is not settled: its tilt bound,
+  // turned from the low-pass's frame to the body's, settle_start)
+  Eigen::Matrix3d p_tt = x_.P_err.block<3, 3>(kTh, kTh);
+  if (x_.pre.start_pending) {
+    const Eigen::Matrix3d r_ib = x_.pre.q_ib.toRotationMatrix();
+    p_tt += r_ib.transpose() * x_.pre.start_tilt_bound * r_ib;
+  }
   const Eigen::Matrix3d p_tw = x_.P_err.block<3, 3>(kTh, kW);
   const Eigen::Matrix3d p_ww = x_.P_err.block<3, 3>(kW, kW);
   const Eigen::Matrix3d body = a * p_tt * a.transpose() + a * p_tw * b.transpose() +

@@ -15,6 +15,19 @@ namespace {
 
 /// Output limit: a state-output difference above 30 deg is a reset, taken at once (sin(15 deg)).
 constexpr double kOutputSnapHalfSin = 0.25881904510252074;
+constexpr double kChi2Dof2P95 = 5.991;  ///< the chi-square distribution's 95 % quantile, 2 degrees of freedom
+
+/// The tilt error a first sample that passes the one-sample rest test can carry, rad^2 per tilt
+/// axis. The test holds its norm within rest_accel_max_mps2 (tol) of g; an acceleration a across
+/// gravity gives |f| = sqrt(g^2 + a^2), so up to a = sqrt((g + tol)^2 - g^2) passes (3.17 m/s^2
+/// with 0.5), a tilt error theta with cos(theta) = g / (g + tol) (17.9 deg). The variance is the
+/// one whose 95 % ellipse (2 degrees of freedom) has that radius (7.3 deg, 0.0163 rad^2). The
+/// gyro's criterion bounds the rate, not the tilt (a linear acceleration turns nothing).
+double rest_start_tilt_variance(const SelectiveEkfParams& p) {
+  const double g = p.gravity_mps2;
+  const double theta = std::acos(g / (g + p.rest_accel_max_mps2));
+  return theta * theta / kChi2Dof2P95;
+}
 
 }  // namespace
 
@@ -283,6 +296,11 @@ void SelectiveEkf::process_imu(const ImuInput& in_raw, bool first_pass) {
 }
 
 void SelectiveEkf::process_vision(const VisionPose& v, bool first_pass) {
+  if (x_.pre.start_pending) {
+    // a start at rest not yet settled (settle_start): its tilt bound joins P_err, which the
+    // frame's rows shrink by their own gain (the low-pass's part stays until it forgets it)
+    add_start_bound(1.0);
+  }
   const aids::AidContext c{x_, p_, first_pass};
   const aids::VisionMeasurement m = aids::vision_measurement(p_, v);
   aids::aid_vision_attitude(c, m, status_of(SelectiveEkfAid::kVisionAttitude));
@@ -307,10 +325,6 @@ void SelectiveEkf::learn_reference(const ImuSample& s) {
     mag_.reference_ready = true;
   }
 }
-
-namespace {
-constexpr double kChi2Dof2P95 = 5.991;  ///< the chi-square distribution's 95 % quantile, 2 degrees of freedom
-}  // namespace
 
 // The external acceleration's error (SelectiveEkfState::ext_accel_error, the accelerometer's
 // figure known) over a prediction, by P's F: th' = a th + b w, e' = e + e_w w, t' = t + h v.
@@ -352,6 +366,83 @@ void SelectiveEkf::drive_ext_accel_error(const Eigen::Vector3d& deviation, doubl
   }
 }
 
+// A start at rest with the accelerometer's noise known (preprocess) took its first sample's tilt
+// as known up to the noise, publishing the rest test's tilt bound meanwhile. The samples after it
+// settle whether that sample carried external acceleration. Both the attitude and the low-pass
+// started on it, so its error stays in both (e = dth: the tilt rows see nothing of it) until the
+// low-pass forgets it over accel_lowpass_tau_s.
+//   A sample outside the rest test (|deviation from the low-pass| above rest_accel_max_mps2, or
+//   |gyro - bias| above rest_gyro_max_rps) within rest_filter_tau_s of the start: the sensor was
+//   not at rest, and the first sample may have carried the bound's acceleration: P_err takes the
+//   bound (a transient at the first sample shows at the second as its negative; a push, when it
+//   ends).
+//   The rest test held for rest_filter_tau_s (the rest detector's time constant, over which it
+//   tells motion from rest): a later sample at rest deviates from the first by minus the first's
+//   acceleration, a step from the second sample on; the frame's turn with a bias not yet learnt
+//   adds a ramp (g x db t, P_err's own). The step is the intercept c of the straight line fitted
+//   to the deviations over the window (weights dt, each sample's noise N^2 / dt per axis: the
+//   line's variance at s is N^2 (S2 - 2 s S1 + s^2 S0) / (S0 S2 - S1^2)); it holds the first
+//   sample's noise too (N^2 / dt, which P_err has: start_noise_pending). An acceleration that
+//   ends within the window is a step later than the second sample, which the line's end value
+//   covers (a step at a fraction f of the window: (1 - f)(1 + 3 f) of it, at least all of it
+//   up to f = 2/3; the intercept only (1 - f)(1 - 3 f)). The larger of the two across gravity,
+//   less the 95 % radius of those two noises, is the first sample's acceleration: P_err takes
+//   the bound scaled to that tilt, (|a_perp| / g)^2 over the bound (at most all of it). At rest,
+//   nothing (a bias not yet learnt turns the frame by db t: a ramp, g db T / 2 at the window's
+//   end against its radius, 0.1 m/s^2 at 0.04 m/s^2 per sample).
+// An acceleration that lasts longer than about 2/3 of rest_filter_tau_s unchanged from the first
+// sample is taken as gravity (docs/SELECTIVE_EKF.md).
+void SelectiveEkf::settle_start(const ImuInput& in, const Eigen::Vector3d& deviation, double k, double dt_s) {
+  SelectiveEkfPreState& pre = x_.pre;
+  if (deviation.norm() > p_.rest_accel_max_mps2 || (in.gyro - x_.b_rps).norm() > p_.rest_gyro_max_rps) {
+    add_start_bound(1.0);
+    return;
+  }
+  const double t = pre.since_start_s;
+  pre.start_dev_0 += deviation * dt_s;
+  pre.start_dev_1 += deviation * (t * dt_s);
+  pre.start_t_1 += t * dt_s;
+  pre.start_t_2 += t * t * dt_s;
+  if (t < p_.rest_filter_tau_s) {
+    pre.start_lp_weight *= 1.0 - k;  // (a merge above comes before this sample's e <- (1 - k) e)
+    return;
+  }
+  const double g = pre.lp_accel_i.norm();
+  const double bound = 0.5 * pre.start_tilt_bound.trace();
+  const double det = t * pre.start_t_2 - pre.start_t_1 * pre.start_t_1;  // S0 = t
+  if (g > 0.0 && bound > 0.0 && det > 0.0) {
+    const Eigen::Vector3d c = (pre.start_t_2 * pre.start_dev_0 - pre.start_t_1 * pre.start_dev_1) / det;
+    const Eigen::Vector3d r = (t * pre.start_dev_1 - pre.start_t_1 * pre.start_dev_0) / det;
+    const double n2 = p_.accel_noise_density_mps2_per_sqrt_hz * p_.accel_noise_density_mps2_per_sqrt_hz;
+    // the line at time s across gravity, less the 95 % radius of its noise and the first sample's
+    auto excess = [&](double s) {
+      const double across = (c + r * s).cross(pre.lp_accel_i / g).norm();
+      const double var = n2 * (1.0 / dt_s + (pre.start_t_2 - 2.0 * s * pre.start_t_1 + s * s * t) / det);
+      return std::max(across - std::sqrt(kChi2Dof2P95 * var), 0.0);
+    };
+    const double tilt = std::max(excess(0.0), excess(t)) / g;
+    add_start_bound(std::min(1.0, tilt * tilt / bound));
+  }
+  pre.start_pending = false;
+}
+
+void SelectiveEkf::add_start_bound(double share) {
+  SelectiveEkfPreState& pre = x_.pre;
+  pre.start_pending = false;
+  if (!(share > 0.0)) {
+    return;
+  }
+  // the bound is in the low-pass's frame (the first sample's body frame); the attitude's error is
+  // in the body's now (R_ib^T), the low-pass's part e weighted by what it keeps of that sample
+  const Eigen::Matrix3d b = share * pre.start_tilt_bound;
+  const Eigen::Matrix3d a = pre.q_ib.toRotationMatrix().transpose();
+  const double w = pre.start_lp_weight;
+  x_.P_err.block<3, 3>(kTh, kTh) += a * b * a.transpose();
+  x_.P_err.block<3, 3>(kE, kE) += (w * w) * b;
+  x_.P_err.block<3, 3>(kTh, kE) += w * a * b;
+  x_.P_err.block<3, 3>(kE, kTh) += w * b * a.transpose();
+}
+
 void SelectiveEkf::preprocess(ImuInput& in) {
   // Part of the state (x_.pre), so a replay after a late vision frame re-derives it exactly.
   SelectiveEkfPreState& pre = x_.pre;
@@ -374,11 +465,13 @@ void SelectiveEkf::preprocess(ImuInput& in) {
       // noise, not init_sigma_attitude_deg (a bound for a start in motion, whose sample carries
       // external acceleration). Its variance needs the sample's interval, so it is added at the
       // next sample (start_noise_pending); here the tilt directions start known (the heading's
-      // start kept) in P_err, and the prior they had is published until then (start_tilt_prior):
-      // without an interval the sample's noise has no figure, and one sample's rest test (the
-      // norm within rest_accel_max_mps2) lets through an acceleration across gravity of up to
-      // sqrt(2 g rest_accel_max_mps2) (3.1 m/s^2, 18 deg), so it does not bound the tilt better.
-      pre.start_tilt_prior = tilt * x_.P_err.block<3, 3>(kTh, kTh) * tilt;
+      // start kept) in P_err. The one-sample rest test lets an acceleration across gravity
+      // through, up to the tilt bound rest_start_tilt_variance: that is published (or the prior,
+      // the smaller) until the samples after it settle it (settle_start).
+      const Eigen::Matrix3d prior = tilt * x_.P_err.block<3, 3>(kTh, kTh) * tilt;
+      const double bound = rest_start_tilt_variance(p_);
+      pre.start_tilt_bound = 0.5 * prior.trace() > bound ? Eigen::Matrix3d(bound * tilt) : prior;
+      pre.start_pending = true;
       Mat keep = Mat::Identity();
       keep.block<3, 3>(kTh, kTh) = u0 * u0.transpose();
       x_.P_err = keep * x_.P_err * keep.transpose();
@@ -420,6 +513,9 @@ void SelectiveEkf::preprocess(ImuInput& in) {
   const Eigen::Vector3d deviation = pre.q_ib * in.accel - pre.lp_accel_i;  // the sample less the low-pass
   if (aids::accel_noise_known(p_)) {
     drive_ext_accel_error(deviation, k, dt_s);
+  }
+  if (pre.start_pending) {
+    settle_start(in, deviation, k, dt_s);
   }
   pre.lp_accel_i += k * deviation;
   // its error: the frame's error less the low-passed past of it, e <- (1 - k) e (rows and

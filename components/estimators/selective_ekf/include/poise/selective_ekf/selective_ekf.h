@@ -422,10 +422,22 @@ struct SelectiveEkfPreState {
   /// the first sample's accelerometer noise is still to be added to P_err's tilt and e (a start
   /// at rest with accel_noise_density_mps2_per_sqrt_hz known: it needs an interval)
   bool start_noise_pending = false;
-  /// the tilt part of P_err's prior that such a start removed (body frame of the first sample,
-  /// rad^2): until the interval is known the sample's noise has no figure, so the published
-  /// covariance carries this prior in its place (attitude_covariance())
-  Eigen::Matrix3d start_tilt_prior = Eigen::Matrix3d::Zero();
+  /// such a start's external acceleration is not settled yet (settle_start): the first sample
+  /// passed the one-sample rest test, which lets an acceleration across gravity through; the
+  /// published covariance carries start_tilt_bound while it is not settled
+  bool start_pending = false;
+  /// the tilt error that acceleration can carry, rad^2 (the frame of the low-pass, which was the
+  /// first sample's body frame: rest_start_tilt_variance across the first up vector)
+  Eigen::Matrix3d start_tilt_bound = Eigen::Matrix3d::Zero();
+  /// the first sample's weight left in the low-pass, prod (1 - k) since the start
+  double start_lp_weight = 1.0;
+  /// the moments of the samples' deviation d from the low-pass since the start, over time t since
+  /// the start, for the straight line fitted to it (settle_start): int d dt (m/s^2 s),
+  /// int d t dt (m/s^2 s^2), int t dt (s^2), int t^2 dt (s^3)
+  Eigen::Vector3d start_dev_0{0, 0, 0};
+  Eigen::Vector3d start_dev_1{0, 0, 0};
+  double start_t_1 = 0.0;
+  double start_t_2 = 0.0;
   RestDetector rest_detector;           ///< rest detected at the last sample: rest_detector.rest
 };
 
@@ -676,6 +688,11 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// preprocess: the external acceleration's error (SelectiveEkfState::ext_accel_error) driven by a
   /// sample's deviation from the accelerometer low-pass (its gain k), with the accelerometer's figure
   void drive_ext_accel_error(const Eigen::Vector3d& deviation, double k, double dt_s);
+  /// A start at rest: whether its first sample carried external acceleration, from the samples
+  /// after it (selective_ekf.cpp).
+  void settle_start(const ImuInput& in, const Eigen::Vector3d& deviation, double k, double dt_s);
+  /// P_err += share times the start's tilt bound, its low-pass part weighted.
+  void add_start_bound(double share);
   /// predict_to: the external acceleration's error by the prediction's F (a, b, e_w, interval h)
   void propagate_ext_accel_error(const Eigen::Matrix3d& a, const Eigen::Matrix3d& b, const Eigen::Matrix3d& e_w,
                                  double h);
