@@ -1019,6 +1019,51 @@ Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) con
   return covariance_terms(out).sum();
 }
 
+/// The external acceleration's share of the published covariance (world rotation-vector axes):
+/// the tilt the low-pass let through, the heading KF2 takes from it, and their cross-covariance.
+Eigen::Matrix3d ParallelKf::external_accel_covariance(const Eigen::Matrix3d& r) const {
+  Eigen::Matrix3d e = Eigen::Matrix3d::Zero();
+  const double g = p_.tilt.gravity_mps2;
+  if (p_.accel_lowpass_tau_s > 0.0) {
+    // the horizontal external acceleration a the low-pass let through (its covariance M, inertial
+    // frame; external_accel_step) tilts the up vector towards it: rotation e_z x a / g
+    const Eigen::Matrix3d w = r * s_.r_ib.transpose();
+    const Eigen::Matrix3d m = w * s_.accel_h_cov_i * w.transpose();
+    Eigen::Matrix2d tilt;
+    tilt << m(1, 1), -m(0, 1), -m(0, 1), m(0, 0);
+    tilt /= g * g;
+    e.topLeftCorner<2, 2>() = tilt;
+    if (s_.gate.learnt) {
+      // the tilt about magnetic north (ENU y) is the east acceleration over g; KF2 pulls the heading
+      // to -tan(dip) times it, low-passed over its lag
+      const double tan_dip = std::sin(s_.gate.dip_rad) / std::max(std::cos(s_.gate.dip_rad), std::sqrt(kMinCos2Dip));
+      const double a_north = (w * s_.accel_h_heading_i).x() / g;
+      e(2, 2) = tan_dip * tan_dip * a_north * a_north;
+      // One acceleration tilts the estimate now, (-a_y, a_x) / g, and pulls the heading, -tan(dip)
+      // A_x / g with A low-passed over KF2's lag: their cross-covariance is the cross moment of a
+      // and A times those factors. At most full correlation (a slowly varying acceleration, as a
+      // start's turning frame, gives it): xc^T T^-1 xc <= the heading's share, T the tilt's block.
+      const Eigen::Matrix3d x = w * s_.accel_h_cross_i * w.transpose() / (g * g);
+      Eigen::Vector2d xc(tan_dip * x(1, 0), -tan_dip * x(0, 0));
+      const double det = tilt.determinant();
+      if (det > 0.0) {
+        const double q = xc.dot(tilt.inverse() * xc);
+        const double h = e(2, 2);
+        if (q > h) {
+          xc *= std::sqrt(h / q);
+        }
+        e.block<2, 1>(0, 2) = xc;
+        e.block<1, 2>(2, 0) = xc.transpose();
+      }
+    }
+  } else {
+    // KF1 sees the raw accelerometer: the external acceleration's horizontal part taken as large
+    // as the vertical one its magnitude shows
+    e.topLeftCorner<2, 2>().diagonal().array() += s_.accel_dev2_lp / (g * g);
+  }
+  return e;
+}
+
 ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& out) const {
   ParallelKfCovarianceTerms t;
   const Eigen::Matrix3d r = out.q_world_body.toRotationMatrix();
@@ -1032,7 +1077,6 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
   t.kf(0, 1) = t.kf(1, 0) = -p_up(0, 1);
   t.kf(2, 2) = p_field(0, 0) / (c * c);
   // what the KFs do not model (see the header)
-  const double g = p_.tilt.gravity_mps2;
   if (p_.bias_estimation) {
     // the error past bias errors left (propagated), and at least what the present bias
     // uncertainty gives over the lags (tau^2 P_b for the tilt, P_b,z t^2 for the heading): the
@@ -1046,43 +1090,7 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
                                 s_.heading_initialized ? p_bias(2, 2) * since * since : 0.0);
     t.bias_lag.diagonal() += (floor - s_.lag_cov.diagonal().head<3>()).cwiseMax(0.0);
   }
-  if (p_.accel_lowpass_tau_s > 0.0) {
-    // the horizontal external acceleration a the low-pass let through (its covariance M, inertial
-    // frame; external_accel_step) tilts the up vector towards it: rotation e_z x a / g
-    const Eigen::Matrix3d w = r * s_.r_ib.transpose();
-    const Eigen::Matrix3d m = w * s_.accel_h_cov_i * w.transpose();
-    Eigen::Matrix2d tilt;
-    tilt << m(1, 1), -m(0, 1), -m(0, 1), m(0, 0);
-    tilt /= g * g;
-    t.external_accel.topLeftCorner<2, 2>() = tilt;
-    if (s_.gate.learnt) {
-      // the tilt about magnetic north (ENU y) is the east acceleration over g; KF2 pulls the heading
-      // to -tan(dip) times it, low-passed over its lag
-      const double tan_dip = std::sin(s_.gate.dip_rad) / std::max(std::cos(s_.gate.dip_rad), std::sqrt(kMinCos2Dip));
-      const double a_north = (w * s_.accel_h_heading_i).x() / g;
-      t.external_accel(2, 2) = tan_dip * tan_dip * a_north * a_north;
-      // One acceleration tilts the estimate now, (-a_y, a_x) / g, and pulls the heading, -tan(dip)
-      // A_x / g with A low-passed over KF2's lag: their cross-covariance is the cross moment of a
-      // and A times those factors. At most full correlation (a slowly varying acceleration, as a
-      // start's turning frame, gives it): xc^T T^-1 xc <= the heading's share, T the tilt's block.
-      const Eigen::Matrix3d x = w * s_.accel_h_cross_i * w.transpose() / (g * g);
-      Eigen::Vector2d xc(tan_dip * x(1, 0), -tan_dip * x(0, 0));
-      const double det = tilt.determinant();
-      if (det > 0.0) {
-        const double q = xc.dot(tilt.inverse() * xc);
-        const double h = t.external_accel(2, 2);
-        if (q > h) {
-          xc *= std::sqrt(h / q);
-        }
-        t.external_accel.block<2, 1>(0, 2) = xc;
-        t.external_accel.block<1, 2>(2, 0) = xc.transpose();
-      }
-    }
-  } else {
-    // KF1 sees the raw accelerometer: the external acceleration's horizontal part taken as large
-    // as the vertical one its magnitude shows
-    t.external_accel.topLeftCorner<2, 2>().diagonal().array() += s_.accel_dev2_lp / (g * g);
-  }
+  t.external_accel = external_accel_covariance(r);
   if (gyro_scale_error() > 0.0) {
     // scale errors of the three gyro axes, independent, each s: the error about body axis i is
     // s times the rotation about it since the low-passed attitude

@@ -156,8 +156,10 @@ void SelectiveEkf::track_unmodelled(const ImuInput& in, bool aided, double aidin
   }
 }
 
-Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
-  const SelectiveEkfUnmodelled& u = x_.unmodelled;
+/// The estimate's own error covariance at the output (world rotation-vector axes): P_err taken
+/// through the delay prediction, the start's tilt bound while it is not settled, and the output
+/// blend's remaining correction.
+Eigen::Matrix3d SelectiveEkf::output_error_covariance() const {
   // P at the output: th_out = Exp(w d)^T th + J_r(w d) d w (the delay prediction)
   const double d = static_cast<double>(current_delay_ns()) * aids::kNsToS;
   const Eigen::Vector3d wd = x_.w_rps * d;
@@ -182,6 +184,13 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   // the output blend's remaining correction (world frame): q_out = exp(delta) q_state
   const Eigen::Vector3d delta = quat_log(quat_align_sign(q_world_body(), q_state) * q_state.conjugate());
   cov += delta * delta.transpose();
+  return cov;
+}
+
+Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
+  const SelectiveEkfUnmodelled& u = x_.unmodelled;
+  const Eigen::Matrix3d r = state_output().toRotationMatrix();
+  Eigen::Matrix3d cov = output_error_covariance();
 
   if (std::isnan(p_.imu_delay_s)) {
     // the delay not known: predicted over half a sample, the true one taken as uniform over none

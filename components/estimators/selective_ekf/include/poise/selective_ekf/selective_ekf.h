@@ -711,6 +711,7 @@ class SelectiveEkf : private SelectiveEkfFullState {
   [[nodiscard]] int64_t delay_ns(double dt_s) const;
   /// delay_ns() of the last sample (the state's time = its stamp - this).
   [[nodiscard]] int64_t current_delay_ns() const { return delay_ns(x_.unmodelled.last_dt_s); }
+  [[nodiscard]] Eigen::Matrix3d output_error_covariance() const;  ///< P_err at the output (attitude_covariance)
 };
 
 // ---- Reporting (selective_ekf_report.cpp): the core's outputs in the shapes every node maps 1:1.
