@@ -878,6 +878,9 @@ double ParallelKf::field_dip_reference(double dip, double dt) {
   // from dip to dip), so the mean does not run after the last few dips when the tilt is well known
   const double noise = p_.sigma_mag_ut / s_.gate.m_ut;
   const double var = std::max(s_.field_dip_tilt_var + noise * noise, kMinTiltVarRad2);
+  if (!std::isfinite(var)) {
+    return s_.gate.dip_rad;  // no usable weight (the state-health check reports the covariance)
+  }
   if (!std::isfinite(s_.field_dip_ref) || s_.field_dip_epoch != epoch) {
     // the learning window's dips, as one weight: startup_s at the present variance
     s_.field_dip_ref = s_.gate.dip_rad;
@@ -1019,8 +1022,6 @@ Eigen::Matrix3d ParallelKf::attitude_covariance(const ParallelKfOutput& out) con
   return covariance_terms(out).sum();
 }
 
-/// The external acceleration's share of the published covariance (world rotation-vector axes):
-/// the tilt the low-pass let through, the heading KF2 takes from it, and their cross-covariance.
 Eigen::Matrix3d ParallelKf::external_accel_covariance(const Eigen::Matrix3d& r) const {
   Eigen::Matrix3d e = Eigen::Matrix3d::Zero();
   const double g = p_.tilt.gravity_mps2;

@@ -422,8 +422,9 @@ void SelectiveEkf::settle_start(const ImuInput& in, const Eigen::Vector3d& devia
     };
     const double tilt = std::max(excess(0.0), excess(t)) / g;
     add_start_bound(std::min(1.0, tilt * tilt / bound));
+  } else {
+    add_start_bound(1.0);  // no line to settle it by: the bound stands (add_start_bound ends pending)
   }
-  pre.start_pending = false;
 }
 
 void SelectiveEkf::add_start_bound(double share) {

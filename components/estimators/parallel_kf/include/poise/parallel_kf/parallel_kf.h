@@ -679,8 +679,10 @@ class ParallelKf {
   /// field_dn_lp / field_dv_lp from an accepted field, after KF2's correction (lag: KF2's, s)
   void field_deviation_step(const Eigen::Vector3d& mag, double lag, double dt);
   /// The dip the field term measures dv against (updated with the accepted dip `dip`), rad
-  [[nodiscard]] Eigen::Matrix3d external_accel_covariance(const Eigen::Matrix3d& r) const;
   double field_dip_reference(double dip, double dt);
+  /// The external acceleration's term of covariance_terms (world axes; r = R_world_body): the tilt
+  /// the low-pass let through, the heading KF2 takes from it, and their cross-covariance
+  [[nodiscard]] Eigen::Matrix3d external_accel_covariance(const Eigen::Matrix3d& r) const;
 
   /// The delay the output is predicted over, s: imu_delay_s, or half the last step when not known.
   [[nodiscard]] double output_delay_s() const;
