@@ -487,7 +487,7 @@ double ParallelKf::gyro_white_var(double t) const {
 }
 
 Eigen::Matrix3d ParallelKf::reference_error_cov() const {
-  const ParallelKfCovarianceTerms c = covariance_terms(output());
+  const ParallelKfCovarianceTerms c = covariance_terms(covariance_output());
   Eigen::Matrix3d px = c.kf + c.external_accel + c.gyro_scale + c.field + c.hard_iron;
   px(2, 2) -= c.external_accel(2, 2);  // carried in full below
   px.block<2, 1>(0, 2) -= c.external_accel.block<2, 1>(0, 2);
@@ -865,7 +865,7 @@ double ParallelKf::field_dip_reference(double dip, double dt) {
   // which keeps the whole covariance (about 1800 instructions) out of the per-sample cost.
   s_.field_dip_var_age_s += dt;
   if (!(s_.field_dip_tilt_var >= 0.0) || s_.field_dip_var_age_s >= kBiasPeriodS) {
-    const ParallelKfOutput out = output();
+    const ParallelKfOutput out = covariance_output();
     Eigen::Vector3d east;
     if (!safe_normalize(Eigen::Vector3d::UnitZ().cross(out.q_world_body * s_.kf2.u()), east, 1e-9)) {
       return s_.gate.dip_rad;
@@ -963,6 +963,13 @@ void ParallelKf::set_imu_delay_s(double delay_s) {
   p.imu_delay_s = delay_s;
   p.validate();
   p_.imu_delay_s = delay_s;
+}
+
+ParallelKfOutput ParallelKf::covariance_output() const {
+  ParallelKfOutput o;
+  o.q_world_body = s_.q_world_body;
+  o.dip_rad = s_.gate.dip_rad;
+  return o;
 }
 
 ParallelKfOutput ParallelKf::output() const {

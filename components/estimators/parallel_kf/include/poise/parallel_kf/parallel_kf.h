@@ -477,6 +477,10 @@ class ParallelKf {
   [[nodiscard]] bool initialized() const { return s_.initialized; }
   /// Everything reported (computed on demand from the state).
   [[nodiscard]] ParallelKfOutput output() const;
+  /// The published attitude covariance of output(): attitude_covariance(output()) without the
+  /// rest of output() (its Euler angles, norms and rotations: covariance_terms reads only the
+  /// attitude and the dip).
+  [[nodiscard]] Eigen::Matrix3d attitude_covariance() const { return attitude_covariance(covariance_output()); }
   /// Covariance of the world-frame attitude error (rad^2, rotation vector about ENU x, y, z) of
   /// `out` (= output()), the one the filter publishes: the two KFs' own covariances (tilt from the
   /// up vector's, heading from the horizontal part of the field direction's over cos(dip)^2) plus
@@ -684,6 +688,8 @@ class ParallelKf {
   /// the low-pass let through, the heading KF2 takes from it, and their cross-covariance
   [[nodiscard]] Eigen::Matrix3d external_accel_covariance(const Eigen::Matrix3d& r) const;
 
+  /// output()'s attitude and dip, the only fields covariance_terms reads (the rest left default)
+  [[nodiscard]] ParallelKfOutput covariance_output() const;
   /// The delay the output is predicted over, s: imu_delay_s, or half the last step when not known.
   [[nodiscard]] double output_delay_s() const;
   /// s_.q_world_body from sZ and sX' (2), predicted over output_delay_s(); kept when they are
@@ -734,7 +740,7 @@ class ParallelKfFilter : public AttitudeFilter {
     if (!kf_.initialized()) {
       return std::nullopt;
     }
-    return kf_.attitude_covariance(kf_.output());
+    return kf_.attitude_covariance();
   }
   [[nodiscard]] HeadingStatus heading_status() const override { return kf_.heading_status(); }
   [[nodiscard]] SourceReports sources() const override { return kf_.sources(); }
