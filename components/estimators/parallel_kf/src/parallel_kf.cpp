@@ -1018,7 +1018,7 @@ double ParallelKf::heading_lag_s(double dt) const {
   if (!safe_normalize(up.cross(s_.kf2.u()), across, 1e-9)) {
     return 0.0;
   }
-  const double a_h = across.dot(heading_covariance().topLeftCorner<3, 3>() * across);
+  const double a_h = across.dot(s_.kf2.direction_covariance() * across);
   const double m = s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0;
   const double noise = 2.0 * p_.sigma_mag_ut * p_.sigma_mag_ut / (m * m);
   const double gain = std::min(1.0, a_h / noise);
@@ -1075,8 +1075,8 @@ Eigen::Matrix3d ParallelKf::external_accel_covariance(const Eigen::Matrix3d& r) 
 ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& out) const {
   ParallelKfCovarianceTerms t;
   const Eigen::Matrix3d r = out.q_world_body.toRotationMatrix();
-  const Eigen::Matrix3d p_up = r * tilt_covariance().topLeftCorner<3, 3>() * r.transpose();
-  const Eigen::Matrix3d p_field = r * heading_covariance().topLeftCorner<3, 3>() * r.transpose();
+  const Eigen::Matrix3d p_up = r * s_.kf1.direction_kf().direction_covariance() * r.transpose();
+  const Eigen::Matrix3d p_field = r * s_.kf2.direction_covariance() * r.transpose();
   const double c = std::max(std::cos(out.dip_rad), 0.1);
   // A small rotation phi moves the up axis e_z by phi x e_z = (phi_y, -phi_x, 0): the tilt
   // angles are read off the up vector's x/y errors; heading from the field's east component.
