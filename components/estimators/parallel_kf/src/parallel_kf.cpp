@@ -26,6 +26,36 @@ constexpr double kMaxGyroBiasWalk = 0.01;
 // sample at 200 Hz, no longer a rate sensor).
 constexpr double kMaxGyroNoiseDensity = 0.1;
 
+// propagate_lag_error's transition Phi over the state (tilt error x, y, heading, the Butterworth's
+// second state x, y) has two entries per row that are not structurally zero (each tilt axis's two
+// states; the heading and the tilt about north), Phi - I the same: a product with it is a sum of
+// two products, the same to the bit whatever order a dense product adds the zeros in. lag_left
+// and lag_right skip the zeros (a dense 5x5 product is 125 multiplications, these 50).
+constexpr int kLagPattern[5][2] = {{0, 3}, {1, 4}, {1, 2}, {0, 3}, {1, 4}};
+// Gamma B's one entry per row: the world axis of the bias error's drift each state integrates
+constexpr int kLagInput[5] = {0, 1, 2, 0, 1};
+
+template <int C>
+Eigen::Matrix<double, 5, C> lag_left(const Eigen::Matrix<double, 5, 5>& phi, const Eigen::Matrix<double, 5, C>& x) {
+  Eigen::Matrix<double, 5, C> r;  // phi x
+  for (int i = 0; i < 5; ++i) {
+    const int a = kLagPattern[i][0];
+    const int b = kLagPattern[i][1];
+    r.row(i) = phi(i, a) * x.row(a) + phi(i, b) * x.row(b);
+  }
+  return r;
+}
+
+Eigen::Matrix<double, 5, 5> lag_right(const Eigen::Matrix<double, 5, 5>& x, const Eigen::Matrix<double, 5, 5>& phi) {
+  Eigen::Matrix<double, 5, 5> r;  // x phi^T
+  for (int j = 0; j < 5; ++j) {
+    const int a = kLagPattern[j][0];
+    const int b = kLagPattern[j][1];
+    r.col(j) = x.col(a) * phi(j, a) + x.col(b) * phi(j, b);
+  }
+  return r;
+}
+
 }  // namespace
 
 ParallelKfParams ParallelKfParams::paper() {
@@ -721,23 +751,33 @@ ParallelKf::LagIncrement ParallelKf::propagate_lag_error(double t) {
     }
     phi(2, 1) -= (1.0 - s_.lag_keep_z) * lag_tan_dip_;
   }
-  const Matrix53 g = gam_b * s_.q_world_body.toRotationMatrix();
+  // G = Gamma B R: each row of Gamma B has one entry (lag_input), so G's rows are R's, scaled
+  const Eigen::Matrix3d r = s_.q_world_body.toRotationMatrix();
+  Matrix53 g;
+  for (int i = 0; i < 5; ++i) {
+    g.row(i) = gam_b(i, kLagInput[i]) * r.row(kLagInput[i]);
+  }
   const Matrix53 c = s_.lag_bias_cov;
   const Matrix53 gp = g * s_.bias_err_cov;
-  const Matrix5 pc = phi * c * g.transpose();
+  const Matrix53 phi_c = lag_left(phi, c);
+  const Matrix5 pc = phi_c * g.transpose();
   // the increment d = (Phi - I) x + G b_err (LagIncrement, its first three rows), from the moments
   // before the step: E[d b^T] = (Phi - I) C + G B, E[y d^T] = Y X (Phi - I)^T + Y C G^T + G C^T
   // (Phi - I)^T + G B G^T for y = Y x + G b_err (Y = Phi: x_j; Y = Phi - I: d)
   const Matrix5 pm = phi - Matrix5::Identity();
-  const Matrix5 common = (g * c.transpose()) * pm.transpose() + gp * g.transpose();
-  const Matrix5 x_d = phi * s_.lag_cov * pm.transpose() + pc + common;
+  const Matrix5 gpg = gp * g.transpose();
+  const Matrix5 gc = g * c.transpose();
+  const Matrix5 common = lag_right(gc, pm) + gpg;
+  const Matrix5 phi_x = lag_left(phi, s_.lag_cov);
+  const Matrix5 x_d = lag_right(phi_x, pm) + pc + common;
   LagIncrement inc;
   inc.x_d = x_d.leftCols<3>();
-  inc.d_d = (x_d - s_.lag_cov * pm.transpose() - c * g.transpose()).topLeftCorner<3, 3>();
-  inc.b_d = (pm * c + gp).topRows<3>().transpose();
-  Matrix5 p = phi * s_.lag_cov * phi.transpose() + pc + pc.transpose() + gp * g.transpose();
+  const Matrix5 cg = c * g.transpose();
+  inc.d_d = (x_d - lag_right(s_.lag_cov, pm) - cg).topLeftCorner<3, 3>();
+  inc.b_d = (lag_left(pm, c) + gp).topRows<3>().transpose();
+  Matrix5 p = lag_right(phi_x, phi) + pc + pc.transpose() + gpg;
   s_.lag_cov = 0.5 * (p + p.transpose());
-  s_.lag_bias_cov = phi * c + gp;
+  s_.lag_bias_cov = phi_c + gp;
   s_.lag_keep_z = 1.0;
   return inc;
 }
