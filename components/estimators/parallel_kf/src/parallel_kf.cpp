@@ -380,19 +380,31 @@ void ParallelKf::external_accel_step(const Eigen::Vector3d& accel_i, double dt) 
     reference_step();
   }
   const Eigen::Vector3d& ref = s_.accel_ref_i;
+  const double k_lp = dt / (tau + dt);
   const Eigen::Matrix3d step_age = dt * s_.r_ib;
-  s_.accel_twin_age = (1.0 - dt / (tau + dt)) * (s_.accel_twin_age + step_age);
+  s_.accel_twin_age = (1.0 - k_lp) * (s_.accel_twin_age + step_age);
   const Eigen::Vector3d& twin =
       p_.accel_lowpass_order == 2 ? s_.accel_bw_twin.step(accel_i, dt) : s_.lp_accel_i;
-  Eigen::Vector3d up;
-  if (!safe_normalize(ref, up)) {
+  if (!(s_.accel_ref_up_for == ref)) {  // the reference moves once per bias period: its direction with it
+    s_.accel_ref_up_ok = safe_normalize(ref, s_.accel_ref_up_i);
+    s_.accel_ref_up_for = ref;
+  }
+  if (!s_.accel_ref_up_ok) {
     return;
   }
+  const Eigen::Vector3d& up = s_.accel_ref_up_i;
   Eigen::Vector3d d = twin - ref;
   d -= d.dot(up) * up;
   d /= 1.0 - s_.accel_ref_g_ratio;  // what the reference let through in phase (reference_step)
-  s_.accel_h_cov_i += (dt / (tau + dt)) * (d * d.transpose() - s_.accel_h_cov_i);
-  s_.accel_h_cross_i += (dt / (tau + dt)) * (d * s_.accel_h_heading_i.transpose() - s_.accel_h_cross_i);
+  // d d^T is symmetric to the bit (d_i d_j = d_j d_i), and so is the low-passed one: its upper
+  // triangle, mirrored
+  for (int j = 0; j < 3; ++j) {
+    for (int i = 0; i <= j; ++i) {
+      s_.accel_h_cov_i(i, j) += k_lp * (d(i) * d(j) - s_.accel_h_cov_i(i, j));
+      s_.accel_h_cov_i(j, i) = s_.accel_h_cov_i(i, j);
+    }
+  }
+  s_.accel_h_cross_i += k_lp * (d * s_.accel_h_heading_i.transpose() - s_.accel_h_cross_i);
   // KF2 pulls the heading towards -tan(dip) times the tilt error about magnetic north, with its
   // lag: that error's horizontal acceleration low-passed over the lag (covariance_terms), stepped
   // once per bias period on the period's mean (the lag is 10 s or more)

@@ -415,6 +415,9 @@ struct ParallelKfState {
   std::array<Eigen::Matrix3d, 3> accel_ref_stage_age{Eigen::Matrix3d::Zero(), Eigen::Matrix3d::Zero(),
                                                      Eigen::Matrix3d::Zero()};
   Eigen::Vector3d accel_ref_i{0, 0, 0};      ///< the reference, L3 + c (L2 - L3) (reference_step), m/s^2
+  Eigen::Vector3d accel_ref_up_i{0, 0, 1};   ///< accel_ref_i normalised (if accel_ref_up_ok) when it was accel_ref_up_for
+  Eigen::Vector3d accel_ref_up_for{std::nan(""), 0, 0};
+  bool accel_ref_up_ok = false;
   double accel_ref_c = 0.0;                   ///< its c, for a ramp lag of tau
   double accel_ref_g_ratio = 0.0;             ///< what it lets through of an acceleration, in phase, over the twin's
   Eigen::Vector3d accel_ref_sum_i{0, 0, 0};   ///< the accelerometer's integral over the bias period so far, m/s
