@@ -537,7 +537,7 @@ Eigen::Matrix3d ParallelKf::reference_error_cov() const {
   if (s_.gate.learnt) {
     // the heading is built from sZ (2): a tilt error a about magnetic north (ENU y) turns it by
     // -tan(dip) a, and KF2 pulls it there (propagate_lag_error)
-    const double tan_dip = std::sin(s_.gate.dip_rad) / std::max(std::cos(s_.gate.dip_rad), std::sqrt(kMinCos2Dip));
+    const double tan_dip = guarded_tan_dip();
     px(2, 2) += tan_dip * tan_dip * px(1, 1);
     px(2, 1) -= tan_dip * px(1, 1);
     px(1, 2) = px(2, 1);
@@ -548,7 +548,16 @@ Eigen::Matrix3d ParallelKf::reference_error_cov() const {
 Eigen::Vector3d ParallelKf::reference_error_decay(double t) const {
   const double tau_tilt = p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : p_.rest_filter_tau_s;
   const double tau_heading = heading_lag_s(s_.last_dt_s);
-  return {std::exp(-t / tau_tilt), std::exp(-t / tau_tilt), tau_heading > 0.0 ? std::exp(-t / tau_heading) : 0.0};
+  const double tilt = std::exp(-t / tau_tilt);
+  return {tilt, tilt, tau_heading > 0.0 ? std::exp(-t / tau_heading) : 0.0};
+}
+
+double ParallelKf::guarded_tan_dip() const {
+  if (s_.gate.dip_rad != tan_dip_for_) {  // the dip moves once per bias period at most
+    tan_dip_for_ = s_.gate.dip_rad;
+    tan_dip_ = std::sin(tan_dip_for_) / std::max(std::cos(tan_dip_for_), std::sqrt(kMinCos2Dip));
+  }
+  return tan_dip_;
 }
 
 ParallelKf::MotionNoise ParallelKf::motion_noise_window(double t, const LagIncrement& lag) const {
@@ -757,11 +766,7 @@ ParallelKf::LagIncrement ParallelKf::propagate_lag_error(double t) {
     // north (ENU y) turns it by -tan(dip) a. KF2 pulls sX' to the field, so the heading error
     // psi follows psi' = beta_z - (psi + tan(dip) a) / tau_2: the share of the heading's lag
     // error the fields removed is replaced by -tan(dip) times the tilt's.
-    if (s_.gate.dip_rad != lag_dip_for_) {
-      lag_dip_for_ = s_.gate.dip_rad;
-      lag_tan_dip_ = std::sin(lag_dip_for_) / std::max(std::cos(lag_dip_for_), std::sqrt(kMinCos2Dip));
-    }
-    phi(2, 1) -= (1.0 - s_.lag_keep_z) * lag_tan_dip_;
+    phi(2, 1) -= (1.0 - s_.lag_keep_z) * guarded_tan_dip();
   }
   // G = Gamma B R: each row of Gamma B has one entry (lag_input), so G's rows are R's, scaled
   const Eigen::Matrix3d r = s_.q_world_body.toRotationMatrix();
@@ -940,7 +945,11 @@ double ParallelKf::field_dip_reference(double dip, double dt) {
     s_.field_dip_epoch = epoch;
   }
   if (gp_.reference_tau_s > 0.0) {
-    s_.field_dip_weight *= std::exp(-dt / gp_.reference_tau_s);
+    if (dt != dip_forget_dt_) {  // the step changes rarely: its exp with it
+      dip_forget_dt_ = dt;
+      dip_forget_ = std::exp(-dt / gp_.reference_tau_s);
+    }
+    s_.field_dip_weight *= dip_forget_;
   }
   const double w = dt / var;
   s_.field_dip_weight += w;
@@ -1096,7 +1105,7 @@ Eigen::Matrix3d ParallelKf::external_accel_covariance(const Eigen::Matrix3d& r) 
     if (s_.gate.learnt) {
       // the tilt about magnetic north (ENU y) is the east acceleration over g; KF2 pulls the heading
       // to -tan(dip) times it, low-passed over its lag
-      const double tan_dip = std::sin(s_.gate.dip_rad) / std::max(std::cos(s_.gate.dip_rad), std::sqrt(kMinCos2Dip));
+      const double tan_dip = guarded_tan_dip();
       const double a_north = (w * s_.accel_h_heading_i).x() / g;
       e(2, 2) = tan_dip * tan_dip * a_north * a_north;
       // One acceleration tilts the estimate now, (-a_y, a_x) / g, and pulls the heading, -tan(dip)
@@ -1129,7 +1138,11 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
   const Eigen::Matrix3d r = out.q_world_body.toRotationMatrix();
   const Eigen::Matrix3d p_up = r * s_.kf1.direction_kf().direction_covariance() * r.transpose();
   const Eigen::Matrix3d p_field = r * s_.kf2.direction_covariance() * r.transpose();
-  const double c = std::max(std::cos(out.dip_rad), 0.1);
+  if (out.dip_rad != cos_dip_for_) {
+    cos_dip_for_ = out.dip_rad;
+    cos_dip_ = std::max(std::cos(out.dip_rad), 0.1);
+  }
+  const double c = cos_dip_;
   // A small rotation phi moves the up axis e_z by phi x e_z = (phi_y, -phi_x, 0): the tilt
   // angles are read off the up vector's x/y errors; heading from the field's east component.
   t.kf(0, 0) = p_up(1, 1);

@@ -706,8 +706,16 @@ class ParallelKf {
   double lag_t_ = -1.0;
   Eigen::Matrix<double, 5, 5> lag_phi_ = Eigen::Matrix<double, 5, 5>::Identity();
   Eigen::Matrix<double, 5, 3> lag_gam_b_ = Eigen::Matrix<double, 5, 3>::Zero();
-  double lag_dip_for_ = std::nan("");  // lag_tan_dip_ = tan(dip) for this dip (guarded)
-  double lag_tan_dip_ = 0.0;
+  // Values of slowly changing inputs, kept with the input they are for (a pure function of it:
+  // the same as computing it each time)
+  mutable double tan_dip_for_ = std::nan("");  // tan_dip_: guarded_tan_dip() for this dip
+  mutable double tan_dip_ = 0.0;
+  mutable double cos_dip_for_ = std::nan("");  // cos_dip_: max(cos(dip), 0.1) (covariance_terms) for this dip
+  mutable double cos_dip_ = 0.0;
+  double dip_forget_dt_ = std::nan("");  // dip_forget_: field_dip_reference's exp(-dt / tau) for this dt
+  double dip_forget_ = 1.0;
+  /// tan(dip) with cos(dip) held at sqrt(kMinCos2Dip) or more
+  [[nodiscard]] double guarded_tan_dip() const;
   ParallelKfState s_;
 
   // Reporting (parallel_kf_report.cpp): the state's per-source reports of the last sample.
