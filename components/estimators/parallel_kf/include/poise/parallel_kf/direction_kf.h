@@ -85,7 +85,8 @@ class DirectionKf {
                        p_.sigma_gyro_extra_rps * p_.sigma_gyro_extra_rps;
     // Q11 = h^2 sigma^2 [u x][u x]^T = h^2 sigma^2 (|u|^2 I - u u^T)            (7d), (11d)
     const double qg = h_s * h_s * sg2;
-    const double q22 = c * c / 3.0 * e_.squaredNorm() + p_.sigma_meas * p_.sigma_meas;  // (7e), (11e)
+    // (7e), (11e); with c = 0 exactly sigma^2 (e is finite: the state-health check)
+    const double q22 = c == 0.0 ? p_.sigma_meas * p_.sigma_meas : c * c / 3.0 * e_.squaredNorm() + p_.sigma_meas * p_.sigma_meas;
     const Eigen::Vector3d u_prev = u_;
 
     u_ = a * u_;  // (5a), (9a)
@@ -94,7 +95,8 @@ class DirectionKf {
       materialize();  // P12 and P22 are propagated below
     }
     const Eigen::Matrix3d p11 = p_mat_.topLeftCorner<3, 3>();
-    Eigen::Matrix3d n11 = a * p11 * a.transpose();
+    Eigen::Matrix3d n11;
+    n11.noalias() = a * p11 * a.transpose();
     n11.noalias() -= qg * (u_prev * u_prev.transpose());
     n11.diagonal().array() += qg * u_prev.squaredNorm();
     p_mat_.topLeftCorner<3, 3>() = 0.5 * (n11 + n11.transpose());  // symmetric (a P a^T rounds unevenly)
@@ -218,7 +220,7 @@ class DirectionKf {
     Eigen::Matrix3d s = (k * k) * a;
     s.diagonal().array() += dr;
     s_inv_ = symmetric_inverse(s);
-    as_ = a * s_inv_;
+    as_.noalias() = a * s_inv_;
     as_ = 0.5 * (as_ + as_.transpose()).eval();
     u_.noalias() += k * (as_ * innov);
     e_.noalias() = d * (s_inv_ * innov);
