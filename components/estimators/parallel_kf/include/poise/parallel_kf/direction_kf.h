@@ -89,14 +89,13 @@ class DirectionKf {
     const double q22 = c == 0.0 ? p_.sigma_meas * p_.sigma_meas : c * c / 3.0 * e_.squaredNorm() + p_.sigma_meas * p_.sigma_meas;
     const Eigen::Vector3d u_prev = u_;
 
-    u_ = a * u_;  // (5a), (9a)
+    u_.noalias() = a * u_prev;  // (5a), (9a)
 
     if (c != 0.0) {
       materialize();  // P12 and P22 are propagated below
     }
-    const Eigen::Matrix3d p11 = p_mat_.topLeftCorner<3, 3>();
     Eigen::Matrix3d n11;
-    n11.noalias() = a * p11 * a.transpose();
+    n11.noalias() = a * p_mat_.topLeftCorner<3, 3>() * a.transpose();
     n11.noalias() -= qg * (u_prev * u_prev.transpose());
     n11.diagonal().array() += qg * u_prev.squaredNorm();
     p_mat_.topLeftCorner<3, 3>() = 0.5 * (n11 + n11.transpose());  // symmetric (a P a^T rounds unevenly)
