@@ -163,7 +163,8 @@ class DirectionKf {
 
   [[nodiscard]] const Eigen::Vector3d& u() const { return u_; }
   [[nodiscard]] const Eigen::Vector3d& e() const { return e_; }
-  /// P (written in full on demand: after a prediction or correction with c = 0 only P11 is)
+  /// P (written in full on demand: after a prediction or correction with c = 0 only P11 is; so
+  /// this const call writes the other blocks, and two threads must not call it at once)
   [[nodiscard]] const Matrix6& covariance() const {
     materialize();
     return p_mat_;
