@@ -36,8 +36,8 @@ bool ParallelKf::healthy() {
       !(std::min({d1.minCoeff(), d2.minCoeff(), s_.bias_cov.diagonal().minCoeff()}) >= 0.0)) {
     return false;
   }
-  return !s_.health.full_due() || (covariance_ok(s_.kf1.covariance(), true) && covariance_ok(s_.kf2.covariance(), true) &&
-                                   covariance_ok(s_.bias_cov, true));
+  return !s_.health.full_due() || (covariance_ok(s_.kf1.covariance(), true) &&
+                                   covariance_ok(s_.kf2.covariance(), true) && covariance_ok(s_.bias_cov, true));
 }
 
 void ParallelKf::reset_unhealthy() {

@@ -86,7 +86,8 @@ class DirectionKf {
     // Q11 = h^2 sigma^2 [u x][u x]^T = h^2 sigma^2 (|u|^2 I - u u^T)            (7d), (11d)
     const double qg = h_s * h_s * sg2;
     // (7e), (11e); with c = 0 exactly sigma^2 (e is finite: the state-health check)
-    const double q22 = c == 0.0 ? p_.sigma_meas * p_.sigma_meas : c * c / 3.0 * e_.squaredNorm() + p_.sigma_meas * p_.sigma_meas;
+    const double s2 = p_.sigma_meas * p_.sigma_meas;
+    const double q22 = c == 0.0 ? s2 : c * c / 3.0 * e_.squaredNorm() + s2;
     const Eigen::Vector3d u_prev = u_;
 
     u_.noalias() = a * u_prev;  // (5a), (9a)

@@ -415,7 +415,7 @@ struct ParallelKfState {
   std::array<Eigen::Matrix3d, 3> accel_ref_stage_age{Eigen::Matrix3d::Zero(), Eigen::Matrix3d::Zero(),
                                                      Eigen::Matrix3d::Zero()};
   Eigen::Vector3d accel_ref_i{0, 0, 0};      ///< the reference, L3 + c (L2 - L3) (reference_step), m/s^2
-  Eigen::Vector3d accel_ref_up_i{0, 0, 1};   ///< accel_ref_i normalised (if accel_ref_up_ok) when it was accel_ref_up_for
+  Eigen::Vector3d accel_ref_up_i{0, 0, 1};   ///< accel_ref_up_for normalised (if accel_ref_up_ok)
   Eigen::Vector3d accel_ref_up_for{std::nan(""), 0, 0};
   bool accel_ref_up_ok = false;
   double accel_ref_c = 0.0;                   ///< its c, for a ramp lag of tau
