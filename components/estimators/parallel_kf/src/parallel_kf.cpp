@@ -26,6 +26,36 @@ constexpr double kMaxGyroBiasWalk = 0.01;
 // sample at 200 Hz, no longer a rate sensor).
 constexpr double kMaxGyroNoiseDensity = 0.1;
 
+// propagate_lag_error's transition Phi over the state (tilt error x, y, heading, the Butterworth's
+// second state x, y) has two entries per row that are not structurally zero (each tilt axis's two
+// states; the heading and the tilt about north), Phi - I the same: a product with it is a sum of
+// two products, the same to the bit whatever order a dense product adds the zeros in. lag_left
+// and lag_right skip the zeros (a dense 5x5 product is 125 multiplications, these 50).
+constexpr int kLagPattern[5][2] = {{0, 3}, {1, 4}, {1, 2}, {0, 3}, {1, 4}};
+// Gamma B's one entry per row: the world axis of the bias error's drift each state integrates
+constexpr int kLagInput[5] = {0, 1, 2, 0, 1};
+
+template <int C>
+Eigen::Matrix<double, 5, C> lag_left(const Eigen::Matrix<double, 5, 5>& phi, const Eigen::Matrix<double, 5, C>& x) {
+  Eigen::Matrix<double, 5, C> r;  // phi x
+  for (int i = 0; i < 5; ++i) {
+    const int a = kLagPattern[i][0];
+    const int b = kLagPattern[i][1];
+    r.row(i) = phi(i, a) * x.row(a) + phi(i, b) * x.row(b);
+  }
+  return r;
+}
+
+Eigen::Matrix<double, 5, 5> lag_right(const Eigen::Matrix<double, 5, 5>& x, const Eigen::Matrix<double, 5, 5>& phi) {
+  Eigen::Matrix<double, 5, 5> r;  // x phi^T
+  for (int j = 0; j < 5; ++j) {
+    const int a = kLagPattern[j][0];
+    const int b = kLagPattern[j][1];
+    r.col(j) = x.col(a) * phi(j, a) + x.col(b) * phi(j, b);
+  }
+  return r;
+}
+
 }  // namespace
 
 ParallelKfParams ParallelKfParams::paper() {
@@ -350,19 +380,31 @@ void ParallelKf::external_accel_step(const Eigen::Vector3d& accel_i, double dt) 
     reference_step();
   }
   const Eigen::Vector3d& ref = s_.accel_ref_i;
+  const double k_lp = dt / (tau + dt);
   const Eigen::Matrix3d step_age = dt * s_.r_ib;
-  s_.accel_twin_age = (1.0 - dt / (tau + dt)) * (s_.accel_twin_age + step_age);
+  s_.accel_twin_age = (1.0 - k_lp) * (s_.accel_twin_age + step_age);
   const Eigen::Vector3d& twin =
       p_.accel_lowpass_order == 2 ? s_.accel_bw_twin.step(accel_i, dt) : s_.lp_accel_i;
-  Eigen::Vector3d up;
-  if (!safe_normalize(ref, up)) {
+  if (!(s_.accel_ref_up_for == ref)) {  // the reference moves once per bias period: its direction with it
+    s_.accel_ref_up_ok = safe_normalize(ref, s_.accel_ref_up_i);
+    s_.accel_ref_up_for = ref;
+  }
+  if (!s_.accel_ref_up_ok) {
     return;
   }
+  const Eigen::Vector3d& up = s_.accel_ref_up_i;
   Eigen::Vector3d d = twin - ref;
   d -= d.dot(up) * up;
   d /= 1.0 - s_.accel_ref_g_ratio;  // what the reference let through in phase (reference_step)
-  s_.accel_h_cov_i += (dt / (tau + dt)) * (d * d.transpose() - s_.accel_h_cov_i);
-  s_.accel_h_cross_i += (dt / (tau + dt)) * (d * s_.accel_h_heading_i.transpose() - s_.accel_h_cross_i);
+  // d d^T is symmetric to the bit (d_i d_j = d_j d_i), and so is the low-passed one: its upper
+  // triangle, mirrored
+  for (int j = 0; j < 3; ++j) {
+    for (int i = 0; i <= j; ++i) {
+      s_.accel_h_cov_i(i, j) += k_lp * (d(i) * d(j) - s_.accel_h_cov_i(i, j));
+      s_.accel_h_cov_i(j, i) = s_.accel_h_cov_i(i, j);
+    }
+  }
+  s_.accel_h_cross_i += k_lp * (d * s_.accel_h_heading_i.transpose() - s_.accel_h_cross_i);
   // KF2 pulls the heading towards -tan(dip) times the tilt error about magnetic north, with its
   // lag: that error's horizontal acceleration low-passed over the lag (covariance_terms), stepped
   // once per bias period on the period's mean (the lag is 10 s or more)
@@ -487,7 +529,7 @@ double ParallelKf::gyro_white_var(double t) const {
 }
 
 Eigen::Matrix3d ParallelKf::reference_error_cov() const {
-  const ParallelKfCovarianceTerms c = covariance_terms(output());
+  const ParallelKfCovarianceTerms c = covariance_terms(covariance_output());
   Eigen::Matrix3d px = c.kf + c.external_accel + c.gyro_scale + c.field + c.hard_iron;
   px(2, 2) -= c.external_accel(2, 2);  // carried in full below
   px.block<2, 1>(0, 2) -= c.external_accel.block<2, 1>(0, 2);
@@ -495,7 +537,7 @@ Eigen::Matrix3d ParallelKf::reference_error_cov() const {
   if (s_.gate.learnt) {
     // the heading is built from sZ (2): a tilt error a about magnetic north (ENU y) turns it by
     // -tan(dip) a, and KF2 pulls it there (propagate_lag_error)
-    const double tan_dip = std::sin(s_.gate.dip_rad) / std::max(std::cos(s_.gate.dip_rad), std::sqrt(kMinCos2Dip));
+    const double tan_dip = guarded_tan_dip();
     px(2, 2) += tan_dip * tan_dip * px(1, 1);
     px(2, 1) -= tan_dip * px(1, 1);
     px(1, 2) = px(2, 1);
@@ -506,7 +548,16 @@ Eigen::Matrix3d ParallelKf::reference_error_cov() const {
 Eigen::Vector3d ParallelKf::reference_error_decay(double t) const {
   const double tau_tilt = p_.accel_lowpass_tau_s > 0.0 ? p_.accel_lowpass_tau_s : p_.rest_filter_tau_s;
   const double tau_heading = heading_lag_s(s_.last_dt_s);
-  return {std::exp(-t / tau_tilt), std::exp(-t / tau_tilt), tau_heading > 0.0 ? std::exp(-t / tau_heading) : 0.0};
+  const double tilt = std::exp(-t / tau_tilt);
+  return {tilt, tilt, tau_heading > 0.0 ? std::exp(-t / tau_heading) : 0.0};
+}
+
+double ParallelKf::guarded_tan_dip() const {
+  if (s_.gate.dip_rad != tan_dip_for_) {  // the dip moves once per bias period at most
+    tan_dip_for_ = s_.gate.dip_rad;
+    tan_dip_ = std::sin(tan_dip_for_) / std::max(std::cos(tan_dip_for_), std::sqrt(kMinCos2Dip));
+  }
+  return tan_dip_;
 }
 
 ParallelKf::MotionNoise ParallelKf::motion_noise_window(double t, const LagIncrement& lag) const {
@@ -715,29 +766,35 @@ ParallelKf::LagIncrement ParallelKf::propagate_lag_error(double t) {
     // north (ENU y) turns it by -tan(dip) a. KF2 pulls sX' to the field, so the heading error
     // psi follows psi' = beta_z - (psi + tan(dip) a) / tau_2: the share of the heading's lag
     // error the fields removed is replaced by -tan(dip) times the tilt's.
-    if (s_.gate.dip_rad != lag_dip_for_) {
-      lag_dip_for_ = s_.gate.dip_rad;
-      lag_tan_dip_ = std::sin(lag_dip_for_) / std::max(std::cos(lag_dip_for_), std::sqrt(kMinCos2Dip));
-    }
-    phi(2, 1) -= (1.0 - s_.lag_keep_z) * lag_tan_dip_;
+    phi(2, 1) -= (1.0 - s_.lag_keep_z) * guarded_tan_dip();
   }
-  const Matrix53 g = gam_b * s_.q_world_body.toRotationMatrix();
+  // G = Gamma B R: each row of Gamma B has one entry (lag_input), so G's rows are R's, scaled
+  const Eigen::Matrix3d r = s_.q_world_body.toRotationMatrix();
+  Matrix53 g;
+  for (int i = 0; i < 5; ++i) {
+    g.row(i) = gam_b(i, kLagInput[i]) * r.row(kLagInput[i]);
+  }
   const Matrix53 c = s_.lag_bias_cov;
   const Matrix53 gp = g * s_.bias_err_cov;
-  const Matrix5 pc = phi * c * g.transpose();
+  const Matrix53 phi_c = lag_left(phi, c);
+  const Matrix5 pc = phi_c * g.transpose();
   // the increment d = (Phi - I) x + G b_err (LagIncrement, its first three rows), from the moments
   // before the step: E[d b^T] = (Phi - I) C + G B, E[y d^T] = Y X (Phi - I)^T + Y C G^T + G C^T
   // (Phi - I)^T + G B G^T for y = Y x + G b_err (Y = Phi: x_j; Y = Phi - I: d)
   const Matrix5 pm = phi - Matrix5::Identity();
-  const Matrix5 common = (g * c.transpose()) * pm.transpose() + gp * g.transpose();
-  const Matrix5 x_d = phi * s_.lag_cov * pm.transpose() + pc + common;
+  const Matrix5 gpg = gp * g.transpose();
+  const Matrix5 gc = g * c.transpose();
+  const Matrix5 common = lag_right(gc, pm) + gpg;
+  const Matrix5 phi_x = lag_left(phi, s_.lag_cov);
+  const Matrix5 x_d = lag_right(phi_x, pm) + pc + common;
   LagIncrement inc;
   inc.x_d = x_d.leftCols<3>();
-  inc.d_d = (x_d - s_.lag_cov * pm.transpose() - c * g.transpose()).topLeftCorner<3, 3>();
-  inc.b_d = (pm * c + gp).topRows<3>().transpose();
-  Matrix5 p = phi * s_.lag_cov * phi.transpose() + pc + pc.transpose() + gp * g.transpose();
+  const Matrix5 cg = c * g.transpose();
+  inc.d_d = (x_d - lag_right(s_.lag_cov, pm) - cg).topLeftCorner<3, 3>();
+  inc.b_d = (lag_left(pm, c) + gp).topRows<3>().transpose();
+  Matrix5 p = lag_right(phi_x, phi) + pc + pc.transpose() + gpg;
   s_.lag_cov = 0.5 * (p + p.transpose());
-  s_.lag_bias_cov = phi * c + gp;
+  s_.lag_bias_cov = phi_c + gp;
   s_.lag_keep_z = 1.0;
   return inc;
 }
@@ -865,7 +922,7 @@ double ParallelKf::field_dip_reference(double dip, double dt) {
   // which keeps the whole covariance (about 1800 instructions) out of the per-sample cost.
   s_.field_dip_var_age_s += dt;
   if (!(s_.field_dip_tilt_var >= 0.0) || s_.field_dip_var_age_s >= kBiasPeriodS) {
-    const ParallelKfOutput out = output();
+    const ParallelKfOutput out = covariance_output();
     Eigen::Vector3d east;
     if (!safe_normalize(Eigen::Vector3d::UnitZ().cross(out.q_world_body * s_.kf2.u()), east, 1e-9)) {
       return s_.gate.dip_rad;
@@ -888,7 +945,11 @@ double ParallelKf::field_dip_reference(double dip, double dt) {
     s_.field_dip_epoch = epoch;
   }
   if (gp_.reference_tau_s > 0.0) {
-    s_.field_dip_weight *= std::exp(-dt / gp_.reference_tau_s);
+    if (dt != dip_forget_dt_) {  // the step changes rarely: its exp with it
+      dip_forget_dt_ = dt;
+      dip_forget_ = std::exp(-dt / gp_.reference_tau_s);
+    }
+    s_.field_dip_weight *= dip_forget_;
   }
   const double w = dt / var;
   s_.field_dip_weight += w;
@@ -965,6 +1026,13 @@ void ParallelKf::set_imu_delay_s(double delay_s) {
   p_.imu_delay_s = delay_s;
 }
 
+ParallelKfOutput ParallelKf::covariance_output() const {
+  ParallelKfOutput o;
+  o.q_world_body = s_.q_world_body;
+  o.dip_rad = s_.gate.dip_rad;
+  return o;
+}
+
 ParallelKfOutput ParallelKf::output() const {
   ParallelKfOutput o;
   o.q_world_body = s_.q_world_body;
@@ -1011,7 +1079,7 @@ double ParallelKf::heading_lag_s(double dt) const {
   if (!safe_normalize(up.cross(s_.kf2.u()), across, 1e-9)) {
     return 0.0;
   }
-  const double a_h = across.dot(heading_covariance().topLeftCorner<3, 3>() * across);
+  const double a_h = across.dot(s_.kf2.direction_covariance() * across);
   const double m = s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0;
   const double noise = 2.0 * p_.sigma_mag_ut * p_.sigma_mag_ut / (m * m);
   const double gain = std::min(1.0, a_h / noise);
@@ -1037,7 +1105,7 @@ Eigen::Matrix3d ParallelKf::external_accel_covariance(const Eigen::Matrix3d& r) 
     if (s_.gate.learnt) {
       // the tilt about magnetic north (ENU y) is the east acceleration over g; KF2 pulls the heading
       // to -tan(dip) times it, low-passed over its lag
-      const double tan_dip = std::sin(s_.gate.dip_rad) / std::max(std::cos(s_.gate.dip_rad), std::sqrt(kMinCos2Dip));
+      const double tan_dip = guarded_tan_dip();
       const double a_north = (w * s_.accel_h_heading_i).x() / g;
       e(2, 2) = tan_dip * tan_dip * a_north * a_north;
       // One acceleration tilts the estimate now, (-a_y, a_x) / g, and pulls the heading, -tan(dip)
@@ -1068,9 +1136,13 @@ Eigen::Matrix3d ParallelKf::external_accel_covariance(const Eigen::Matrix3d& r) 
 ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& out) const {
   ParallelKfCovarianceTerms t;
   const Eigen::Matrix3d r = out.q_world_body.toRotationMatrix();
-  const Eigen::Matrix3d p_up = r * tilt_covariance().topLeftCorner<3, 3>() * r.transpose();
-  const Eigen::Matrix3d p_field = r * heading_covariance().topLeftCorner<3, 3>() * r.transpose();
-  const double c = std::max(std::cos(out.dip_rad), 0.1);
+  const Eigen::Matrix3d p_up = r * s_.kf1.direction_kf().direction_covariance() * r.transpose();
+  const Eigen::Matrix3d p_field = r * s_.kf2.direction_covariance() * r.transpose();
+  if (out.dip_rad != cos_dip_for_) {
+    cos_dip_for_ = out.dip_rad;
+    cos_dip_ = std::max(std::cos(out.dip_rad), 0.1);
+  }
+  const double c = cos_dip_;
   // A small rotation phi moves the up axis e_z by phi x e_z = (phi_y, -phi_x, 0): the tilt
   // angles are read off the up vector's x/y errors; heading from the field's east component.
   t.kf(0, 0) = p_up(1, 1);

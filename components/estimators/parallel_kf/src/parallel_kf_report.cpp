@@ -28,15 +28,16 @@ bool ParallelKf::update(const ImuSample& s) {
 bool ParallelKf::healthy() {
   // per sample: one sum over the state and the three covariances' diagonals, and their signs;
   // every kFullCheckEvery-th sample the full check of each covariance (state_health.h)
-  const auto& p1 = s_.kf1.covariance();
-  const auto& p2 = s_.kf2.covariance();
+  // (the diagonals without writing the KFs' implicit blocks: DirectionKf::covariance_diagonal)
+  const Eigen::Matrix<double, 6, 1> d1 = s_.kf1.direction_kf().covariance_diagonal();
+  const Eigen::Matrix<double, 6, 1> d2 = s_.kf2.covariance_diagonal();
   if (!all_finite(s_.kf1.up_body(), s_.kf1.ext_accel_body(), s_.kf2.u(), s_.kf2.e(), s_.bias, s_.lp_accel_i,
-                  s_.gate.m_ut, s_.gate.dip_rad, p1.diagonal(), p2.diagonal(), s_.bias_cov.diagonal()) ||
-      !(std::min({p1.diagonal().minCoeff(), p2.diagonal().minCoeff(), s_.bias_cov.diagonal().minCoeff()}) >= 0.0)) {
+                  s_.gate.m_ut, s_.gate.dip_rad, d1, d2, s_.bias_cov.diagonal()) ||
+      !(std::min({d1.minCoeff(), d2.minCoeff(), s_.bias_cov.diagonal().minCoeff()}) >= 0.0)) {
     return false;
   }
-  return !s_.health.full_due() ||
-         (covariance_ok(p1, true) && covariance_ok(p2, true) && covariance_ok(s_.bias_cov, true));
+  return !s_.health.full_due() || (covariance_ok(s_.kf1.covariance(), true) &&
+                                   covariance_ok(s_.kf2.covariance(), true) && covariance_ok(s_.bias_cov, true));
 }
 
 void ParallelKf::reset_unhealthy() {

@@ -24,6 +24,7 @@
 #include <Eigen/Core>
 
 #include <cmath>
+#include <cstdint>
 
 namespace poise {
 
@@ -58,7 +59,7 @@ class DirectionKf {
 
   /// Starts at direction `u` (normalised) with e = 0 and covariance diag(var_u I, var_e I).
   void reset(const Eigen::Vector3d& u, double var_u, double var_e) {
-    decoupled_ = false;
+    layout_ = Layout::kFull;
     u_ = u.normalized();
     e_.setZero();
     p_mat_.setZero();
@@ -84,24 +85,27 @@ class DirectionKf {
                        p_.sigma_gyro_extra_rps * p_.sigma_gyro_extra_rps;
     // Q11 = h^2 sigma^2 [u x][u x]^T = h^2 sigma^2 (|u|^2 I - u u^T)            (7d), (11d)
     const double qg = h_s * h_s * sg2;
-    const double q22 = c * c / 3.0 * e_.squaredNorm() + p_.sigma_meas * p_.sigma_meas;  // (7e), (11e)
+    // (7e), (11e); with c = 0 exactly sigma^2 (e is finite: the state-health check)
+    const double s2 = p_.sigma_meas * p_.sigma_meas;
+    const double q22 = c == 0.0 ? s2 : c * c / 3.0 * e_.squaredNorm() + s2;
     const Eigen::Vector3d u_prev = u_;
 
-    u_ = a * u_;  // (5a), (9a)
+    u_.noalias() = a * u_prev;  // (5a), (9a)
 
-    const Eigen::Matrix3d p11 = p_mat_.topLeftCorner<3, 3>();
-    Eigen::Matrix3d n11 = a * p11 * a.transpose();
+    if (c != 0.0) {
+      materialize();  // P12 and P22 are propagated below
+    }
+    Eigen::Matrix3d n11;
+    n11.noalias() = a * p_mat_.topLeftCorner<3, 3>() * a.transpose();
     n11.noalias() -= qg * (u_prev * u_prev.transpose());
     n11.diagonal().array() += qg * u_prev.squaredNorm();
     p_mat_.topLeftCorner<3, 3>() = 0.5 * (n11 + n11.transpose());  // symmetric (a P a^T rounds unevenly)
     if (c == 0.0) {
-      // e = 0, P12 = 0, P22 = q22 I exactly (which correct() then updates in closed form)
+      // e = 0, P12 = 0, P22 = q22 I exactly (which correct() then updates in closed form; the
+      // blocks are written only when covariance() is asked)
       e_.setZero();
-      p_mat_.topRightCorner<3, 3>().setZero();
-      p_mat_.bottomLeftCorner<3, 3>().setZero();
-      p_mat_.bottomRightCorner<3, 3>().setZero();
-      p_mat_.bottomRightCorner<3, 3>().diagonal().setConstant(q22);
-      decoupled_ = true;
+      d_ = q22;
+      layout_ = Layout::kBlockDiagonal;
       return;
     }
     e_ *= c;  // (5b), (9b)
@@ -110,7 +114,7 @@ class DirectionKf {
     p_mat_.bottomLeftCorner<3, 3>() = p_mat_.topRightCorner<3, 3>().transpose();
     p_mat_.bottomRightCorner<3, 3>() *= c * c;
     p_mat_.bottomRightCorner<3, 3>().diagonal().array() += q22;
-    decoupled_ = false;
+    layout_ = Layout::kFull;
   }
 
   /// Measurement update with z = k u + e + n (H = [k I | I], M = sigma^2 I). `extra_var` is added
@@ -120,10 +124,11 @@ class DirectionKf {
     // M is diagonal, so the batch update equals three sequential scalar updates (rows of
     // H = [k I | I]); this avoids the 3x3 inverse and the 6x3 gain products.
     const double r = p_.sigma_meas * p_.sigma_meas + extra_var;  // (7h), (11h)
-    if (decoupled_) {
+    if (layout_ == Layout::kBlockDiagonal) {
       correct_decoupled(innov, k, r);
       return innov;
     }
+    materialize();
     Eigen::Matrix<double, 6, 1> x;
     x << u_, e_;
     for (int i = 0; i < 3; ++i) {
@@ -143,33 +148,6 @@ class DirectionKf {
     return innov;
   }
 
-  /// The update of correct() when P = blkdiag(A, d I) and e = 0 (right after a prediction with
-  /// c = 0), in closed form with S = k^2 A + (d + r) I: u += k A S^-1 v, e = d S^-1 v,
-  /// P11 = A - k^2 A S^-1 A = (d + r) A S^-1 (as S - k^2 A = (d + r) I), P12 = -k d A S^-1,
-  /// P22 = d I - d^2 S^-1. A and S^-1 commute, so A S^-1 is symmetric. The same posterior as the
-  /// three scalar updates, at about a third of their cost.
-  void correct_decoupled(const Eigen::Vector3d& innov, double k, double r) {
-    const Eigen::Matrix3d a = p_mat_.topLeftCorner<3, 3>();
-    const double d = p_mat_(3, 3);
-    const double dr = d + r;
-    Eigen::Matrix3d s = (k * k) * a;
-    s.diagonal().array() += dr;
-    const Eigen::Matrix3d s_inv = symmetric_inverse(s);
-    Eigen::Matrix3d as = a * s_inv;
-    as = 0.5 * (as + as.transpose()).eval();
-    u_.noalias() += k * (as * innov);
-    e_.noalias() = d * (s_inv * innov);
-    p_mat_.topLeftCorner<3, 3>() = dr * as;
-    p_mat_.topRightCorner<3, 3>() = (-k * d) * as;
-    p_mat_.bottomLeftCorner<3, 3>() = p_mat_.topRightCorner<3, 3>();
-    p_mat_.bottomRightCorner<3, 3>() = (-d * d) * s_inv;
-    p_mat_.bottomRightCorner<3, 3>().diagonal().array() += d;
-    decoupled_ = false;
-    if (p_.renormalize) {
-      u_.normalize();
-    }
-  }
-
   /// Inverse of a symmetric 3x3 matrix by its cofactors (six of them), exactly symmetric.
   static Eigen::Matrix3d symmetric_inverse(const Eigen::Matrix3d& m) {
     const double c00 = m(1, 1) * m(2, 2) - m(1, 2) * m(1, 2);
@@ -186,12 +164,35 @@ class DirectionKf {
 
   [[nodiscard]] const Eigen::Vector3d& u() const { return u_; }
   [[nodiscard]] const Eigen::Vector3d& e() const { return e_; }
-  [[nodiscard]] const Matrix6& covariance() const { return p_mat_; }
+  /// P (written in full on demand: after a prediction or correction with c = 0 only P11 is; so
+  /// this const call writes the other blocks, and two threads must not call it at once)
+  [[nodiscard]] const Matrix6& covariance() const {
+    materialize();
+    return p_mat_;
+  }
+  /// P11, the direction's block, without writing the others
+  [[nodiscard]] Eigen::Block<const Matrix6, 3, 3> direction_covariance() const {
+    const Matrix6& p = p_mat_;
+    return p.topLeftCorner<3, 3>();
+  }
+  /// The diagonal of P without writing the blocks
+  [[nodiscard]] Eigen::Matrix<double, 6, 1> covariance_diagonal() const {
+    Eigen::Matrix<double, 6, 1> v;
+    v.head<3>() = p_mat_.diagonal().head<3>();
+    if (layout_ == Layout::kBlockDiagonal) {
+      v.tail<3>().setConstant(d_);
+    } else if (layout_ == Layout::kDecoupledPosterior) {
+      v.tail<3>() = ((-d_ * d_) * s_inv_.diagonal()).array() + d_;
+    } else {
+      v.tail<3>() = p_mat_.diagonal().tail<3>();
+    }
+    return v;
+  }
   /// Replaces u (e.g. after an external correction); the caller keeps it unit if it wants.
   void set_u(const Eigen::Vector3d& u) { u_ = u; }
   void set_e(const Eigen::Vector3d& e) {
+    materialize();
     e_ = e;
-    decoupled_ = false;
   }
 
   /// The Markov coefficient for a step of h seconds.
@@ -207,11 +208,60 @@ class DirectionKf {
   }
 
  private:
+  /// The update of correct() when P = blkdiag(A, d I) and e = 0 (right after a prediction with
+  /// c = 0), in closed form with S = k^2 A + (d + r) I: u += k A S^-1 v, e = d S^-1 v,
+  /// P11 = A - k^2 A S^-1 A = (d + r) A S^-1 (as S - k^2 A = (d + r) I), P12 = -k d A S^-1,
+  /// P22 = d I - d^2 S^-1. A and S^-1 commute, so A S^-1 is symmetric. The same posterior as the
+  /// three scalar updates, at about a third of their cost. P12 and P22 are kept as A S^-1 and
+  /// S^-1 and written only when covariance() is asked (the next prediction with c = 0 drops them).
+  void correct_decoupled(const Eigen::Vector3d& innov, double k, double r) {
+    const Eigen::Matrix3d a = p_mat_.topLeftCorner<3, 3>();
+    const double d = d_;
+    const double dr = d + r;
+    Eigen::Matrix3d s = (k * k) * a;
+    s.diagonal().array() += dr;
+    s_inv_ = symmetric_inverse(s);
+    as_.noalias() = a * s_inv_;
+    as_ = 0.5 * (as_ + as_.transpose()).eval();
+    u_.noalias() += k * (as_ * innov);
+    e_.noalias() = d * (s_inv_ * innov);
+    p_mat_.topLeftCorner<3, 3>() = dr * as_;
+    kd_ = -k * d;
+    layout_ = Layout::kDecoupledPosterior;
+    if (p_.renormalize) {
+      u_.normalize();
+    }
+  }
+
+  /// Writes the blocks of p_mat_ the layout keeps implicit (P11 is always written).
+  void materialize() const {
+    if (layout_ == Layout::kBlockDiagonal) {
+      p_mat_.topRightCorner<3, 3>().setZero();
+      p_mat_.bottomLeftCorner<3, 3>().setZero();
+      p_mat_.bottomRightCorner<3, 3>().setZero();
+      p_mat_.bottomRightCorner<3, 3>().diagonal().setConstant(d_);
+    } else if (layout_ == Layout::kDecoupledPosterior) {
+      p_mat_.topRightCorner<3, 3>() = kd_ * as_;
+      p_mat_.bottomLeftCorner<3, 3>() = p_mat_.topRightCorner<3, 3>();
+      p_mat_.bottomRightCorner<3, 3>() = (-d_ * d_) * s_inv_;
+      p_mat_.bottomRightCorner<3, 3>().diagonal().array() += d_;
+    }
+    layout_ = Layout::kFull;
+  }
+
   DirectionKfParams p_;
   Eigen::Vector3d u_{0.0, 0.0, 1.0};
   Eigen::Vector3d e_{0.0, 0.0, 0.0};
-  Matrix6 p_mat_ = Matrix6::Identity();
-  bool decoupled_ = false;  // P = blkdiag(P11, d I) and e = 0: set by a prediction with c = 0
+  // How much of P p_mat_ holds: all of it; P11 of blkdiag(P11, d_ I) with e = 0 (a prediction
+  // with c = 0, which correct() then updates in closed form); P11 of the closed-form posterior,
+  // P12 = kd_ as_, P22 = d_ I - d_^2 s_inv_ (correct_decoupled).
+  enum class Layout : uint8_t { kFull, kBlockDiagonal, kDecoupledPosterior };
+  mutable Matrix6 p_mat_ = Matrix6::Identity();
+  mutable Layout layout_ = Layout::kFull;
+  double d_ = 0.0;
+  double kd_ = 0.0;
+  Eigen::Matrix3d as_ = Eigen::Matrix3d::Zero();
+  Eigen::Matrix3d s_inv_ = Eigen::Matrix3d::Zero();
   mutable double cached_h_ = -1.0;  // step_c() cache (the pow is only recomputed when h changes)
   mutable double cached_c_ = 0.0;
 };

@@ -415,6 +415,9 @@ struct ParallelKfState {
   std::array<Eigen::Matrix3d, 3> accel_ref_stage_age{Eigen::Matrix3d::Zero(), Eigen::Matrix3d::Zero(),
                                                      Eigen::Matrix3d::Zero()};
   Eigen::Vector3d accel_ref_i{0, 0, 0};      ///< the reference, L3 + c (L2 - L3) (reference_step), m/s^2
+  Eigen::Vector3d accel_ref_up_i{0, 0, 1};   ///< accel_ref_up_for normalised (if accel_ref_up_ok)
+  Eigen::Vector3d accel_ref_up_for{std::nan(""), 0, 0};
+  bool accel_ref_up_ok = false;
   double accel_ref_c = 0.0;                   ///< its c, for a ramp lag of tau
   double accel_ref_g_ratio = 0.0;             ///< what it lets through of an acceleration, in phase, over the twin's
   Eigen::Vector3d accel_ref_sum_i{0, 0, 0};   ///< the accelerometer's integral over the bias period so far, m/s
@@ -477,6 +480,10 @@ class ParallelKf {
   [[nodiscard]] bool initialized() const { return s_.initialized; }
   /// Everything reported (computed on demand from the state).
   [[nodiscard]] ParallelKfOutput output() const;
+  /// The published attitude covariance of output(): attitude_covariance(output()) without the
+  /// rest of output() (its Euler angles, norms and rotations: covariance_terms reads only the
+  /// attitude and the dip).
+  [[nodiscard]] Eigen::Matrix3d attitude_covariance() const { return attitude_covariance(covariance_output()); }
   /// Covariance of the world-frame attitude error (rad^2, rotation vector about ENU x, y, z) of
   /// `out` (= output()), the one the filter publishes: the two KFs' own covariances (tilt from the
   /// up vector's, heading from the horizontal part of the field direction's over cos(dip)^2) plus
@@ -684,6 +691,8 @@ class ParallelKf {
   /// the low-pass let through, the heading KF2 takes from it, and their cross-covariance
   [[nodiscard]] Eigen::Matrix3d external_accel_covariance(const Eigen::Matrix3d& r) const;
 
+  /// output()'s attitude and dip, the only fields covariance_terms reads (the rest left default)
+  [[nodiscard]] ParallelKfOutput covariance_output() const;
   /// The delay the output is predicted over, s: imu_delay_s, or half the last step when not known.
   [[nodiscard]] double output_delay_s() const;
   /// s_.q_world_body from sZ and sX' (2), predicted over output_delay_s(); kept when they are
@@ -697,8 +706,16 @@ class ParallelKf {
   double lag_t_ = -1.0;
   Eigen::Matrix<double, 5, 5> lag_phi_ = Eigen::Matrix<double, 5, 5>::Identity();
   Eigen::Matrix<double, 5, 3> lag_gam_b_ = Eigen::Matrix<double, 5, 3>::Zero();
-  double lag_dip_for_ = std::nan("");  // lag_tan_dip_ = tan(dip) for this dip (guarded)
-  double lag_tan_dip_ = 0.0;
+  // Values of slowly changing inputs, kept with the input they are for (a pure function of it:
+  // the same as computing it each time)
+  mutable double tan_dip_for_ = std::nan("");  // tan_dip_: guarded_tan_dip() for this dip
+  mutable double tan_dip_ = 0.0;
+  mutable double cos_dip_for_ = std::nan("");  // cos_dip_: max(cos(dip), 0.1) (covariance_terms) for this dip
+  mutable double cos_dip_ = 0.0;
+  double dip_forget_dt_ = std::nan("");  // dip_forget_: field_dip_reference's exp(-dt / tau) for this dt
+  double dip_forget_ = 1.0;
+  /// tan(dip) with cos(dip) held at sqrt(kMinCos2Dip) or more
+  [[nodiscard]] double guarded_tan_dip() const;
   ParallelKfState s_;
 
   // Reporting (parallel_kf_report.cpp): the state's per-source reports of the last sample.
@@ -734,7 +751,7 @@ class ParallelKfFilter : public AttitudeFilter {
     if (!kf_.initialized()) {
       return std::nullopt;
     }
-    return kf_.attitude_covariance(kf_.output());
+    return kf_.attitude_covariance();
   }
   [[nodiscard]] HeadingStatus heading_status() const override { return kf_.heading_status(); }
   [[nodiscard]] SourceReports sources() const override { return kf_.sources(); }
