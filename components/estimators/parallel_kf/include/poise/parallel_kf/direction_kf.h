@@ -164,11 +164,13 @@ class DirectionKf {
 
   [[nodiscard]] const Eigen::Vector3d& u() const { return u_; }
   [[nodiscard]] const Eigen::Vector3d& e() const { return e_; }
-  /// P (written in full on demand: after a prediction or correction with c = 0 only P11 is; so
-  /// this const call writes the other blocks, and two threads must not call it at once)
-  [[nodiscard]] const Matrix6& covariance() const {
-    materialize();
-    return p_mat_;
+  /// P, by value: after a prediction or correction with c = 0 only P11 is stored, and the other
+  /// blocks are filled in here from what the update kept (the filter itself is not written, so
+  /// concurrent readers are safe)
+  [[nodiscard]] Matrix6 covariance() const {
+    Matrix6 p = p_mat_;
+    fill_blocks(p);
+    return p;
   }
   /// P11, the direction's block, without writing the others
   [[nodiscard]] Eigen::Block<const Matrix6, 3, 3> direction_covariance() const {
@@ -234,18 +236,23 @@ class DirectionKf {
   }
 
   /// Writes the blocks of p_mat_ the layout keeps implicit (P11 is always written).
-  void materialize() const {
+  /// Writes P12, P21 and P22 of `p` (P11 already in it) from the layout's kept quantities.
+  void fill_blocks(Matrix6& p) const {
     if (layout_ == Layout::kBlockDiagonal) {
-      p_mat_.topRightCorner<3, 3>().setZero();
-      p_mat_.bottomLeftCorner<3, 3>().setZero();
-      p_mat_.bottomRightCorner<3, 3>().setZero();
-      p_mat_.bottomRightCorner<3, 3>().diagonal().setConstant(d_);
+      p.topRightCorner<3, 3>().setZero();
+      p.bottomLeftCorner<3, 3>().setZero();
+      p.bottomRightCorner<3, 3>().setZero();
+      p.bottomRightCorner<3, 3>().diagonal().setConstant(d_);
     } else if (layout_ == Layout::kDecoupledPosterior) {
-      p_mat_.topRightCorner<3, 3>() = kd_ * as_;
-      p_mat_.bottomLeftCorner<3, 3>() = p_mat_.topRightCorner<3, 3>();
-      p_mat_.bottomRightCorner<3, 3>() = (-d_ * d_) * s_inv_;
-      p_mat_.bottomRightCorner<3, 3>().diagonal().array() += d_;
+      p.topRightCorner<3, 3>() = kd_ * as_;
+      p.bottomLeftCorner<3, 3>() = p.topRightCorner<3, 3>();
+      p.bottomRightCorner<3, 3>() = (-d_ * d_) * s_inv_;
+      p.bottomRightCorner<3, 3>().diagonal().array() += d_;
     }
+  }
+  /// Stores P in full (before an update that needs every block).
+  void materialize() {
+    fill_blocks(p_mat_);
     layout_ = Layout::kFull;
   }
 
@@ -256,8 +263,8 @@ class DirectionKf {
   // with c = 0, which correct() then updates in closed form); P11 of the closed-form posterior,
   // P12 = kd_ as_, P22 = d_ I - d_^2 s_inv_ (correct_decoupled).
   enum class Layout : uint8_t { kFull, kBlockDiagonal, kDecoupledPosterior };
-  mutable Matrix6 p_mat_ = Matrix6::Identity();
-  mutable Layout layout_ = Layout::kFull;
+  Matrix6 p_mat_ = Matrix6::Identity();
+  Layout layout_ = Layout::kFull;
   double d_ = 0.0;
   double kd_ = 0.0;
   Eigen::Matrix3d as_ = Eigen::Matrix3d::Zero();

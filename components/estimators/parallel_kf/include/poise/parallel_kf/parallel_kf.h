@@ -557,8 +557,8 @@ class ParallelKf {
   /// q_world_body (ENU) from sZ and sX' (2) after the last accepted sample (the state's); the
   /// last valid one if they are (anti)parallel.
   [[nodiscard]] Eigen::Quaterniond q_world_body() const { return s_.q_world_body; }
-  [[nodiscard]] const Eigen::Matrix<double, 6, 6>& tilt_covariance() const { return s_.kf1.covariance(); }
-  [[nodiscard]] const Eigen::Matrix<double, 6, 6>& heading_covariance() const { return s_.kf2.covariance(); }
+  [[nodiscard]] Eigen::Matrix<double, 6, 6> tilt_covariance() const { return s_.kf1.covariance(); }
+  [[nodiscard]] Eigen::Matrix<double, 6, 6> heading_covariance() const { return s_.kf2.covariance(); }
   [[nodiscard]] const TiltKf& tilt_kf() const { return s_.kf1; }
   [[nodiscard]] const RejectCounters& rejections() const { return s_.rejections; }
   /// Magnetometer samples not used for the heading: gated as disturbed.

@@ -98,7 +98,7 @@ class TiltKf {
 
   [[nodiscard]] const Eigen::Vector3d& up_body() const { return kf_.u(); }         ///< sZ, unit
   [[nodiscard]] const Eigen::Vector3d& ext_accel_body() const { return kf_.e(); }  ///< sa, m/s^2
-  [[nodiscard]] const Eigen::Matrix<double, 6, 6>& covariance() const { return kf_.covariance(); }
+  [[nodiscard]] Eigen::Matrix<double, 6, 6> covariance() const { return kf_.covariance(); }
   [[nodiscard]] const DirectionKf& direction_kf() const { return kf_; }
   [[nodiscard]] bool initialized() const { return initialized_; }
   [[nodiscard]] const TiltKfParams& params() const { return params_; }
