@@ -36,9 +36,7 @@ void aid_zero_rate(const AidContext& c, const ImuInput& in, SourceStatus& st) {
   const Eigen::Matrix3d s_w =
       c.x.P.block<3, 3>(SelectiveEkf::kW, SelectiveEkf::kW) + r_rest * Eigen::Matrix3d::Identity();
   if (c.x.w_rps.dot(s_w.ldlt().solve(c.x.w_rps)) <= kNees95Dof3) {  // chi-square, 3 dof, 95 %
-    h.setZero();
-    h.middleCols<3>(SelectiveEkf::kW).setIdentity();
-    fuse_bias_considered<3>(c.x, h, -c.x.w_rps, Eigen::Vector3d::Constant(r_rest), Eigen::Vector3d::Constant(r_rest));
+    fuse_rate_bias_considered(c.x, -c.x.w_rps, Eigen::Vector3d::Constant(r_rest), Eigen::Vector3d::Constant(r_rest));
   }
   // status
   record(st, Decision::kFused, in.stamp_ns, c.first_pass);

@@ -736,8 +736,10 @@ bool SelectiveEkf::update_vision(const VisionPose& v_in) {
 
 bool SelectiveEkf::healthy() {
   const bool full = health_.full_due();
+  // P_err finite: x - x is 0 for a finite x and NaN for an infinite or NaN one, so the sum is NaN
+  // exactly when allFinite() is false (a vectorised sum instead of a test per coefficient)
   return all_finite(x_.w_rps, x_.q_world_body.coeffs(), x_.b_rps, x_.t_m, x_.v_mps, out_q_.coeffs()) &&
-         covariance_ok(x_.P, full) && x_.P_err.allFinite();
+         covariance_ok(x_.P, full) && !std::isnan((x_.P_err - x_.P_err).sum());
 }
 
 void SelectiveEkf::reset_unhealthy(int64_t stamp_ns) {

@@ -21,6 +21,70 @@ inline bool finite_quat(const Eigen::Quaterniond& q) {
   return q.coeffs().allFinite() && q.coeffs().norm() > 0.5 && q.coeffs().norm() < 1.5;
 }
 
+/// Whether every row of `h` selects states: entries 0 or 1, at most two 1s a row (the gyro's, the
+/// rest aid's rows). A product with such rows has at most two non-zero terms in each sum, whose
+/// value no order of summation changes: times_ht() then gives a dense product's numbers by
+/// selection, bit for bit, at a fraction of its cost.
+template <int M, int N>
+bool selector_rows(const Eigen::Matrix<double, M, N>& h) {
+  for (int i = 0; i < M; ++i) {
+    int ones = 0;
+    for (int j = 0; j < N; ++j) {
+      if (h(i, j) == 1.0) {
+        ++ones;
+      } else if (h(i, j) != 0.0) {
+        return false;
+      }
+    }
+    if (ones > 2) {
+      return false;
+    }
+  }
+  return true;
+}
+
+/// C H^T, with `selector` = selector_rows(h): by selection (column i the sum of the columns of C
+/// row i picks), else C.lazyProduct(H^T).
+template <typename CMat, int M, int N>
+Eigen::Matrix<double, CMat::RowsAtCompileTime, M> times_ht(const CMat& c, const Eigen::Matrix<double, M, N>& h,
+                                                           bool selector) {
+  Eigen::Matrix<double, CMat::RowsAtCompileTime, M> out;
+  if (!selector) {
+    out.noalias() = c.lazyProduct(h.transpose());
+    return out;
+  }
+  out.setZero();
+  for (int i = 0; i < M; ++i) {
+    for (int j = 0; j < N; ++j) {
+      if (h(i, j) == 1.0) {
+        out.col(i) += c.col(j);
+      }
+    }
+  }
+  return out;
+}
+
+/// H A, with `selector` = selector_rows(h): by selection (row i the sum of the rows of A row i of
+/// H picks), else H.lazyProduct(A).
+template <int M, int N, typename AMat>
+Eigen::Matrix<double, M, AMat::ColsAtCompileTime> h_times(const Eigen::Matrix<double, M, N>& h, const AMat& a,
+                                                          bool selector) {
+  Eigen::Matrix<double, M, AMat::ColsAtCompileTime> out;
+  if (!selector) {
+    out.noalias() = h.lazyProduct(a);
+    return out;
+  }
+  out.setZero();
+  for (int i = 0; i < M; ++i) {
+    for (int j = 0; j < N; ++j) {
+      if (h(i, j) == 1.0) {
+        out.row(i) += a.row(j);
+      }
+    }
+  }
+  return out;
+}
+
 /// Update with M rows of a dense H (M x N) and diagonal R, processed one row at a time (exact for
 /// a diagonal R: the same result as the batch update, at O(M N^2) instead of O(M N^3)):
 ///   v_i = P h_i^T (prior), u_i = v_i - sum_{j<i} u_j (h_i . u_j) / s_j (= P_{i-1} h_i^T),
@@ -34,7 +98,8 @@ bool sequential_update(PMat&& p, const Eigen::Matrix<double, M, N>& h,
                        const Eigen::Matrix<double, M, 1>& innov,
                        const Eigen::Matrix<double, M, 1>& r_diag, double gate_sigma, bool gate,
                        bool report_only, SourceStatus& st, Eigen::Matrix<double, N, 1>& dx) {
-  Eigen::Matrix<double, N, M> u = p.lazyProduct(h.transpose());  // prior P H^T
+  const bool selector = selector_rows(h);
+  Eigen::Matrix<double, N, M> u = times_ht(p, h, selector);  // prior P H^T
   double ratio = 0.0;
   st.innovation.setZero();
   st.innovation_variance.setZero();
@@ -114,8 +179,9 @@ void update_error_covariance_block(SelectiveEkfState& x, const Eigen::Matrix<dou
   auto z = x.ext_accel_error.template segment<NB>(Off);
   const Eigen::Matrix<double, M, 1> hz = h * z;
   z -= k * hz;
-  const Eigen::Matrix<double, NB, M> a = c.lazyProduct(h.transpose());
-  Eigen::Matrix<double, M, M> s = h.lazyProduct(a);
+  const bool selector = selector_rows(h);
+  const Eigen::Matrix<double, NB, M> a = times_ht(c, h, selector);
+  Eigen::Matrix<double, M, M> s = h_times(h, a, selector);
   s.diagonal() += r_diag;
   const Eigen::Matrix<double, NB, M> g = 0.5 * k.lazyProduct(s) - a;
   Eigen::Matrix<double, NB, NB> m;
@@ -164,9 +230,10 @@ bool fuse(SelectiveEkfState& x, const Eigen::Matrix<double, M, SelectiveEkf::kN>
   // (on the attitude block alone for its rows while uncoupled: zero elsewhere)
   Eigen::Matrix<double, kN, M> k = Eigen::Matrix<double, kN, M>::Zero();
   if (att_only) {
-    const Eigen::Matrix<double, kAttN, M> u = x.P.template topLeftCorner<kAttN, kAttN>().lazyProduct(
-        h.template leftCols<kAttN>().transpose());
-    Eigen::Matrix<double, M, M> s = h.template leftCols<kAttN>().lazyProduct(u);
+    const Eigen::Matrix<double, M, kAttN> ha = h.template leftCols<kAttN>();
+    const bool selector = selector_rows(ha);
+    const Eigen::Matrix<double, kAttN, M> u = times_ht(x.P.template topLeftCorner<kAttN, kAttN>(), ha, selector);
+    Eigen::Matrix<double, M, M> s = h_times(ha, u, selector);
     s.diagonal() += r_diag;
     k.template topRows<kAttN>() = u * s.inverse();
   } else {
@@ -242,6 +309,43 @@ Eigen::Matrix<double, M, 1> fuse_bias_considered(SelectiveEkfState& x, const Eig
   SelectiveEkf::Mat keep = SelectiveEkf::Mat::Identity();
   keep.block<3, 3>(SelectiveEkf::kB, SelectiveEkf::kB).setZero();
   return fuse_considered<M>(x, h, innov, r_diag, r_err_diag, keep);
+}
+
+/// fuse_bias_considered of the three rows that read the rate itself, H = [I 0 0 0 0 0] (the rest
+/// aid's zero rate), bit for bit, without the dense products (for cost: they were a third of the
+/// filter's instructions on BROAD). With H a selection, H P H^T is P_ww and P H^T is P's rate
+/// columns (one non-zero term in each sum); I - K H is I but in its rate columns, so each sum of
+/// (I - K H) P (I - K H)^T takes the three rate terms in the dense product's order, then the
+/// identity's term; K R K^T has three terms per sum. Coupled blocks: fuse_bias_considered.
+inline Eigen::Vector3d fuse_rate_bias_considered(SelectiveEkfState& x, const Eigen::Vector3d& innov,
+                                                 const Eigen::Vector3d& r_diag, const Eigen::Vector3d& r_err_diag) {
+  constexpr int kN = SelectiveEkf::kN;
+  constexpr int kA = SelectiveEkf::kAttN;
+  Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
+  h.middleCols<3>(SelectiveEkf::kW).setIdentity();
+  static_assert(SelectiveEkf::kW == 0, "the rate's columns lead the attitude block");
+  if (x.coupled) {
+    return fuse_bias_considered<3>(x, h, innov, r_diag, r_err_diag);
+  }
+  auto pa = x.P.topLeftCorner<kA, kA>();
+  Eigen::Matrix3d s = pa.topLeftCorner<3, 3>();
+  s.diagonal() += r_diag;
+  const Eigen::Matrix3d s_inv = s.inverse();
+  Eigen::Matrix<double, kN, 3> k = Eigen::Matrix<double, kN, 3>::Zero();
+  k.topRows<kA>() = pa.leftCols<3>().lazyProduct(s_inv);
+  k.middleRows<3>(SelectiveEkf::kB).setZero();  // the bias considered
+  const Eigen::Matrix<double, kA, 3> ka = k.topRows<kA>();
+  const Eigen::Matrix<double, kA, 3> ikh_w = Eigen::Matrix<double, kA, 3>::Identity() - ka;  // (I - K H)'s rate columns
+  Eigen::Matrix<double, kA, kA> m1 = ikh_w.lazyProduct(pa.topRows<3>());  // (I - K H) P
+  m1.bottomRows<kA - 3>() += pa.bottomRows<kA - 3>();
+  Eigen::Matrix<double, kA, kA> m2 = m1.leftCols<3>().lazyProduct(ikh_w.transpose());  // ... (I - K H)^T
+  m2.rightCols<kA - 3>() += m1.rightCols<kA - 3>();
+  const Eigen::Matrix<double, kA, 3> kr = ka * r_diag.asDiagonal();
+  const Eigen::Matrix<double, kA, kA> updated = m2 + kr.lazyProduct(ka.transpose());
+  pa = 0.5 * (updated + updated.transpose());
+  update_error_covariance<3>(x, k, h, r_err_diag, true);
+  inject(x, k * innov);
+  return s.diagonal();
 }
 
 // ---- The figures the estimate's error covariance P_err uses: the sensor's own where the
