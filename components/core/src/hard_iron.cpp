@@ -22,6 +22,8 @@ void HardIronParams::validate(const char* filter) const {
   check.positive(converged_sigma_ut, "converged_sigma_ut", "uT");
   check.non_negative(min_applied_ut, "min_applied_ut", "uT");
   check.non_negative(consistency_tau_s, "consistency_tau_s", "s, 0 = no check");
+  check.non_negative(removed_log_lr, "removed_log_lr", "0 = no test");
+  check.require(removed_log_lr <= 1e6, "removed_log_lr", "<= 1e6");
   check.positive(max_dt_s, "max_dt_s", "s");
   check.require(lag_s < 100.0, "lag_s", "< 100 (s)");
   check.positive(max_mag_ut, "max_mag_ut", "uT");
@@ -91,7 +93,24 @@ const HardIronReport& HardIronEstimator::finish(HardIronStep s) {
 void HardIronEstimator::refresh() {
   report_.converged = (P_.diagonal().array() < p_.converged_sigma_ut * p_.converged_sigma_ut).all();
   report_.consistent = !(p_.consistency_tau_s > 0.0) || cor_change2_ < raw_change2_;
-  applied_ = report_.converged && b_.squaredNorm() > p_.min_applied_ut * p_.min_applied_ut && report_.consistent;
+  const bool large = b_.squaredNorm() > p_.min_applied_ut * p_.min_applied_ut && report_.consistent;
+  applied_ = report_.converged && large;
+  report_.present = applied_ || (large && b_.dot(P_.ldlt().solve(b_)) > p_.gate_chi2);
+  if (!report_.present) {
+    report_.removed_llr = 0.0;  // the test is of an offset that is there
+  }
+}
+
+bool HardIronEstimator::removed(const Eigen::Vector3d& y, const Eigen::Matrix3d& s, const Eigen::Matrix3d& r,
+                                double nis) {
+  if (!(p_.removed_log_lr > 0.0) || !report_.present) {
+    return false;
+  }
+  // log p(y | b = 0) - log p(y | b ~ N(b_hat, P)): y ~ N(0, R) against y ~ N(H b_hat, S)
+  const double nis0 = y.dot(r.ldlt().solve(y));
+  const double llr = 0.5 * (nis - nis0) + 0.5 * std::log(s.determinant() / r.determinant());
+  report_.removed_llr = std::max(0.0, report_.removed_llr + (std::isfinite(llr) ? llr : 0.0));
+  return report_.removed_llr >= p_.removed_log_lr;
 }
 
 bool HardIronEstimator::usable(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const {
@@ -226,6 +245,14 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
   const Eigen::LDLT<Eigen::Matrix3d> ldlt(S);
   report_.nis = r.dot(ldlt.solve(r));
+  if (removed(k.m - C * j.m, S, R, report_.nis)) {
+    // the readings fit no offset better than the estimate, beyond chance: the magnet is gone
+    refused_s_ = 0.0;
+    b_.setZero();
+    P_ = Eigen::Matrix3d::Identity() * (p_.prior_sigma_ut * p_.prior_sigma_ut);
+    refresh();
+    return finish(HardIronStep::kReset);
+  }
   if (!(report_.nis <= p_.gate_chi2)) {
     refused_s_ += static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9;
     if (refused_s_ >= p_.reset_after_s) {
