@@ -12,6 +12,7 @@
 
 #include "poise/core/types.h"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
@@ -143,6 +144,11 @@ class HardIronEstimator {
   /// Adds one comparison's log-likelihood ratio of "no offset" against the estimate
   /// (removed_log_lr); true when the sum reached the threshold (the offset is gone).
   bool removed(const Eigen::Vector3d& y, const Eigen::Matrix3d& s, const Eigen::Matrix3d& r, double nis);
+  /// The Kalman update of b and P with one comparison (H = I - C, innovation r, its noise, S's LDLT).
+  void correct(const Eigen::Matrix3d& h, const Eigen::Vector3d& r, const Eigen::Matrix3d& noise,
+               const Eigen::LDLT<Eigen::Matrix3d>& s_ldlt);
+  /// b learnt again: P back to the prior (and b to zero when `zero`: the offset is gone).
+  void reopen(bool zero);
   [[nodiscard]] bool usable(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
   [[nodiscard]] double reading_var(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
 
