@@ -95,7 +95,7 @@ void HardIronEstimator::refresh() {
   report_.consistent = !(p_.consistency_tau_s > 0.0) || cor_change2_ < raw_change2_;
   const bool large = b_.squaredNorm() > p_.min_applied_ut * p_.min_applied_ut && report_.consistent;
   applied_ = report_.converged && large;
-  report_.present = applied_ || large;
+  report_.present = applied_ || (large && b_.dot(P_.ldlt().solve(b_)) > p_.gate_chi2);
   if (!report_.present) {
     report_.removed_llr = 0.0;  // the test is of an offset that is there
   }

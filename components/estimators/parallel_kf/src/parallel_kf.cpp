@@ -294,7 +294,8 @@ Eigen::Vector3d ParallelKf::hard_iron_corrected(int64_t stamp_ns, const Eigen::V
 bool ParallelKf::field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, double dt) {
   // At rest the body does not turn, so neither does a world-fixed field with a constant body offset
   // seen from the gyro's frame: what moves it is a magnet attached or brought near. Judged on the
-  // low-passed field (the rest detector's time constant) against the gate's norm tolerance.
+  // low-passed field (the rest detector's time constant) against the gate's norm tolerance; the
+  // field when the rest began is followed with the gate's reference_tau_s (a temperature drift).
   if (!p_.bias_estimation || !mag_ok || !s_.gate.learnt || !(p_.mag_norm_tol > 0.0)) {
     s_.rest_field_i.setConstant(std::nan(""));
     return false;
@@ -307,6 +308,8 @@ bool ParallelKf::field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, do
   }
   if (!s_.rest_field_i.allFinite()) {
     s_.rest_field_i = s_.field_i_lp;
+  } else if (gp_.reference_tau_s > 0.0) {  // a slow change is followed, as the gate's reference does
+    s_.rest_field_i += (dt / (gp_.reference_tau_s + dt)) * (s_.field_i_lp - s_.rest_field_i);
   }
   return (s_.field_i_lp - s_.rest_field_i).norm() > p_.mag_norm_tol * s_.gate.m_ut;
 }
