@@ -24,7 +24,7 @@ constexpr double kConvergedS = 20.0;         // scored from here on (the estimat
 constexpr double kMagNoiseUt = 0.3;          // 1-sigma per axis, uT
 constexpr double kGyroNoiseRps = 0.002;      // 1-sigma per axis, rad/s
 constexpr double kAccelNoiseMps2 = 0.02;     // 1-sigma per axis, m/s^2
-constexpr double kHeadingTolDeg = 1.0;       // rms heading error after convergence, deg (offset removed; 0.09 measured)
+constexpr double kHeadingTolDeg = 1.0;       // rms heading error after convergence, deg (offset removed; 0.25 measured, 0.09 before session 18: see docs/ESTIMATORS.md "Magnets the BROAD copy does not hold")
 constexpr double kUncorrectedWorseFactor = 3.0;  // without the estimator the rms heading error is at least this many times larger
 constexpr double kCoveredShare = 0.95;       // share of scored samples with |heading error| <= 3 sigma
 
