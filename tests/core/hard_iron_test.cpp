@@ -196,6 +196,7 @@ TEST(HardIron, GivenAnOffsetTheReadingsNoLongerCarryWhenTheEstimateStillHoldsItT
     HardIronParams p;
     p.gate_chi2 = 1e12;
     p.reset_after_s = 1e3;
+    p.removed_log_lr = 0.0;  // the consistency check alone (the removal test is below)
     p.consistency_tau_s = tau_s;
     HardIronEstimator h(p);
     Sim sim;
@@ -219,6 +220,31 @@ TEST(HardIron, GivenAnOffsetTheReadingsNoLongerCarryWhenTheEstimateStillHoldsItT
       EXPECT_TRUE(h.applied()) << "without the check the stale offset is still removed";
     }
   }
+}
+
+TEST(HardIron, GivenAnOffsetThatIsRemovedWhenNoInnovationIsRefusedThenTheRemovalTestDropsTheEstimate) {
+  // GIVEN a 37 uT offset on for 20 s, then gone, the chi-square reset out of the way (as above)
+  constexpr double kRealS = 20.0;   // s
+  constexpr double kDroppedS = 5.0;  // the estimate must be dropped within this after the removal, s
+  HardIronParams p;
+  p.gate_chi2 = 1e12;
+  p.reset_after_s = 1e3;
+  p.consistency_tau_s = 0.0;  // the removal test alone
+  HardIronEstimator h(p);
+  Sim sim;
+  for (int i = 0; i < static_cast<int>(kRealS * kRateHz); ++i) {
+    h.update(sim.next(Eigen::Vector3d(30.0, -10.0, 20.0), tumbling_rate));
+  }
+  ASSERT_TRUE(h.applied());
+  EXPECT_EQ(h.report().count(HardIronStep::kReset), 0U) << "no false alarm while the offset is there";
+  // WHEN the readings no longer carry it
+  for (int i = 0; i < static_cast<int>(kDroppedS * kRateHz); ++i) {
+    h.update(sim.next(Eigen::Vector3d::Zero(), tumbling_rate));
+  }
+  // THEN the CUSUM of "no offset" against the estimate reached removed_log_lr: b dropped, learnt again
+  EXPECT_GE(h.report().count(HardIronStep::kReset), 1U);
+  EXPECT_LT(h.offset_ut().norm(), p.min_applied_ut);
+  EXPECT_FALSE(h.applied());
 }
 
 TEST(HardIron, GivenHostileReadingsWhenFedThenEachIsRejectedCountedAndTheEstimateUntouched) {

@@ -2,6 +2,7 @@
 // carries a known body-fixed offset, simulated here, and the `hard_iron` YAML keys.
 #include "poise/core/consistency.h"
 #include "poise/parallel_kf/parallel_kf.h"
+#include "poise/sim/sensor_simulator.h"
 
 #include "poise/testing/param_errors.h"
 
@@ -23,7 +24,7 @@ constexpr double kConvergedS = 20.0;         // scored from here on (the estimat
 constexpr double kMagNoiseUt = 0.3;          // 1-sigma per axis, uT
 constexpr double kGyroNoiseRps = 0.002;      // 1-sigma per axis, rad/s
 constexpr double kAccelNoiseMps2 = 0.02;     // 1-sigma per axis, m/s^2
-constexpr double kHeadingTolDeg = 1.0;       // rms heading error after convergence, deg (offset removed; 0.09 measured)
+constexpr double kHeadingTolDeg = 1.0;       // rms heading error after convergence, deg (offset removed; 0.25 measured, 0.09 before session 18: see docs/ESTIMATORS.md "Magnets the BROAD copy does not hold")
 constexpr double kUncorrectedWorseFactor = 3.0;  // without the estimator the rms heading error is at least this many times larger
 constexpr double kCoveredShare = 0.95;       // share of scored samples with |heading error| <= 3 sigma
 
@@ -127,6 +128,94 @@ TEST(ParallelKfHardIron, GivenATumblingSensorWithABodyFixedOffsetWhenHardIronIsO
   EXPECT_GT(off.rms_deg, kUncorrectedWorseFactor * on.rms_deg);
 }
 
+// Issue 32: a magnet attached to a hand-held sensor at rest and removed during the motion (BROAD's
+// protocol, trials 32/34/36), with offsets the BROAD copy does not hold. The oracle is the
+// simulator's attitude. Times in s, offsets in uT.
+constexpr double kMagnetRestS = 20.0;       // rest before the motion (the magnet attached during it)
+constexpr double kMagnetMotionS = 80.0;     // hand-held motion
+constexpr double kMagnetEndRestS = 10.0;    // rest after it
+constexpr double kMagnetOnS = 14.0;         // the magnet's attachment starts (ramp kMagnetRampS)
+constexpr double kMagnetRampS = 1.5;
+constexpr double kMagnetOffS = 75.0;        // its removal starts, in the motion
+constexpr double kMagnetHeadingTolDeg = 3.0;  // rms heading error over the motion, deg (0.1-1.1 measured)
+
+/// Rms heading error (world z of the rotation-vector error), deg, over the motion of a hand-held
+/// run (kept near level: the rotation shows the offset's vertical part slowly) with `offset` fixed
+/// in the body from kMagnetOnS to kMagnetOffS (+ ramps), the simulated sensor's noise figures told.
+double attached_magnet_heading_rms_deg(const Eigen::Vector3d& offset_ut) {
+  sim::SimConfig cfg;
+  cfg.rate_hz = 200.0;
+  cfg.seed = 1;
+  cfg.duration_s = kMagnetRestS + kMagnetMotionS + kMagnetEndRestS;
+  cfg.field.magnitude_ut = 44.0;  // BROAD's: horizontal 15 uT
+  cfg.field.dip_deg = 70.0;
+  cfg.noise.gyro_bias_rps = Eigen::Vector3d(0.3, -0.2, 0.25) * kRadPerDeg;
+  sim::MotionSegment rest;
+  rest.duration_s = kMagnetRestS;
+  sim::MotionSegment hand;
+  hand.name = "hand";
+  hand.duration_s = kMagnetMotionS;
+  hand.rotation_amplitude_rps = 1.2;
+  hand.rotation_freq_hz = 0.3;
+  hand.level_gain_per_s = 0.3;
+  hand.accel_amplitude_mps2 = 1.5;
+  hand.accel_freq_hz = 0.8;
+  sim::MotionSegment end = rest;
+  end.duration_s = kMagnetEndRestS;
+  cfg.segments = {rest, hand, end};
+  sim::MagnetEpisode magnet;
+  magnet.start_s = kMagnetOnS;
+  magnet.ramp_s = kMagnetRampS;
+  magnet.hold_s = kMagnetOffS - kMagnetOnS - kMagnetRampS;
+  magnet.field_ut = offset_ut;
+  magnet.body_fixed = true;
+  cfg.magnets = {magnet};
+  ParallelKfParams p;  // the simulated sensor's figures, as config/hosts/simulated.yaml tells them
+  p.imu_delay_s = 0.0;
+  p.gyro_bias_walk_rps_per_sqrt_s = 0.0;
+  p.gyro_noise_density_rps_per_sqrt_hz = cfg.noise.sigma_gyro_rps / std::sqrt(cfg.rate_hz);
+  p.gyro_scale_error = 0.0;
+  ParallelKf kf(p);
+  sim::SensorSimulator sim(cfg);
+  double sq = 0.0;
+  uint64_t n = 0;
+  while (!sim.done()) {
+    const sim::SimSample s = sim.next();
+    kf.update(s.imu);
+    if (!kf.initialized() || !s.truth.moving) {
+      continue;
+    }
+    const double err = world_attitude_error(kf.output().q_world_body, s.truth.q_world_body).z();
+    sq += err * err;
+    ++n;
+  }
+  return n > 0 ? std::sqrt(sq / static_cast<double>(n)) * kDegPerRad : 1e9;
+}
+
+TEST(ParallelKfHardIron, GivenAMagnetAttachedAtRestAndRemovedInMotionWhenItsOffsetIsOneTheGateCannotTellThenTheHeadingHolds) {
+  // GIVEN a hand-held sensor in BROAD's field (44 uT, horizontal 15 uT), a magnet attached at rest
+  // and removed during the motion, its body offset
+  //   - 25 uT along -y (against the horizontal field at the start): where it reverses the
+  //     horizontal field the sum passes both the norm and the dip gate (42.5 uT, 76 deg);
+  //   - 25 uT along -x (across it): passes the gate at other orientations;
+  //   - 60 uT along +x: gated throughout, so after mag_max_reject_s (60 s) used anyway.
+  // Before: 108.7 / 24.0 / 13.2 deg rms; the hard-iron estimate in this motion converges late or
+  // not at all (the vertical part of the offset shows slowly when the sensor is kept near level).
+  const struct {
+    Eigen::Vector3d offset;
+    const char* what;
+  } cases[] = {{{0.0, -25.0, 0.0}, "25 uT along -y"}, {{-25.0, 0.0, 0.0}, "25 uT along -x"},
+               {{60.0, 0.0, 0.0}, "60 uT along +x"}};
+  for (const auto& c : cases) {
+    // WHEN the default filter runs on it
+    const double rms = attached_magnet_heading_rms_deg(c.offset);
+    std::printf("%s: heading rms over the motion %.2f deg\n", c.what, rms);
+    // THEN the heading stays within tolerance of the truth: the raw field is not used while the
+    // offset cannot be removed (nor when it moved at rest), and the offset is dropped once gone
+    EXPECT_LT(rms, kMagnetHeadingTolDeg) << c.what;
+  }
+}
+
 TEST(ParallelKfHardIron, GivenTheHardIronKeysInYamlWhenLoadedThenTheyAreReadAndHostileValuesAreRefusedByName) {
   const std::string path = ::testing::TempDir() + "/pkf_hard_iron.yaml";
   auto write = [&](const std::string& text) {
@@ -142,12 +231,13 @@ TEST(ParallelKfHardIron, GivenTheHardIronKeysInYamlWhenLoadedThenTheyAreReadAndH
   EXPECT_FALSE(load_parallel_kf_params(dir + "parallel_kf_paper.yaml").hard_iron);
   EXPECT_TRUE(load_parallel_kf_params(dir + "parallel_kf.yaml").hard_iron);
   write("parallel_kf:\n  hard_iron: false\n  hard_iron_estimator:\n    min_applied_ut: 8\n    noise_ut: 2\n"
-        "    consistency_tau_s: 0\n");
+        "    consistency_tau_s: 0\n    removed_log_lr: 0\n");
   const ParallelKfParams p = load_parallel_kf_params(path);
   EXPECT_FALSE(p.hard_iron);
   EXPECT_EQ(p.hard_iron_estimator.min_applied_ut, 8.0);
   EXPECT_EQ(p.hard_iron_estimator.noise_ut, 2.0);
   EXPECT_EQ(p.hard_iron_estimator.consistency_tau_s, 0.0);
+  EXPECT_EQ(p.hard_iron_estimator.removed_log_lr, 0.0);
   // hostile values: each refused with a message naming the key
   const struct {
     const char* yaml;
@@ -166,6 +256,8 @@ TEST(ParallelKfHardIron, GivenTheHardIronKeysInYamlWhenLoadedThenTheyAreReadAndH
       {"  hard_iron_estimator:\n    gate_chi2: -.inf\n", "gate_chi2"},
       {"  hard_iron_estimator:\n    consistency_tau_s: -5\n", "consistency_tau_s"},
       {"  hard_iron_estimator:\n    consistency_tau_s: .nan\n", "consistency_tau_s"},
+      {"  hard_iron_estimator:\n    removed_log_lr: -1\n", "removed_log_lr"},
+      {"  hard_iron_estimator:\n    removed_log_lr: .inf\n", "removed_log_lr"},
       {"  hard_iron_estimator:\n    no_such_key: 1\n", "no_such_key"},
       {"  hard_iron_estimator:\n    prior_sigma_ut: [1, 2]\n", "prior_sigma_ut"},
   };

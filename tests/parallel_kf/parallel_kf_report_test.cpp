@@ -33,6 +33,7 @@ TEST(ParallelKfReport, MagDecisionsFollowTheGateIncludingTheForcedCase) {
   p.mag_reacquire_s = 0.0;   // no new reference: the rejection lasts
   p.mag_max_reject_s = 1.0;  // then the magnetometer is used regardless
   p.mag_verify_s = 0.0;      // the learnt reference verified at once (not relearnt from the new field)
+  p.bias_estimation = false;  // no rest detector: a field that moves at rest is the gate's to judge
   ParallelKf kf(p);
   int i = 0;
   kf.update(rest(i++, 1.0));
@@ -60,6 +61,22 @@ TEST(ParallelKfReport, MagDecisionsFollowTheGateIncludingTheForcedCase) {
   EXPECT_STREQ(mag_of(kf).reason, "forced_after_max_reject");
   EXPECT_GT(mag_of(kf).test_ratio, 1.0) << "still outside the gate";
   EXPECT_EQ(mag_of(kf).rejected_count, kf.mag_gated_count());
+}
+
+TEST(ParallelKfReport, GivenTheSensorAtRestWhenTheFieldMovesThenTheMagSaysFieldMovedAtRest) {
+  // GIVEN the default filter at rest (the rest detector needs rest_min_s), its field learnt
+  ParallelKf kf;
+  int i = 0;
+  for (; i < 300; ++i) {
+    kf.update(rest(i, 1.0));
+  }
+  EXPECT_EQ(mag_of(kf).decision, SourceDecision::kFused);
+  // WHEN the field grows by half with the sensor still, THEN it is refused as moved at rest
+  for (int k = 0; k < 100; ++k) {
+    kf.update(rest(i++, 1.5));
+  }
+  EXPECT_EQ(mag_of(kf).decision, SourceDecision::kRejected);
+  EXPECT_STREQ(mag_of(kf).reason, "field_moved_at_rest");
 }
 
 TEST(ParallelKfReport, MissingAndRejectedSamplesSayWhy) {

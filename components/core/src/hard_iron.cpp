@@ -22,6 +22,8 @@ void HardIronParams::validate(const char* filter) const {
   check.positive(converged_sigma_ut, "converged_sigma_ut", "uT");
   check.non_negative(min_applied_ut, "min_applied_ut", "uT");
   check.non_negative(consistency_tau_s, "consistency_tau_s", "s, 0 = no check");
+  check.non_negative(removed_log_lr, "removed_log_lr", "0 = no test");
+  check.require(removed_log_lr <= 1e6, "removed_log_lr", "<= 1e6");
   check.positive(max_dt_s, "max_dt_s", "s");
   check.require(lag_s < 100.0, "lag_s", "< 100 (s)");
   check.positive(max_mag_ut, "max_mag_ut", "uT");
@@ -91,7 +93,24 @@ const HardIronReport& HardIronEstimator::finish(HardIronStep s) {
 void HardIronEstimator::refresh() {
   report_.converged = (P_.diagonal().array() < p_.converged_sigma_ut * p_.converged_sigma_ut).all();
   report_.consistent = !(p_.consistency_tau_s > 0.0) || cor_change2_ < raw_change2_;
-  applied_ = report_.converged && b_.squaredNorm() > p_.min_applied_ut * p_.min_applied_ut && report_.consistent;
+  const bool large = b_.squaredNorm() > p_.min_applied_ut * p_.min_applied_ut && report_.consistent;
+  applied_ = report_.converged && large;
+  report_.present = applied_ || (large && b_.dot(P_.ldlt().solve(b_)) > p_.gate_chi2);
+  if (!report_.present) {
+    report_.removed_llr = 0.0;  // the test is of an offset that is there
+  }
+}
+
+bool HardIronEstimator::removed(const Eigen::Vector3d& y, const Eigen::Matrix3d& s, const Eigen::Matrix3d& r,
+                                double nis) {
+  if (!(p_.removed_log_lr > 0.0) || !report_.present) {
+    return false;
+  }
+  // log p(y | b = 0) - log p(y | b ~ N(b_hat, P)): y ~ N(0, R) against y ~ N(H b_hat, S)
+  const double nis0 = y.dot(r.ldlt().solve(y));
+  const double llr = 0.5 * (nis - nis0) + 0.5 * std::log(s.determinant() / r.determinant());
+  report_.removed_llr = std::max(0.0, report_.removed_llr + (std::isfinite(llr) ? llr : 0.0));
+  return report_.removed_llr >= p_.removed_log_lr;
 }
 
 bool HardIronEstimator::usable(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const {
@@ -214,36 +233,56 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   // R_k^T R_j, made a rotation again (the caller's orientation is renormalised only now and then)
   const Eigen::Quaterniond rel = Eigen::Quaterniond(Eigen::Matrix3d(k.r.transpose() * j.r)).normalized();
   report_.rotation_rad = Eigen::AngleAxisd(rel).angle();
-  if (report_.rotation_rad < p_.min_rotation_rad) {
-    return finish(HardIronStep::kNotEnoughRotation);
-  }
-  consistency(j.m, k.m, static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9);
   const Eigen::Matrix3d C = rel.toRotationMatrix();
   const Eigen::Matrix3d H = Eigen::Matrix3d::Identity() - C;
-  const Eigen::Vector3d r = k.m - C * j.m - H * b_;
+  const Eigen::Vector3d y = k.m - C * j.m;
+  const Eigen::Vector3d r = y - H * b_;
   // Both readings carry their own variance per axis: cov(m_k - C m_j) = (var_k + var_j) I.
   const Eigen::Matrix3d R = Eigen::Matrix3d::Identity() * (k.var_ut2 + j.var_ut2);
   const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
   const Eigen::LDLT<Eigen::Matrix3d> ldlt(S);
-  report_.nis = r.dot(ldlt.solve(r));
+  const double nis = r.dot(ldlt.solve(r));
+  // whether the offset is gone is judged on every comparison: a small rotation tells little
+  // (H b is small under both hypotheses), never something wrong, so none is skipped
+  if (removed(y, S, R, nis)) {
+    reopen(true);  // the readings fit no offset better than the estimate, beyond chance: the magnet is gone
+    return finish(HardIronStep::kReset);
+  }
+  if (report_.rotation_rad < p_.min_rotation_rad) {
+    return finish(HardIronStep::kNotEnoughRotation);
+  }
+  consistency(j.m, k.m, static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9);
+  report_.nis = nis;
   if (!(report_.nis <= p_.gate_chi2)) {
     refused_s_ += static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9;
     if (refused_s_ >= p_.reset_after_s) {
-      refused_s_ = 0.0;
-      P_ = Eigen::Matrix3d::Identity() * (p_.prior_sigma_ut * p_.prior_sigma_ut);
-      refresh();
+      reopen(false);
       return finish(HardIronStep::kReset);
     }
     return finish(HardIronStep::kGated);
   }
   refused_s_ = 0.0;
-  const Eigen::Matrix3d K = ldlt.solve(H * P_).transpose();  // P H^T S^-1 (P, S symmetric)
+  correct(H, r, R, ldlt);
+  return finish(HardIronStep::kUpdated);
+}
+
+void HardIronEstimator::correct(const Eigen::Matrix3d& h, const Eigen::Vector3d& r, const Eigen::Matrix3d& noise,
+                                const Eigen::LDLT<Eigen::Matrix3d>& s_ldlt) {
+  const Eigen::Matrix3d K = s_ldlt.solve(h * P_).transpose();  // P H^T S^-1 (P, S symmetric)
   b_ += K * r;
-  const Eigen::Matrix3d IKH = Eigen::Matrix3d::Identity() - K * H;
-  P_ = IKH * P_ * IKH.transpose() + K * R * K.transpose();
+  const Eigen::Matrix3d IKH = Eigen::Matrix3d::Identity() - K * h;
+  P_ = IKH * P_ * IKH.transpose() + K * noise * K.transpose();
   P_ = 0.5 * (P_ + P_.transpose());
   refresh();
-  return finish(HardIronStep::kUpdated);
+}
+
+void HardIronEstimator::reopen(bool zero) {
+  refused_s_ = 0.0;
+  if (zero) {
+    b_.setZero();
+  }
+  P_ = Eigen::Matrix3d::Identity() * (p_.prior_sigma_ut * p_.prior_sigma_ut);
+  refresh();
 }
 
 }  // namespace poise

@@ -251,7 +251,9 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   }
 
   // KF2: heading + magnetic disturbance (8)-(11), on the reading with the hard-iron offset removed
-  heading_step(hard_iron_corrected(s.stamp_ns, gyro, s.mag_ut, c.mag_ok), c.mag_ok, dt);
+  const Eigen::Vector3d mag = hard_iron_corrected(s.stamp_ns, gyro, s.mag_ut, c.mag_ok);
+  s_.mag_moved_at_rest = field_moved_at_rest(s.mag_ut, c.mag_ok, dt);  // the raw field: the offset turns with the body
+  heading_step(mag, c.mag_ok, dt);
   s_.gate.tick(gp_, dt);
   if (p_.bias_estimation) {
     s_.mb_time += dt;
@@ -305,16 +307,41 @@ Eigen::Quaterniond ParallelKf::gyro_attitude() const {
 Eigen::Vector3d ParallelKf::hard_iron_corrected(int64_t stamp_ns, const Eigen::Vector3d& gyro,
                                                 const Eigen::Vector3d& mag, bool mag_ok) {
   s_.mag_corrected = false;
+  s_.mag_offset_pending = false;
   if (!p_.hard_iron || !mag_ok) {
     return mag;
   }
   s_.hard_iron.update(stamp_ns, s_.r_ib, gyro, mag);  // the filter's gyro-only orientation: integrated once
+  s_.mag_offset_pending = s_.hard_iron.pending();
   if (!s_.hard_iron.applied()) {
     return mag;
   }
   s_.mag_corrected = true;
   ++s_.mag_corrected_count;
   return mag - s_.hard_iron.offset_ut();
+}
+
+bool ParallelKf::field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, double dt) {
+  // At rest the body does not turn, so neither does a world-fixed field with a constant body offset
+  // seen from the gyro's frame: what moves it is a magnet attached or brought near. Judged on the
+  // low-passed field (the rest detector's time constant) against the gate's norm tolerance; the
+  // field when the rest began is followed with the gate's reference_tau_s (a temperature drift).
+  if (!p_.bias_estimation || !mag_ok || !s_.gate.learnt || !(p_.mag_norm_tol > 0.0)) {
+    s_.rest_field_i.setConstant(std::nan(""));
+    return false;
+  }
+  const Eigen::Vector3d f = (gyro_frame_kept() ? s_.r_ib : s_.q_ib.toRotationMatrix()) * mag;
+  s_.field_i_lp = s_.field_i_lp.allFinite() ? Eigen::Vector3d(s_.field_i_lp + (dt / (p_.rest_filter_tau_s + dt)) * (f - s_.field_i_lp)) : f;
+  if (!s_.rest_det.rest) {
+    s_.rest_field_i.setConstant(std::nan(""));
+    return false;
+  }
+  if (!s_.rest_field_i.allFinite()) {
+    s_.rest_field_i = s_.field_i_lp;
+  } else if (gp_.reference_tau_s > 0.0) {  // a slow change is followed, as the gate's reference does
+    s_.rest_field_i += (dt / (gp_.reference_tau_s + dt)) * (s_.field_i_lp - s_.rest_field_i);
+  }
+  return (s_.field_i_lp - s_.rest_field_i).norm() > p_.mag_norm_tol * s_.gate.m_ut;
 }
 
 void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {
@@ -826,6 +853,19 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
     s_.heading_initialized = true;
     s_.heading_from_gyro = false;
   }
+  using MagUse = ParallelKfState::MagUse;
+  if (!first_field && (s_.mag_moved_at_rest || s_.mag_offset_pending)) {
+    // Not the Earth's field, whatever the gate would say of it at this orientation: it moved while
+    // the sensor was still (a magnet attached or brought near; the heading at rest needs no
+    // field), or it carries a body-fixed offset the estimate cannot remove yet (an attached
+    // magnet before the rotation has shown all of it; an offset across the horizontal field
+    // barely moves |s_M| or the dip, and one that reverses it can pass both). Not used, and not
+    // the gate's: the field did not change for good, so its clocks (reacquire, forced use) do not run.
+    s_.mag_use = s_.mag_moved_at_rest ? MagUse::kMovedAtRest : MagUse::kPending;
+    s_.mb_head_trusted = false;
+    s_.kf2.set_e(mag - s_.gate.m_ut * s_.kf2.u());  // the disturbance seen through the propagated heading
+    return;
+  }
   const FieldVerdict verdict = s_.gate.step(gp_, mag, s_.kf1.up_body(), dt);
   if (first_field) {
     s_.heading_anchored = verdict != FieldVerdict::kGated || !(p_.mag_verify_s > 0.0);
@@ -838,7 +878,6 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
     s_.gate_norm_ut = s_.gate.last_norm_ut;
     s_.gate_sin_dip = s_.gate.last_sin_dip;
   }
-  using MagUse = ParallelKfState::MagUse;
   switch (verdict) {
     case FieldVerdict::kLearning: s_.mag_use = MagUse::kLearning; break;
     case FieldVerdict::kForced: s_.mag_use = MagUse::kForced; break;

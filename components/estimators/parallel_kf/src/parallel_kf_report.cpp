@@ -81,6 +81,8 @@ void ParallelKf::report(const ImuSample& s, const SampleCheck& c, bool accepted,
   using MagUse = ParallelKfState::MagUse;
   switch (s_.mag_use) {
     case MagUse::kGated: s_.mag_src.mark_rejected("disturbed"); return;
+    case MagUse::kPending: s_.mag_src.mark_rejected("hard_iron_pending"); return;
+    case MagUse::kMovedAtRest: s_.mag_src.mark_rejected("field_moved_at_rest"); return;
     case MagUse::kForced: s_.mag_src.mark_fused(s.stamp_ns, "forced_after_max_reject"); return;
     case MagUse::kLearning: s_.mag_src.mark_not_available("learning_field"); return;
     case MagUse::kRestarted: s_.mag_src.mark_fused(s.stamp_ns, "heading_restarted"); return;

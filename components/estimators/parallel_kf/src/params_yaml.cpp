@@ -72,6 +72,7 @@ ParallelKfParams load_parallel_kf_params(const std::string& path, const Parallel
     hi.get("converged_sigma_ut", p.hard_iron_estimator.converged_sigma_ut);
     hi.get("min_applied_ut", p.hard_iron_estimator.min_applied_ut);
     hi.get("consistency_tau_s", p.hard_iron_estimator.consistency_tau_s);
+    hi.get("removed_log_lr", p.hard_iron_estimator.removed_log_lr);
     hi.get("max_dt_s", p.hard_iron_estimator.max_dt_s);
     hi.get("max_mag_ut", p.hard_iron_estimator.max_mag_ut);
     hi.get("max_gyro_rps", p.hard_iron_estimator.max_gyro_rps);

@@ -12,6 +12,7 @@
 
 #include "poise/core/types.h"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
@@ -46,6 +47,14 @@ struct HardIronParams {
   /// this time constant, s (0 = no check). A field that varies in space (a magnet near the sensor,
   /// not on it) fits an offset, but removing it makes the magnitude vary where it did not.
   double consistency_tau_s = 5.0;
+  /// The offset is taken as gone (b learnt again, as after reset_after_s) once the evidence that
+  /// the readings carry no offset at all outweighs the estimate by this log-likelihood ratio
+  /// (0 = no test). While the estimate is present (below), each comparison with enough rotation
+  /// adds log p(y | b = 0) - log p(y | b ~ N(b_hat, P)), y = m_k - C m_j, to a sum held at or above
+  /// zero (Page's CUSUM): a magnet removed makes every comparison favour b = 0, with no innovation
+  /// large enough for the chi-square gate when the body turns slowly. The chance that the sum ever
+  /// reaches h while the offset is still there is at most e^-h (Wald); 6.9: 1e-3.
+  double removed_log_lr = 6.9;
   double max_dt_s = 0.1;              ///< a longer gap between samples restarts the comparison, s
   double max_mag_ut = 5000.0;         ///< |m| above this (or non-finite) is refused, uT
   double max_gyro_rps = 100.0;        ///< |w| above this (or non-finite) is refused, rad/s
@@ -79,6 +88,11 @@ struct HardIronReport {
   double raw_norm_change_ut = 0.0;
   double corrected_norm_change_ut = 0.0;
   bool consistent = false;
+  /// An offset is there: |b| > min_applied_ut, consistent, and converged or b far from zero
+  /// against its covariance (b^T P^-1 b > gate_chi2). Present but not converged: the raw reading
+  /// carries an offset that cannot be removed yet.
+  bool present = false;
+  double removed_llr = 0.0;  ///< the CUSUM of the log-likelihood ratio for "no offset" (removed_log_lr)
   /// per step reason (indexed by HardIronStep), since construction/reset: an array, not a map,
   /// so the per-sample path of a filter that carries the estimator does no lookup
   std::array<uint64_t, static_cast<size_t>(HardIronStep::kCount)> counts{};
@@ -107,6 +121,9 @@ class HardIronEstimator {
   /// Whether corrected() removes the offset: converged, |b| > min_applied_ut and consistent (the
   /// corrected field's magnitude changes less over rotation than the raw one's).
   [[nodiscard]] bool applied() const { return applied_; }
+  /// An offset is in the readings but not known well enough to remove (present, not converged):
+  /// the raw reading is not the Earth's field and cannot be corrected yet.
+  [[nodiscard]] bool pending() const { return report_.present && !applied_; }
   /// The reading with the offset removed when applied(), unchanged otherwise.
   [[nodiscard]] Eigen::Vector3d corrected(const Eigen::Vector3d& m_ut) const { return applied() ? Eigen::Vector3d(m_ut - b_) : m_ut; }
   [[nodiscard]] const HardIronReport& report() const { return report_; }
@@ -124,6 +141,14 @@ class HardIronEstimator {
   /// Adds one comparison's |m| and |m - b| changes (consistency_tau_s) and refreshes.
   void consistency(const Eigen::Vector3d& m_j, const Eigen::Vector3d& m_k, double interval_s);
   void refresh();  ///< converged and applied from b_ and P_ (called where they change, not per sample)
+  /// Adds one comparison's log-likelihood ratio of "no offset" against the estimate
+  /// (removed_log_lr); true when the sum reached the threshold (the offset is gone).
+  bool removed(const Eigen::Vector3d& y, const Eigen::Matrix3d& s, const Eigen::Matrix3d& r, double nis);
+  /// The Kalman update of b and P with one comparison (H = I - C, innovation r, its noise, S's LDLT).
+  void correct(const Eigen::Matrix3d& h, const Eigen::Vector3d& r, const Eigen::Matrix3d& noise,
+               const Eigen::LDLT<Eigen::Matrix3d>& s_ldlt);
+  /// b learnt again: P back to the prior (and b to zero when `zero`: the offset is gone).
+  void reopen(bool zero);
   [[nodiscard]] bool usable(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
   [[nodiscard]] double reading_var(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
 

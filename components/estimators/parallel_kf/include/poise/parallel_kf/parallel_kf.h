@@ -315,7 +315,11 @@ struct ParallelKfCovarianceTerms {
 /// are here too, so a restored state gives the same outputs and reports bit for bit.
 struct ParallelKfState {
   /// What the last sample's heading step did with s_M (for the mag report).
-  enum class MagUse : uint8_t { kNone, kLearning, kGated, kForced, kRestarted };
+  /// kPending: the reading carries a hard-iron offset not yet known well enough to remove
+  /// (HardIronEstimator::pending): not used, and the gate not asked.
+  /// kMovedAtRest: the field turned in the (gyro-propagated) inertial frame while the sensor was
+  /// at rest (field_moved_at_rest): not used, and the gate not asked.
+  enum class MagUse : uint8_t { kNone, kLearning, kGated, kForced, kRestarted, kPending, kMovedAtRest };
 
   TiltKf kf1;
   DirectionKf kf2;
@@ -380,6 +384,12 @@ struct ParallelKfState {
   /// The hard-iron offset estimate (hard_iron); fed every accepted sample with a magnetometer
   HardIronEstimator hard_iron;
   bool mag_corrected = false;  ///< the last sample's s_M had the hard-iron offset removed
+  bool mag_offset_pending = false;  ///< the last sample's s_M carried an offset that cannot be removed yet
+  /// r_ib s_M low-passed over rest_filter_tau_s, and its value when the current rest began (NaN:
+  /// not at rest), uT: the field seen from the gyro's almost inertial frame (field_moved_at_rest)
+  Eigen::Vector3d field_i_lp = Eigen::Vector3d::Constant(std::nan(""));
+  Eigen::Vector3d rest_field_i = Eigen::Vector3d::Constant(std::nan(""));
+  bool mag_moved_at_rest = false;  ///< the last sample's field had moved since the rest began
   uint64_t mag_corrected_count = 0;  ///< samples whose s_M had the offset removed
 
   // What the two KFs do not model, for the published covariance (attitude_covariance)
@@ -678,6 +688,9 @@ class ParallelKf {
   /// bias_err_cov (and bias_err_att_cov) after a bias measurement along h with gain k, whose
   /// noise is white of variance w_white plus, with `mn`, the window's attitude error rate.
   void bias_error_update(const Eigen::Vector3d& h, const Eigen::Vector3d& k, double w_white, MotionNoise* mn);
+  /// Whether the raw field `mag` has moved, in the gyro's almost inertial frame,
+  /// by more than the gate's norm tolerance since the current rest began (false when not at rest)
+  bool field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, double dt);
   /// KF2's correction (predicted already, before KF1's correction was shared) and the gate
   void heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt);
   /// KF2 restarted on the field `mag` (a relearnt reference, or the first accepted field after a
