@@ -79,6 +79,37 @@ TEST(ParallelKfReport, GivenTheSensorAtRestWhenTheFieldMovesThenTheMagSaysFieldM
   EXPECT_STREQ(mag_of(kf).reason, "field_moved_at_rest");
 }
 
+TEST(ParallelKfReport, GivenAVerifiedHeadingAtRestWhenTheFieldStaysMovedLongerThanVerifyThenTheHeadingIsUnverified) {
+  // GIVEN the default filter at rest with its learnt reference verified (accepted for
+  // mag_verify_s after the start-up second)
+  const ParallelKfParams p;
+  ParallelKf kf(p);
+  int i = 0;
+  const int verify_samples = static_cast<int>(p.mag_verify_s * 100.0);  // 100 Hz
+  for (; i < 100 + verify_samples + 100; ++i) {
+    kf.update(rest(i, 1.0));
+  }
+  ASSERT_EQ(kf.heading_status(), HeadingStatus::kVerified);
+  // WHEN the field moves with the sensor still (refused before the gate, so the gate's own
+  // rejected time does not run) for just under mag_verify_s, THEN the heading is still verified
+  for (int k = 0; k < verify_samples - 10; ++k) {
+    kf.update(rest(i++, 1.5));
+  }
+  ASSERT_STREQ(mag_of(kf).reason, "field_moved_at_rest");
+  EXPECT_EQ(kf.heading_status(), HeadingStatus::kVerified);
+  // and past it, no field has held the heading for mag_verify_s: unverified, as a gated stretch is
+  for (int k = 0; k < 20; ++k) {
+    kf.update(rest(i++, 1.5));
+  }
+  EXPECT_EQ(kf.heading_status(), HeadingStatus::kUnverified);
+  // WHEN the Earth's field is back and used again, THEN the heading is verified again
+  for (int k = 0; k < 100; ++k) {
+    kf.update(rest(i++, 1.0));
+  }
+  EXPECT_EQ(mag_of(kf).decision, SourceDecision::kFused);
+  EXPECT_EQ(kf.heading_status(), HeadingStatus::kVerified);
+}
+
 TEST(ParallelKfReport, MissingAndRejectedSamplesSayWhy) {
   ParallelKf kf;
   ImuSample s = rest(0, 1.0);

@@ -862,11 +862,15 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
     // barely moves |s_M| or the dip, and one that reverses it can pass both). Not used, and not
     // the gate's: the field did not change for good, so its clocks (reacquire, forced use) do not run.
     s_.mag_use = s_.mag_moved_at_rest ? MagUse::kMovedAtRest : MagUse::kPending;
+    s_.field_refused_s += dt;
     s_.mb_head_trusted = false;
     s_.kf2.set_e(mag - s_.gate.m_ut * s_.kf2.u());  // the disturbance seen through the propagated heading
     return;
   }
   const FieldVerdict verdict = s_.gate.step(gp_, mag, s_.kf1.up_body(), dt);
+  if (verdict != FieldVerdict::kGated) {
+    s_.field_refused_s = 0.0;  // a field used (or a new reference): the heading is held again
+  }
   if (first_field) {
     s_.heading_anchored = verdict != FieldVerdict::kGated || !(p_.mag_verify_s > 0.0);
   }
@@ -1104,7 +1108,10 @@ HeadingStatus ParallelKf::heading_status() const {
   if (!s_.initialized || !s_.heading_initialized || s_.heading_from_gyro) {
     return HeadingStatus::kNoReference;
   }
-  const bool long_gated = p_.mag_verify_s > 0.0 && s_.gate.rejected_s >= p_.mag_verify_s;
+  // no field has held the heading for mag_verify_s: gated, or refused before the gate (a field that
+  // moved at rest, an offset not yet removable), in a row
+  const bool long_gated =
+      p_.mag_verify_s > 0.0 && s_.gate.rejected_s + s_.field_refused_s >= p_.mag_verify_s;
   return heading_unknown() || long_gated ? HeadingStatus::kUnverified : HeadingStatus::kVerified;
 }
 

@@ -230,8 +230,9 @@ struct ParallelKfParams {
   /// against it for this long, s (FieldGateParams::verify_s; 0 = verified when learnt, the paper).
   /// While provisional the heading is unverified and its variance that of a heading uniform over
   /// +-180 deg, and a gated field that stays consistent for startup_s replaces the reference and
-  /// restarts the heading on it (a cold start next to a magnet). Also: gated for this long, the
-  /// heading is unverified (its variance grows with the gyro's). 5 s: a magnet near a handheld
+  /// restarts the heading on it (a cold start next to a magnet). Also: with no field used for this long
+  /// (gated, or refused before the gate: moved at rest, an offset not yet removable), the heading
+  /// is unverified (its variance grows with the gyro's). 5 s: a magnet near a handheld
   /// device changes the field within seconds of motion, and a start-up field that held that long
   /// is taken as the Earth's; shorter than mag_reacquire_s, the gate's patience with a verified one.
   double mag_verify_s = 5.0;
@@ -390,6 +391,9 @@ struct ParallelKfState {
   Eigen::Vector3d field_i_lp = Eigen::Vector3d::Constant(std::nan(""));
   Eigen::Vector3d rest_field_i = Eigen::Vector3d::Constant(std::nan(""));
   bool mag_moved_at_rest = false;  ///< the last sample's field had moved since the rest began
+  /// continuous time the field was refused before the gate (moved at rest, offset pending) since
+  /// the gate last used one, s: with the gate's own rejected time, what heading_status() counts
+  double field_refused_s = 0.0;
   uint64_t mag_corrected_count = 0;  ///< samples whose s_M had the offset removed
 
   // What the two KFs do not model, for the published covariance (attitude_covariance)
