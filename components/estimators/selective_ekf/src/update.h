@@ -311,43 +311,6 @@ Eigen::Matrix<double, M, 1> fuse_bias_considered(SelectiveEkfState& x, const Eig
   return fuse_considered<M>(x, h, innov, r_diag, r_err_diag, keep);
 }
 
-/// fuse_bias_considered of the three rows that read the rate itself, H = [I 0 0 0 0 0] (the rest
-/// aid's zero rate), bit for bit, without the dense products (for cost: they were a third of the
-/// filter's instructions on BROAD). With H a selection, H P H^T is P_ww and P H^T is P's rate
-/// columns (one non-zero term in each sum); I - K H is I but in its rate columns, so each sum of
-/// (I - K H) P (I - K H)^T takes the three rate terms in the dense product's order, then the
-/// identity's term; K R K^T has three terms per sum. Coupled blocks: fuse_bias_considered.
-inline Eigen::Vector3d fuse_rate_bias_considered(SelectiveEkfState& x, const Eigen::Vector3d& innov,
-                                                 const Eigen::Vector3d& r_diag, const Eigen::Vector3d& r_err_diag) {
-  constexpr int kN = SelectiveEkf::kN;
-  constexpr int kA = SelectiveEkf::kAttN;
-  Eigen::Matrix<double, 3, kN> h = Eigen::Matrix<double, 3, kN>::Zero();
-  h.middleCols<3>(SelectiveEkf::kW).setIdentity();
-  static_assert(SelectiveEkf::kW == 0, "the rate's columns lead the attitude block");
-  if (x.coupled) {
-    return fuse_bias_considered<3>(x, h, innov, r_diag, r_err_diag);
-  }
-  auto pa = x.P.topLeftCorner<kA, kA>();
-  Eigen::Matrix3d s = pa.topLeftCorner<3, 3>();
-  s.diagonal() += r_diag;
-  const Eigen::Matrix3d s_inv = s.inverse();
-  Eigen::Matrix<double, kN, 3> k = Eigen::Matrix<double, kN, 3>::Zero();
-  k.topRows<kA>() = pa.leftCols<3>().lazyProduct(s_inv);
-  k.middleRows<3>(SelectiveEkf::kB).setZero();  // the bias considered
-  const Eigen::Matrix<double, kA, 3> ka = k.topRows<kA>();
-  const Eigen::Matrix<double, kA, 3> ikh_w = Eigen::Matrix<double, kA, 3>::Identity() - ka;  // (I - K H)'s rate columns
-  Eigen::Matrix<double, kA, kA> m1 = ikh_w.lazyProduct(pa.topRows<3>());  // (I - K H) P
-  m1.bottomRows<kA - 3>() += pa.bottomRows<kA - 3>();
-  Eigen::Matrix<double, kA, kA> m2 = m1.leftCols<3>().lazyProduct(ikh_w.transpose());  // ... (I - K H)^T
-  m2.rightCols<kA - 3>() += m1.rightCols<kA - 3>();
-  const Eigen::Matrix<double, kA, 3> kr = ka * r_diag.asDiagonal();
-  const Eigen::Matrix<double, kA, kA> updated = m2 + kr.lazyProduct(ka.transpose());
-  pa = 0.5 * (updated + updated.transpose());
-  update_error_covariance<3>(x, k, h, r_err_diag, true);
-  inject(x, k * innov);
-  return s.diagonal();
-}
-
 // ---- The figures the estimate's error covariance P_err uses: the sensor's own where the
 // parameters give them (gyro_noise_density_rps_per_sqrt_hz, accel_noise_density_mps2_per_sqrt_hz,
 // gyro_bias_walk_rps_per_sqrt_s), else the design's, as the gains (docs/SELECTIVE_EKF.md "The
