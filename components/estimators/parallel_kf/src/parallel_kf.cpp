@@ -965,7 +965,7 @@ void ParallelKf::field_rotation_step(const Eigen::Vector3d& mag, const Eigen::Ve
   // does not turn, an error phi (world) gives nu = phi_up + tan(dip) phi_north (the field's dip
   // turns a tilt about magnetic north into a horizontal angle), and nu_lp, that low-passed, has at
   // most the variance v^T P v, v = e_up + tan(dip) e_north, P the rest of the published covariance
-  // (field_heading_var, taken once per bias window with the dip's). Like the adaptive
+  // (field_heading_var, taken once per bias window with the dip's), low-passed as nu2_lp is. Like the adaptive
   // R = E[nu nu^T] - H P H^T, with P the published covariance. The estimate is untouched: only the published heading variance
   // takes 2 max(nu2_lp - model, 0) (field_rotation_var).
   const bool unit = p_.tilt.renormalize && p_.tilt.exact_rotation;  // KF2's direction is unit
@@ -975,7 +975,12 @@ void ParallelKf::field_rotation_step(const Eigen::Vector3d& mag, const Eigen::Ve
   s_.field_nu_lp += k * (nu - s_.field_nu_lp);
   s_.field_nu2_lp += k * (s_.field_nu_lp * s_.field_nu_lp - s_.field_nu2_lp);
   const double white = 2.0 * p_.sigma_mag_ut * p_.sigma_mag_ut / (s_.gate.m_ut * s_.gate.m_ut * s_.c2_dip);
-  s_.field_nu_model = white * k / (2.0 - k) + s_.field_heading_var;
+  // the model's share passes the same two low-passes as the statistic (E[nu_lp^2] <= the low-passed
+  // v^T P v: a weighted mean's square is at most the mean of the squares), so an error the
+  // statistic still remembers is expected for as long as it does
+  s_.field_model_lp += k * (s_.field_heading_var - s_.field_model_lp);
+  s_.field_model_lp2 += k * (s_.field_model_lp - s_.field_model_lp2);
+  s_.field_nu_model = white * k / (2.0 - k) + s_.field_model_lp2;
 }
 
 double ParallelKf::field_rotation_var() const {
@@ -1007,10 +1012,13 @@ double ParallelKf::field_dip_reference(double dip, double dt) {
     if (!safe_normalize(Eigen::Vector3d::UnitZ().cross(out.q_world_body * s_.kf2.u()), east, 1e-9)) {
       return s_.gate.dip_rad;
     }
-    Eigen::Matrix3d cov = covariance_terms(out).sum();
+    const ParallelKfCovarianceTerms terms = covariance_terms(out);
+    Eigen::Matrix3d cov = terms.sum();
     s_.field_dip_tilt_var = east.dot(cov * east);
     // what field_rotation_step's model expects of its innovation: the heading error and tan(dip)
-    // times the tilt about magnetic north (east x up), the rotation term itself left out
+    // times the tilt about magnetic north (east x up), the rotation term itself left out, and an
+    // unknown heading's (a reference not yet verified: the heading is the field's all the same)
+    cov -= terms.unknown_heading;
     cov(2, 2) -= field_rotation_var();
     const Eigen::Vector3d v = Eigen::Vector3d::UnitZ() + guarded_tan_dip() * east.cross(Eigen::Vector3d::UnitZ());
     s_.field_heading_var = v.dot(cov * v);
@@ -1057,6 +1065,8 @@ void ParallelKf::restart_heading(const Eigen::Vector3d& mag) {
   s_.field_dv_lp = 0.0;
   s_.field_nu_lp = 0.0;  // the heading starts on the field: no innovation left
   s_.field_nu2_lp = 0.0;
+  s_.field_model_lp = 0.0;
+  s_.field_model_lp2 = 0.0;
   s_.field_dip_ref = std::nan("");
   s_.field_dip_tilt_var = std::nan("");  // the covariance jumps with the heading: taken again
   s_.mb_head_trusted = false;  // a jump of the heading, not a measurement of the bias

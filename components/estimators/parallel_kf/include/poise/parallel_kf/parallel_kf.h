@@ -447,6 +447,8 @@ struct ParallelKfState {
   double field_nu_lp = 0.0;
   double field_nu2_lp = 0.0;
   double field_nu_model = 0.0;
+  double field_model_lp = 0.0;   ///< field_heading_var low-passed over KF2's lag, rad^2
+  double field_model_lp2 = 0.0;  ///< that low-passed again (nu_model's share of it), rad^2
   /// v^T P v, P the published covariance but field_rotation_var, v = up + tan(dip) magnetic north
   /// (world): what field_rotation_step expects of its innovation, rad^2; taken with field_dip_tilt_var
   double field_heading_var = 0.0;
@@ -559,6 +561,9 @@ class ParallelKf {
   ///             by the inverse tilt variance about magnetic east, field_dip_reference), over (m cos(dip))^2: its horizontal
   ///             part across the field, which moves the heading, is taken as large as the two the
   ///             gate can see (the mean of their squares);
+  ///           + a horizontal rotation of the field, which the gate cannot see (field_rotation_var):
+  ///             twice KF2's innovation about the vertical low-passed over its lag, squared and
+  ///             low-passed again, less what the rest of the covariance explains of it;
   ///   both    + (dt^2 / 12) (R w)(R w)^T while imu_delay_s is not known (NaN): the output is
   ///             predicted over half a sample, the true delay taken as uniform over none to one
   ///             sample; its error turns the attitude about the rate axis w;
