@@ -912,8 +912,15 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
   const double share = std::min(1.0, dt / std::max(lag, dt));
   s_.since_mag_s *= 1.0 - share;
   s_.lag_keep_z *= 1.0 - share;
+  if (s_.gate.dip_rad != s_.c2_dip_for) {  // cos^2(dip), guarded: a heading rotation shows cos(dip) in sX'
+    s_.c2_dip = std::max(std::cos(s_.gate.dip_rad) * std::cos(s_.gate.dip_rad), kMinCos2Dip);
+    s_.c2_dip_for = s_.gate.dip_rad;
+  }
   if (s_.gate.learnt && s_.gate.m_ut > 0.0) {
     field_deviation_step(mag, lag, dt);
+    if (p_.mag_gating) {  // the field-disturbance extension (off in the paper configuration)
+      field_rotation_step(mag, x_prior, lag, dt);
+    }
   }
   if (p_.bias_estimation && p_.motion_bias_sigma_rps > 0.0 && p_.motion_bias_heading && s_.gate.learnt) {
     if (s_.mag_use == MagUse::kForced) {
@@ -922,10 +929,6 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
     }
     // heading part (about sZ) of the correction rotation, sX'+ x sX'- = dtheta_perp(sX'); only
     // cos(dip) of a heading rotation shows in sX'
-    if (s_.gate.dip_rad != s_.c2_dip_for) {
-      s_.c2_dip = std::max(std::cos(s_.gate.dip_rad) * std::cos(s_.gate.dip_rad), kMinCos2Dip);
-      s_.c2_dip_for = s_.gate.dip_rad;
-    }
     const bool unit = p_.tilt.renormalize && p_.tilt.exact_rotation;  // both directions are unit
     const Eigen::Vector3d corr =
         unit ? s_.kf2.u().cross(x_prior) : s_.kf2.u().normalized().cross(x_prior.normalized());
@@ -943,6 +946,45 @@ void ParallelKf::field_deviation_step(const Eigen::Vector3d& mag, double lag, do
   const double k = dt / (lag + dt);
   s_.field_dn_lp += k * (mag.norm() - m - s_.field_dn_lp);
   s_.field_dv_lp += k * (m * (dip - field_dip_reference(dip, dt)) - s_.field_dv_lp);
+}
+
+void ParallelKf::field_rotation_step(const Eigen::Vector3d& mag, const Eigen::Vector3d& x_prior, double lag,
+                                     double dt) {
+  // A field whose horizontal direction is rotated by delta where the sensor moves keeps its norm
+  // and dip: the gate and field_deviation_step cannot see it; the gyro can, through KF2's
+  // innovation about the vertical, nu = delta - eps + n (eps the heading's error, n the modelled
+  // white noise). KF2 follows the field with its lag tau (first order, H = 1 / (1 + tau s)), so
+  // eps = H delta and nu = (1 - H) delta: nu's low-pass over tau, nu_lp = H (1 - H) delta, is tau
+  // times the rate at which eps moves. For a delta that varies faster than tau (the sensor moving
+  // through the region: a flat spectrum S0 below 1 / tau), E[eps^2] = S0 / (2 tau) and E[nu_lp^2]
+  // = S0 / (4 tau) (integrals of |H|^2 and |H (1 - H)|^2), whatever S0: eps's variance is twice
+  // nu_lp's. nu_lp is in quadrature with eps (it is largest while eps moves), so its square is
+  // averaged over tau as well (nu2_lp). What the model explains is taken out: the white noise's
+  // share, S k / (2 - k) for a step's gain k = dt / (tau + dt) and S = 2 sigma_M^2 / (m cos(dip))^2
+  // (KF2's direction prior is small against it), and the attitude error's own: in a field that
+  // does not turn, an error phi (world) gives nu = phi_up + tan(dip) phi_north (the field's dip
+  // turns a tilt about magnetic north into a horizontal angle), and nu_lp, that low-passed, has at
+  // most the variance v^T P v, v = e_up + tan(dip) e_north, P the rest of the published covariance
+  // (field_heading_var, taken once per bias window with the dip's), low-passed as nu2_lp is. Like the adaptive
+  // R = E[nu nu^T] - H P H^T, with P the published covariance. The estimate is untouched: only the published heading variance
+  // takes 2 max(nu2_lp - model, 0) (field_rotation_var).
+  const bool unit = p_.tilt.renormalize && p_.tilt.exact_rotation;  // KF2's direction is unit
+  const Eigen::Vector3d& up = s_.kf1.up_body();
+  const double nu = up.dot((unit ? x_prior : x_prior.normalized()).cross(mag)) / (mag.norm() * s_.c2_dip);
+  const double k = dt / (lag + dt);
+  s_.field_nu_lp += k * (nu - s_.field_nu_lp);
+  s_.field_nu2_lp += k * (s_.field_nu_lp * s_.field_nu_lp - s_.field_nu2_lp);
+  const double white = 2.0 * p_.sigma_mag_ut * p_.sigma_mag_ut / (s_.gate.m_ut * s_.gate.m_ut * s_.c2_dip);
+  // the model's share passes the same two low-passes as the statistic (E[nu_lp^2] <= the low-passed
+  // v^T P v: a weighted mean's square is at most the mean of the squares), so an error the
+  // statistic still remembers is expected for as long as it does
+  s_.field_model_lp += k * (s_.field_heading_var - s_.field_model_lp);
+  s_.field_model_lp2 += k * (s_.field_model_lp - s_.field_model_lp2);
+  s_.field_nu_model = white * k / (2.0 - k) + s_.field_model_lp2;
+}
+
+double ParallelKf::field_rotation_var() const {
+  return 2.0 * std::max(s_.field_nu2_lp - s_.field_nu_model, 0.0);
 }
 
 double ParallelKf::field_dip_reference(double dip, double dt) {
@@ -970,7 +1012,16 @@ double ParallelKf::field_dip_reference(double dip, double dt) {
     if (!safe_normalize(Eigen::Vector3d::UnitZ().cross(out.q_world_body * s_.kf2.u()), east, 1e-9)) {
       return s_.gate.dip_rad;
     }
-    s_.field_dip_tilt_var = east.dot(covariance_terms(out).sum() * east);
+    const ParallelKfCovarianceTerms terms = covariance_terms(out);
+    Eigen::Matrix3d cov = terms.sum();
+    s_.field_dip_tilt_var = east.dot(cov * east);
+    // what field_rotation_step's model expects of its innovation: the heading error and tan(dip)
+    // times the tilt about magnetic north (east x up), the rotation term itself left out, and an
+    // unknown heading's (a reference not yet verified: the heading is the field's all the same)
+    cov -= terms.unknown_heading;
+    cov(2, 2) -= field_rotation_var();
+    const Eigen::Vector3d v = Eigen::Vector3d::UnitZ() + guarded_tan_dip() * east.cross(Eigen::Vector3d::UnitZ());
+    s_.field_heading_var = v.dot(cov * v);
     s_.field_dip_var_age_s = 0.0;
   }
   // each dip's error: the tilt about magnetic east (slow, shared by neighbouring dips) and the
@@ -1012,6 +1063,10 @@ void ParallelKf::restart_heading(const Eigen::Vector3d& mag) {
   s_.bias_err_att_cov.col(2).setZero();  // and no error the bias filter has seen the rate of
   s_.field_dn_lp = 0.0;  // deviations from the reference it replaced
   s_.field_dv_lp = 0.0;
+  s_.field_nu_lp = 0.0;  // the heading starts on the field: no innovation left
+  s_.field_nu2_lp = 0.0;
+  s_.field_model_lp = 0.0;
+  s_.field_model_lp2 = 0.0;
   s_.field_dip_ref = std::nan("");
   s_.field_dip_tilt_var = std::nan("");  // the covariance jumps with the heading: taken again
   s_.mb_head_trusted = false;  // a jump of the heading, not a measurement of the bias
@@ -1225,7 +1280,8 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
   if (s_.heading_initialized) {
     const double m = s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0;
     const double power = 0.5 * (s_.field_dn_lp * s_.field_dn_lp + s_.field_dv_lp * s_.field_dv_lp);
-    t.field(2, 2) = power / (m * m * c * c);
+    // + the horizontal rotation KF2's innovations show beyond the model (field_rotation_step), rad^2
+    t.field(2, 2) = power / (m * m * c * c) + field_rotation_var();
   }
   if (std::isnan(p_.imu_delay_s)) {
     // the delay not known: predicted over half a sample, the true one taken as uniform over

@@ -440,6 +440,18 @@ struct ParallelKfState {
   double accel_ref_span_s = 0.0;  ///< time the reference has averaged (its stages' window until their time constant), s
   double field_dn_lp = 0.0;    ///< |s_M| - m of the fields used for heading, low-passed over KF2's lag, uT
   double field_dv_lp = 0.0;    ///< m (dip - alpha) of the same, low-passed the same way, uT
+  /// KF2's innovations about the vertical (field_rotation_step), rad: their horizontal angle from
+  /// the prior direction low-passed over KF2's lag (nu_lp), its square low-passed the same way
+  /// (nu2_lp, rad^2), and what the model expects of that square (the white noise's and the bias
+  /// error's, nu_model, rad^2)
+  double field_nu_lp = 0.0;
+  double field_nu2_lp = 0.0;
+  double field_nu_model = 0.0;
+  double field_model_lp = 0.0;   ///< field_heading_var low-passed over KF2's lag, rad^2
+  double field_model_lp2 = 0.0;  ///< that low-passed again (nu_model's share of it), rad^2
+  /// v^T P v, P the published covariance but field_rotation_var, v = up + tan(dip) magnetic north
+  /// (world): what field_rotation_step expects of its innovation, rad^2; taken with field_dip_tilt_var
+  double field_heading_var = 0.0;
   /// alpha for field_dv_lp with a learnt reference: the accepted dips' mean weighted by the inverse
   /// published tilt variance about magnetic east (field_dip_reference), rad; NaN = not started
   double field_dip_ref = std::nan("");
@@ -488,6 +500,9 @@ class ParallelKf {
   /// The filter's whole state (VQF's getState): two filters with the same parameters and the
   /// same state give the same outputs for the same samples.
   [[nodiscard]] const ParallelKfState& state() const { return s_; }
+  /// The heading variance the field's horizontal rotation adds (field_rotation_step): twice what
+  /// KF2's low-passed innovations about the vertical show beyond the model, rad^2 (in the field term).
+  [[nodiscard]] double field_rotation_var() const;
   /// Restores a state taken from state() of a filter with the same parameters (setState).
   void set_state(const ParallelKfState& state) { s_ = state; }
 
@@ -546,6 +561,9 @@ class ParallelKf {
   ///             by the inverse tilt variance about magnetic east, field_dip_reference), over (m cos(dip))^2: its horizontal
   ///             part across the field, which moves the heading, is taken as large as the two the
   ///             gate can see (the mean of their squares);
+  ///           + a horizontal rotation of the field, which the gate cannot see (field_rotation_var):
+  ///             twice KF2's innovation about the vertical low-passed over its lag, squared and
+  ///             low-passed again, less what the rest of the covariance explains of it;
   ///   both    + (dt^2 / 12) (R w)(R w)^T while imu_delay_s is not known (NaN): the output is
   ///             predicted over half a sample, the true delay taken as uniform over none to one
   ///             sample; its error turns the attitude about the rate axis w;
@@ -702,6 +720,9 @@ class ParallelKf {
   void restart_heading(const Eigen::Vector3d& mag);
   /// field_dn_lp / field_dv_lp from an accepted field, after KF2's correction (lag: KF2's, s)
   void field_deviation_step(const Eigen::Vector3d& mag, double lag, double dt);
+  /// field_nu_lp / field_nu2_lp / field_nu_model from an accepted field: its horizontal angle from
+  /// KF2's prior direction `x_prior` about sZ (the innovation's; lag: KF2's, s)
+  void field_rotation_step(const Eigen::Vector3d& mag, const Eigen::Vector3d& x_prior, double lag, double dt);
   /// The dip the field term measures dv against (updated with the accepted dip `dip`), rad
   double field_dip_reference(double dip, double dt);
   /// The external acceleration's term of covariance_terms (world axes; r = R_world_body): the tilt
