@@ -895,6 +895,10 @@ void expect_same_params(const SelectiveEkfParams& a, const SelectiveEkfParams& b
   EXPECT_EQ(a.aiding_period_s, b.aiding_period_s);
   EXPECT_EQ(a.sigma_heading_rad_sqrt_s, b.sigma_heading_rad_sqrt_s);
   EXPECT_EQ(a.heading_disturbance_weight, b.heading_disturbance_weight);
+  EXPECT_EQ(a.hard_iron, b.hard_iron);
+  EXPECT_EQ(a.hard_iron_estimator.prior_sigma_ut, b.hard_iron_estimator.prior_sigma_ut);
+  EXPECT_EQ(a.hard_iron_estimator.min_applied_ut, b.hard_iron_estimator.min_applied_ut);
+  EXPECT_EQ(a.hard_iron_estimator.removed_log_lr, b.hard_iron_estimator.removed_log_lr);
   EXPECT_EQ(a.gyro_scale_error, b.gyro_scale_error);
   EXPECT_EQ(a.rest_detection, b.rest_detection);
   EXPECT_EQ(a.rest_gyro_max_rps, b.rest_gyro_max_rps);
