@@ -196,10 +196,14 @@ bool FieldMovedAtRest::step(const Eigen::Vector3d& field_i, bool at_rest, double
   }
   if (!rest_field.allFinite()) {
     rest_field = field_lp;
-  } else if (reference_tau_s > 0.0) {  // a slow change is followed, as the gate's reference does
+  }
+  const bool moved = (field_lp - rest_field).norm() > tol_ut;
+  if (!moved && reference_tau_s > 0.0) {
+    // a slow change is followed, as the gate's reference follows the accepted field: never the
+    // moved one (a magnet's field adopted would outlast the magnet)
     rest_field += (dt_s / (reference_tau_s + dt_s)) * (field_lp - rest_field);
   }
-  return (field_lp - rest_field).norm() > tol_ut;
+  return moved;
 }
 
 }  // namespace poise

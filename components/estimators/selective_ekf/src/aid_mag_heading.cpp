@@ -69,8 +69,10 @@ void aid_mag_heading(const AidContext& c, const ImuInput& in, bool anchored, Mag
     return;
   }
   // refused before the gate (a magnet attached: field_offsets)
-  mag.status.offset_pending = c.x.heading_checked && c.x.mag_offset_pending;
-  mag.status.moved_at_rest = c.x.heading_checked && c.x.mag_moved_at_rest;
+  // (the selective part: not with gating_enabled false)
+  const bool refusing = c.p.gating_enabled && c.x.heading_checked;
+  mag.status.offset_pending = refusing && c.x.mag_offset_pending;
+  mag.status.moved_at_rest = refusing && c.x.mag_moved_at_rest;
   if (mag.status.offset_pending || mag.status.moved_at_rest) {
     refuse_field(c, in, mag, st);
     return;
