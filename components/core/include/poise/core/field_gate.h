@@ -149,7 +149,9 @@ struct FieldGate {
 /// at second order (10 uT across 15 uT: +1.1 uT of 44) but turns the heading a lot (34 deg), so
 /// the gate's norm and dip tests pass it. Judged on the field in that frame low-passed (the rest
 /// detector's time constant) against the field when the rest began, which follows with the
-/// gate's reference_tau_s (a temperature drift). A value type (copied with the filter's state).
+/// gate's reference_tau_s while the field has not moved (a temperature drift; a magnet's field is
+/// never adopted, as the gate's reference follows only the accepted field). A value type (copied
+/// with the filter's state).
 struct FieldMovedAtRest {
   Eigen::Vector3d field_lp = Eigen::Vector3d::Constant(std::nan(""));  ///< low-passed field in the frame, uT
   /// the low-passed field when the rest began (NaN: not at rest), following with reference_tau_s, uT
