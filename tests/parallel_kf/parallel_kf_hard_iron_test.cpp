@@ -4,6 +4,7 @@
 #include "poise/parallel_kf/parallel_kf.h"
 #include "poise/sim/sensor_simulator.h"
 
+#include "poise/testing/attached_magnet.h"
 #include "poise/testing/param_errors.h"
 
 #include <gtest/gtest.h>
@@ -131,45 +132,14 @@ TEST(ParallelKfHardIron, GivenATumblingSensorWithABodyFixedOffsetWhenHardIronIsO
 // Issue 32: a magnet attached to a hand-held sensor at rest and removed during the motion (BROAD's
 // protocol, trials 32/34/36), with offsets the BROAD copy does not hold. The oracle is the
 // simulator's attitude. Times in s, offsets in uT.
-constexpr double kMagnetRestS = 20.0;       // rest before the motion (the magnet attached during it)
-constexpr double kMagnetMotionS = 80.0;     // hand-held motion
-constexpr double kMagnetEndRestS = 10.0;    // rest after it
-constexpr double kMagnetOnS = 14.0;         // the magnet's attachment starts (ramp kMagnetRampS)
-constexpr double kMagnetRampS = 1.5;
-constexpr double kMagnetOffS = 75.0;        // its removal starts, in the motion
+// (the run: poise/testing/attached_magnet.h)
 constexpr double kMagnetHeadingTolDeg = 3.0;  // rms heading error over the motion, deg (0.1-1.1 measured)
 
 /// Rms heading error (world z of the rotation-vector error), deg, over the motion of a hand-held
 /// run (kept near level: the rotation shows the offset's vertical part slowly) with `offset` fixed
 /// in the body from kMagnetOnS to kMagnetOffS (+ ramps), the simulated sensor's noise figures told.
 double attached_magnet_heading_rms_deg(const Eigen::Vector3d& offset_ut) {
-  sim::SimConfig cfg;
-  cfg.rate_hz = 200.0;
-  cfg.seed = 1;
-  cfg.duration_s = kMagnetRestS + kMagnetMotionS + kMagnetEndRestS;
-  cfg.field.magnitude_ut = 44.0;  // BROAD's: horizontal 15 uT
-  cfg.field.dip_deg = 70.0;
-  cfg.noise.gyro_bias_rps = Eigen::Vector3d(0.3, -0.2, 0.25) * kRadPerDeg;
-  sim::MotionSegment rest;
-  rest.duration_s = kMagnetRestS;
-  sim::MotionSegment hand;
-  hand.name = "hand";
-  hand.duration_s = kMagnetMotionS;
-  hand.rotation_amplitude_rps = 1.2;
-  hand.rotation_freq_hz = 0.3;
-  hand.level_gain_per_s = 0.3;
-  hand.accel_amplitude_mps2 = 1.5;
-  hand.accel_freq_hz = 0.8;
-  sim::MotionSegment end = rest;
-  end.duration_s = kMagnetEndRestS;
-  cfg.segments = {rest, hand, end};
-  sim::MagnetEpisode magnet;
-  magnet.start_s = kMagnetOnS;
-  magnet.ramp_s = kMagnetRampS;
-  magnet.hold_s = kMagnetOffS - kMagnetOnS - kMagnetRampS;
-  magnet.field_ut = offset_ut;
-  magnet.body_fixed = true;
-  cfg.magnets = {magnet};
+  const sim::SimConfig cfg = testing::attached_magnet_hand_held(offset_ut);
   ParallelKfParams p;  // the simulated sensor's figures, as config/hosts/simulated.yaml tells them
   p.imu_delay_s = 0.0;
   p.gyro_bias_walk_rps_per_sqrt_s = 0.0;

@@ -186,4 +186,24 @@ double FieldGate::dip_ratio() const {
   return (last_sin_dip - std::sin(dip_rad)) / (0.5 * (sin_hi - sin_lo));
 }
 
+bool FieldMovedAtRest::step(const Eigen::Vector3d& field_i, bool at_rest, double dt_s, double lowpass_tau_s,
+                            double reference_tau_s, double tol_ut) {
+  field_lp = field_lp.allFinite() ? Eigen::Vector3d(field_lp + (dt_s / (lowpass_tau_s + dt_s)) * (field_i - field_lp))
+                                  : field_i;
+  if (!at_rest) {
+    clear();
+    return false;
+  }
+  if (!rest_field.allFinite()) {
+    rest_field = field_lp;
+  }
+  const bool moved = (field_lp - rest_field).norm() > tol_ut;
+  if (!moved && reference_tau_s > 0.0) {
+    // a slow change is followed, as the gate's reference follows the accepted field: never the
+    // moved one (a magnet's field adopted would outlast the magnet)
+    rest_field += (dt_s / (reference_tau_s + dt_s)) * (field_lp - rest_field);
+  }
+  return moved;
+}
+
 }  // namespace poise

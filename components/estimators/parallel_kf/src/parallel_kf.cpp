@@ -326,22 +326,14 @@ bool ParallelKf::field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, do
   // seen from the gyro's frame: what moves it is a magnet attached or brought near. Judged on the
   // low-passed field (the rest detector's time constant) against the gate's norm tolerance; the
   // field when the rest began is followed with the gate's reference_tau_s (a temperature drift).
+  // (poise/core/field_gate.h FieldMovedAtRest, shared with the selective EKF)
   if (!p_.bias_estimation || !mag_ok || !s_.gate.learnt || !(p_.mag_norm_tol > 0.0)) {
-    s_.rest_field_i.setConstant(std::nan(""));
+    s_.rest_field.clear();
     return false;
   }
   const Eigen::Vector3d f = (gyro_frame_kept() ? s_.r_ib : s_.q_ib.toRotationMatrix()) * mag;
-  s_.field_i_lp = s_.field_i_lp.allFinite() ? Eigen::Vector3d(s_.field_i_lp + (dt / (p_.rest_filter_tau_s + dt)) * (f - s_.field_i_lp)) : f;
-  if (!s_.rest_det.rest) {
-    s_.rest_field_i.setConstant(std::nan(""));
-    return false;
-  }
-  if (!s_.rest_field_i.allFinite()) {
-    s_.rest_field_i = s_.field_i_lp;
-  } else if (gp_.reference_tau_s > 0.0) {  // a slow change is followed, as the gate's reference does
-    s_.rest_field_i += (dt / (gp_.reference_tau_s + dt)) * (s_.field_i_lp - s_.rest_field_i);
-  }
-  return (s_.field_i_lp - s_.rest_field_i).norm() > p_.mag_norm_tol * s_.gate.m_ut;
+  return s_.rest_field.step(f, s_.rest_det.rest, dt, p_.rest_filter_tau_s, gp_.reference_tau_s,
+                            p_.mag_norm_tol * s_.gate.m_ut);
 }
 
 void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {

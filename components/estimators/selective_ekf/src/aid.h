@@ -87,6 +87,11 @@ void aid_vision_position(const AidContext& c, const VisionMeasurement& v, Source
 /// rest and given the initial attitude variance, as at a start.
 void restart_heading(const AidContext& c, const Eigen::Vector3d& up, double dpsi);
 
+/// The heading row left out before the gate (split mode): the field carries a hard-iron offset
+/// not removable yet or moved at rest (SelectiveEkf::field_offsets). The gate is not stepped (its
+/// window still ticks); counted untrusted, reported rejected.
+void refuse_field(const AidContext& c, const ImuInput& in, MagTrust& mag, SourceStatus& st);
+
 /// The factor (>= 1) on the heading row's noise density sigma_heading^2 (split mode): raised as
 /// the field nears the gate's tolerances (heading_disturbance_weight).
 double heading_noise_factor(const SelectiveEkfParams& p, const FieldGate& gate, const FieldGateParams& gp);

@@ -39,11 +39,42 @@ void restart_heading(const AidContext& c, const Eigen::Vector3d& up, double dpsi
   x.unmodelled.rotation_heading.setZero();
 }
 
+void refuse_field(const AidContext& c, const ImuInput& in, MagTrust& mag, SourceStatus& st) {
+  // Not the Earth's field, whatever the gate would say of it at this orientation: it moved while
+  // the sensor was still (a magnet attached or brought near; the heading at rest needs no field),
+  // or it carries a body-fixed offset the estimate cannot remove yet (an offset across the
+  // horizontal field barely moves |m| or the dip, and one that reverses it can pass both). Not
+  // fused, and not the gate's: the field did not change for good, so its clocks (reacquire,
+  // forced use) do not run; the reference's window still advances.
+  c.x.field_gate.tick(mag.gate, in.dt_s);
+  MagStatus& m = mag.status;
+  m.trusted = false;
+  m.angle_test_failed = false;
+  m.norm_test_failed = false;
+  m.quat_error_test_failed = false;
+  if (c.first_pass) {
+    ++m.untrusted_samples;
+  }
+  st.innovation.setZero();
+  st.innovation_variance.setZero();
+  st.test_ratio = 0.0;
+  record(st, Decision::kRejectedDisturbance, in.stamp_ns, c.first_pass);
+}
+
 void aid_mag_heading(const AidContext& c, const ImuInput& in, bool anchored, MagTrust& mag, SourceStatus& st) {
   const int64_t now = in.stamp_ns;
   // validate: a magnetometer sample, an interval for the density, a field that is not vertical
   if (!in.has_mag || !(in.dt_s > 0.0)) {
     record(st, Decision::kRejectedNoMag, now, c.first_pass);
+    return;
+  }
+  // refused before the gate (a magnet attached: field_offsets)
+  // (the selective part: not with gating_enabled false)
+  const bool refusing = c.p.gating_enabled && c.x.heading_checked;
+  mag.status.offset_pending = refusing && c.x.mag_offset_pending;
+  mag.status.moved_at_rest = refusing && c.x.mag_moved_at_rest;
+  if (mag.status.offset_pending || mag.status.moved_at_rest) {
+    refuse_field(c, in, mag, st);
     return;
   }
   const Eigen::Vector3d mw = c.x.q_world_body * in.mag;

@@ -28,6 +28,7 @@ void validate(const SelectiveEkfParams& p) {
   check.require(p.gyro_scale_error >= 0.0 && p.gyro_scale_error < 1.0, "gyro_scale_error", "in [0, 1) (relative)");
   check.require(p.heading_disturbance_weight >= 0.0 && p.heading_disturbance_weight <= 1.0e6, "heading_disturbance_weight",
                 "in [0, 1e6] (0 = off; larger would make the heading variance overflow)");
+  p.hard_iron_estimator.validate("selective_ekf hard_iron_estimator");
   check.positive(p.rest_gyro_max_rps, "rest_gyro_max_rps", "rad/s");
   check.positive(p.rest_accel_max_mps2, "rest_accel_max_mps2", "m/s^2");
   check.non_negative(p.rest_min_s, "rest_min_s", "s");

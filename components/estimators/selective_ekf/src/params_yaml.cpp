@@ -40,6 +40,10 @@ void read(YamlParamReader& r, SelectiveEkfParams& p) {
   r.get("heading_dip_tolerance_deg", p.heading_dip_tolerance_deg);
   r.get("heading_norm_tolerance", p.heading_norm_tolerance);
   r.get("heading_disturbance_weight", p.heading_disturbance_weight);
+  r.get("hard_iron", p.hard_iron);
+  YamlParamReader hi = r.child("hard_iron_estimator");
+  p.hard_iron_estimator.read(hi);
+  hi.finish();
   r.get_nullable("field_magnitude_ut", p.field_magnitude_ut);
   r.get("field_startup_s", p.field_startup_s);
   r.get("field_reference_tau_s", p.field_reference_tau_s);

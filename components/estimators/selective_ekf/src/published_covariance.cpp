@@ -33,6 +33,8 @@
 //              dip deviation dv = m (dip - dip_ref) low-passed over the heading's lag; the part
 //              across the horizontal field, which turns the heading, is taken as large as those
 //              two: share^2 (dn^2 + dv^2) / 2 / (m cos dip)^2
+//   hard_iron  heading: while the hard-iron offset is removed (hard_iron), its estimate's error
+//              across the horizontal field, share^2 x^T P_b x / (m cos dip)^2
 //   dip        heading: the unmodelled tilt terms' error through the dip, tan(dip) times the
 //              error about north (below; P's own tilt error reaches the heading through the row)
 //   unknown    heading: pi^2 / 3 (a heading uniform over +-180 deg) while heading_unknown(): a
@@ -252,6 +254,14 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
     const double mh = fg.m_ut * cos_dip;
     const double power = 0.5 * (u.field_dn_lp * u.field_dn_lp + u.field_dv_lp * u.field_dv_lp);
     cov(2, 2) += share * share * power / (mh * mh);
+    if (x_.mag_corrected) {
+      // the offset removed is b's estimate: its error e (covariance P_b, body, uT^2) stays in every
+      // reading; its part across the horizontal field (body x = R^T e_x, magnetic north +y) turns
+      // the heading by e . x / (m cos dip). b is constant, so the heading's averaging does not
+      // reduce it (the parallel KF's hard_iron term), by the magnetometer's share
+      const Eigen::Vector3d across = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitX();
+      cov(2, 2) += share * share * across.dot(x_.hard_iron.covariance() * across) / (mh * mh);
+    }
   }
   // heading: the tilt's error through the dip. The row's innovation is
   //   dpsi = dth_z + tan(dip) dth_n

@@ -82,6 +82,7 @@ void SelectiveEkf::reset() {
   gn_.reset();
   x_ = SelectiveEkfState{};
   x_.field_gate.reset(gp_);
+  x_.hard_iron = HardIronEstimator(p_.hard_iron_estimator);
   x_.P.setZero();
   const double sa = p_.init_sigma_attitude_deg * kRadPerDeg;
   x_.P.diagonal().segment<3>(kW).setConstant(p_.init_sigma_rate_rps * p_.init_sigma_rate_rps);
@@ -259,6 +260,9 @@ SourceStatus& SelectiveEkf::status_of(SelectiveEkfAid a) { return status_[static
 void SelectiveEkf::process_imu(const ImuInput& in_raw, bool first_pass) {
   ImuInput in = in_raw;
   preprocess(in);
+  if (p_.imu_measurement == ImuMeasurement::kSplit) {
+    field_offsets(in);
+  }
   const int64_t now = in.stamp_ns;
   const aids::AidContext c{x_, p_, first_pass};
   aids::aid_gyro(c, in, status_of(SelectiveEkfAid::kGyro));
@@ -540,6 +544,52 @@ void SelectiveEkf::preprocess(ImuInput& in) {
     pre.rest_detector.step(in.gyro, in.accel, dt_s, rp, x_.b_rps);
   }
   in.rest = pre.rest_detector.rest;
+}
+
+// A magnet fixed to the sensor (hard_iron) and a field moved at rest (the core pieces the parallel
+// KF uses): judged on the raw reading every sample with a magnetometer, in the accelerometer
+// low-pass's frame q_ib (turned with the state's rate: the gyro's rotation between readings, the
+// almost inertial frame at rest).
+void SelectiveEkf::field_offsets(ImuInput& in) {
+  x_.mag_offset_pending = false;
+  x_.mag_moved_at_rest = false;
+  x_.mag_corrected = false;
+  if (!in.has_mag) {
+    x_.rest_field.clear();
+    return;
+  }
+  const Eigen::Matrix3d r_ib = x_.pre.q_ib.toRotationMatrix();
+  const Eigen::Vector3d raw = in.mag;
+  if (p_.hard_iron) {
+    x_.hard_iron.update(in.stamp_ns, r_ib, in.gyro - x_.b_rps, raw);
+    x_.mag_offset_pending = x_.hard_iron.pending();
+    if (x_.hard_iron.applied()) {
+      in.mag = raw - x_.hard_iron.offset_ut();
+      x_.mag_corrected = true;
+    }
+  }
+  // the raw field: the offset turns with the body, the Earth's field not (at rest neither does)
+  const FieldGate& g = x_.field_gate;
+  if (!p_.rest_detection || !g.learnt || !(gp_.norm_tol > 0.0) || !(in.dt_s > 0.0)) {
+    x_.rest_field.clear();
+    x_.field_moved = false;
+    return;
+  }
+  const bool moved = x_.rest_field.step(r_ib * raw, in.rest, in.dt_s, p_.rest_filter_tau_s, gp_.reference_tau_s,
+                                        gp_.norm_tol * g.m_ut);
+  // A field that moved at rest stays refused in the motion after it until the hard-iron estimate
+  // has judged it (hard_iron): an offset present (pending, then removed), or converged and the
+  // last comparison accepted (an estimate converged before the field moved is refused by the
+  // new readings, then learnt again). The motion's first seconds are when the raw field would
+  // pull the heading (the estimate needs rotation to tell the offset from the Earth's field,
+  // and the gate cannot).
+  if (in.rest || !p_.hard_iron) {
+    x_.field_moved = moved;
+  } else if (x_.field_moved) {
+    const HardIronReport& r = x_.hard_iron.report();
+    x_.field_moved = !r.present && !(r.converged && r.step == HardIronStep::kUpdated);
+  }
+  x_.mag_moved_at_rest = x_.field_moved;
 }
 
 bool SelectiveEkf::update_imu(const ImuSample& s) {

@@ -80,7 +80,9 @@ SourceReports selective_ekf_sources(const SelectiveEkf& ekf) {
       mag.last_fused_stamp_ns = quat.last_fused_stamp_ns;
     } else {
       mag.decision = SourceDecision::kRejected;
-      mag.reason = m.angle_test_failed        ? "disturbance_angle"
+      mag.reason = m.moved_at_rest            ? "field_moved_at_rest"
+                   : m.offset_pending         ? "hard_iron_pending"
+                   : m.angle_test_failed      ? "disturbance_angle"
                    : m.norm_test_failed       ? "field_norm"
                    : m.quat_error_test_failed ? "quat_error"
                                               : "untrusted_hold";

@@ -142,4 +142,29 @@ struct FieldGate {
   void adopt_candidate();  ///< the candidate becomes the reference; rejection and candidate restart
 };
 
+/// A field that moves while the sensor is at rest (shared by the filters whose heading uses the
+/// field gate). At rest the body does not turn, so neither does a world-fixed field with a
+/// constant body-frame offset seen from a gyro-propagated (almost inertial) frame: what moves it
+/// is a magnet attached or brought near. An offset across the horizontal field changes |m| only
+/// at second order (10 uT across 15 uT: +1.1 uT of 44) but turns the heading a lot (34 deg), so
+/// the gate's norm and dip tests pass it. Judged on the field in that frame low-passed (the rest
+/// detector's time constant) against the field when the rest began, which follows with the
+/// gate's reference_tau_s while the field has not moved (a temperature drift; a magnet's field is
+/// never adopted, as the gate's reference follows only the accepted field). A value type (copied
+/// with the filter's state).
+struct FieldMovedAtRest {
+  Eigen::Vector3d field_lp = Eigen::Vector3d::Constant(std::nan(""));  ///< low-passed field in the frame, uT
+  /// the low-passed field when the rest began (NaN: not at rest), following with reference_tau_s, uT
+  Eigen::Vector3d rest_field = Eigen::Vector3d::Constant(std::nan(""));
+
+  /// Not judged (no field, no reference, no rest detector): the rest's field forgotten.
+  void clear() { rest_field.setConstant(std::nan("")); }
+  /// One sample: `field_i` the raw reading turned into the frame (R_ib m, uT), `at_rest` the rest
+  /// detector's verdict, dt_s since the last; `lowpass_tau_s` the rest detector's time constant,
+  /// `reference_tau_s` the gate's (0 = fixed), `tol_ut` the gate's norm tolerance (norm_tol m).
+  /// True when the field has moved by more than tol_ut since the rest began.
+  bool step(const Eigen::Vector3d& field_i, bool at_rest, double dt_s, double lowpass_tau_s, double reference_tau_s,
+            double tol_ut);
+};
+
 }  // namespace poise

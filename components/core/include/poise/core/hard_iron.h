@@ -61,6 +61,26 @@ struct HardIronParams {
   /// Throws std::invalid_argument "<filter> parameter <key> must be ..." on a bad value (`filter`:
   /// how the caller's messages name this section, e.g. "parallel_kf hard_iron_estimator").
   void validate(const char* filter = "hard_iron") const;
+  /// Reads the keys above (same names) with a YamlParamReader (poise/core/yaml_params.h; a
+  /// template, so this header needs no yaml-cpp): the filters' `hard_iron_estimator:` sections.
+  template <typename Reader>
+  void read(Reader& r) {
+    r.get("prior_sigma_ut", prior_sigma_ut);
+    r.get("noise_ut", noise_ut);
+    r.get("timing_s", timing_s);
+    r.get("walk_ut_per_sqrt_s", walk_ut_per_sqrt_s);
+    r.get("lag_s", lag_s);
+    r.get("min_rotation_rad", min_rotation_rad);
+    r.get("gate_chi2", gate_chi2);
+    r.get("reset_after_s", reset_after_s);
+    r.get("converged_sigma_ut", converged_sigma_ut);
+    r.get("min_applied_ut", min_applied_ut);
+    r.get("consistency_tau_s", consistency_tau_s);
+    r.get("removed_log_lr", removed_log_lr);
+    r.get("max_dt_s", max_dt_s);
+    r.get("max_mag_ut", max_mag_ut);
+    r.get("max_gyro_rps", max_gyro_rps);
+  }
 };
 
 /// Why the last sample did or did not update the estimate.

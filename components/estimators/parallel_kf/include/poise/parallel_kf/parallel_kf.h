@@ -388,8 +388,7 @@ struct ParallelKfState {
   bool mag_offset_pending = false;  ///< the last sample's s_M carried an offset that cannot be removed yet
   /// r_ib s_M low-passed over rest_filter_tau_s, and its value when the current rest began (NaN:
   /// not at rest), uT: the field seen from the gyro's almost inertial frame (field_moved_at_rest)
-  Eigen::Vector3d field_i_lp = Eigen::Vector3d::Constant(std::nan(""));
-  Eigen::Vector3d rest_field_i = Eigen::Vector3d::Constant(std::nan(""));
+  FieldMovedAtRest rest_field;
   bool mag_moved_at_rest = false;  ///< the last sample's field had moved since the rest began
   /// continuous time the field was refused before the gate (moved at rest, offset pending) since
   /// the gate last used one, s: with the gate's own rejected time, what heading_status() counts

@@ -79,6 +79,7 @@
 #include "poise/core/attitude_filter.h"
 #include "poise/core/north.h"
 #include "poise/core/field_gate.h"
+#include "poise/core/hard_iron.h"
 #include "poise/core/sample_check.h"
 #include "poise/core/source_report.h"
 #include "poise/core/state_health.h"
@@ -188,6 +189,17 @@ struct SelectiveEkfParams {
   /// the deviation equals the tolerance (the tolerance is the scale of a field error the gate lets
   /// through). 0 = off.
   double heading_disturbance_weight = 1.0;
+  /// kSplit: a hard-iron offset learnt online (poise/core/hard_iron.h, the parallel KF's
+  /// hard_iron): a magnet fixed to the sensor adds a constant body-frame vector to every reading.
+  /// Once known (converged, consistent, above min_applied_ut) it is removed from the reading the
+  /// heading and the gate see; while it is there but not known yet (HardIronEstimator::pending())
+  /// the field is not used and the gate is not asked (an offset against north reverses the
+  /// horizontal field and passes the gate's norm and dip tests). Independently, with
+  /// rest_detection, a field that moves while the sensor is at rest (FieldMovedAtRest, the gate's
+  /// norm tolerance) is not used either. ImuMeasurement::kQuaternion (the paper's) has neither.
+  bool hard_iron = true;
+  /// The estimator's own parameters (YAML `hard_iron_estimator: {key: value}`, same key names).
+  HardIronParams hard_iron_estimator;
   // ---- rest detection (zero-rate measurement, observes the gyro bias)
   bool rest_detection = true;
   double rest_gyro_max_rps = 2.0 * kRadPerDeg;  ///< rest if the low-passed |gyro| stays below, rad/s
@@ -387,6 +399,10 @@ struct MagStatus {
   double quat_error_deg = 0.0;          ///< theta_q (9); kSplit: |heading innovation|
   bool reference_ready = false;         ///< dip (and |m|) learnt
   double dip_deg = 0.0;
+  /// kSplit: the field was refused before the gate: a hard-iron offset not removable yet
+  /// (hard_iron), or a field that moved at rest
+  bool offset_pending = false;
+  bool moved_at_rest = false;
   uint64_t untrusted_samples = 0;       ///< first-pass count
 };
 
@@ -512,6 +528,16 @@ struct SelectiveEkfState {
   /// the field the heading was started on.
   bool heading_anchored = false;
   bool heading_checked = false;
+  /// kSplit, hard_iron: the body-fixed offset of the field, fed every sample with a magnetometer
+  /// (the low-pass's frame q_ib as the gyro's rotation; in the state, so replays reproduce it)
+  HardIronEstimator hard_iron = HardIronEstimator(HardIronParams{});
+  FieldMovedAtRest rest_field;           ///< kSplit, rest_detection: the field seen from q_ib's frame at rest
+  bool mag_offset_pending = false;       ///< this sample's reading carries an offset not removable yet
+  bool mag_moved_at_rest = false;        ///< this sample's field moved since the rest began
+  /// the field moved at rest, held into the motion after it until the hard-iron estimate judged
+  /// it (field_offsets)
+  bool field_moved = false;
+  bool mag_corrected = false;            ///< this sample's reading had the offset removed
   SelectiveEkfUnmodelled unmodelled;     ///< the published covariance's own terms
 };
 
@@ -682,6 +708,9 @@ class SelectiveEkf : private SelectiveEkfFullState {
   void replay_from(size_t snapshot_index);
   void blend_output(const Eigen::Vector3d& gyro_rps, double dt_s);
   void preprocess(ImuInput& in);
+  /// kSplit: the hard-iron offset and the field moved at rest from this sample's raw reading
+  /// (state flags for the heading aid); `in.mag` becomes the reading with the offset removed.
+  void field_offsets(ImuInput& in);
   /// The published covariance's tracked terms after a step (SelectiveEkfUnmodelled); `aided`:
   /// tilt and heading were fused at this step over `aiding_dt_s`.
   void track_unmodelled(const ImuInput& in, bool aided, double aiding_dt_s);

@@ -1,0 +1,117 @@
+// The selective EKF (IMU only, kSplit) next to a magnet attached to the sensor (issues 31 and 32,
+// BROAD's "attached magnet" trials): the simulator's hand-held run in BROAD's field with a
+// body-fixed offset attached at rest and removed in the motion, and the `hard_iron` YAML keys.
+// Oracles: the simulator's truth (the heading error) and the published covariance's heading
+// variance (the share of samples its 95 % bound covers).
+#include "poise/core/attitude.h"
+#include "poise/core/consistency.h"
+#include "poise/selective_ekf/selective_ekf.h"
+#include "poise/sim/sensor_simulator.h"
+
+#include "poise/testing/attached_magnet.h"
+#include "poise/testing/param_errors.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <string>
+
+namespace poise {
+namespace {
+
+constexpr double kHeadingTolDeg = 3.0;  // rms heading error over the motion, deg (the parallel KF's test's)
+constexpr double kZ95 = 1.96;           // the 95 % bound of a normal heading error, in sigmas
+/// Least share of the motion's samples whose heading error the published 95 % bound covers (the
+/// issue's band starts at 85 %)
+constexpr double kMinCovered = 0.85;
+
+struct MagnetRun {
+  double heading_rms_deg = 0.0;  ///< over the motion
+  double covered = 0.0;          ///< share of the motion's samples with |heading error| <= 1.96 sigma
+};
+
+/// The hand-held run of poise/testing/attached_magnet.h with `offset` fixed in the body; the filter
+/// told the simulated sensor's figures.
+MagnetRun attached_magnet_run(const Eigen::Vector3d& offset_ut) {
+  const sim::SimConfig cfg = testing::attached_magnet_hand_held(offset_ut);
+  SelectiveEkfParams p;  // the simulated sensor's figures, as config/filters/selective_ekf_sim.yaml
+  p.imu_delay_s = 0.0;
+  p.gyro_noise_density_rps_per_sqrt_hz = cfg.noise.sigma_gyro_rps / std::sqrt(cfg.rate_hz);
+  p.accel_noise_density_mps2_per_sqrt_hz = cfg.noise.sigma_accel_mps2 / std::sqrt(cfg.rate_hz);
+  p.gyro_bias_walk_rps_per_sqrt_s = 0.0;
+  SelectiveEkf ekf(p);
+  sim::SensorSimulator sim(cfg);
+  double sq = 0.0;
+  uint64_t n = 0;
+  uint64_t covered = 0;
+  while (!sim.done()) {
+    const sim::SimSample s = sim.next();
+    ekf.update_imu(s.imu);
+    if (!ekf.initialized() || !s.truth.moving) {
+      continue;
+    }
+    const double err = world_attitude_error(ekf.q_world_body(), s.truth.q_world_body).z();
+    const double var = ekf.attitude_covariance()(2, 2);
+    sq += err * err;
+    covered += std::abs(err) <= kZ95 * std::sqrt(var) ? 1 : 0;
+    ++n;
+  }
+  MagnetRun r;
+  r.heading_rms_deg = n > 0 ? std::sqrt(sq / static_cast<double>(n)) * kDegPerRad : 1e9;
+  r.covered = n > 0 ? static_cast<double>(covered) / static_cast<double>(n) : 0.0;
+  return r;
+}
+
+TEST(SelectiveEkfMagnet, GivenAMagnetAttachedAtRestAndRemovedInMotionWhenTheGateCannotTellThenTheHeadingHoldsAndIsCovered) {
+  // GIVEN a hand-held sensor in BROAD's field, a magnet attached at rest and removed in the motion,
+  // its body offset
+  //   - 25 uT along -y (against the horizontal field at the start): where it reverses the
+  //     horizontal field the sum passes both the norm and the dip gate;
+  //   - 25 uT along -x (across it): passes the gate at other orientations;
+  //   - 10 uT along +x (across it, at rest: |m| moves by 1.1 uT of 44, the heading by 34 deg).
+  // Before (no hard-iron estimate, no moved-at-rest test): 120.4 / 17.5 / 21.7 deg rms, 0 / 24 /
+  // 0 % covered.
+  const struct {
+    Eigen::Vector3d offset;
+    const char* what;
+  } cases[] = {{{0.0, -25.0, 0.0}, "25 uT along -y"},
+               {{-25.0, 0.0, 0.0}, "25 uT along -x"},
+               {{10.0, 0.0, 0.0}, "10 uT along +x"}};
+  for (const auto& c : cases) {
+    // WHEN the default filter (IMU only) runs on it
+    const MagnetRun r = attached_magnet_run(c.offset);
+    std::printf("%s: heading rms over the motion %.2f deg, %.1f %% inside the 95 %% bound\n", c.what,
+                r.heading_rms_deg, 100.0 * r.covered);
+    // THEN the heading stays within tolerance of the truth (the raw field is not used while the
+    // offset cannot be removed, nor when it moved at rest) and the published heading variance
+    // covers its error
+    EXPECT_LT(r.heading_rms_deg, kHeadingTolDeg) << c.what;
+    EXPECT_GE(r.covered, kMinCovered) << c.what;
+  }
+}
+
+TEST(SelectiveEkfMagnet, GivenTheHardIronKeysInYamlWhenLoadedThenTheyAreReadAndHostileValuesAreRefusedByName) {
+  const std::string path = ::testing::TempDir() + "/sel_hard_iron.yaml";
+  auto write = [&](const std::string& text) {
+    std::FILE* f = std::fopen(path.c_str(), "w");
+    ASSERT_NE(f, nullptr);
+    std::fputs(text.c_str(), f);
+    std::fclose(f);
+  };
+  EXPECT_TRUE(SelectiveEkfParams{}.hard_iron);
+  write("selective_ekf:\n  hard_iron: false\n  hard_iron_estimator:\n    min_applied_ut: 8\n    removed_log_lr: 0\n");
+  const SelectiveEkfParams p = load_selective_ekf_params(path);
+  EXPECT_FALSE(p.hard_iron);
+  EXPECT_EQ(p.hard_iron_estimator.min_applied_ut, 8.0);
+  EXPECT_EQ(p.hard_iron_estimator.removed_log_lr, 0.0);
+  // hostile values and unknown keys: refused with a message naming the key
+  write("selective_ekf:\n  hard_iron_estimator:\n    lag_s: -1\n");
+  EXPECT_NE(testing::error_message([&] { load_selective_ekf_params(path); }).find("lag_s"), std::string::npos);
+  write("selective_ekf:\n  hard_iron_estimator:\n    no_such_key: 1\n");
+  EXPECT_NE(testing::error_message([&] { load_selective_ekf_params(path); }).find("no_such_key"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace poise
