@@ -83,6 +83,16 @@ Eigen::Vector3d bias_from_the_prior(const ParallelKfParams& p, uint64_t seed) {
   return Eigen::Vector3d(bias(rng), bias(rng), bias(rng));
 }
 
+/// The filter told every figure of the simulated sensor (told_the_simulated_sensor, its bias walk
+/// and its white noise density), and the sensor's bias drawn from the filter's prior (`bias_seed`).
+ParallelKfParams told_every_figure(sim::SimConfig& cfg, uint64_t bias_seed) {
+  ParallelKfParams p = told_the_simulated_sensor(cfg);
+  p.gyro_bias_walk_rps_per_sqrt_s = cfg.noise.gyro_bias_walk_rps_per_sqrt_s;
+  p.gyro_noise_density_rps_per_sqrt_hz = cfg.noise.sigma_gyro_rps / std::sqrt(cfg.rate_hz);
+  cfg.noise.gyro_bias_rps = bias_from_the_prior(p, bias_seed);
+  return p;
+}
+
 /// kRuns runs of the static scenario, each with a bias drawn from the filter's prior walking at
 /// `sensor_walk` (rad/s/sqrt(s)); the filter told the sensor (told_the_simulated_sensor) and,
 /// unless NaN, that walk as gyro_bias_walk_rps_per_sqrt_s.
@@ -211,10 +221,7 @@ testing::AveragedNees run_in_motion() {
     // GIVEN random motion on a simulated sensor whose figures the filter is told
     sim::SimConfig cfg = sim::make_scenario("random_motion", kRateHz, 3000 + static_cast<uint64_t>(run));
     cfg.duration_s = kMotionLastS + 0.5;
-    ParallelKfParams p = told_the_simulated_sensor(cfg);
-    p.gyro_bias_walk_rps_per_sqrt_s = cfg.noise.gyro_bias_walk_rps_per_sqrt_s;
-    p.gyro_noise_density_rps_per_sqrt_hz = cfg.noise.sigma_gyro_rps / std::sqrt(cfg.rate_hz);
-    cfg.noise.gyro_bias_rps = bias_from_the_prior(p, 9000 + static_cast<uint64_t>(run));
+    const ParallelKfParams p = told_every_figure(cfg, 9000 + static_cast<uint64_t>(run));
     add_run(cfg, p, a);
   }
   return a;
@@ -288,10 +295,7 @@ TEST(ParallelKfChiSquare, GivenAFieldWhoseHorizontalDirectionTurnsWhereTheSensor
     // GIVEN random motion in a field turning horizontally by up to kRotationDeg
     sim::SimConfig cfg = sim::make_scenario("random_motion", kRateHz, 4000 + static_cast<uint64_t>(run));
     cfg.duration_s = kRotatedLastS + 0.5;
-    ParallelKfParams p = told_the_simulated_sensor(cfg);
-    p.gyro_bias_walk_rps_per_sqrt_s = cfg.noise.gyro_bias_walk_rps_per_sqrt_s;
-    p.gyro_noise_density_rps_per_sqrt_hz = cfg.noise.sigma_gyro_rps / std::sqrt(cfg.rate_hz);
-    cfg.noise.gyro_bias_rps = bias_from_the_prior(p, 11000 + static_cast<uint64_t>(run));
+    const ParallelKfParams p = told_every_figure(cfg, 11000 + static_cast<uint64_t>(run));
     ParallelKf kf(p);
     RotatedFieldSim simu(cfg);
     // WHEN the filter runs over every sample
