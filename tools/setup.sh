@@ -42,7 +42,8 @@ done
 # Foxglove clients),
 # dpkg-dev (dpkg-shlibdeps for the Debian packages), systemd (systemd-analyze verify), and the
 # GY-87 firmware's toolchain and emulator (tests/firmware, docs/FIRMWARE.md): arduino-mk with
-# Debian's AVR core, gcc-avr, avr-libc, simavr + libsimavr-dev + libelf-dev.
+# Debian's AVR core, gcc-avr, avr-libc, simavr + libsimavr-dev + libelf-dev; ccache (tools/test.sh
+# compiles the cores twice: the second time is a cache hit).
 packages=(build-essential cmake ninja-build pkg-config libeigen3-dev libyaml-cpp-dev)
 if [ "$cores_only" = OFF ]; then
   packages+=(libfastrtps-dev libfastcdr-dev fastddsgen fastdds-tools
@@ -55,7 +56,7 @@ fi
 if [ "$tests" = ON ]; then
   packages+=(libgtest-dev libgmock-dev cyclonedds-dev cyclonedds-tools iproute2 iputils-ping openssl clang
              dpkg-dev systemd arduino-mk arduino-core-avr gcc-avr binutils-avr avr-libc simavr
-             libsimavr-dev libelf-dev)
+             libsimavr-dev libelf-dev ccache)
 fi
 
 missing=()

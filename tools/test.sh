@@ -10,6 +10,12 @@
 #   tools/test.sh [extra ctest arguments, e.g. -R Parallel]
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+"$root/tools/setup.sh" --no-build  # packages first: ccache is one of them
+# The cores are compiled twice with the same command (build/ and check_cores.sh's build-cores/):
+# through ccache the second is a cache hit. A launcher the caller chose is kept.
+if [[ -z "${CMAKE_CXX_COMPILER_LAUNCHER:-}" ]] && command -v ccache >/dev/null 2>&1; then
+  export CMAKE_CXX_COMPILER_LAUNCHER=ccache CMAKE_C_COMPILER_LAUNCHER=ccache
+fi
 "$root/tools/setup.sh"
 cd "$root"
 "$root/tools/check_cores.sh" "$root/build-cores"  # the cores build without Fast DDS / OpenCV / clocks
