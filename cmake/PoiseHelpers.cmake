@@ -63,6 +63,10 @@ function(poise_add_test name)
   add_executable(${name} ${A_SOURCES})
   target_link_libraries(${name} PRIVATE ${A_DEPS} poise_testing GTest::gtest GTest::gmock GTest::gtest_main)
   poise_target_warnings(${name})
+  # The test's own code at -O1: the code under test is the libraries', built as configured (-O3 in
+  # Release). Test sources are half of a cold build's compile time, and -O1 takes a quarter off
+  # each (selective_ekf_test.cpp: 32 -> 24 s); -O0 is no faster with Eigen (31.6 s).
+  target_compile_options(${name} PRIVATE $<$<CONFIG:Release>:-O1>)
   set(props TIMEOUT ${A_TIMEOUT} ENVIRONMENT "POISE_DDS_PROFILE=poise_loopback;POISE_SHARED_DIR=${POISE_SHARED_DIR};POISE_SOURCE_DIR=${PROJECT_SOURCE_DIR};POISE_BINARY_DIR=${PROJECT_BINARY_DIR}")
   if(A_LABELS)
     list(APPEND props LABELS "${A_LABELS}")
