@@ -154,7 +154,8 @@ struct FieldGate {
 /// with the filter's state).
 struct FieldMovedAtRest {
   Eigen::Vector3d field_lp = Eigen::Vector3d::Constant(std::nan(""));  ///< low-passed field in the frame, uT
-  /// the low-passed field when the rest began (NaN: not at rest), following with reference_tau_s, uT
+  /// the low-passed field when the rest began (NaN: not at rest and nothing held), following with
+  /// reference_tau_s while the field has not moved, uT
   Eigen::Vector3d rest_field = Eigen::Vector3d::Constant(std::nan(""));
   bool held = false;  ///< the field moved at rest and is still refused (hold())
 
