@@ -136,5 +136,45 @@ TEST(FieldGate, GivenAConfiguredReferenceWhenResetThenNothingIsLearnt) {
   EXPECT_EQ(g.step(p, field(50.0, 55.0), kUp, kDt), FieldVerdict::kGated);
 }
 
+
+// FieldMovedAtRest::hold (session 20): a field that moved at rest stays refused in the motion after
+// it until the hard-iron estimate has judged it or the field is back at the rest's field. Oracle:
+// the fields fed (the frame is the test's; the Earth's field fixed in it).
+constexpr double kMovedTolUt = 2.2;     // the gate's norm tolerance, uT (0.05 x 44)
+constexpr double kMovedLowpassS = 0.5;  // the rest detector's time constant, s
+constexpr double kMovedSettleS = 5.0;   // ten low-pass time constants, s
+
+/// Steps `fr` for `seconds` with the field `f` (held verdict of the last sample).
+bool run_moved(FieldMovedAtRest& fr, const Eigen::Vector3d& f, bool rest, bool judged, double seconds) {
+  bool held = false;
+  for (double t = 0.0; t < seconds; t += kDt) {
+    const bool moved = fr.step(f, rest, kDt, kMovedLowpassS, 0.0, kMovedTolUt);
+    held = fr.hold(moved, rest, judged, kMovedTolUt);
+  }
+  return held;
+}
+
+TEST(FieldMovedAtRest, GivenAFieldThatMovedAtRestWhenTheMotionStartsThenItIsHeldUntilJudgedOrBack) {
+  const Eigen::Vector3d earth(15.0, 0.0, -41.3);           // 44 uT at 70 deg dip
+  const Eigen::Vector3d magnet = earth + Eigen::Vector3d(5.0, 0.0, 0.0);  // 5 uT more: moved
+  // GIVEN a rest that began in the Earth's field, then a magnet's field
+  FieldMovedAtRest fr;
+  EXPECT_FALSE(run_moved(fr, earth, true, false, kMovedSettleS));
+  EXPECT_TRUE(run_moved(fr, magnet, true, false, kMovedSettleS));
+  // WHEN the motion starts with the magnet's field still there and nothing judged
+  // THEN it stays held (the rest's field is kept)
+  EXPECT_TRUE(run_moved(fr, magnet, false, false, kMovedSettleS));
+  // and WHEN the field comes back to the rest's field THEN it is released
+  FieldMovedAtRest back = fr;
+  EXPECT_FALSE(run_moved(back, earth, false, false, kMovedSettleS));
+  // and WHEN the hard-iron estimate has judged it THEN it is released at once
+  FieldMovedAtRest judged = fr;
+  EXPECT_FALSE(judged.hold(false, false, true, kMovedTolUt));
+  // and a field that did not move at rest is never held in the motion
+  FieldMovedAtRest clean;
+  run_moved(clean, earth, true, false, kMovedSettleS);
+  EXPECT_FALSE(run_moved(clean, magnet, false, false, kMovedSettleS));
+}
+
 }  // namespace
 }  // namespace poise

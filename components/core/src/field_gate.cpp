@@ -206,4 +206,16 @@ bool FieldMovedAtRest::step(const Eigen::Vector3d& field_i, bool at_rest, double
   return moved;
 }
 
+bool FieldMovedAtRest::hold(bool moved, bool at_rest, bool judged, double tol_ut) {
+  if (at_rest) {
+    held = moved;
+  } else if (held) {
+    held = !judged && !((field_lp - rest_field).norm() <= tol_ut);
+    if (!held) {
+      clear();
+    }
+  }
+  return held;
+}
+
 }  // namespace poise

@@ -326,14 +326,21 @@ bool ParallelKf::field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, do
   // seen from the gyro's frame: what moves it is a magnet attached or brought near. Judged on the
   // low-passed field (the rest detector's time constant) against the gate's norm tolerance; the
   // field when the rest began is followed with the gate's reference_tau_s (a temperature drift).
+  // Held into the motion after the rest until the hard-iron estimate has judged it (hard_iron).
   // (poise/core/field_gate.h FieldMovedAtRest, shared with the selective EKF)
-  if (!p_.bias_estimation || !mag_ok || !s_.gate.learnt || !(p_.mag_norm_tol > 0.0)) {
+  if (!mag_ok) {
     s_.rest_field.clear();
     return false;
   }
+  if (!p_.bias_estimation || !s_.gate.learnt || !(p_.mag_norm_tol > 0.0)) {
+    s_.rest_field.reset();
+    return false;
+  }
   const Eigen::Vector3d f = (gyro_frame_kept() ? s_.r_ib : s_.q_ib.toRotationMatrix()) * mag;
-  return s_.rest_field.step(f, s_.rest_det.rest, dt, p_.rest_filter_tau_s, gp_.reference_tau_s,
-                            p_.mag_norm_tol * s_.gate.m_ut);
+  const bool rest = s_.rest_det.rest;
+  const double tol = p_.mag_norm_tol * s_.gate.m_ut;
+  const bool moved = s_.rest_field.step(f, rest, dt, p_.rest_filter_tau_s, gp_.reference_tau_s, tol);
+  return s_.rest_field.hold(moved, rest || !p_.hard_iron, s_.hard_iron.report().judged(), tol);
 }
 
 void ParallelKf::initialize(const ImuSample& s, bool mag_ok) {

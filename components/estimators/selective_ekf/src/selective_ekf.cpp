@@ -571,25 +571,13 @@ void SelectiveEkf::field_offsets(ImuInput& in) {
   // the raw field: the offset turns with the body, the Earth's field not (at rest neither does)
   const FieldGate& g = x_.field_gate;
   if (!p_.rest_detection || !g.learnt || !(gp_.norm_tol > 0.0) || !(in.dt_s > 0.0)) {
-    x_.rest_field.clear();
-    x_.field_moved = false;
+    x_.rest_field.reset();
     return;
   }
-  const bool moved = x_.rest_field.step(r_ib * raw, in.rest, in.dt_s, p_.rest_filter_tau_s, gp_.reference_tau_s,
-                                        gp_.norm_tol * g.m_ut);
-  // A field that moved at rest stays refused in the motion after it until the hard-iron estimate
-  // has judged it (hard_iron): an offset present (pending, then removed), or converged and the
-  // last comparison accepted (an estimate converged before the field moved is refused by the
-  // new readings, then learnt again). The motion's first seconds are when the raw field would
-  // pull the heading (the estimate needs rotation to tell the offset from the Earth's field,
-  // and the gate cannot).
-  if (in.rest || !p_.hard_iron) {
-    x_.field_moved = moved;
-  } else if (x_.field_moved) {
-    const HardIronReport& r = x_.hard_iron.report();
-    x_.field_moved = !r.present && !(r.converged && r.step == HardIronStep::kUpdated);
-  }
-  x_.mag_moved_at_rest = x_.field_moved;
+  const double tol = gp_.norm_tol * g.m_ut;
+  const bool moved = x_.rest_field.step(r_ib * raw, in.rest, in.dt_s, p_.rest_filter_tau_s, gp_.reference_tau_s, tol);
+  // held into the motion after it until the hard-iron estimate has judged it (hard_iron)
+  x_.mag_moved_at_rest = x_.rest_field.hold(moved, in.rest || !p_.hard_iron, x_.hard_iron.report().judged(), tol);
 }
 
 bool SelectiveEkf::update_imu(const ImuSample& s) {

@@ -154,17 +154,39 @@ struct FieldGate {
 /// with the filter's state).
 struct FieldMovedAtRest {
   Eigen::Vector3d field_lp = Eigen::Vector3d::Constant(std::nan(""));  ///< low-passed field in the frame, uT
-  /// the low-passed field when the rest began (NaN: not at rest), following with reference_tau_s, uT
+  /// the low-passed field when the rest began (NaN: not at rest and nothing held), following with
+  /// reference_tau_s while the field has not moved, uT
   Eigen::Vector3d rest_field = Eigen::Vector3d::Constant(std::nan(""));
+  bool held = false;  ///< the field moved at rest and is still refused (hold())
 
-  /// Not judged (no field, no reference, no rest detector): the rest's field forgotten.
-  void clear() { rest_field.setConstant(std::nan("")); }
+  /// The rest's field forgotten, unless the field is held (hold()): in the motion after the rest
+  /// it is what the field must come back to.
+  void clear() {
+    if (!held) {
+      rest_field.setConstant(std::nan(""));
+    }
+  }
+  /// Not judged (no reference, no rest detector): nothing held, the rest's field forgotten.
+  void reset() {
+    held = false;
+    clear();
+  }
   /// One sample: `field_i` the raw reading turned into the frame (R_ib m, uT), `at_rest` the rest
   /// detector's verdict, dt_s since the last; `lowpass_tau_s` the rest detector's time constant,
   /// `reference_tau_s` the gate's (0 = fixed), `tol_ut` the gate's norm tolerance (norm_tol m).
   /// True when the field has moved by more than tol_ut since the rest began.
   bool step(const Eigen::Vector3d& field_i, bool at_rest, double dt_s, double lowpass_tau_s, double reference_tau_s,
             double tol_ut);
+  /// A field that moved at rest stays refused in the motion after it until the hard-iron estimate
+  /// has judged it (`judged`: HardIronReport::judged()) or the field seen from the frame is back
+  /// within tol_ut of the rest's field before it moved (the source has gone: a magnet fixed to the
+  /// body turns with it and stays |b| > tol_ut away; a magnet fixed in the world is left behind).
+  /// The motion's first seconds are when the raw field would pull the heading: the estimate needs
+  /// rotation to tell the offset from the Earth's field, and the gate cannot. While held the
+  /// rest's field is kept (step() does not forget it). `moved` is this sample's step();
+  /// `at_rest` true (also for a filter without the estimate) gives `moved` itself. Returns
+  /// whether the field is refused.
+  bool hold(bool moved, bool at_rest, bool judged, double tol_ut);
 };
 
 }  // namespace poise

@@ -117,6 +117,10 @@ struct HardIronReport {
   /// so the per-sample path of a filter that carries the estimator does no lookup
   std::array<uint64_t, static_cast<size_t>(HardIronStep::kCount)> counts{};
   [[nodiscard]] uint64_t count(HardIronStep s) const { return counts[static_cast<size_t>(s)]; }
+  /// Whether the estimate has judged the reading's offset: one present (pending, then removed), or
+  /// converged and the last comparison accepted (an estimate converged before the field moved is
+  /// refused by the new readings, then learnt again). FieldMovedAtRest::hold releases on it.
+  [[nodiscard]] bool judged() const { return present || (converged && step == HardIronStep::kUpdated); }
 };
 
 class HardIronEstimator {

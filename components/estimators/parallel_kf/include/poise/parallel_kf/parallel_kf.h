@@ -389,7 +389,7 @@ struct ParallelKfState {
   /// r_ib s_M low-passed over rest_filter_tau_s, and its value when the current rest began (NaN:
   /// not at rest), uT: the field seen from the gyro's almost inertial frame (field_moved_at_rest)
   FieldMovedAtRest rest_field;
-  bool mag_moved_at_rest = false;  ///< the last sample's field had moved since the rest began
+  bool mag_moved_at_rest = false;  ///< the last sample's field had moved since the rest began (or is held)
   /// continuous time the field was refused before the gate (moved at rest, offset pending) since
   /// the gate last used one, s: with the gate's own rejected time, what heading_status() counts
   double field_refused_s = 0.0;

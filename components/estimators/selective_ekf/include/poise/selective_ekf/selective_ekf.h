@@ -531,12 +531,11 @@ struct SelectiveEkfState {
   /// kSplit, hard_iron: the body-fixed offset of the field, fed every sample with a magnetometer
   /// (the low-pass's frame q_ib as the gyro's rotation; in the state, so replays reproduce it)
   HardIronEstimator hard_iron = HardIronEstimator(HardIronParams{});
-  FieldMovedAtRest rest_field;           ///< kSplit, rest_detection: the field seen from q_ib's frame at rest
+  /// kSplit, rest_detection: the field seen from q_ib's frame at rest; `held` the field moved at
+  /// rest, held into the motion after it until the hard-iron estimate judged it (field_offsets)
+  FieldMovedAtRest rest_field;
   bool mag_offset_pending = false;       ///< this sample's reading carries an offset not removable yet
-  bool mag_moved_at_rest = false;        ///< this sample's field moved since the rest began
-  /// the field moved at rest, held into the motion after it until the hard-iron estimate judged
-  /// it (field_offsets)
-  bool field_moved = false;
+  bool mag_moved_at_rest = false;        ///< this sample's field moved since the rest began (or is held)
   bool mag_corrected = false;            ///< this sample's reading had the offset removed
   SelectiveEkfUnmodelled unmodelled;     ///< the published covariance's own terms
 };
