@@ -136,7 +136,6 @@ TEST(FieldGate, GivenAConfiguredReferenceWhenResetThenNothingIsLearnt) {
   EXPECT_EQ(g.step(p, field(50.0, 55.0), kUp, kDt), FieldVerdict::kGated);
 }
 
-
 // FieldMovedAtRest::hold (session 20): a field that moved at rest stays refused in the motion after
 // it until the hard-iron estimate has judged it or the field is back at the rest's field. Oracle:
 // the fields fed (the frame is the test's; the Earth's field fixed in it).

@@ -326,7 +326,8 @@ bool ParallelKf::field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, do
   // seen from the gyro's frame: what moves it is a magnet attached or brought near. Judged on the
   // low-passed field (the rest detector's time constant) against the gate's norm tolerance; the
   // field when the rest began is followed with the gate's reference_tau_s (a temperature drift).
-  // Held into the motion after the rest until the hard-iron estimate has judged it (hard_iron).
+  // Held into the motion after the rest until the hard-iron estimate has judged it (hard_iron) or
+  // the field is back within the tolerance of the rest's field before it moved (FieldMovedAtRest::hold).
   // (poise/core/field_gate.h FieldMovedAtRest, shared with the selective EKF)
   if (!mag_ok) {
     s_.rest_field.clear();

@@ -576,7 +576,8 @@ void SelectiveEkf::field_offsets(ImuInput& in) {
   }
   const double tol = gp_.norm_tol * g.m_ut;
   const bool moved = x_.rest_field.step(r_ib * raw, in.rest, in.dt_s, p_.rest_filter_tau_s, gp_.reference_tau_s, tol);
-  // held into the motion after it until the hard-iron estimate has judged it (hard_iron)
+  // held into the motion after it until the hard-iron estimate has judged it (hard_iron) or the
+  // field is back within the tolerance of the rest's field before it moved (FieldMovedAtRest::hold)
   x_.mag_moved_at_rest = x_.rest_field.hold(moved, in.rest || !p_.hard_iron, x_.hard_iron.report().judged(), tol);
 }
 
