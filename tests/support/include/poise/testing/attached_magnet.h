@@ -8,6 +8,8 @@
 
 #include <Eigen/Core>
 
+#include <cstdint>
+
 namespace poise::testing {
 
 inline constexpr double kMagnetRestS = 20.0;      ///< at rest before the motion, s
@@ -49,6 +51,20 @@ inline sim::SimConfig attached_magnet_hand_held(const Eigen::Vector3d& offset_ut
   magnet.field_ut = offset_ut;
   magnet.body_fixed = true;
   cfg.magnets = {magnet};
+  return cfg;
+}
+
+/// The same run as BROAD's sensor records it (its figures as the filters' defaults assume them):
+/// 285.7 Hz, gyro noise 0.15 deg/s, accelerometer 0.05 m/s^2 and magnetometer 0.6 uT per sample;
+/// `seed` the noise's.
+inline sim::SimConfig attached_magnet_hand_held_broad_noise(const Eigen::Vector3d& offset_ut, uint64_t seed) {
+  constexpr double kPi = 3.14159265358979323846;
+  sim::SimConfig cfg = attached_magnet_hand_held(offset_ut);
+  cfg.rate_hz = 285.7;
+  cfg.seed = seed;
+  cfg.noise.sigma_gyro_rps = 0.15 * (kPi / 180.0);
+  cfg.noise.sigma_accel_mps2 = 0.05;
+  cfg.noise.sigma_mag_ut = 0.6;
   return cfg;
 }
 
