@@ -247,6 +247,58 @@ TEST(HardIron, GivenAnOffsetThatIsRemovedWhenNoInnovationIsRefusedThenTheRemoval
   EXPECT_FALSE(h.applied());
 }
 
+// A slow turn about one axis (rad/s): 0.1 rad/s turns the body 0.025 rad over lag_s, so a
+// comparison of readings lag_s apart sees (I - C) b of 0.2 uT for an 8 uT offset, below the noise.
+Eigen::Vector3d slow_rate(double /*t*/) { return {0.0, 0.0, 0.1}; }
+
+// The removal test judges each grid reading against the field followed in the gyro frame: once the
+// magnet is gone, "no offset" fits and the estimate misses by |b| whatever the body's rate. Oracle:
+// the simulator knows when the offset is removed. The bound on the time to drop it is derived from
+// the test's own statistics: after the removal each reading adds at least
+// 0.5 (|b|^2 / v - 3) to the CUSUM (the estimate's residual |b| against a variance v, at most twice
+// the reading's noise_ut^2 for the reading plus the field's mean, less the no-offset residual's
+// expected 3 dof), so removed_log_lr is reached after n = ceil(h / that) readings, lag_s apart,
+// plus one lag_s for the grid instant after the removal and one for the comparison that starts.
+TEST(HardIron, GivenAnOffsetRemovedInSlowMotionWhenTheReadingsNoLongerCarryItThenTheEstimateIsDroppedWithinTheDerivedTime) {
+  const Eigen::Vector3d b(6.0, -4.0, 3.5);  // 8.0 uT, the size the sweep lost 15-20 s on
+  constexpr double kTumbleS = 20.0;          // learnt while tumbling, s
+  constexpr double kSlowWithMagnetS = 10.0;  // then slow motion with the magnet still on, s
+  HardIronParams p;
+  HardIronEstimator h(p);
+  Sim sim;
+  for (int i = 0; i < static_cast<int>(kTumbleS * kRateHz); ++i) {
+    h.update(sim.next(b, tumbling_rate));
+  }
+  ASSERT_TRUE(h.applied());
+  ASSERT_LT((h.offset_ut() - b).norm(), kConvergedTolUt);
+  // GIVEN slow motion with the magnet still on: no false alarm, the estimate stays applied
+  for (int i = 0; i < static_cast<int>(kSlowWithMagnetS * kRateHz); ++i) {
+    h.update(sim.next(b, slow_rate));
+  }
+  EXPECT_EQ(h.report().count(HardIronStep::kReset), 0U) << "no false alarm while the offset is there";
+  ASSERT_TRUE(h.applied());
+  // WHEN the magnet is removed, the body still turning slowly
+  const double v = 2.0 * p.noise_ut * p.noise_ut;  // uT^2, per axis
+  const double llr_per_reading = 0.5 * (b.squaredNorm() / v - 3.0);
+  ASSERT_GT(llr_per_reading, 0.0);
+  const double dropped_within_s = p.lag_s * (std::ceil(p.removed_log_lr / llr_per_reading) + 2.0);
+  double dropped_after_s = std::numeric_limits<double>::infinity();
+  constexpr double kWatchS = 30.0;  // s (the old test of readings lag_s apart: not dropped in this)
+  for (int i = 0; i < static_cast<int>(kWatchS * kRateHz); ++i) {
+    h.update(sim.next(Eigen::Vector3d::Zero(), slow_rate));
+    if (!h.applied()) {
+      dropped_after_s = (i + 1) / kRateHz;
+      break;
+    }
+  }
+  // THEN it is dropped (b = 0, learnt again) within the derived time, and the reading is used as it is
+  EXPECT_LE(dropped_after_s, dropped_within_s) << "bound " << dropped_within_s << " s";
+  EXPECT_EQ(h.report().count(HardIronStep::kReset), 1U);
+  EXPECT_LT(h.offset_ut().norm(), p.min_applied_ut);
+  const Eigen::Vector3d m(1.0, 2.0, 3.0);
+  EXPECT_EQ(h.corrected(m), m);
+}
+
 TEST(HardIron, GivenHostileReadingsWhenFedThenEachIsRejectedCountedAndTheEstimateUntouched) {
   HardIronEstimator h;
   Sim sim;

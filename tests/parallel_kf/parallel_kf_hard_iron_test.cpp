@@ -289,13 +289,14 @@ TEST(ParallelKfHardIron, GivenTheHardIronKeysInYamlWhenLoadedThenTheyAreReadAndH
   EXPECT_FALSE(load_parallel_kf_params(dir + "parallel_kf_paper.yaml").hard_iron);
   EXPECT_TRUE(load_parallel_kf_params(dir + "parallel_kf.yaml").hard_iron);
   write("parallel_kf:\n  hard_iron: false\n  hard_iron_estimator:\n    min_applied_ut: 8\n    noise_ut: 2\n"
-        "    consistency_tau_s: 0\n    removed_log_lr: 0\n");
+        "    consistency_tau_s: 0\n    removed_log_lr: 0\n    removed_tau_s: 2\n");
   const ParallelKfParams p = load_parallel_kf_params(path);
   EXPECT_FALSE(p.hard_iron);
   EXPECT_EQ(p.hard_iron_estimator.min_applied_ut, 8.0);
   EXPECT_EQ(p.hard_iron_estimator.noise_ut, 2.0);
   EXPECT_EQ(p.hard_iron_estimator.consistency_tau_s, 0.0);
   EXPECT_EQ(p.hard_iron_estimator.removed_log_lr, 0.0);
+  EXPECT_EQ(p.hard_iron_estimator.removed_tau_s, 2.0);
   // hostile values: each refused with a message naming the key
   const struct {
     const char* yaml;
@@ -316,6 +317,8 @@ TEST(ParallelKfHardIron, GivenTheHardIronKeysInYamlWhenLoadedThenTheyAreReadAndH
       {"  hard_iron_estimator:\n    consistency_tau_s: .nan\n", "consistency_tau_s"},
       {"  hard_iron_estimator:\n    removed_log_lr: -1\n", "removed_log_lr"},
       {"  hard_iron_estimator:\n    removed_log_lr: .inf\n", "removed_log_lr"},
+      {"  hard_iron_estimator:\n    removed_tau_s: 0\n", "removed_tau_s"},
+      {"  hard_iron_estimator:\n    removed_tau_s: .nan\n", "removed_tau_s"},
       {"  hard_iron_estimator:\n    no_such_key: 1\n", "no_such_key"},
       {"  hard_iron_estimator:\n    prior_sigma_ut: [1, 2]\n", "prior_sigma_ut"},
   };

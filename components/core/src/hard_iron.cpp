@@ -24,6 +24,8 @@ void HardIronParams::validate(const char* filter) const {
   check.non_negative(consistency_tau_s, "consistency_tau_s", "s, 0 = no check");
   check.non_negative(removed_log_lr, "removed_log_lr", "0 = no test");
   check.require(removed_log_lr <= 1e6, "removed_log_lr", "<= 1e6");
+  check.positive(removed_tau_s, "removed_tau_s", "s");
+  check.require(removed_tau_s <= 1e6, "removed_tau_s", "<= 1e6 (s)");
   check.positive(max_dt_s, "max_dt_s", "s");
   check.require(lag_s < 100.0, "lag_s", "< 100 (s)");
   check.positive(max_mag_ut, "max_mag_ut", "uT");
@@ -80,6 +82,7 @@ void HardIronEstimator::reset() {
   raw_change2_ = 0.0;
   cor_change2_ = 0.0;
   change_weight_ = 0.0;
+  clear_field();
   report_ = HardIronReport{};
   refresh();
 }
@@ -101,16 +104,65 @@ void HardIronEstimator::refresh() {
   }
 }
 
-bool HardIronEstimator::removed(const Eigen::Vector3d& y, const Eigen::Matrix3d& s, const Eigen::Matrix3d& r,
-                                double nis) {
-  if (!(p_.removed_log_lr > 0.0) || !report_.present) {
+void HardIronEstimator::clear_field() {
+  field_sum_.setZero();
+  frame_sum_.setZero();
+  field_w_ = 0.0;
+  field_var2_ = 0.0;
+  field_refused_s_ = 0.0;
+}
+
+bool HardIronEstimator::removed(const Eigen::Matrix3d& r_k, const Eigen::Vector3d& m_k, double var_ut2,
+                                double interval_s) {
+  if (!(p_.removed_log_lr > 0.0)) {
     return false;
   }
-  // log p(y | b = 0) - log p(y | b ~ N(b_hat, P)): y ~ N(0, R) against y ~ N(H b_hat, S)
-  const double nis0 = y.dot(r.ldlt().solve(y));
-  const double llr = 0.5 * (nis - nis0) + 0.5 * std::log(s.determinant() / r.determinant());
-  report_.removed_llr = std::max(0.0, report_.removed_llr + (std::isfinite(llr) ? llr : 0.0));
-  return report_.removed_llr >= p_.removed_log_lr;
+  const double keep = std::exp(-interval_s / p_.removed_tau_s);
+  field_sum_ *= keep;
+  frame_sum_ *= keep;
+  field_w_ *= keep;
+  field_var2_ *= keep * keep;
+  const Eigen::Vector3d z = r_k * m_k;  // the reading seen from the gyro frame
+  bool fits = true;  // the estimate fits k (or nothing is judged): k joins the field followed
+  if (report_.present && field_w_ > 0.0) {
+    // the field followed, f(b) = mean(z) - mean(R) b; "no offset": z = f(b_hat), its error
+    // mean(R) (b_hat - b); "the estimate": z - R_k b_hat = f(b_hat), its error (mean(R) - R_k) (b_hat - b)
+    const Eigen::Matrix3d mean_r = frame_sum_ / field_w_;
+    const Eigen::Vector3d e0 = z - field_sum_ / field_w_ + mean_r * b_;
+    const Eigen::Vector3d e1 = e0 - r_k * b_;
+    const Eigen::Matrix3d noise = Eigen::Matrix3d::Identity() * (var_ut2 + field_var2_ / (field_w_ * field_w_));
+    const Eigen::Matrix3d d = mean_r - r_k;
+    const Eigen::Matrix3d s0 = noise + mean_r * P_ * mean_r.transpose();
+    const Eigen::Matrix3d s1 = noise + d * P_ * d.transpose();
+    const double nis0 = e0.dot(s0.ldlt().solve(e0));
+    const double nis1 = e1.dot(s1.ldlt().solve(e1));
+    report_.removed_nis_none = nis0;
+    report_.removed_nis_estimate = nis1;
+    fits = nis1 <= p_.gate_chi2;
+    if (!fits && !(nis0 <= p_.gate_chi2)) {
+      // neither fits: the field itself moves (a disturbance, the magnet on its way off), no
+      // evidence either way and nothing followed; a field refused for removed_tau_s (the time it
+      // is taken as constant over) has moved for good and is followed anew
+      field_refused_s_ += interval_s;
+      if (field_refused_s_ >= p_.removed_tau_s) {
+        clear_field();
+      }
+      return false;
+    }
+    field_refused_s_ = 0.0;
+    const double llr = 0.5 * (nis1 - nis0) + 0.5 * std::log(s1.determinant() / s0.determinant());
+    report_.removed_llr = std::max(0.0, report_.removed_llr + (std::isfinite(llr) ? llr : 0.0));
+    if (report_.removed_llr >= p_.removed_log_lr) {
+      return true;
+    }
+  }
+  if (fits) {
+    field_sum_ += z;
+    frame_sum_ += r_k;
+    field_w_ += 1.0;
+    field_var2_ += var_ut2;
+  }
+  return false;
 }
 
 bool HardIronEstimator::usable(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const {
@@ -181,6 +233,7 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
     have_last_ = true;
     last_ns_ = stamp_ns;
     have_start_ = false;
+    clear_field();  // the frame across a gap is not known
     prev_ = {stamp_ns, mag_ut, 0.0, r_body};
     int64_t q = stamp_ns / lag_ns_;  // the first multiple of lag_s at or after this stamp
     if (q * lag_ns_ < stamp_ns) {
@@ -242,9 +295,8 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
   const Eigen::LDLT<Eigen::Matrix3d> ldlt(S);
   const double nis = r.dot(ldlt.solve(r));
-  // whether the offset is gone is judged on every comparison: a small rotation tells little
-  // (H b is small under both hypotheses), never something wrong, so none is skipped
-  if (removed(y, S, R, nis)) {
+  // whether the offset is gone is judged at every grid reading, the body turning or not
+  if (removed(k.r, k.m, k.var_ut2, static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9)) {
     reopen(true);  // the readings fit no offset better than the estimate, beyond chance: the magnet is gone
     return finish(HardIronStep::kReset);
   }
@@ -278,6 +330,7 @@ void HardIronEstimator::correct(const Eigen::Matrix3d& h, const Eigen::Vector3d&
 
 void HardIronEstimator::reopen(bool zero) {
   refused_s_ = 0.0;
+  clear_field();  // f(b) = mean(z) - mean(R) b holds for one offset over the window: it changed
   if (zero) {
     b_.setZero();
   }

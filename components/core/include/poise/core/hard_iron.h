@@ -49,12 +49,22 @@ struct HardIronParams {
   double consistency_tau_s = 5.0;
   /// The offset is taken as gone (b learnt again, as after reset_after_s) once the evidence that
   /// the readings carry no offset at all outweighs the estimate by this log-likelihood ratio
-  /// (0 = no test). While the estimate is present (below), each comparison with enough rotation
-  /// adds log p(y | b = 0) - log p(y | b ~ N(b_hat, P)), y = m_k - C m_j, to a sum held at or above
-  /// zero (Page's CUSUM): a magnet removed makes every comparison favour b = 0, with no innovation
-  /// large enough for the chi-square gate when the body turns slowly. The chance that the sum ever
-  /// reaches h while the offset is still there is at most e^-h (Wald); 6.9: 1e-3.
+  /// (0 = no test). Each grid reading k (every lag_s) is seen from the caller's gyro frame,
+  /// z = R_k m_k; the field there, f, is followed over removed_tau_s as sums of z and R_k, so that
+  /// f(b) = mean(z) - mean(R) b holds for any b (the estimate's later changes included). While the
+  /// estimate is present, "no offset" predicts z = f(b_hat), "the estimate" z - R_k b_hat = f(b_hat):
+  /// the two differ by R_k b_hat, |b| whatever the body's rate (a test of readings lag_s apart sees
+  /// only (I - C) b, the rotation over lag_s: 15-20 s for 8 uT in slow hand-held motion). Each
+  /// reading that either hypothesis fits (normalised residual <= gate_chi2) adds
+  /// log p(z | no offset) - log p(z | b ~ N(b_hat, P)) to a sum held at or above zero (Page's
+  /// CUSUM); the chance that the sum ever reaches h while the offset is still there is at most
+  /// e^-h (Wald); 6.9: 1e-3.
   double removed_log_lr = 6.9;
+  /// The time constant over which the field seen from the gyro frame is taken as constant for the
+  /// removal test, s: the reading's noise averages over it (its variance in the mean is added), the
+  /// frame's drift and the field's variation in space must stay within the noise over it. The
+  /// same window as consistency_tau_s (recent comparisons), not chosen on data.
+  double removed_tau_s = 5.0;
   double max_dt_s = 0.1;              ///< a longer gap between samples restarts the comparison, s
   double max_mag_ut = 5000.0;         ///< |m| above this (or non-finite) is refused, uT
   double max_gyro_rps = 100.0;        ///< |w| above this (or non-finite) is refused, rad/s
@@ -77,6 +87,7 @@ struct HardIronParams {
     r.get("min_applied_ut", min_applied_ut);
     r.get("consistency_tau_s", consistency_tau_s);
     r.get("removed_log_lr", removed_log_lr);
+    r.get("removed_tau_s", removed_tau_s);
     r.get("max_dt_s", max_dt_s);
     r.get("max_mag_ut", max_mag_ut);
     r.get("max_gyro_rps", max_gyro_rps);
@@ -113,6 +124,10 @@ struct HardIronReport {
   /// carries an offset that cannot be removed yet.
   bool present = false;
   double removed_llr = 0.0;  ///< the CUSUM of the log-likelihood ratio for "no offset" (removed_log_lr)
+  /// the last judged grid reading's normalised residuals against the field followed in the gyro
+  /// frame (removed_tau_s): under "no offset" and under the estimate (3 dof each)
+  double removed_nis_none = 0.0;
+  double removed_nis_estimate = 0.0;
   /// per step reason (indexed by HardIronStep), since construction/reset: an array, not a map,
   /// so the per-sample path of a filter that carries the estimator does no lookup
   std::array<uint64_t, static_cast<size_t>(HardIronStep::kCount)> counts{};
@@ -165,9 +180,11 @@ class HardIronEstimator {
   /// Adds one comparison's |m| and |m - b| changes (consistency_tau_s) and refreshes.
   void consistency(const Eigen::Vector3d& m_j, const Eigen::Vector3d& m_k, double interval_s);
   void refresh();  ///< converged and applied from b_ and P_ (called where they change, not per sample)
-  /// Adds one comparison's log-likelihood ratio of "no offset" against the estimate
-  /// (removed_log_lr); true when the sum reached the threshold (the offset is gone).
-  bool removed(const Eigen::Vector3d& y, const Eigen::Matrix3d& s, const Eigen::Matrix3d& r, double nis);
+  /// Adds grid reading k's log-likelihood ratio of "no offset" against the estimate, judged
+  /// against the field followed in the gyro frame (removed_log_lr, removed_tau_s), then follows
+  /// the field with k; true when the sum reached the threshold (the offset is gone).
+  bool removed(const Eigen::Matrix3d& r_k, const Eigen::Vector3d& m_k, double var_ut2, double interval_s);
+  void clear_field();  ///< the field followed in the gyro frame starts again (removed_tau_s)
   /// The Kalman update of b and P with one comparison (H = I - C, innovation r, its noise, S's LDLT).
   void correct(const Eigen::Matrix3d& h, const Eigen::Vector3d& r, const Eigen::Matrix3d& noise,
                const Eigen::LDLT<Eigen::Matrix3d>& s_ldlt);
@@ -195,6 +212,13 @@ class HardIronEstimator {
   double raw_change2_ = 0.0;  ///< forgetting sums of the squared |m| / |m - b| changes, uT^2
   double cor_change2_ = 0.0;
   double change_weight_ = 0.0;  ///< the same sum of the weights (for the rms)
+  /// The field followed in the gyro frame (removed_tau_s): forgetting sums of R_k m_k, uT, of
+  /// R_k, of the weights and of the squared weights times the reading's variance
+  Eigen::Vector3d field_sum_ = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d frame_sum_ = Eigen::Matrix3d::Zero();
+  double field_w_ = 0.0;
+  double field_var2_ = 0.0;
+  double field_refused_s_ = 0.0;  ///< time of consecutive readings neither hypothesis fits, s (removed_tau_s)
   bool applied_ = false;
   HardIronReport report_;
 };
