@@ -210,7 +210,7 @@ TEST(ParallelKfHardIron, GivenAMagnetAttachedAtRestAndRemovedInMotionWhenItsOffs
 // covariance for long) attached at rest, then the hand-held motion. The field moved at rest; in the
 // motion the raw field carries the offset and passes the gate (10 uT across 15 uT horizontal turns
 // the heading 34 deg, |m| by 1.1 uT). Session 20 (issue 32).
-constexpr double kSmallMagnetHeadingTolDeg = 2.0;  // rms heading error over the motion, deg (0.13-1.24 measured; main 3.8-20)
+constexpr double kSmallMagnetHeadingTolDeg = 2.0;  // rms heading error over the motion, deg (main 3.8-20)
 /// least share of the motion's samples inside the published 95 % heading bound (the issue's band
 /// starts at 85 %)
 constexpr double kSmallMagnetMinCovered = 0.85;
@@ -219,19 +219,18 @@ TEST(ParallelKfHardIron, GivenASmallMagnetAttachedAtRestWhenTheSensorIsThenHandH
   // GIVEN a hand-held sensor in BROAD's field (44 uT, horizontal 15 uT) and a small magnet attached
   // at rest, removed during the motion, its body offset
   //   - 3 uT along -x, 5 uT along (-1, 1, -1)/sqrt 3, 10 uT along -y;
-  //   - 8 uT along +x (along the horizontal field at the start): the field pulls the heading at
-  //     rest before it is seen to have moved (0.5 deg in the rest detector's low-pass), which sits
-  //     at the published 95 % bound (2 % inside): its coverage is not asserted.
+  //   - 8 uT along +x (across the horizontal field at the start): at rest the field pulls the
+  //     heading 0.5 deg before the rest detector's low-pass sees it move; that turn is taken back
+  //     when it does (field_moved_at_rest; session 20 without it: 1.24 deg, 2 % inside).
   // Before (main at 782f3ea): 8.23 / 3.80 / 6.96 / 19.97 deg rms, 38 / 93 / 93 / 31 % inside.
   const double r3 = 1.0 / std::sqrt(3.0);
   const struct {
     Eigen::Vector3d offset;
     const char* what;
-    bool covered;  ///< the coverage asserted
-  } cases[] = {{{-3.0, 0.0, 0.0}, "3 uT along -x", true},
-               {{-5.0 * r3, 5.0 * r3, -5.0 * r3}, "5 uT along (-1, 1, -1)", true},
-               {{0.0, -10.0, 0.0}, "10 uT along -y", true},
-               {{8.0, 0.0, 0.0}, "8 uT along +x", false}};
+  } cases[] = {{{-3.0, 0.0, 0.0}, "3 uT along -x"},
+               {{-5.0 * r3, 5.0 * r3, -5.0 * r3}, "5 uT along (-1, 1, -1)"},
+               {{0.0, -10.0, 0.0}, "10 uT along -y"},
+               {{8.0, 0.0, 0.0}, "8 uT along +x"}};
   for (const auto& c : cases) {
     // WHEN the default filter runs on it
     const MagnetRun r = attached_magnet_run(c.offset);
@@ -241,10 +240,57 @@ TEST(ParallelKfHardIron, GivenASmallMagnetAttachedAtRestWhenTheSensorIsThenHandH
     // refused in the motion until the hard-iron estimate has judged it, or it is back at the
     // rest's field) and the published heading variance covers the error
     EXPECT_LT(r.heading_rms_deg, kSmallMagnetHeadingTolDeg) << c.what;
-    if (c.covered) {
-      EXPECT_GE(r.covered, kSmallMagnetMinCovered) << c.what;
+    EXPECT_GE(r.covered, kSmallMagnetMinCovered) << c.what;
+  }
+}
+
+// At rest the body does not turn: the heading turn KF2's fields give while a magnet's field ramps
+// in across the horizontal field, before the rest detector's low-pass sees it move, is taken back
+// when it does (session 21, issue 32).
+/// Heading change kept over the attachment at rest, deg: what KF2 turns before the reading leaves
+/// the gate's norm tolerance of the rest's field (2.2 uT across the 15 uT horizontal field turns its
+/// direction 8.3 deg; the 8 uT ramp over 1.5 s gets there in 0.41 s, which KF2's lag of about 10 s
+/// follows by about 20 deg/s x 0.41^2 s^2 / (2 x 10 s) = 0.17 deg), and the heading's noise at rest.
+constexpr double kRestTurnKeptTolDeg = 0.25;
+TEST(ParallelKfHardIron, GivenAMagnetAttachedAtRestAcrossTheFieldWhenTheMoveIsSeenThenTheHeadingTurnItGaveIsTakenBack) {
+  // GIVEN the session-20 run's 8 uT along +x (across the horizontal field), the simulated
+  // sensor's figures told
+  const sim::SimConfig cfg = testing::attached_magnet_hand_held(Eigen::Vector3d(8.0, 0.0, 0.0));
+  ParallelKfParams p;
+  p.imu_delay_s = 0.0;
+  p.gyro_bias_walk_rps_per_sqrt_s = 0.0;
+  p.gyro_noise_density_rps_per_sqrt_hz = cfg.noise.sigma_gyro_rps / std::sqrt(cfg.rate_hz);
+  p.gyro_scale_error = 0.0;
+  ParallelKf kf(p);
+  sim::SensorSimulator sim(cfg);
+  // WHEN it runs through the attachment (the ramp from kMagnetOnS) to the end of the rest
+  double before = std::nan("");
+  double after = std::nan("");
+  double largest_pull = 0.0;
+  while (!sim.done()) {
+    const sim::SimSample s = sim.next();
+    kf.update(s.imu);
+    if (!kf.initialized()) {
+      continue;
+    }
+    const double err = world_attitude_error(kf.q_world_body(), s.truth.q_world_body).z() * kDegPerRad;
+    if (s.truth.t_s < testing::kMagnetOnS) {
+      before = err;
+    } else if (s.truth.t_s < testing::kMagnetRestS - 0.5) {
+      largest_pull = std::max(largest_pull, std::abs(err - before));
+      after = err;
+    } else {
+      break;
     }
   }
+  std::printf("heading error before %.3f deg, at the end of the rest %.3f deg (largest change %.3f deg), turns "
+              "taken back %llu\n",
+              before, after, largest_pull, static_cast<unsigned long long>(kf.rest_turns_reverted_count()));
+  // THEN the field was found moved once and the heading is back within tolerance of where it was
+  // (the pull it had reached is larger: the turn was there and was taken back)
+  EXPECT_EQ(kf.rest_turns_reverted_count(), 1u);
+  EXPECT_LT(std::abs(after - before), kRestTurnKeptTolDeg);
+  EXPECT_GT(largest_pull, kRestTurnKeptTolDeg);
 }
 
 // The same magnet as BROAD's sensor sees it (its noise, the filter's defaults). While the removed

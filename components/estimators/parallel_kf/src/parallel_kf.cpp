@@ -348,7 +348,23 @@ bool ParallelKf::field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, do
   const Eigen::Vector3d f = (gyro_frame_kept() ? s_.r_ib : s_.q_ib.toRotationMatrix()) * mag;
   const bool rest = s_.rest_det.rest;
   const double tol = p_.mag_norm_tol * s_.gate.m_ut;
+  const bool was_held = s_.rest_field.held;
   const bool moved = s_.rest_field.step(f, rest, dt, p_.rest_filter_tau_s, gp_.reference_tau_s, tol);
+  // At rest the body does not turn, so the heading turns KF2's fields gave since the reading last
+  // agreed with the rest's field (within the same tolerance) came from the move the low-pass has
+  // only now seen: taken back, about the vertical, when it sees it. Turns from before (KF2 settling
+  // a heading error the motion left) are kept.
+  if (!rest) {
+    s_.rest_heading_turn_rad = 0.0;
+  } else if (moved && !was_held) {
+    if (s_.rest_heading_turn_rad != 0.0) {
+      s_.kf2.set_u(Eigen::AngleAxisd(-s_.rest_heading_turn_rad, s_.kf1.up_body()) * s_.kf2.u());
+      ++s_.rest_turns_reverted;
+    }
+    s_.rest_heading_turn_rad = 0.0;
+  } else if (!moved && (f - s_.rest_field.rest_field).norm() <= tol) {
+    s_.rest_heading_turn_rad = 0.0;
+  }
   return s_.rest_field.hold(moved, rest || !p_.hard_iron, s_.hard_iron.report().judged(), tol);
 }
 
@@ -916,6 +932,12 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
   s_.kf2.correct(mag, s_.gate.m_ut, s_.mag_extra_var);  // (10b), (11f)-(11h)
   s_.mag_extra_var = 0.0;
   s_.mag_used = true;
+  if (s_.rest_det.rest) {  // the turn about the vertical this field gave (field_moved_at_rest)
+    const Eigen::Vector3d& up = s_.kf1.up_body();
+    const Eigen::Vector3d before = x_prior - x_prior.dot(up) * up;
+    const Eigen::Vector3d after = s_.kf2.u() - s_.kf2.u().dot(up) * up;
+    s_.rest_heading_turn_rad += std::atan2(up.dot(before.cross(after)), before.dot(after));
+  }
   // One accepted field removes the share g = dt / lag of the heading error the gyro accumulated
   // since the heading was last held by fields (KF2's gain about the vertical), not all of it: a
   // field accepted now and then amid gated ones leaves most of it. Continuously accepted, this

@@ -44,7 +44,7 @@ void ParallelKf::reset_unhealthy() {
   using S = ParallelKfState;
   const FieldGate gate = s_.gate;  // its counters are kept, its reference is learnt again
   reset_keeping(s_, [this] { reset(); }, &S::rejections, &S::gyro_src, &S::accel_src, &S::mag_src,
-                &S::mag_corrected_count);
+                &S::mag_corrected_count, &S::rest_turns_reverted);
   s_.gate.gated = gate.gated;
   s_.gate.forced = gate.forced;
   s_.gate.reacquired = gate.reacquired;

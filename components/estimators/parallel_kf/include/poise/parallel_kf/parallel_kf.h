@@ -390,6 +390,11 @@ struct ParallelKfState {
   /// not at rest), uT: the field seen from the gyro's almost inertial frame (field_moved_at_rest)
   FieldMovedAtRest rest_field;
   bool mag_moved_at_rest = false;  ///< the last sample's field had moved since the rest began (or is held)
+  /// The turn about the vertical (rad, body sZ) KF2's accepted fields gave the heading at rest since
+  /// the last reading that was within the gate's norm tolerance of the rest's field: taken back
+  /// when the field is found to have moved (field_moved_at_rest).
+  double rest_heading_turn_rad = 0.0;
+  uint64_t rest_turns_reverted = 0;  ///< fields found moved at rest whose heading turns were taken back
   /// continuous time the field was refused before the gate (moved at rest, offset pending) since
   /// the gate last used one, s: with the gate's own rejected time, what heading_status() counts
   double field_refused_s = 0.0;
@@ -601,6 +606,9 @@ class ParallelKf {
   [[nodiscard]] uint64_t mag_forced_count() const { return s_.gate.forced; }
   /// Magnetometer samples whose reading had the hard-iron offset removed (hard_iron).
   [[nodiscard]] uint64_t mag_hard_iron_corrected_count() const { return s_.mag_corrected_count; }
+  /// Fields found moved at rest whose heading turn since the reading last agreed with the rest's
+  /// field was taken back (field_moved_at_rest).
+  [[nodiscard]] uint64_t rest_turns_reverted_count() const { return s_.rest_turns_reverted; }
   [[nodiscard]] const HardIronEstimator& hard_iron() const { return s_.hard_iron; }
   /// Resets after an unhealthy state (poise/core/state_health.h).
   [[nodiscard]] uint64_t state_resets() const { return s_.health.resets; }
