@@ -298,6 +298,17 @@ void ParallelKf::scale_error_step(const Eigen::Vector3d& w, double dt) {
           .normalized();
 }
 
+void ParallelKf::add_rest_heading_turn(const Eigen::Vector3d& x_prior) {
+  if (!s_.rest_det.rest) {
+    return;
+  }
+  // the turn about the vertical KF2's correction from x_prior gave (field_moved_at_rest)
+  const Eigen::Vector3d& up = s_.kf1.up_body();
+  const Eigen::Vector3d before = x_prior - x_prior.dot(up) * up;
+  const Eigen::Vector3d after = s_.kf2.u() - s_.kf2.u().dot(up) * up;
+  s_.rest_heading_turn_rad += std::atan2(up.dot(before.cross(after)), before.dot(after));
+}
+
 double ParallelKf::removed_offset_var_across_ut2() const {
   Eigen::Vector3d across;
   if (!s_.mag_corrected || !safe_normalize(s_.kf1.up_body().cross(s_.kf2.u()), across, 1e-9)) {
@@ -932,12 +943,7 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
   s_.kf2.correct(mag, s_.gate.m_ut, s_.mag_extra_var);  // (10b), (11f)-(11h)
   s_.mag_extra_var = 0.0;
   s_.mag_used = true;
-  if (s_.rest_det.rest) {  // the turn about the vertical this field gave (field_moved_at_rest)
-    const Eigen::Vector3d& up = s_.kf1.up_body();
-    const Eigen::Vector3d before = x_prior - x_prior.dot(up) * up;
-    const Eigen::Vector3d after = s_.kf2.u() - s_.kf2.u().dot(up) * up;
-    s_.rest_heading_turn_rad += std::atan2(up.dot(before.cross(after)), before.dot(after));
-  }
+  add_rest_heading_turn(x_prior);
   // One accepted field removes the share g = dt / lag of the heading error the gyro accumulated
   // since the heading was last held by fields (KF2's gain about the vertical), not all of it: a
   // field accepted now and then amid gated ones leaves most of it. Continuously accepted, this

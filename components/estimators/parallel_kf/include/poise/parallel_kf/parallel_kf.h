@@ -694,6 +694,9 @@ class ParallelKf {
   /// across the field, x^T P_b x with x the unit horizontal direction across the field (body: up x
   /// sX' normalised), uT^2; the part of the error that turns the heading. 0 otherwise.
   [[nodiscard]] double removed_offset_var_across_ut2() const;
+  /// At rest: adds the turn about the vertical KF2's last correction (from x_prior) gave the heading
+  /// to rest_heading_turn_rad.
+  void add_rest_heading_turn(const Eigen::Vector3d& x_prior);
   /// Turns the twin low-pass and the gravity reference of external_accel_step by a bias change
   /// db (body, rad/s): the frame the new bias would have propagated, the vectors' samples turned
   /// by the integral of r_ib db from each sample to now (accel_twin_age, accel_ref_stage_age).
