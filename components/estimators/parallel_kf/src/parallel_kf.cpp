@@ -306,7 +306,12 @@ void ParallelKf::add_rest_heading_turn(const Eigen::Vector3d& x_prior) {
   const Eigen::Vector3d& up = s_.kf1.up_body();
   const Eigen::Vector3d before = x_prior - x_prior.dot(up) * up;
   const Eigen::Vector3d after = s_.kf2.u() - s_.kf2.u().dot(up) * up;
-  s_.rest_heading_turn_rad += std::atan2(up.dot(before.cross(after)), before.dot(after));
+  const double sin_part = up.dot(before.cross(after));
+  const double cos_part = before.dot(after);
+  // one correction turns by micro-radians: atan(x) = x - x^3 / 3 + ..., below 1e-3 x itself is
+  // within 3.4e-7 of it (relative)
+  s_.rest_heading_turn_rad +=
+      std::abs(sin_part) < 1e-3 * cos_part ? sin_part / cos_part : std::atan2(sin_part, cos_part);
 }
 
 double ParallelKf::removed_offset_var_across_ut2() const {
