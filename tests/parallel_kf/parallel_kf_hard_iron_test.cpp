@@ -171,15 +171,20 @@ MagnetRun magnet_run(const sim::SimConfig& cfg, const ParallelKfParams& p) {
   return r;
 }
 
-/// magnet_run() of testing::attached_magnet_hand_held, the simulated sensor's figures told.
-MagnetRun attached_magnet_run(const Eigen::Vector3d& offset_ut) {
-  const sim::SimConfig cfg = testing::attached_magnet_hand_held(offset_ut);
-  ParallelKfParams p;  // the simulated sensor's figures, as config/hosts/simulated.yaml tells them
+/// The default filter told the simulated sensor's figures, as config/hosts/simulated.yaml tells them.
+ParallelKfParams told_params(const sim::SimConfig& cfg) {
+  ParallelKfParams p;
   p.imu_delay_s = 0.0;
   p.gyro_bias_walk_rps_per_sqrt_s = 0.0;
   p.gyro_noise_density_rps_per_sqrt_hz = cfg.noise.sigma_gyro_rps / std::sqrt(cfg.rate_hz);
   p.gyro_scale_error = 0.0;
-  return magnet_run(cfg, p);
+  return p;
+}
+
+/// magnet_run() of testing::attached_magnet_hand_held, the simulated sensor's figures told.
+MagnetRun attached_magnet_run(const Eigen::Vector3d& offset_ut) {
+  const sim::SimConfig cfg = testing::attached_magnet_hand_held(offset_ut);
+  return magnet_run(cfg, told_params(cfg));
 }
 
 TEST(ParallelKfHardIron, GivenAMagnetAttachedAtRestAndRemovedInMotionWhenItsOffsetIsOneTheGateCannotTellThenTheHeadingHolds) {
@@ -256,12 +261,7 @@ TEST(ParallelKfHardIron, GivenAMagnetAttachedAtRestAcrossTheFieldWhenTheMoveIsSe
   // GIVEN the session-20 run's 8 uT along +x (across the horizontal field), the simulated
   // sensor's figures told
   const sim::SimConfig cfg = testing::attached_magnet_hand_held(Eigen::Vector3d(8.0, 0.0, 0.0));
-  ParallelKfParams p;
-  p.imu_delay_s = 0.0;
-  p.gyro_bias_walk_rps_per_sqrt_s = 0.0;
-  p.gyro_noise_density_rps_per_sqrt_hz = cfg.noise.sigma_gyro_rps / std::sqrt(cfg.rate_hz);
-  p.gyro_scale_error = 0.0;
-  ParallelKf kf(p);
+  ParallelKf kf(told_params(cfg));
   sim::SensorSimulator sim(cfg);
   // WHEN it runs through the attachment (the ramp from kMagnetOnS) to the end of the rest
   double before = std::nan("");
