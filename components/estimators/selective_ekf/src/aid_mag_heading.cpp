@@ -37,6 +37,9 @@ void restart_heading(const AidContext& c, const Eigen::Vector3d& up, double dpsi
   x.unmodelled.field_dn_lp = 0.0;
   x.unmodelled.field_dv_lp = 0.0;
   x.unmodelled.rotation_heading.setZero();
+  x.unmodelled.rotation_tilt_at_heading.setZero();
+  x.unmodelled.tilt_innovation_at_heading.setZero();
+  x.unmodelled.ext_accel_at_heading.setZero();
 }
 
 void refuse_field(const AidContext& c, const ImuInput& in, MagTrust& mag, SourceStatus& st) {

@@ -147,6 +147,14 @@ void SelectiveEkf::track_unmodelled(const ImuInput& in, bool aided, double aidin
       }
     }
   }
+  // the same tilt errors as the heading's corrections average them (the dip term below)
+  const double kh = lowpass_gain(in.dt_s, tau_heading);
+  u.rotation_tilt_at_heading += kh * (u.rotation_tilt.head<2>() - u.rotation_tilt_at_heading);
+  u.tilt_innovation_at_heading += kh * (u.tilt_innovation_lp.head<2>() - u.tilt_innovation_at_heading);
+  if (p_.imu_measurement == ImuMeasurement::kSplit && aids::accel_noise_known(p_)) {
+    const Eigen::Vector2d z = (r * x_.ext_accel_error.segment<3>(kTh)).head<2>();
+    u.ext_accel_at_heading += kh * (z - u.ext_accel_at_heading);
+  }
   const SourceStatus& heading = status(SelectiveEkfAid::kMagHeading);
   const FieldGate& g = x_.field_gate;
   if (aided && heading.last == Decision::kFused && heading.last_stamp_ns == in.stamp_ns && g.learnt &&
@@ -189,6 +197,18 @@ Eigen::Matrix3d SelectiveEkf::output_error_covariance() const {
   return cov;
 }
 
+/// The heading's magnetometer row variance density (rad^2 s) of the last sample, as fused
+/// (inflated while untrusted); infinite when the last sample was not fused.
+double SelectiveEkf::heading_row_density() const {
+  const SourceStatus& heading = status(SelectiveEkfAid::kMagHeading);
+  if (heading.last != Decision::kFused && heading.last != Decision::kFusedInflated) {
+    return kInf;
+  }
+  return p_.sigma_heading_rad_sqrt_s * p_.sigma_heading_rad_sqrt_s *
+         aids::heading_noise_factor(p_, x_.field_gate, gp_) *
+         (heading.last == Decision::kFusedInflated ? p_.inflate_factor : 1.0);
+}
+
 Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const SelectiveEkfUnmodelled& u = x_.unmodelled;
   const Eigen::Matrix3d r = state_output().toRotationMatrix();
@@ -211,73 +231,87 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const Eigen::Matrix3d p_world = r * x_.P.block<3, 3>(kTh, kTh) * r.transpose();
   const double p_tilt = 0.5 * (p_world(0, 0) + p_world(1, 1));
   const double p_heading = p_world(2, 2);
-  // gyro scale error: s times the rotation away from the attitude low-passed over each lag
-  // (the tilt's unmodelled errors are collected in tilt_slow too: the heading follows them through
-  // the dip, below)
-  Eigen::Matrix3d tilt_slow = Eigen::Matrix3d::Zero();
+  const bool split = p_.imu_measurement == ImuMeasurement::kSplit;
+  const FieldGate& fg = x_.field_gate;
+  const double r_heading = split ? heading_row_density() : kInf;
+  const double cos_dip = std::cos(fg.dip_rad);
+  const bool mag_row = std::isfinite(r_heading) && fg.learnt && cos_dip > 1e-3;
+  // the magnetometer's share of the heading's correction
+  const double share_heading = mag_row ? std::min(1.0, p_heading * p_heading / (q * r_heading)) : 0.0;
+  // heading: the tilt's error through the dip. The row's innovation is
+  //   dpsi = dth_z + tan(dip) dth_n
+  // with dth_n the world-frame error about magnetic north (+y, the reference's horizontal
+  // direction). The row's H has both terms and considers the tilt (aid_mag_heading.cpp), so P's
+  // own tilt error reaches P's heading. A tilt error P does not hold pulls the heading where the
+  // row's two terms cancel, e_z = g e_y with g = -share tan(dip), as fast as the heading's
+  // corrections go: the heading takes g times that error low-passed over its lag (the *_at_heading
+  // realizations), not the error of the moment (session 22: a tilt error that comes and goes
+  // within the tilt's 3 s lag does not reach a heading whose lag is 17 s).
+  const double g = mag_row ? -share_heading * std::tan(fg.dip_rad) : 0.0;
+  Eigen::Matrix3d slow = Eigen::Matrix3d::Zero();
   if (p_.gyro_scale_error > 0.0) {
+    // gyro scale error: s times the rotation away from the attitude low-passed over each lag
     const double s2 = p_.gyro_scale_error * p_.gyro_scale_error;
-    tilt_slow(0, 0) += s2 * u.rotation_tilt.x() * u.rotation_tilt.x();
-    tilt_slow(1, 1) += s2 * u.rotation_tilt.y() * u.rotation_tilt.y();
+    slow(0, 0) += s2 * u.rotation_tilt.x() * u.rotation_tilt.x();
+    const Eigen::Vector3d w(0.0, u.rotation_tilt.y(), g * u.rotation_tilt_at_heading.y());
+    slow += s2 * w * w.transpose();
     cov(2, 2) += s2 * u.rotation_heading.z() * u.rotation_heading.z();
   }
-  if (p_.imu_measurement != ImuMeasurement::kSplit) {
-    return cov + tilt_slow;
+  if (!split) {
+    return cov + slow;
   }
-  // tilt: the low-passed accelerometer's own errors, by its share of the tilt's correction
-  const double tilt_sigma = std::isnan(p_.sigma_tilt_rad_sqrt_s)
-                                ? p_.accel_lowpass_tau_s * std::sqrt(q)
-                                : p_.sigma_tilt_rad_sqrt_s;
-  const double r_tilt = tilt_sigma * tilt_sigma;
-  if (aids::accel_noise_known(p_)) {
-    // the accelerometer's noise known (the tilt rows carry none in P_err): the external
-    // acceleration's error through the filter's own gains (ext_accel_error), its power over the
-    // tilt's lag; it holds what "following" below stands for
-    tilt_slow.topLeftCorner<2, 2>() += u.ext_accel_power;
-  } else if (r_tilt > 0.0) {
-    const double share = std::min(1.0, p_tilt * p_tilt / (q * r_tilt));
-    tilt_slow.topLeftCorner<2, 2>() +=
-        share * share * u.tilt_innovation_lp.head<2>() * u.tilt_innovation_lp.head<2>().transpose();
-  }
+  slow += tilt_following(q, p_tilt, g);
   // heading: the accepted field's disturbance, by the magnetometer's share of the heading's correction
-  const FieldGate& fg = x_.field_gate;
-  const SourceStatus& heading = status(SelectiveEkfAid::kMagHeading);
-  double r_heading = kInf;
-  if (heading.last == Decision::kFused || heading.last == Decision::kFusedInflated) {
-    r_heading = p_.sigma_heading_rad_sqrt_s * p_.sigma_heading_rad_sqrt_s *
-                aids::heading_noise_factor(p_, fg, gp_) *
-                (heading.last == Decision::kFusedInflated ? p_.inflate_factor : 1.0);
-  }
-  const double cos_dip = std::cos(fg.dip_rad);
-  if (std::isfinite(r_heading) && fg.learnt && fg.m_ut > 0.0 && cos_dip > 1e-3) {
-    const double share = std::min(1.0, p_heading * p_heading / (q * r_heading));
+  if (mag_row && fg.m_ut > 0.0) {
+    const double share2 = share_heading * share_heading;
     const double mh = fg.m_ut * cos_dip;
     const double power = 0.5 * (u.field_dn_lp * u.field_dn_lp + u.field_dv_lp * u.field_dv_lp);
-    cov(2, 2) += share * share * power / (mh * mh);
+    cov(2, 2) += share2 * power / (mh * mh);
     if (x_.mag_corrected) {
       // the offset removed is b's estimate: its error e (covariance P_b, body, uT^2) stays in every
       // reading; its part across the horizontal field (body x = R^T e_x, magnetic north +y) turns
       // the heading by e . x / (m cos dip). b is constant, so the heading's averaging does not
       // reduce it (the parallel KF's hard_iron term), by the magnetometer's share
       const Eigen::Vector3d across = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitX();
-      cov(2, 2) += share * share * across.dot(x_.hard_iron.covariance() * across) / (mh * mh);
+      cov(2, 2) += share2 * across.dot(x_.hard_iron.covariance() * across) / (mh * mh);
     }
   }
-  // heading: the tilt's error through the dip. The row's innovation is
-  //   dpsi = dth_z + tan(dip) dth_n
-  // with dth_n the world-frame error about magnetic north (+y, the reference's horizontal
-  // direction). The row's H has both terms and considers the tilt (aid_mag_heading.cpp), so P's
-  // own tilt error reaches P's heading. The tilt errors P does not hold (tilt_slow) pull the
-  // heading where the row's two terms cancel: e_z = g e_y with g = -share tan(dip); slower than
-  // the heading's lag they are followed whole: A tilt_slow A^T with A = I + g e_z e_y^T.
-  if (std::isfinite(r_heading) && fg.learnt && cos_dip > 1e-3) {
-    const double share = std::min(1.0, p_heading * p_heading / (q * r_heading));
-    const double g = -share * std::tan(fg.dip_rad);
-    Eigen::Matrix3d follow = Eigen::Matrix3d::Identity();
-    follow(2, 1) = g;
-    tilt_slow = follow * tilt_slow * follow.transpose();
+  return cov + slow;
+}
+
+/// The tilt's error from the accelerometer's disturbance (world x, y) and the heading's through the
+/// dip (g, the attitude_covariance comment): its tilt realization v and the heading's g v_y
+/// low-passed over the heading's lag, w = (v_x, v_y, g LP(v_y)), as w w^T.
+Eigen::Matrix3d SelectiveEkf::tilt_following(double q, double p_tilt, double g) const {
+  const SelectiveEkfUnmodelled& u = x_.unmodelled;
+  Eigen::Matrix3d out = Eigen::Matrix3d::Zero();
+  if (aids::accel_noise_known(p_)) {
+    // the accelerometer's noise known (the tilt rows carry none in P_err): the external
+    // acceleration's error through the filter's own gains (ext_accel_error), its power over the
+    // tilt's lag; it holds what "following" below stands for. A power, not one realization: the
+    // heading's part is g times the realization low-passed over the heading's lag, taken as
+    // correlated with the tilt's (B = I + k e_z e_y^T, k^2 P_yy = (g LP(z_y))^2)
+    out.topLeftCorner<2, 2>() = u.ext_accel_power;
+    const double pyy = u.ext_accel_power(1, 1);
+    if (pyy > 0.0) {
+      Eigen::Matrix3d b = Eigen::Matrix3d::Identity();
+      b(2, 1) = g * std::abs(u.ext_accel_at_heading.y()) / std::sqrt(pyy);
+      out = b * out * b.transpose();
+    }
+    return out;
   }
-  return cov + tilt_slow;
+  // tilt: the low-passed accelerometer's own errors, by its share of the tilt's correction
+  const double tilt_sigma = std::isnan(p_.sigma_tilt_rad_sqrt_s)
+                                ? p_.accel_lowpass_tau_s * std::sqrt(q)
+                                : p_.sigma_tilt_rad_sqrt_s;
+  const double r_tilt = tilt_sigma * tilt_sigma;
+  if (r_tilt > 0.0) {
+    const double share = std::min(1.0, p_tilt * p_tilt / (q * r_tilt));
+    const Eigen::Vector3d w = share * Eigen::Vector3d(u.tilt_innovation_lp.x(), u.tilt_innovation_lp.y(),
+                                                      g * u.tilt_innovation_at_heading.y());
+    out = w * w.transpose();
+  }
+  return out;
 }
 
 }  // namespace poise

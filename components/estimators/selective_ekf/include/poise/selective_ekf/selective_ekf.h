@@ -472,6 +472,12 @@ struct SelectiveEkfUnmodelled {
   /// (ext_accel_error's attitude part, world x, y) squared, low-passed over the tilt's lag: its
   /// variance, rad^2 (accel_noise_density_mps2_per_sqrt_hz known; else zero)
   Eigen::Matrix2d ext_accel_power = Eigen::Matrix2d::Zero();
+  /// the tilt's unmodelled errors above (rotation_tilt, tilt_innovation_lp and ext_accel_error's
+  /// tilt part, world x, y) low-passed again over the heading's lag: the heading follows a tilt
+  /// error about magnetic north through the dip only as its corrections average it, rad
+  Eigen::Vector2d rotation_tilt_at_heading{0.0, 0.0};
+  Eigen::Vector2d tilt_innovation_at_heading{0.0, 0.0};
+  Eigen::Vector2d ext_accel_at_heading{0.0, 0.0};
   double field_dn_lp = 0.0;    ///< |m| - reference of the fields used, low-passed over the heading lag, uT
   double field_dv_lp = 0.0;    ///< reference |m| (dip - reference dip), the same, uT
   double last_dt_s = 0.0;      ///< the last sample interval, s
@@ -740,6 +746,9 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// delay_ns() of the last sample (the state's time = its stamp - this).
   [[nodiscard]] int64_t current_delay_ns() const { return delay_ns(x_.unmodelled.last_dt_s); }
   [[nodiscard]] Eigen::Matrix3d output_error_covariance() const;  ///< P_err at the output (attitude_covariance)
+  [[nodiscard]] double heading_row_density() const;  ///< the last magnetometer row's density, rad^2 s (attitude_covariance)
+  /// the accelerometer's disturbance on the tilt and, through the dip, the heading (attitude_covariance)
+  [[nodiscard]] Eigen::Matrix3d tilt_following(double q, double p_tilt, double g) const;
 };
 
 // ---- Reporting (selective_ekf_report.cpp): the core's outputs in the shapes every node maps 1:1.
