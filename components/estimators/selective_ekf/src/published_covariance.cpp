@@ -128,9 +128,10 @@ void SelectiveEkf::track_unmodelled(const ImuInput& in, bool aided, double aidin
   const Eigen::Matrix3d p_world = r * x_.P.block<3, 3>(kTh, kTh) * r.transpose();
   const double tau_tilt = q > 0.0 ? 0.5 * (p_world(0, 0) + p_world(1, 1)) / q : kInf;
   const double tau_heading = heading_lag_s();
-  const Eigen::Vector3d turn = r * (x_.w_rps * in.dt_s);
+  // column i: body axis i's rotation increment in the world frame
+  const Eigen::Matrix3d turn = r * (x_.w_rps * in.dt_s).asDiagonal();
   u.rotation_tilt = (1.0 - lowpass_gain(in.dt_s, tau_tilt)) * (u.rotation_tilt + turn);
-  u.rotation_heading = (1.0 - lowpass_gain(in.dt_s, tau_heading)) * (u.rotation_heading + turn);
+  u.rotation_heading = (1.0 - lowpass_gain(in.dt_s, tau_heading)) * (u.rotation_heading + turn.row(2).transpose());
   if (p_.imu_measurement == ImuMeasurement::kSplit) {
     const SourceStatus& tilt = status(SelectiveEkfAid::kAccelTilt);
     if (aided && tilt.last_stamp_ns == in.stamp_ns) {
@@ -149,7 +150,7 @@ void SelectiveEkf::track_unmodelled(const ImuInput& in, bool aided, double aidin
   }
   // the same tilt errors as the heading's corrections average them (the dip term below)
   const double kh = lowpass_gain(in.dt_s, tau_heading);
-  u.rotation_tilt_at_heading += kh * (u.rotation_tilt.head<2>() - u.rotation_tilt_at_heading);
+  u.rotation_tilt_at_heading += kh * (u.rotation_tilt.row(1).transpose() - u.rotation_tilt_at_heading);
   u.tilt_innovation_at_heading += kh * (u.tilt_innovation_lp.head<2>() - u.tilt_innovation_at_heading);
   if (p_.imu_measurement == ImuMeasurement::kSplit && aids::accel_noise_known(p_)) {
     const Eigen::Vector2d z = (r * x_.ext_accel_error.segment<3>(kTh)).head<2>();
@@ -250,12 +251,15 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const double g = mag_row ? -share_heading * std::tan(fg.dip_rad) : 0.0;
   Eigen::Matrix3d slow = Eigen::Matrix3d::Zero();
   if (p_.gyro_scale_error > 0.0) {
-    // gyro scale error: s times the rotation away from the attitude low-passed over each lag
+    // gyro scale error, each axis' its own (independent, gyro_scale_error each): s_i times axis
+    // i's rotation away from the attitude low-passed over each lag; the heading's is its own lag's
+    // plus the tilt's pulled through the dip
     const double s2 = p_.gyro_scale_error * p_.gyro_scale_error;
-    slow(0, 0) += s2 * u.rotation_tilt.x() * u.rotation_tilt.x();
-    const Eigen::Vector3d w(0.0, u.rotation_tilt.y(), g * u.rotation_tilt_at_heading.y());
-    slow += s2 * w * w.transpose();
-    cov(2, 2) += s2 * u.rotation_heading.z() * u.rotation_heading.z();
+    for (int i = 0; i < 3; ++i) {
+      const Eigen::Vector3d w(u.rotation_tilt(0, i), u.rotation_tilt(1, i),
+                              u.rotation_heading(i) + g * u.rotation_tilt_at_heading(i));
+      slow += s2 * w * w.transpose();
+    }
   }
   if (!split) {
     return cov + slow;

@@ -460,10 +460,12 @@ struct SelectiveEkfPreState {
 /// What the published covariance adds to P (attitude_covariance(), src/published_covariance.cpp):
 /// the errors the filter does not model, tracked with the samples (so replays reproduce them).
 struct SelectiveEkfUnmodelled {
-  /// the rotation the tilt's and the heading's corrections have not caught up with yet: the
-  /// world-frame rotation increments R w dt high-passed over each correction lag (rad); a gyro
-  /// scale error s turns the estimate by s times it
-  Eigen::Vector3d rotation_tilt{0.0, 0.0, 0.0};
+  /// the rotation the tilt's and the heading's corrections have not caught up with yet, per body
+  /// axis (a gyro's scale error is its own on each axis): the world-frame rotation increments
+  /// R e_i w_i dt high-passed over each correction lag, column i (rotation_tilt, world x, y, z) and
+  /// its world-z component (rotation_heading, element i), rad; a scale error s_i of axis i turns
+  /// the estimate by s_i times column i
+  Eigen::Matrix3d rotation_tilt = Eigen::Matrix3d::Zero();
   Eigen::Vector3d rotation_heading{0.0, 0.0, 0.0};
   /// the tilt rows' innovation as a world-frame rotation, low-passed over the tilt's correction
   /// lag: the accelerometer's disturbance the tilt is still following, rad
@@ -475,7 +477,7 @@ struct SelectiveEkfUnmodelled {
   /// the tilt's unmodelled errors above (rotation_tilt, tilt_innovation_lp and ext_accel_error's
   /// tilt part, world x, y) low-passed again over the heading's lag: the heading follows a tilt
   /// error about magnetic north through the dip only as its corrections average it, rad
-  Eigen::Vector2d rotation_tilt_at_heading{0.0, 0.0};
+  Eigen::Vector3d rotation_tilt_at_heading{0.0, 0.0, 0.0};  ///< rotation_tilt's world y per body axis
   Eigen::Vector2d tilt_innovation_at_heading{0.0, 0.0};
   Eigen::Vector2d ext_accel_at_heading{0.0, 0.0};
   double field_dn_lp = 0.0;    ///< |m| - reference of the fields used, low-passed over the heading lag, uT
