@@ -35,6 +35,13 @@
 //              two: share^2 (dn^2 + dv^2) / 2 / (m cos dip)^2
 //   hard_iron  heading: while the hard-iron offset is removed (hard_iron), its estimate's error
 //              across the horizontal field, share^2 x^T P_b x / (m cos dip)^2
+//   offset     heading: an offset the hard-iron estimate holds (converged) but does not remove
+//              (|b| <= min_applied_ut, or not consistent; significant or not): the
+//              heading error it put into the estimate is s . b, s the heading row's response to
+//              an offset left in its readings through its own gains
+//              (SelectiveEkfState::heading_per_offset: the averaging over the rotation, the
+//              gyro-only stretches, other rows' corrections), b ~ N(b_hat, P_b):
+//              (s . b_hat)^2 + s^T P_b s (unremoved_offset_var)
 //   dip        heading: the unmodelled tilt terms' error through the dip, tan(dip) times the
 //              error about north (below; P's own tilt error reaches the heading through the row)
 //   unknown    heading: pi^2 / 3 (a heading uniform over +-180 deg) while heading_unknown(): a
@@ -189,6 +196,19 @@ Eigen::Matrix3d SelectiveEkf::output_error_covariance() const {
   return cov;
 }
 
+double SelectiveEkf::unremoved_offset_var() const {
+  // an estimate converged (every axis' sigma below converged_sigma_ut) and not removed, whatever
+  // its size and significance: b ~ N(b_hat, P_b) is what the filter knows of the offset in its
+  // readings (not converged, P_b is still the prior's: nothing known; removed, hard_iron's term)
+  const HardIronEstimator& hi = x_.hard_iron;
+  if (p_.imu_measurement != ImuMeasurement::kSplit || !p_.hard_iron || !hi.converged() || hi.applied()) {
+    return 0.0;
+  }
+  const Eigen::Vector3d& s = x_.heading_per_offset;
+  const double mean = s.dot(hi.offset_ut());
+  return mean * mean + s.dot(hi.covariance() * s);
+}
+
 Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const SelectiveEkfUnmodelled& u = x_.unmodelled;
   const Eigen::Matrix3d r = state_output().toRotationMatrix();
@@ -263,6 +283,7 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
       cov(2, 2) += share * share * across.dot(x_.hard_iron.covariance() * across) / (mh * mh);
     }
   }
+  cov(2, 2) += unremoved_offset_var();
   // heading: the tilt's error through the dip. The row's innovation is
   //   dpsi = dth_z + tan(dip) dth_n
   // with dth_n the world-frame error about magnetic north (+y, the reference's horizontal
