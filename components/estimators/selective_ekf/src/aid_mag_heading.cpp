@@ -46,7 +46,8 @@ void restart_heading(const AidContext& c, const Eigen::Vector3d& up, double dpsi
   x.unmodelled.field_dn_lp = 0.0;
   x.unmodelled.field_dv_lp = 0.0;
   x.unmodelled.rotation_heading.setZero();
-  x.heading_per_offset.setZero();  // (the caller: the new heading's, when the reading carries one)
+  x.heading_per_offset.setZero();  // (the caller: the new heading's reading)
+  x.heading_per_removed_offset.setZero();
 }
 
 void refuse_field(const AidContext& c, const ImuInput& in, MagTrust& mag, SourceStatus& st) {
@@ -111,9 +112,8 @@ void aid_mag_heading(const AidContext& c, const ImuInput& in, bool anchored, Mag
     if (!anchored) {
       const Eigen::Vector3d started = offset_heading_sensitivity(c.x.q_world_body, mw, horiz);
       restart_heading(c, u, dpsi);
-      if (!c.x.mag_corrected) {
-        c.x.heading_per_offset = started;  // the new heading is this reading's, whole
-      }
+      // the new heading is this reading's, whole
+      (c.x.mag_corrected ? c.x.heading_per_removed_offset : c.x.heading_per_offset) = started;
       record(st, Decision::kReset, now, c.first_pass);
       return;
     }
@@ -158,9 +158,7 @@ void aid_mag_heading(const AidContext& c, const ImuInput& in, bool anchored, Mag
   const Eigen::Vector3d drive = offset_heading_sensitivity(c.x.q_world_body, mw, horiz);
   st.innovation_variance.setZero();
   st.innovation_variance.head<1>() = fuse_considered<1>(c.x, h, innov, rr, rr, keep);
-  if (!c.x.mag_corrected) {
-    c.x.heading_per_offset += k_heading * drive;
-  }
+  (c.x.mag_corrected ? c.x.heading_per_removed_offset : c.x.heading_per_offset) += k_heading * drive;
   st.innovation.setZero();
   st.innovation[0] = dpsi;
   st.test_ratio = dpsi * dpsi / (kReportGateSigma * kReportGateSigma * st.innovation_variance[0]);

@@ -517,6 +517,9 @@ struct SelectiveEkfState {
   /// heading row's averaging over the rotation, gyro-only stretches and vision's corrections
   /// (published_covariance.cpp, "offset").
   Eigen::Vector3d heading_per_offset{0.0, 0.0, 0.0};
+  /// The same for the readings the hard-iron estimate corrected: their offset is b's estimate's
+  /// error (covariance P_b), the heading error it put in heading_per_removed_offset . (b - b_hat)
+  Eigen::Vector3d heading_per_removed_offset{0.0, 0.0, 0.0};
   int64_t stamp_ns = -1;                 ///< time of the state
   int64_t untrusted_until_ns = -1;       ///< magnetometer untrusted until (hold)
   int64_t q_error_fail_since_ns = -1;    ///< start of the current quaternion-error failure run
@@ -693,6 +696,9 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// own gains (SelectiveEkfState::heading_per_offset): (s . b)^2 + s^T P_b s; 0 otherwise. Part
   /// of attitude_covariance().
   [[nodiscard]] double unremoved_offset_var() const;
+  /// The heading variance, rad^2, of the removed offset's error (hard_iron applied): s_r^T P_b s_r,
+  /// s_r = SelectiveEkfState::heading_per_removed_offset, while the estimate is converged.
+  [[nodiscard]] double removed_offset_var() const;
   /// The camera-IMU time offset in use (vision_time_offset_s, or its online estimate), its
   /// sigma, convergence and per-frame decisions (vision_time_offset.h).
   [[nodiscard]] const VisionTimeOffsetStatus& vision_time_offset() const { return time_offset_.status(); }
