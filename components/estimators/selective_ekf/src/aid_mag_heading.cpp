@@ -48,6 +48,7 @@ void restart_heading(const AidContext& c, const Eigen::Vector3d& up, double dpsi
   x.unmodelled.rotation_heading.setZero();
   x.heading_per_offset.setZero();  // (the caller: the new heading's reading)
   x.heading_per_removed_offset.setZero();
+  x.offset_left_var = 0.0;
 }
 
 void refuse_field(const AidContext& c, const ImuInput& in, MagTrust& mag, SourceStatus& st) {

@@ -285,7 +285,7 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
     const double power = 0.5 * (u.field_dn_lp * u.field_dn_lp + u.field_dv_lp * u.field_dv_lp);
     cov(2, 2) += share * share * power / (mh * mh);
   }
-  cov(2, 2) += unremoved_offset_var() + removed_offset_var();
+  cov(2, 2) += unremoved_offset_var() + removed_offset_var() + x_.offset_left_var;
   // heading: the tilt's error through the dip. The row's innovation is
   //   dpsi = dth_z + tan(dip) dth_n
   // with dth_n the world-frame error about magnetic north (+y, the reference's horizontal

@@ -520,6 +520,12 @@ struct SelectiveEkfState {
   /// The same for the readings the hard-iron estimate corrected: their offset is b's estimate's
   /// error (covariance P_b), the heading error it put in heading_per_removed_offset . (b - b_hat)
   Eigen::Vector3d heading_per_removed_offset{0.0, 0.0, 0.0};
+  /// The heading variance, rad^2, an offset the readings no longer carry left in the estimate:
+  /// when the hard-iron estimate reopens (HardIronStep::kReset: the offset changed), the two terms
+  /// above as they stood move here and both sensitivities restart at zero (they count only the
+  /// readings of the new offset); every row's gain takes its share back ((1 - u^T K H u)^2, as
+  /// the sensitivities).
+  double offset_left_var = 0.0;
   int64_t stamp_ns = -1;                 ///< time of the state
   int64_t untrusted_until_ns = -1;       ///< magnetometer untrusted until (hold)
   int64_t q_error_fail_since_ns = -1;    ///< start of the current quaternion-error failure run
