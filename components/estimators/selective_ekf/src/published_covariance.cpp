@@ -42,7 +42,10 @@
 //              an offset left in its readings through its own gains
 //              (SelectiveEkfState::heading_per_offset: the averaging over the rotation, the
 //              gyro-only stretches, other rows' corrections), b ~ N(b_hat, P_b):
-//              (s . b_hat)^2 + s^T P_b s (unremoved_offset_var)
+//              (s . b_hat)^2 + s^T P_b s (unremoved_offset_var; the mean part only while the
+//              estimate is consistent, i.e. a body offset's). When the estimate reopens (the
+//              offset changed) both terms move to offset_left_var, which the rows correct away as
+//              they do the heading error, and s, s_r count the new offset's readings from zero
 //   dip        heading: the unmodelled tilt terms' error through the dip, tan(dip) times the
 //              error about north (below; P's own tilt error reaches the heading through the row)
 //   unknown    heading: pi^2 / 3 (a heading uniform over +-180 deg) while heading_unknown(): a
@@ -205,8 +208,11 @@ double SelectiveEkf::unremoved_offset_var() const {
   if (p_.imu_measurement != ImuMeasurement::kSplit || !p_.hard_iron || !hi.converged() || hi.applied()) {
     return 0.0;
   }
+  // b_hat is a body offset's only while removing it makes |m| more constant over the rotation
+  // (consistent); otherwise it fits a field that varies in space (a magnet near the sensor, not
+  // on it: the field term's), and of a body offset only P_b is known
   const Eigen::Vector3d& s = x_.heading_per_offset;
-  const double mean = s.dot(hi.offset_ut());
+  const double mean = hi.report().consistent ? s.dot(hi.offset_ut()) : 0.0;
   return mean * mean + s.dot(hi.covariance() * s);
 }
 

@@ -698,8 +698,9 @@ class SelectiveEkf : private SelectiveEkfFullState {
   [[nodiscard]] double heading_lag_s() const;
   /// The heading variance, rad^2, of an offset the hard-iron estimate holds (converged) but does
   /// not remove (|b| at or below min_applied_ut, or not consistent), through the heading row's
-  /// own gains (SelectiveEkfState::heading_per_offset): (s . b)^2 + s^T P_b s; 0 otherwise. Part
-  /// of attitude_covariance().
+  /// own gains (SelectiveEkfState::heading_per_offset): (s . b)^2 + s^T P_b s, the mean part only
+  /// while the estimate is consistent (a body offset's; otherwise it fits a field that varies in
+  /// space); 0 otherwise. Part of attitude_covariance(), with SelectiveEkfState::offset_left_var.
   [[nodiscard]] double unremoved_offset_var() const;
   /// The heading variance, rad^2, of the removed offset's error (hard_iron applied): s_r^T P_b s_r,
   /// s_r = SelectiveEkfState::heading_per_removed_offset, while the estimate is converged.
