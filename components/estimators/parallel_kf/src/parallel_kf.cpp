@@ -298,6 +298,14 @@ void ParallelKf::scale_error_step(const Eigen::Vector3d& w, double dt) {
           .normalized();
 }
 
+double ParallelKf::removed_offset_var_across_ut2() const {
+  Eigen::Vector3d across;
+  if (!s_.mag_corrected || !safe_normalize(s_.kf1.up_body().cross(s_.kf2.u()), across, 1e-9)) {
+    return 0.0;
+  }
+  return across.dot(s_.hard_iron.covariance() * across);
+}
+
 bool ParallelKf::gyro_frame_kept() const { return p_.accel_lowpass_tau_s > 0.0 || p_.hard_iron; }
 
 Eigen::Quaterniond ParallelKf::gyro_attitude() const {
@@ -900,6 +908,10 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
     const double rd = s_.gate.dip_ratio();
     s_.mag_extra_var = p_.mag_soft_weight * p_.sigma_mag_ut * p_.sigma_mag_ut * (rn * rn + rd * rd);
   }
+  // The removed offset's error stays in every corrected reading: its part across the field turns
+  // the heading as much as the reading's own noise there, so KF2 takes it as noise (it is constant
+  // in the body, so white is an approximation: the body's turning decorrelates it in the world)
+  s_.mag_extra_var += removed_offset_var_across_ut2();
   const Eigen::Vector3d x_prior = s_.kf2.u();
   s_.kf2.correct(mag, s_.gate.m_ut, s_.mag_extra_var);  // (10b), (11f)-(11h)
   s_.mag_extra_var = 0.0;
@@ -1293,14 +1305,11 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
     // The offset removed is b's estimate: its error e (covariance P_b, body, uT^2) stays in every
     // reading the heading is built from. Only e's horizontal part across the field turns the
     // heading: with the horizontal field of magnitude B_h = m cos(dip) along the unit h and e_perp
-    // = e . x (x the unit horizontal direction across it, body: up x sX' normalised), the measured
-    // horizontal field points at atan2(e_perp, B_h) ~ e_perp / B_h from h. b is constant, so KF2's
-    // averaging over its lag does not reduce it: var_heading += x^T P_b x / B_h^2 (rad^2).
-    Eigen::Vector3d across;
-    if (safe_normalize(s_.kf1.up_body().cross(s_.kf2.u()), across, 1e-9)) {
-      const double b_h = (s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0) * c;
-      t.hard_iron(2, 2) = across.dot(s_.hard_iron.covariance() * across) / (b_h * b_h);
-    }
+    // = e . x (x the unit horizontal direction across it), the measured horizontal field points at
+    // atan2(e_perp, B_h) ~ e_perp / B_h from h. b is constant, so KF2's averaging over its lag does
+    // not reduce it: var_heading += x^T P_b x / B_h^2 (rad^2).
+    const double b_h = (s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0) * c;
+    t.hard_iron(2, 2) = removed_offset_var_across_ut2() / (b_h * b_h);
   }
   if (heading_unknown()) {
     t.unknown_heading(2, 2) = kUnknownHeadingVarRad2;

@@ -8,6 +8,8 @@
 
 #include <Eigen/Core>
 
+#include <cstdint>
+
 namespace poise::testing {
 
 inline constexpr double kMagnetRestS = 20.0;      ///< at rest before the motion, s
@@ -63,6 +65,20 @@ inline sim::SimConfig attached_magnet_tumbling(const Eigen::Vector3d& offset_ut)
   motion.level_gain_per_s = 0.0;
   motion.accel_amplitude_mps2 = 2.0;
   motion.accel_freq_hz = 0.6;
+  return cfg;
+}
+
+/// The same run as BROAD's sensor records it (its figures as the filters' defaults assume them):
+/// 285.7 Hz, gyro noise 0.15 deg/s, accelerometer 0.05 m/s^2 and magnetometer 0.6 uT per sample;
+/// `seed` the noise's.
+inline sim::SimConfig attached_magnet_hand_held_broad_noise(const Eigen::Vector3d& offset_ut, uint64_t seed) {
+  constexpr double kPi = 3.14159265358979323846;
+  sim::SimConfig cfg = attached_magnet_hand_held(offset_ut);
+  cfg.rate_hz = 285.7;
+  cfg.seed = seed;
+  cfg.noise.sigma_gyro_rps = 0.15 * (kPi / 180.0);
+  cfg.noise.sigma_accel_mps2 = 0.05;
+  cfg.noise.sigma_mag_ut = 0.6;
   return cfg;
 }
 

@@ -682,6 +682,10 @@ class ParallelKf {
   [[nodiscard]] bool gyro_frame_kept() const;
   /// The gyro-only attitude: r_ib where it is kept, else q_ib.
   [[nodiscard]] Eigen::Quaterniond gyro_attitude() const;
+  /// While the hard-iron offset is removed (mag_corrected): the variance of its estimate's error
+  /// across the field, x^T P_b x with x the unit horizontal direction across the field (body: up x
+  /// sX' normalised), uT^2; the part of the error that turns the heading. 0 otherwise.
+  [[nodiscard]] double removed_offset_var_across_ut2() const;
   /// Turns the twin low-pass and the gravity reference of external_accel_step by a bias change
   /// db (body, rad/s): the frame the new bias would have propagated, the vectors' samples turned
   /// by the integral of r_ib db from each sample to now (accel_twin_age, accel_ref_stage_age).
