@@ -33,8 +33,19 @@
 //              dip deviation dv = m (dip - dip_ref) low-passed over the heading's lag; the part
 //              across the horizontal field, which turns the heading, is taken as large as those
 //              two: share^2 (dn^2 + dv^2) / 2 / (m cos dip)^2
-//   hard_iron  heading: while the hard-iron offset is removed (hard_iron), its estimate's error
-//              across the horizontal field, share^2 x^T P_b x / (m cos dip)^2
+//   hard_iron  heading: the removed hard-iron offset's estimate's error (covariance P_b) in the
+//              readings corrected: s_r^T P_b s_r, s_r the heading row's response to it through
+//              its own gains (SelectiveEkfState::heading_per_removed_offset, as "offset" below)
+//   offset     heading: an offset the hard-iron estimate holds (converged) but does not remove
+//              (|b| <= min_applied_ut, or not consistent; significant or not): the
+//              heading error it put into the estimate is s . b, s the heading row's response to
+//              an offset left in its readings through its own gains
+//              (SelectiveEkfState::heading_per_offset: the averaging over the rotation, the
+//              gyro-only stretches, other rows' corrections), b ~ N(b_hat, P_b):
+//              (s . b_hat)^2 + s^T P_b s (unremoved_offset_var; the mean part only while the
+//              estimate is consistent, i.e. a body offset's). When the estimate reopens (the
+//              offset changed) both terms move to offset_left_var, which the rows correct away as
+//              they do the heading error, and s, s_r count the new offset's readings from zero
 //   dip        heading: the unmodelled tilt terms' error through the dip, tan(dip) times the
 //              error about north (below; P's own tilt error reaches the heading through the row)
 //   unknown    heading: pi^2 / 3 (a heading uniform over +-180 deg) while heading_unknown(): a
@@ -210,6 +221,31 @@ double SelectiveEkf::heading_row_density() const {
          (heading.last == Decision::kFusedInflated ? p_.inflate_factor : 1.0);
 }
 
+double SelectiveEkf::unremoved_offset_var() const {
+  // an estimate converged (every axis' sigma below converged_sigma_ut) and not removed, whatever
+  // its size and significance: b ~ N(b_hat, P_b) is what the filter knows of the offset in its
+  // readings (not converged, P_b is still the prior's: nothing known; removed, hard_iron's term)
+  const HardIronEstimator& hi = x_.hard_iron;
+  if (p_.imu_measurement != ImuMeasurement::kSplit || !p_.hard_iron || !hi.converged() || hi.applied()) {
+    return 0.0;
+  }
+  // b_hat is a body offset's only while removing it makes |m| more constant over the rotation
+  // (consistent); otherwise it fits a field that varies in space (a magnet near the sensor, not
+  // on it: the field term's), and of a body offset only P_b is known
+  const Eigen::Vector3d& s = x_.heading_per_offset;
+  const double mean = hi.report().consistent ? s.dot(hi.offset_ut()) : 0.0;
+  return mean * mean + s.dot(hi.covariance() * s);
+}
+
+double SelectiveEkf::removed_offset_var() const {
+  const HardIronEstimator& hi = x_.hard_iron;
+  if (p_.imu_measurement != ImuMeasurement::kSplit || !p_.hard_iron || !hi.converged()) {
+    return 0.0;
+  }
+  const Eigen::Vector3d& s = x_.heading_per_removed_offset;
+  return s.dot(hi.covariance() * s);
+}
+
 Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const SelectiveEkfUnmodelled& u = x_.unmodelled;
   const Eigen::Matrix3d r = state_output().toRotationMatrix();
@@ -271,15 +307,8 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
     const double mh = fg.m_ut * cos_dip;
     const double power = 0.5 * (u.field_dn_lp * u.field_dn_lp + u.field_dv_lp * u.field_dv_lp);
     cov(2, 2) += share2 * power / (mh * mh);
-    if (x_.mag_corrected) {
-      // the offset removed is b's estimate: its error e (covariance P_b, body, uT^2) stays in every
-      // reading; its part across the horizontal field (body x = R^T e_x, magnetic north +y) turns
-      // the heading by e . x / (m cos dip). b is constant, so the heading's averaging does not
-      // reduce it (the parallel KF's hard_iron term), by the magnetometer's share
-      const Eigen::Vector3d across = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitX();
-      cov(2, 2) += share2 * across.dot(x_.hard_iron.covariance() * across) / (mh * mh);
-    }
   }
+  cov(2, 2) += unremoved_offset_var() + removed_offset_var() + x_.offset_left_var;
   return cov + slow;
 }
 

@@ -516,6 +516,24 @@ struct SelectiveEkfState {
   /// so the filter's own response to it (docs/SELECTIVE_EKF.md "External acceleration"). Zero
   /// when the figure is not known.
   Eigen::Matrix<double, 18, 1> ext_accel_error = Eigen::Matrix<double, 18, 1>::Zero();
+  /// kSplit: the world heading error, rad, that a body-fixed offset b (uT) left in the readings
+  /// the heading row fused has put into the estimate is heading_per_offset . b. Driven by the
+  /// heading row while its reading is not corrected (hard_iron not applied): the row's heading
+  /// gain times the innovation's sensitivity to the reading, d dpsi / d m_body; every row's gain
+  /// takes its share back (s <- (1 - u^T K H u) s, u = up in the body: the world heading's
+  /// direction), the prediction leaves a world-frame heading error as it is. So it holds the
+  /// heading row's averaging over the rotation, gyro-only stretches and vision's corrections
+  /// (published_covariance.cpp, "offset").
+  Eigen::Vector3d heading_per_offset{0.0, 0.0, 0.0};
+  /// The same for the readings the hard-iron estimate corrected: their offset is b's estimate's
+  /// error (covariance P_b), the heading error it put in heading_per_removed_offset . (b - b_hat)
+  Eigen::Vector3d heading_per_removed_offset{0.0, 0.0, 0.0};
+  /// The heading variance, rad^2, an offset the readings no longer carry left in the estimate:
+  /// when the hard-iron estimate reopens (HardIronStep::kReset: the offset changed), the two terms
+  /// above as they stood move here and both sensitivities restart at zero (they count only the
+  /// readings of the new offset); every row's gain takes its share back ((1 - u^T K H u)^2, as
+  /// the sensitivities).
+  double offset_left_var = 0.0;
   int64_t stamp_ns = -1;                 ///< time of the state
   int64_t untrusted_until_ns = -1;       ///< magnetometer untrusted until (hold)
   int64_t q_error_fail_since_ns = -1;    ///< start of the current quaternion-error failure run
@@ -686,6 +704,15 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// The heading's correction time constant now, s: the heading density the filter fuses (rad^2
   /// s, inflated while untrusted) over P's heading variance; infinite without a heading row.
   [[nodiscard]] double heading_lag_s() const;
+  /// The heading variance, rad^2, of an offset the hard-iron estimate holds (converged) but does
+  /// not remove (|b| at or below min_applied_ut, or not consistent), through the heading row's
+  /// own gains (SelectiveEkfState::heading_per_offset): (s . b)^2 + s^T P_b s, the mean part only
+  /// while the estimate is consistent (a body offset's; otherwise it fits a field that varies in
+  /// space); 0 otherwise. Part of attitude_covariance(), with SelectiveEkfState::offset_left_var.
+  [[nodiscard]] double unremoved_offset_var() const;
+  /// The heading variance, rad^2, of the removed offset's error (hard_iron applied): s_r^T P_b s_r,
+  /// s_r = SelectiveEkfState::heading_per_removed_offset, while the estimate is converged.
+  [[nodiscard]] double removed_offset_var() const;
   /// The camera-IMU time offset in use (vision_time_offset_s, or its online estimate), its
   /// sigma, convergence and per-frame decisions (vision_time_offset.h).
   [[nodiscard]] const VisionTimeOffsetStatus& vision_time_offset() const { return time_offset_.status(); }
