@@ -25,10 +25,12 @@
 //              acceleration's error z (SelectiveEkfState::ext_accel_error, the low-pass's error
 //              driven by the measured deviation d from it, through P's gains): its tilt part
 //              (R z_th) squared and low-passed over the tilt's lag (x, y)
-//   scale      tilt and heading: a gyro scale error s turns the estimate by s times the rotation
-//              the corrections have not caught up with: the world-frame rotation increments
-//              R w dt high-passed over each lag (X' = R w - X / tau), s^2 X_i^2 per world axis
-//              (x, y over the tilt's lag, z over the heading's)
+//   scale      tilt and heading: a gyro scale error s_i of body axis i (each its own, independent,
+//              gyro_scale_error each) turns the estimate by s_i times that axis' rotation the
+//              corrections have not caught up with: its world-frame increments R e_i w_i dt
+//              high-passed over each lag (X_i' = R e_i w_i - X_i / tau; x, y over the tilt's lag,
+//              z over the heading's), s^2 w_i w_i^T with w_i = (X_i,x, X_i,y, X_i,z + g LP(X_i,y))
+//              (the heading's pull through the dip, below)
 //   field      heading: the disturbance of the fields the gate accepted, its norm deviation dn and
 //              dip deviation dv = m (dip - dip_ref) low-passed over the heading's lag; the part
 //              across the horizontal field, which turns the heading, is taken as large as those
@@ -46,8 +48,9 @@
 //              estimate is consistent, i.e. a body offset's). When the estimate reopens (the
 //              offset changed) both terms move to offset_left_var, which the rows correct away as
 //              they do the heading error, and s, s_r count the new offset's readings from zero
-//   dip        heading: the unmodelled tilt terms' error through the dip, tan(dip) times the
-//              error about north (below; P's own tilt error reaches the heading through the row)
+//   dip        heading: the unmodelled tilt terms' error through the dip, g = -share tan(dip)
+//              times the error about north low-passed over the heading's lag (attitude_covariance;
+//              P's own tilt error reaches the heading through the row)
 //   unknown    heading: pi^2 / 3 (a heading uniform over +-180 deg) while heading_unknown(): a
 //              field reference still learnt or provisional (field_verify_s), or a heading started
 //              on a gated field; nothing bounds the heading then (a start next to a magnet)

@@ -267,10 +267,11 @@ struct SelectiveEkfParams {
   /// ones pass at once. Differences above 30 deg (a reset) are taken at once. 0 = the state.
   double output_max_correction_dps = 20.0;
   /// Published covariance only (attitude_covariance(); the estimate does not use it): the
-  /// relative gyro scale error it allows for, per axis. A scale error s turns the estimate by s
-  /// times the rotation the corrections have not caught up with yet (the rotation away from the
-  /// attitude low-passed over the tilt's and the heading's correction lags). MPU6050: +-3 %
-  /// uncalibrated; 0.5 % is the residue after a rate-table or turn calibration. 0 = none.
+  /// relative gyro scale error it allows for, per axis, each axis' independent of the others'. A
+  /// scale error s_i turns the estimate by s_i times axis i's rotation the corrections have not
+  /// caught up with yet (the rotation away from the attitude low-passed over the tilt's and the
+  /// heading's correction lags). MPU6050: +-3 % uncalibrated; 0.5 % is the residue after a
+  /// rate-table or turn calibration. 0 = none.
   double gyro_scale_error = 0.005;
   // ---- figures of the sensor (the estimate's error covariance P_err only; the gains never read
   // them, so the estimate is the same bit for bit whatever their value). NaN (default; null in
