@@ -127,6 +127,14 @@ struct ParallelKfParams {
   /// term is the coning of a rotation axis that moves during the step; it grows with (|w| h)^2,
   /// so it matters at low rates: 40.8 Hz BROAD undisturbed 2.264 -> 2.020 deg, docs/ESTIMATORS.md).
   bool coning_correction = true;
+  /// With the coning term: the rate over (k-1, k] is the quadratic through the last three
+  /// samples (k-2, k-1, k) instead of the line through the last two, and the step's rotation that
+  /// of that rate (its integral and its coning, both closed form). The trapezoid misses
+  /// h^3 w'' / 12 of the rotation per step: a rate that curves within the step (a hand turning
+  /// back and forth at a few Hz) sampled at tens of Hz leaves the gyro-only frame, and with it the
+  /// accelerometer's low-pass and the tilt, that far off (docs/ESTIMATORS.md "The rate between
+  /// samples"). Used when the two last intervals differ by at most a factor of two (else the line).
+  bool quadratic_rate = true;
   /// IMU group delay, s: the sensor's samples describe the motion this long before their stamp
   /// (its internal low-pass; MPU6050 DLPF_CFG 3: about 4.8 ms). The output is predicted over it
   /// with the bias-corrected gyro, q_world_body = q (x) exp(w delay); the filter state is not
@@ -330,6 +338,8 @@ struct ParallelKfState {
   bool heading_from_gyro = false;
   int64_t last_stamp_ns = -1;
   Eigen::Vector3d prev_gyro{0, 0, 0};  ///< bias-corrected s_G at k-1
+  Eigen::Vector3d prev2_gyro{0, 0, 0};  ///< bias-corrected s_G at k-2 (quadratic_rate)
+  double prev_dt_s = 0.0;  ///< the interval between k-2 and k-1, s (0: no sample k-2)
   RejectCounters rejections;
   bool mag_used = false;  ///< the last magnetometer sample corrected the heading
   /// q_world_body (ENU) from sZ and sX' (2) after the last accepted sample: computed once per
@@ -671,6 +681,13 @@ class ParallelKf {
   /// The step's transition for both filters, from the step rate w (the previous and current
   /// bias-corrected rates `gyro` weighted) and, with the coning term, the two rates themselves
   [[nodiscard]] Eigen::Matrix3d transition(const Eigen::Vector3d& w, const Eigen::Vector3d& gyro, double dt) const;
+  /// The rate over the step of dt to the bias-corrected `gyro`, w(t) = a + b t + c t^2 for t in
+  /// [0, dt] from sample k-1 (a = prev_gyro): the quadratic through k-2, k-1, k (quadratic_rate,
+  /// when sample k-2 is there), else the line (c = 0)
+  struct StepRate {
+    Eigen::Vector3d a, b, c;
+  };
+  [[nodiscard]] StepRate step_rate(const Eigen::Vector3d& gyro, double dt) const;
   void bias_update();  ///< the bias filter over the window s_.mb_time (predict, rest or motion)
   /// One scalar bias measurement along unit h (body): value z (rad/s), noise variance w; the
   /// component along unit *keep (if given) is left as it is; `mn` (a motion measurement's window,
