@@ -165,34 +165,35 @@ void ParallelKf::reset() {
 }
 
 ParallelKf::StepRate ParallelKf::step_rate(const Eigen::Vector3d& gyro, double dt) const {
-  StepRate r{s_.prev_gyro, (gyro - s_.prev_gyro) / dt, Eigen::Vector3d::Zero()};
-  const double h0 = s_.prev_dt_s;
-  if (p_.quadratic_rate && h0 >= 0.5 * dt && h0 <= 2.0 * dt) {
-    // w(-h0) = prev2, w(0) = prev, w(dt) = gyro
-    r.c = ((gyro - r.a) / dt + (s_.prev2_gyro - r.a) / h0) / (dt + h0);
-    r.b -= r.c * dt;
+  StepRate r{s_.prev_gyro + p_.gyro_current_weight * (gyro - s_.prev_gyro), Eigen::Vector3d::Zero()};
+  if (!p_.tilt.exact_rotation || !p_.coning_correction || p_.gyro_current_weight != 0.5) {
+    return r;
   }
+  const double h0 = s_.prev_dt_s;
+  if (!p_.quadratic_rate || h0 < 0.5 * dt || h0 > 2.0 * dt) {
+    // the rotation over the step for a rate linear between the two samples (w1 + (w2 - w1) s / h):
+    // h (w1 + w2) / 2 + (h^2 / 12) w1 x w2 (the rotation vector's rate is w + theta x w / 2)
+    r.coning = (dt * dt / 12.0) * s_.prev_gyro.cross(gyro);
+    return r;
+  }
+  // w(t) = a + b t + c t^2 for t in [0, dt] through w(-h0) = prev2, w(0) = prev, w(dt) = gyro; its
+  // mean over the step, and its coning: (1/2) int_0^h (int_0^t w) x w(t) dt = a x b h^3 / 12 +
+  // a x c h^4 / 12 + b x c h^5 / 60 (with c = 0 the line's h^2 w1 x w2 / 12)
+  const Eigen::Vector3d& a = s_.prev_gyro;
+  const Eigen::Vector3d c = ((gyro - a) / dt + (s_.prev2_gyro - a) / h0) / (dt + h0);
+  const Eigen::Vector3d b = (gyro - a) / dt - c * dt;
+  const double h3 = dt * dt * dt;
+  r.w = a + (0.5 * dt) * b + (dt * dt / 3.0) * c;
+  r.coning = (h3 / 12.0) * a.cross(b + dt * c) + (h3 * dt * dt / 60.0) * b.cross(c);
   return r;
 }
 
-Eigen::Matrix3d ParallelKf::transition(const Eigen::Vector3d& w, const Eigen::Vector3d& gyro, double dt) const {
+Eigen::Matrix3d ParallelKf::transition(const StepRate& r, double dt) const {
   // One transition for both filters: exp(-h w) or the printed first order I - h[w x] (5a), (9a)
   if (p_.tilt.exact_rotation) {
-    Eigen::Vector3d phi = dt * w;
-    if (p_.coning_correction && p_.gyro_current_weight == 0.5 && p_.quadratic_rate) {
-      // w the rate's mean over the step; the coning of a + b t + c t^2 over [0, h], the rotation
-      // vector's rate being w + theta x w / 2: (1/2) int_0^h (int_0^t w) x w(t) dt =
-      // a x b h^3 / 12 + a x c h^4 / 12 + b x c h^5 / 60 (with c = 0 the linear case's h^2 w1 x w2 / 12)
-      const StepRate r = step_rate(gyro, dt);
-      const double h3 = dt * dt * dt;
-      phi += (h3 / 12.0) * (r.a.cross(r.b) + dt * r.a.cross(r.c)) + (h3 * dt * dt / 60.0) * r.b.cross(r.c);
-    } else if (p_.coning_correction && p_.gyro_current_weight == 0.5) {
-      // the rotation over the step for a rate linear between the two samples (w1 + (w2 - w1) s / h):
-      // h (w1 + w2) / 2 + (h^2 / 12) w1 x w2 (the rotation vector's rate is w + theta x w / 2)
-      phi += (dt * dt / 12.0) * s_.prev_gyro.cross(gyro);
-    }
-    return rot_exp(-phi);
+    return rot_exp(-(dt * r.w + r.coning));
   }
+  const Eigen::Vector3d& w = r.w;
   Eigen::Matrix3d a = -dt * skew(w);
   a.diagonal().array() += 1.0;
   return a;
@@ -220,13 +221,9 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
     s_.rest_det.step(s.gyro_rps, s.accel_mps2, dt, rp);
   }
   const Eigen::Vector3d gyro = s.gyro_rps - s_.bias;
-  Eigen::Vector3d w = s_.prev_gyro + p_.gyro_current_weight * (gyro - s_.prev_gyro);
-  if (p_.quadratic_rate && p_.coning_correction && p_.gyro_current_weight == 0.5) {
-    const StepRate r = step_rate(gyro, dt);
-    w = r.a + (0.5 * dt) * r.b + (dt * dt / 3.0) * r.c;  // the rate's mean over the step
-  }
-
-  const Eigen::Matrix3d a = transition(w, gyro, dt);
+  const StepRate rate = step_rate(gyro, dt);
+  const Eigen::Vector3d& w = rate.w;
+  const Eigen::Matrix3d a = transition(rate, dt);
 
   // KF1: tilt + external acceleration (5)-(7)
   s_.kf1.core().predict_with_transition(a, dt);

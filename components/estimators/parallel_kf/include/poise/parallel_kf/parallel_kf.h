@@ -678,16 +678,16 @@ class ParallelKf {
   /// `mag` less the offset while it is applied (s_.mag_corrected), `mag` otherwise
   Eigen::Vector3d hard_iron_corrected(int64_t stamp_ns, const Eigen::Vector3d& gyro, const Eigen::Vector3d& mag,
                                       bool mag_ok);
-  /// The step's transition for both filters, from the step rate w (the previous and current
-  /// bias-corrected rates `gyro` weighted) and, with the coning term, the two rates themselves
-  [[nodiscard]] Eigen::Matrix3d transition(const Eigen::Vector3d& w, const Eigen::Vector3d& gyro, double dt) const;
-  /// The rate over the step of dt to the bias-corrected `gyro`, w(t) = a + b t + c t^2 for t in
-  /// [0, dt] from sample k-1 (a = prev_gyro): the quadratic through k-2, k-1, k (quadratic_rate,
-  /// when sample k-2 is there), else the line (c = 0)
+  /// The rate over the step of dt to the bias-corrected `gyro`: w its mean (the previous and current
+  /// rates weighted by gyro_current_weight; with quadratic_rate, the mean of the quadratic through
+  /// k-2, k-1, k) and, with the coning term, the coning rotation (rad) of that rate over the step
   struct StepRate {
-    Eigen::Vector3d a, b, c;
+    Eigen::Vector3d w;
+    Eigen::Vector3d coning;
   };
   [[nodiscard]] StepRate step_rate(const Eigen::Vector3d& gyro, double dt) const;
+  /// The step's transition for both filters, from the step rate (step_rate)
+  [[nodiscard]] Eigen::Matrix3d transition(const StepRate& r, double dt) const;
   void bias_update();  ///< the bias filter over the window s_.mb_time (predict, rest or motion)
   /// One scalar bias measurement along unit h (body): value z (rad/s), noise variance w; the
   /// component along unit *keep (if given) is left as it is; `mn` (a motion measurement's window,
