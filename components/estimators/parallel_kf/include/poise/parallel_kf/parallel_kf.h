@@ -35,7 +35,8 @@
 //   - KF1's tilt correction applied to KF2's field direction as well (share_tilt_correction):
 //     one attitude error moves both world directions seen in the body;
 //   - trapezoidal propagation (gyro_current_weight; the paper uses k-1) with the coning of a rate
-//     linear between samples (coning_correction), and the output predicted
+//     linear between samples (coning_correction), or of the quadratic through the last three
+//     samples (quadratic_rate: what low rates need), and the output predicted
 //     over the IMU's group delay (imu_delay_s, a calibrated property of the sensor);
 //   - soft inflation of M2 as the field approaches the gate (mag_soft_weight, off: no gain);
 //   - a hard-iron offset learnt online (hard_iron, poise/core/hard_iron.h: a magnet fixed to the
@@ -133,7 +134,8 @@ struct ParallelKfParams {
   /// h^3 w'' / 12 of the rotation per step: a rate that curves within the step (a hand turning
   /// back and forth at a few Hz) sampled at tens of Hz leaves the gyro-only frame, and with it the
   /// accelerometer's low-pass and the tilt, that far off (docs/ESTIMATORS.md "The rate between
-  /// samples"). Used when the two last intervals differ by at most a factor of two (else the line).
+  /// samples"). Used when the two last intervals differ by at most a factor of two (else the line),
+  /// with exact rotation and the trapezoid (gyro_current_weight 0.5). Off in paper().
   bool quadratic_rate = true;
   /// IMU group delay, s: the sensor's samples describe the motion this long before their stamp
   /// (its internal low-pass; MPU6050 DLPF_CFG 3: about 4.8 ms). The output is predicted over it
