@@ -366,7 +366,7 @@ namespace {
 TEST(ParallelKf, GivenAStaticSensorWithGyroBiasWhenAtRestThenTheBiasIsLearntWithinSecondsAtAnyRate) {
   constexpr double kBiasTolDps = 0.05;    // deg/s: well below the 0.2-0.3 deg/s injected
   constexpr double kAfterS = 6.0;         // s: 1.5 s to detect rest + a few s of averaging
-  for (const double rate : {100.0, 1000.0}) {
+  for (const double rate : {2000.0 / 49.0, 2000.0 / 21.0, 100.0, 1000.0}) {  // BROAD every 7th / 3rd row too
     // GIVEN the static_magnet scenario's first 6 s (no magnet yet): static, gyro bias + noise
     sim::SensorSimulator sim(sim::make_scenario("static_magnet", rate, 5));
     ParallelKf kf(ParallelKfParams::defaults());
@@ -379,7 +379,7 @@ TEST(ParallelKf, GivenAStaticSensorWithGyroBiasWhenAtRestThenTheBiasIsLearntWith
     // THEN the bias is learnt and its reported uncertainty has shrunk from the initial one
     const ParallelKfOutput o = kf.output();
     const double err_dps = (o.gyro_bias_rps - s.truth.gyro_bias_rps).norm() * kDegPerRad;
-    std::printf("%.0f Hz: bias error %.4f deg/s, sigma %.4f deg/s\n", rate, err_dps,
+    std::printf("%.1f Hz: bias error %.4f deg/s, sigma %.4f deg/s\n", rate, err_dps,
                 o.gyro_bias_sigma_rps * kDegPerRad);
     EXPECT_TRUE(o.rest);
     EXPECT_LT(err_dps, kBiasTolDps) << rate << " Hz";
@@ -953,9 +953,10 @@ Eigen::Vector3d coning_rate(double t_s) {
 }
 
 /// The heading error (deg, world z of the rotation-vector error) after kConingSeconds.
-double coning_heading_error_deg(bool coning_correction) {
+double coning_heading_error_deg(bool coning_correction, bool quadratic_rate = false) {
   ParallelKfParams p;
   p.coning_correction = coning_correction;
+  p.quadratic_rate = quadratic_rate;  // the line between two samples unless asked
   p.bias_estimation = false;
   p.imu_delay_s = 0.0;
   ParallelKf kf(p);
@@ -1012,6 +1013,80 @@ TEST(ParallelKf, GivenAConingMotionAtFortyHertzWhenPropagatedThenTheConingTermGi
   // THEN the term gives back the coning the trapezoid misses, and the heading is nearer the truth
   EXPECT_NEAR(std::abs(without - with), missed_deg, kConingShareTol * missed_deg);
   EXPECT_LT(std::abs(with), std::abs(without));
+  // and the quadratic through three samples (quadratic_rate, the default), whose rotation and
+  // coning are those of the rate's curve, leaves at most W h / 2 (the ratio of its per-step error
+  // to the line's for a rate turning at W = 2 pi f) of what the line leaves
+  const double quadratic = coning_heading_error_deg(true, true);
+  const double order_ratio = 2.0 * kPi * kConingFreqHz * h / 2.0;
+  std::printf("with the quadratic rate: heading error %.3f deg (bound %.3f deg)\n", quadratic,
+              order_ratio * std::abs(with));
+  EXPECT_LT(std::abs(quadratic), order_ratio * std::abs(with));
+}
+
+// The rate between samples at BROAD's decimated rates (95.2 and 40.8 Hz: every 3rd and 7th row of
+// 285.7 Hz). A hand circling: yaw 60 deg and pitch 30 deg, both at 1.5 Hz a quarter period apart
+// (up to about 600 deg/s), point samples of the exact body rate, gravity and the field exact, no
+// delay; the filter's rotation over a step is all that is wrong. Oracle: the analytic attitude,
+// inclination RMS after the start-up. The trapezoid (the line through two samples) misses
+// h^3 w'' / 12 of the rotation per step; the quadratic through three misses h^4 w''' / 24, for
+// the motion's angular frequency W a factor W h / 2 of it (0.05 at 95.2 Hz, 0.12 at 40.8 Hz).
+// That error turns the gyro-only frame in which the accelerometer is low-passed, so the tilt
+// takes it: the inclination error with the quadratic must be below that factor times the
+// trapezoid's, and inside the tilt promise (kTiltTolDeg), which the trapezoid misses at 40.8 Hz.
+constexpr double kCircleHz = 1.5;  // both axes, Hz
+
+Eigen::Quaterniond circling_truth(double t) {
+  const double a = 2.0 * kPi * kCircleHz * t;
+  return Eigen::Quaterniond(Eigen::AngleAxisd(60.0 * kRadPerDeg * std::sin(a), Eigen::Vector3d::UnitZ())) *
+         Eigen::Quaterniond(Eigen::AngleAxisd(30.0 * kRadPerDeg * std::cos(a), Eigen::Vector3d::UnitY()));
+}
+
+/// Inclination RMS error (deg) of the default filter (quadratic_rate as given) at rate_hz.
+double circling_inclination_rms_deg(double rate_hz, bool quadratic_rate) {
+  constexpr double kDurationS = 60.0;
+  constexpr double kScoreFromS = 20.0;  // start-up and the 3 s low-pass settled
+  constexpr double kEpsS = 1e-5;        // central difference for the body rate
+  const Eigen::Vector3d field_enu(0.0, 48.0 * std::cos(60.0 * kRadPerDeg), -48.0 * std::sin(60.0 * kRadPerDeg));
+  ParallelKfParams p = ParallelKfParams::defaults();
+  p.quadratic_rate = quadratic_rate;
+  p.imu_delay_s = 0.0;
+  ParallelKf kf(p);
+  double sq = 0.0;
+  int n = 0;
+  for (int k = 0; k < static_cast<int>(kDurationS * rate_hz); ++k) {
+    const double t = k / rate_hz;
+    const Eigen::Quaterniond q = circling_truth(t);
+    ImuSample s;
+    s.stamp_ns = static_cast<int64_t>(std::llround(t * 1e9));
+    s.seq = static_cast<uint32_t>(k);
+    s.gyro_rps = quat_log(circling_truth(t - kEpsS).conjugate() * circling_truth(t + kEpsS)) / (2.0 * kEpsS);
+    s.accel_mps2 = q.conjugate() * Eigen::Vector3d(0.0, 0.0, 9.81);
+    s.mag_ut = q.conjugate() * field_enu;
+    s.has_mag = true;
+    EXPECT_TRUE(kf.update(s));
+    if (t >= kScoreFromS) {
+      const double incl = heading_inclination_of_world_error(kf.q_world_body() * q.conjugate()).inclination_rad;
+      sq += incl * incl;
+      ++n;
+    }
+  }
+  return std::sqrt(sq / n) * kDegPerRad;
+}
+
+TEST(ParallelKf, GivenAHandCirclingAtFortyAndNinetyFiveHertzWhenTheRateIsTheQuadraticThenTheTiltKeepsItsPromise) {
+  for (const double rate_hz : {2000.0 / 21.0, 2000.0 / 49.0}) {  // BROAD every 3rd, 7th row
+    // GIVEN the circling hand sampled at rate_hz, WHEN the default filter and the trapezoid run
+    const double quadratic = circling_inclination_rms_deg(rate_hz, true);
+    const double trapezoid = circling_inclination_rms_deg(rate_hz, false);
+    const double order_ratio = 2.0 * kPi * kCircleHz / rate_hz / 2.0;  // W h / 2
+    std::printf("circling at %.1f Hz: inclination RMS %.4f deg quadratic, %.4f deg trapezoid (W h / 2 = %.3f)\n",
+                rate_hz, quadratic, trapezoid, order_ratio);
+    // THEN the quadratic leaves at most W h / 2 of the trapezoid's error, inside the tilt promise
+    EXPECT_LT(quadratic, order_ratio * trapezoid) << rate_hz << " Hz";
+    EXPECT_LT(quadratic, kTiltTolDeg) << rate_hz << " Hz";
+  }
+  // and the trapezoid breaks the promise at 40.8 Hz (the mechanism matters there)
+  EXPECT_GT(circling_inclination_rms_deg(2000.0 / 49.0, false), kTiltTolDeg);
 }
 
 }  // namespace

@@ -79,6 +79,7 @@ ParallelKfParams ParallelKfParams::paper() {
   p.mag_verify_s = 0.0;
   p.imu_delay_s = 0.0;  // the paper predicts nothing
   p.coning_correction = false;
+  p.quadratic_rate = false;
   p.hard_iron = false;
   return p;
 }
@@ -163,17 +164,36 @@ void ParallelKf::reset() {
   s_.hard_iron = HardIronEstimator(p_.hard_iron_estimator);
 }
 
-Eigen::Matrix3d ParallelKf::transition(const Eigen::Vector3d& w, const Eigen::Vector3d& gyro, double dt) const {
+ParallelKf::StepRate ParallelKf::step_rate(const Eigen::Vector3d& gyro, double dt) const {
+  StepRate r{s_.prev_gyro + p_.gyro_current_weight * (gyro - s_.prev_gyro), Eigen::Vector3d::Zero()};
+  if (!p_.tilt.exact_rotation || !p_.coning_correction || p_.gyro_current_weight != 0.5) {
+    return r;
+  }
+  const double h0 = s_.prev_dt_s;
+  if (!p_.quadratic_rate || h0 < 0.5 * dt || h0 > 2.0 * dt) {
+    // the rotation over the step for a rate linear between the two samples (w1 + (w2 - w1) s / h):
+    // h (w1 + w2) / 2 + (h^2 / 12) w1 x w2 (the rotation vector's rate is w + theta x w / 2)
+    r.coning = (dt * dt / 12.0) * s_.prev_gyro.cross(gyro);
+    return r;
+  }
+  // w(t) = a + b t + c t^2 for t in [0, dt] through w(-h0) = prev2, w(0) = prev, w(dt) = gyro; its
+  // mean over the step, and its coning: (1/2) int_0^h (int_0^t w) x w(t) dt = a x b h^3 / 12 +
+  // a x c h^4 / 12 + b x c h^5 / 60 (with c = 0 the line's h^2 w1 x w2 / 12)
+  const Eigen::Vector3d& a = s_.prev_gyro;
+  const Eigen::Vector3d c = ((gyro - a) / dt + (s_.prev2_gyro - a) / h0) / (dt + h0);
+  const Eigen::Vector3d b = (gyro - a) / dt - c * dt;
+  const double h3 = dt * dt * dt;
+  r.w = a + (0.5 * dt) * b + (dt * dt / 3.0) * c;
+  r.coning = (h3 / 12.0) * a.cross(b + dt * c) + (h3 * dt * dt / 60.0) * b.cross(c);
+  return r;
+}
+
+Eigen::Matrix3d ParallelKf::transition(const StepRate& r, double dt) const {
   // One transition for both filters: exp(-h w) or the printed first order I - h[w x] (5a), (9a)
   if (p_.tilt.exact_rotation) {
-    Eigen::Vector3d phi = dt * w;
-    if (p_.coning_correction && p_.gyro_current_weight == 0.5) {
-      // the rotation over the step for a rate linear between the two samples (w1 + (w2 - w1) s / h):
-      // h (w1 + w2) / 2 + (h^2 / 12) w1 x w2 (the rotation vector's rate is w + theta x w / 2)
-      phi += (dt * dt / 12.0) * s_.prev_gyro.cross(gyro);
-    }
-    return rot_exp(-phi);
+    return rot_exp(-(dt * r.w + r.coning));
   }
+  const Eigen::Vector3d& w = r.w;
   Eigen::Matrix3d a = -dt * skew(w);
   a.diagonal().array() += 1.0;
   return a;
@@ -183,6 +203,7 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   c = check_imu_sample(s, s_.last_stamp_ns, p_.limits, s_.rejections, p_.use_magnetometer);
   if (s_.anchor.reanchor(c, s.stamp_ns, p_.limits.max_dt_s)) {
     s_.last_stamp_ns = s.stamp_ns;  // restart time after a confirmed jump; attitude kept
+    s_.prev_dt_s = 0.0;             // no rate curve across the jump
     return false;
   }
   if (!c.accept) {
@@ -200,9 +221,9 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
     s_.rest_det.step(s.gyro_rps, s.accel_mps2, dt, rp);
   }
   const Eigen::Vector3d gyro = s.gyro_rps - s_.bias;
-  const Eigen::Vector3d w = s_.prev_gyro + p_.gyro_current_weight * (gyro - s_.prev_gyro);
-
-  const Eigen::Matrix3d a = transition(w, gyro, dt);
+  const StepRate rate = step_rate(gyro, dt);
+  const Eigen::Vector3d& w = rate.w;
+  const Eigen::Matrix3d a = transition(rate, dt);
 
   // KF1: tilt + external acceleration (5)-(7)
   s_.kf1.core().predict_with_transition(a, dt);
@@ -269,7 +290,9 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
       }
     }
   }
+  s_.prev2_gyro = s_.prev_gyro;
   s_.prev_gyro = gyro;
+  s_.prev_dt_s = dt;
   return true;
 }
 

@@ -29,6 +29,7 @@ ParallelKfParams load_parallel_kf_params(const std::string& path, const Parallel
     r.get("startup_s", p.startup_s);
     r.get("gyro_current_weight", p.gyro_current_weight);
     r.get("coning_correction", p.coning_correction);
+    r.get("quadratic_rate", p.quadratic_rate);
     r.get_nullable("imu_delay_s", p.imu_delay_s);
     r.get("accel_lowpass_tau_s", p.accel_lowpass_tau_s);
     r.get("accel_lowpass_order", p.accel_lowpass_order);

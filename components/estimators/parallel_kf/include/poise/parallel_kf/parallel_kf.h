@@ -35,7 +35,8 @@
 //   - KF1's tilt correction applied to KF2's field direction as well (share_tilt_correction):
 //     one attitude error moves both world directions seen in the body;
 //   - trapezoidal propagation (gyro_current_weight; the paper uses k-1) with the coning of a rate
-//     linear between samples (coning_correction), and the output predicted
+//     linear between samples (coning_correction), or of the quadratic through the last three
+//     samples (quadratic_rate: what low rates need), and the output predicted
 //     over the IMU's group delay (imu_delay_s, a calibrated property of the sensor);
 //   - soft inflation of M2 as the field approaches the gate (mag_soft_weight, off: no gain);
 //   - a hard-iron offset learnt online (hard_iron, poise/core/hard_iron.h: a magnet fixed to the
@@ -127,6 +128,15 @@ struct ParallelKfParams {
   /// term is the coning of a rotation axis that moves during the step; it grows with (|w| h)^2,
   /// so it matters at low rates: 40.8 Hz BROAD undisturbed 2.264 -> 2.020 deg, docs/ESTIMATORS.md).
   bool coning_correction = true;
+  /// With the coning term: the rate over (k-1, k] is the quadratic through the last three
+  /// samples (k-2, k-1, k) instead of the line through the last two, and the step's rotation that
+  /// of that rate (its integral and its coning, both closed form). The trapezoid misses
+  /// h^3 w'' / 12 of the rotation per step: a rate that curves within the step (a hand turning
+  /// back and forth at a few Hz) sampled at tens of Hz leaves the gyro-only frame, and with it the
+  /// accelerometer's low-pass and the tilt, that far off (docs/ESTIMATORS.md "The rate between
+  /// samples"). Used when the two last intervals differ by at most a factor of two (else the line),
+  /// with exact rotation and the trapezoid (gyro_current_weight 0.5). Off in paper().
+  bool quadratic_rate = true;
   /// IMU group delay, s: the sensor's samples describe the motion this long before their stamp
   /// (its internal low-pass; MPU6050 DLPF_CFG 3: about 4.8 ms). The output is predicted over it
   /// with the bias-corrected gyro, q_world_body = q (x) exp(w delay); the filter state is not
@@ -330,6 +340,8 @@ struct ParallelKfState {
   bool heading_from_gyro = false;
   int64_t last_stamp_ns = -1;
   Eigen::Vector3d prev_gyro{0, 0, 0};  ///< bias-corrected s_G at k-1
+  Eigen::Vector3d prev2_gyro{0, 0, 0};  ///< bias-corrected s_G at k-2 (quadratic_rate)
+  double prev_dt_s = 0.0;  ///< the interval between k-2 and k-1, s (0: no sample k-2)
   RejectCounters rejections;
   bool mag_used = false;  ///< the last magnetometer sample corrected the heading
   /// q_world_body (ENU) from sZ and sX' (2) after the last accepted sample: computed once per
@@ -668,9 +680,16 @@ class ParallelKf {
   /// `mag` less the offset while it is applied (s_.mag_corrected), `mag` otherwise
   Eigen::Vector3d hard_iron_corrected(int64_t stamp_ns, const Eigen::Vector3d& gyro, const Eigen::Vector3d& mag,
                                       bool mag_ok);
-  /// The step's transition for both filters, from the step rate w (the previous and current
-  /// bias-corrected rates `gyro` weighted) and, with the coning term, the two rates themselves
-  [[nodiscard]] Eigen::Matrix3d transition(const Eigen::Vector3d& w, const Eigen::Vector3d& gyro, double dt) const;
+  /// The rate over the step of dt to the bias-corrected `gyro`: w its mean (the previous and current
+  /// rates weighted by gyro_current_weight; with quadratic_rate, the mean of the quadratic through
+  /// k-2, k-1, k) and, with the coning term, the coning rotation (rad) of that rate over the step
+  struct StepRate {
+    Eigen::Vector3d w;
+    Eigen::Vector3d coning;
+  };
+  [[nodiscard]] StepRate step_rate(const Eigen::Vector3d& gyro, double dt) const;
+  /// The step's transition for both filters, from the step rate (step_rate)
+  [[nodiscard]] Eigen::Matrix3d transition(const StepRate& r, double dt) const;
   void bias_update();  ///< the bias filter over the window s_.mb_time (predict, rest or motion)
   /// One scalar bias measurement along unit h (body): value z (rad/s), noise variance w; the
   /// component along unit *keep (if given) is left as it is; `mn` (a motion measurement's window,
