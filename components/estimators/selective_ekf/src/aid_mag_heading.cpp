@@ -20,6 +20,15 @@ double heading_noise_factor(const SelectiveEkfParams& p, const FieldGate& gate, 
   return 1.0 + p.heading_disturbance_weight * (rn * rn + rd * rd);
 }
 
+namespace {
+/// d dpsi / d m_body of the heading row's innovation at the field mw = R m (world, horizontal
+/// part horiz): the heading error a body-fixed offset in the reading puts in per uT, rad/uT.
+Eigen::Vector3d offset_heading_sensitivity(const Eigen::Quaterniond& q_world_body, const Eigen::Vector3d& mw,
+                                          double horiz) {
+  return q_world_body.conjugate() * (Eigen::Vector3d(mw.y(), -mw.x(), 0.0) / (horiz * horiz));
+}
+}  // namespace
+
 void restart_heading(const AidContext& c, const Eigen::Vector3d& up, double dpsi) {
   SelectiveEkfState& x = c.x;
   // world-frame turn about e_z = body-frame turn about up: q exp(dpsi up) = exp(dpsi e_z) q
@@ -37,6 +46,12 @@ void restart_heading(const AidContext& c, const Eigen::Vector3d& up, double dpsi
   x.unmodelled.field_dn_lp = 0.0;
   x.unmodelled.field_dv_lp = 0.0;
   x.unmodelled.rotation_heading.setZero();
+  x.unmodelled.rotation_tilt_at_heading.setZero();
+  x.unmodelled.tilt_innovation_at_heading.setZero();
+  x.unmodelled.ext_accel_at_heading.setZero();
+  x.heading_per_offset.setZero();  // (the caller: the new heading's reading)
+  x.heading_per_removed_offset.setZero();
+  x.offset_left_var = 0.0;
 }
 
 void refuse_field(const AidContext& c, const ImuInput& in, MagTrust& mag, SourceStatus& st) {
@@ -99,7 +114,10 @@ void aid_mag_heading(const AidContext& c, const ImuInput& in, bool anchored, Mag
   if (v == FieldVerdict::kRelearnt || (v == FieldVerdict::kAccepted && !c.x.heading_anchored)) {
     c.x.heading_anchored = true;
     if (!anchored) {
+      const Eigen::Vector3d started = offset_heading_sensitivity(c.x.q_world_body, mw, horiz);
       restart_heading(c, u, dpsi);
+      // the new heading is this reading's, whole
+      (c.x.mag_corrected ? c.x.heading_per_removed_offset : c.x.heading_per_offset) = started;
       record(st, Decision::kReset, now, c.first_pass);
       return;
     }
@@ -136,8 +154,15 @@ void aid_mag_heading(const AidContext& c, const ImuInput& in, bool anchored, Mag
   keep.block<3, 3>(SelectiveEkf::kB, SelectiveEkf::kB) = u * u.transpose();
   keep.block<3, 3>(SelectiveEkf::kE, SelectiveEkf::kE).setZero();
   const Eigen::Matrix<double, 1, 1> rr(r);
+  // the row's heading gain u^T K (P before the row): an offset left in the reading moves dpsi by
+  // a . (R off), a = (m_n, -m_e, 0) / horiz^2, and the heading by the gain times that
+  // (SelectiveEkfState::heading_per_offset; the row's own share taken back in the update)
+  const Eigen::Matrix<double, SelectiveEkf::kN, 1> ph = c.x.P * h.transpose();
+  const double k_heading = u.dot(ph.segment<3>(SelectiveEkf::kTh)) / (h.dot(ph) + r);
+  const Eigen::Vector3d drive = offset_heading_sensitivity(c.x.q_world_body, mw, horiz);
   st.innovation_variance.setZero();
   st.innovation_variance.head<1>() = fuse_considered<1>(c.x, h, innov, rr, rr, keep);
+  (c.x.mag_corrected ? c.x.heading_per_removed_offset : c.x.heading_per_offset) += k_heading * drive;
   st.innovation.setZero();
   st.innovation[0] = dpsi;
   st.test_ratio = dpsi * dpsi / (kReportGateSigma * kReportGateSigma * st.innovation_variance[0]);

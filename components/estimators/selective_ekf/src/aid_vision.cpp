@@ -60,6 +60,9 @@ void aid_vision_attitude(const AidContext& c, const VisionMeasurement& v, Source
       pm->block<3, 3>(SelectiveEkf::kTh, SelectiveEkf::kTh) = r_body;
     }
     x.ext_accel_error.segment<3>(SelectiveEkf::kTh).setZero();  // the attitude is vision's now
+    x.heading_per_offset.setZero();
+    x.heading_per_removed_offset.setZero();
+    x.offset_left_var = 0.0;
     x.vision_aligned = true;
     x.vision_consecutive_rejects = 0;
     x.last_vision_fused_ns = now;

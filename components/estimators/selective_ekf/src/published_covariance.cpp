@@ -25,18 +25,32 @@
 //              acceleration's error z (SelectiveEkfState::ext_accel_error, the low-pass's error
 //              driven by the measured deviation d from it, through P's gains): its tilt part
 //              (R z_th) squared and low-passed over the tilt's lag (x, y)
-//   scale      tilt and heading: a gyro scale error s turns the estimate by s times the rotation
-//              the corrections have not caught up with: the world-frame rotation increments
-//              R w dt high-passed over each lag (X' = R w - X / tau), s^2 X_i^2 per world axis
-//              (x, y over the tilt's lag, z over the heading's)
+//   scale      tilt and heading: a gyro scale error s_i of body axis i (each its own, independent,
+//              gyro_scale_error each) turns the estimate by s_i times that axis' rotation the
+//              corrections have not caught up with: its world-frame increments R e_i w_i dt
+//              high-passed over each lag (X_i' = R e_i w_i - X_i / tau; x, y over the tilt's lag,
+//              z over the heading's), s^2 w_i w_i^T with w_i = (X_i,x, X_i,y, X_i,z + g LP(X_i,y))
+//              (the heading's pull through the dip, below)
 //   field      heading: the disturbance of the fields the gate accepted, its norm deviation dn and
 //              dip deviation dv = m (dip - dip_ref) low-passed over the heading's lag; the part
 //              across the horizontal field, which turns the heading, is taken as large as those
 //              two: share^2 (dn^2 + dv^2) / 2 / (m cos dip)^2
-//   hard_iron  heading: while the hard-iron offset is removed (hard_iron), its estimate's error
-//              across the horizontal field, share^2 x^T P_b x / (m cos dip)^2
-//   dip        heading: the unmodelled tilt terms' error through the dip, tan(dip) times the
-//              error about north (below; P's own tilt error reaches the heading through the row)
+//   hard_iron  heading: the removed hard-iron offset's estimate's error (covariance P_b) in the
+//              readings corrected: s_r^T P_b s_r, s_r the heading row's response to it through
+//              its own gains (SelectiveEkfState::heading_per_removed_offset, as "offset" below)
+//   offset     heading: an offset the hard-iron estimate holds (converged) but does not remove
+//              (|b| <= min_applied_ut, or not consistent; significant or not): the
+//              heading error it put into the estimate is s . b, s the heading row's response to
+//              an offset left in its readings through its own gains
+//              (SelectiveEkfState::heading_per_offset: the averaging over the rotation, the
+//              gyro-only stretches, other rows' corrections), b ~ N(b_hat, P_b):
+//              (s . b_hat)^2 + s^T P_b s (unremoved_offset_var; the mean part only while the
+//              estimate is consistent, i.e. a body offset's). When the estimate reopens (the
+//              offset changed) both terms move to offset_left_var, which the rows correct away as
+//              they do the heading error, and s, s_r count the new offset's readings from zero
+//   dip        heading: the unmodelled tilt terms' error through the dip, g = -share tan(dip)
+//              times the error about north low-passed over the heading's lag (attitude_covariance;
+//              P's own tilt error reaches the heading through the row)
 //   unknown    heading: pi^2 / 3 (a heading uniform over +-180 deg) while heading_unknown(): a
 //              field reference still learnt or provisional (field_verify_s), or a heading started
 //              on a gated field; nothing bounds the heading then (a start next to a magnet)
@@ -128,9 +142,10 @@ void SelectiveEkf::track_unmodelled(const ImuInput& in, bool aided, double aidin
   const Eigen::Matrix3d p_world = r * x_.P.block<3, 3>(kTh, kTh) * r.transpose();
   const double tau_tilt = q > 0.0 ? 0.5 * (p_world(0, 0) + p_world(1, 1)) / q : kInf;
   const double tau_heading = heading_lag_s();
-  const Eigen::Vector3d turn = r * (x_.w_rps * in.dt_s);
+  // column i: body axis i's rotation increment in the world frame
+  const Eigen::Matrix3d turn = r * (x_.w_rps * in.dt_s).asDiagonal();
   u.rotation_tilt = (1.0 - lowpass_gain(in.dt_s, tau_tilt)) * (u.rotation_tilt + turn);
-  u.rotation_heading = (1.0 - lowpass_gain(in.dt_s, tau_heading)) * (u.rotation_heading + turn);
+  u.rotation_heading = (1.0 - lowpass_gain(in.dt_s, tau_heading)) * (u.rotation_heading + turn.row(2).transpose());
   if (p_.imu_measurement == ImuMeasurement::kSplit) {
     const SourceStatus& tilt = status(SelectiveEkfAid::kAccelTilt);
     if (aided && tilt.last_stamp_ns == in.stamp_ns) {
@@ -146,6 +161,14 @@ void SelectiveEkf::track_unmodelled(const ImuInput& in, bool aided, double aidin
         u.ext_accel_power += lowpass_gain(aiding_dt_s, tau_tilt) * (z * z.transpose() - u.ext_accel_power);
       }
     }
+  }
+  // the same tilt errors as the heading's corrections average them (the dip term below)
+  const double kh = lowpass_gain(in.dt_s, tau_heading);
+  u.rotation_tilt_at_heading += kh * (u.rotation_tilt.row(1).transpose() - u.rotation_tilt_at_heading);
+  u.tilt_innovation_at_heading += kh * (u.tilt_innovation_lp.head<2>() - u.tilt_innovation_at_heading);
+  if (p_.imu_measurement == ImuMeasurement::kSplit && aids::accel_noise_known(p_)) {
+    const Eigen::Vector2d z = (r * x_.ext_accel_error.segment<3>(kTh)).head<2>();
+    u.ext_accel_at_heading += kh * (z - u.ext_accel_at_heading);
   }
   const SourceStatus& heading = status(SelectiveEkfAid::kMagHeading);
   const FieldGate& g = x_.field_gate;
@@ -189,6 +212,43 @@ Eigen::Matrix3d SelectiveEkf::output_error_covariance() const {
   return cov;
 }
 
+/// The heading's magnetometer row variance density (rad^2 s) of the last sample, as fused
+/// (inflated while untrusted); infinite when the last sample was not fused.
+double SelectiveEkf::heading_row_density() const {
+  const SourceStatus& heading = status(SelectiveEkfAid::kMagHeading);
+  if (heading.last != Decision::kFused && heading.last != Decision::kFusedInflated) {
+    return kInf;
+  }
+  return p_.sigma_heading_rad_sqrt_s * p_.sigma_heading_rad_sqrt_s *
+         aids::heading_noise_factor(p_, x_.field_gate, gp_) *
+         (heading.last == Decision::kFusedInflated ? p_.inflate_factor : 1.0);
+}
+
+double SelectiveEkf::unremoved_offset_var() const {
+  // an estimate converged (every axis' sigma below converged_sigma_ut) and not removed, whatever
+  // its size and significance: b ~ N(b_hat, P_b) is what the filter knows of the offset in its
+  // readings (not converged, P_b is still the prior's: nothing known; removed, hard_iron's term)
+  const HardIronEstimator& hi = x_.hard_iron;
+  if (p_.imu_measurement != ImuMeasurement::kSplit || !p_.hard_iron || !hi.converged() || hi.applied()) {
+    return 0.0;
+  }
+  // b_hat is a body offset's only while removing it makes |m| more constant over the rotation
+  // (consistent); otherwise it fits a field that varies in space (a magnet near the sensor, not
+  // on it: the field term's), and of a body offset only P_b is known
+  const Eigen::Vector3d& s = x_.heading_per_offset;
+  const double mean = hi.report().consistent ? s.dot(hi.offset_ut()) : 0.0;
+  return mean * mean + s.dot(hi.covariance() * s);
+}
+
+double SelectiveEkf::removed_offset_var() const {
+  const HardIronEstimator& hi = x_.hard_iron;
+  if (p_.imu_measurement != ImuMeasurement::kSplit || !p_.hard_iron || !hi.converged()) {
+    return 0.0;
+  }
+  const Eigen::Vector3d& s = x_.heading_per_removed_offset;
+  return s.dot(hi.covariance() * s);
+}
+
 Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const SelectiveEkfUnmodelled& u = x_.unmodelled;
   const Eigen::Matrix3d r = state_output().toRotationMatrix();
@@ -211,73 +271,83 @@ Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
   const Eigen::Matrix3d p_world = r * x_.P.block<3, 3>(kTh, kTh) * r.transpose();
   const double p_tilt = 0.5 * (p_world(0, 0) + p_world(1, 1));
   const double p_heading = p_world(2, 2);
-  // gyro scale error: s times the rotation away from the attitude low-passed over each lag
-  // (the tilt's unmodelled errors are collected in tilt_slow too: the heading follows them through
-  // the dip, below)
-  Eigen::Matrix3d tilt_slow = Eigen::Matrix3d::Zero();
+  const bool split = p_.imu_measurement == ImuMeasurement::kSplit;
+  const FieldGate& fg = x_.field_gate;
+  const double r_heading = split ? heading_row_density() : kInf;
+  const double cos_dip = std::cos(fg.dip_rad);
+  const bool mag_row = std::isfinite(r_heading) && fg.learnt && cos_dip > 1e-3;
+  // the magnetometer's share of the heading's correction
+  const double share_heading = mag_row ? std::min(1.0, p_heading * p_heading / (q * r_heading)) : 0.0;
+  // heading: the tilt's error through the dip. The row's innovation is
+  //   dpsi = dth_z + tan(dip) dth_n
+  // with dth_n the world-frame error about magnetic north (+y, the reference's horizontal
+  // direction). The row's H has both terms and considers the tilt (aid_mag_heading.cpp), so P's
+  // own tilt error reaches P's heading. A tilt error P does not hold pulls the heading where the
+  // row's two terms cancel, e_z = g e_y with g = -share tan(dip), as fast as the heading's
+  // corrections go: the heading takes g times that error low-passed over its lag (the *_at_heading
+  // realizations), not the error of the moment (session 22: a tilt error that comes and goes
+  // within the tilt's 3 s lag does not reach a heading whose lag is 17 s).
+  const double g = mag_row ? -share_heading * std::tan(fg.dip_rad) : 0.0;
+  Eigen::Matrix3d slow = Eigen::Matrix3d::Zero();
   if (p_.gyro_scale_error > 0.0) {
+    // gyro scale error, each axis' its own (independent, gyro_scale_error each): s_i times axis
+    // i's rotation away from the attitude low-passed over each lag; the heading's is its own lag's
+    // plus the tilt's pulled through the dip
     const double s2 = p_.gyro_scale_error * p_.gyro_scale_error;
-    tilt_slow(0, 0) += s2 * u.rotation_tilt.x() * u.rotation_tilt.x();
-    tilt_slow(1, 1) += s2 * u.rotation_tilt.y() * u.rotation_tilt.y();
-    cov(2, 2) += s2 * u.rotation_heading.z() * u.rotation_heading.z();
+    for (int i = 0; i < 3; ++i) {
+      const Eigen::Vector3d w(u.rotation_tilt(0, i), u.rotation_tilt(1, i),
+                              u.rotation_heading(i) + g * u.rotation_tilt_at_heading(i));
+      slow += s2 * w * w.transpose();
+    }
   }
-  if (p_.imu_measurement != ImuMeasurement::kSplit) {
-    return cov + tilt_slow;
+  if (!split) {
+    return cov + slow;
+  }
+  slow += tilt_following(q, p_tilt, g);
+  // heading: the accepted field's disturbance, by the magnetometer's share of the heading's correction
+  if (mag_row && fg.m_ut > 0.0) {
+    const double share2 = share_heading * share_heading;
+    const double mh = fg.m_ut * cos_dip;
+    const double power = 0.5 * (u.field_dn_lp * u.field_dn_lp + u.field_dv_lp * u.field_dv_lp);
+    cov(2, 2) += share2 * power / (mh * mh);
+  }
+  cov(2, 2) += unremoved_offset_var() + removed_offset_var() + x_.offset_left_var;
+  return cov + slow;
+}
+
+/// The tilt's error from the accelerometer's disturbance (world x, y) and the heading's through the
+/// dip (g, the attitude_covariance comment): its tilt realization v and the heading's g v_y
+/// low-passed over the heading's lag, w = (v_x, v_y, g LP(v_y)), as w w^T.
+Eigen::Matrix3d SelectiveEkf::tilt_following(double q, double p_tilt, double g) const {
+  const SelectiveEkfUnmodelled& u = x_.unmodelled;
+  Eigen::Matrix3d out = Eigen::Matrix3d::Zero();
+  if (aids::accel_noise_known(p_)) {
+    // the accelerometer's noise known (the tilt rows carry none in P_err): the external
+    // acceleration's error through the filter's own gains (ext_accel_error), its power over the
+    // tilt's lag; it holds what "following" below stands for. A power, not one realization: the
+    // heading's part is g times the realization low-passed over the heading's lag, taken as
+    // correlated with the tilt's (B = I + k e_z e_y^T, k^2 P_yy = (g LP(z_y))^2)
+    out.topLeftCorner<2, 2>() = u.ext_accel_power;
+    const double pyy = u.ext_accel_power(1, 1);
+    if (pyy > 0.0) {
+      Eigen::Matrix3d b = Eigen::Matrix3d::Identity();
+      b(2, 1) = g * std::abs(u.ext_accel_at_heading.y()) / std::sqrt(pyy);
+      out = b * out * b.transpose();
+    }
+    return out;
   }
   // tilt: the low-passed accelerometer's own errors, by its share of the tilt's correction
   const double tilt_sigma = std::isnan(p_.sigma_tilt_rad_sqrt_s)
                                 ? p_.accel_lowpass_tau_s * std::sqrt(q)
                                 : p_.sigma_tilt_rad_sqrt_s;
   const double r_tilt = tilt_sigma * tilt_sigma;
-  if (aids::accel_noise_known(p_)) {
-    // the accelerometer's noise known (the tilt rows carry none in P_err): the external
-    // acceleration's error through the filter's own gains (ext_accel_error), its power over the
-    // tilt's lag; it holds what "following" below stands for
-    tilt_slow.topLeftCorner<2, 2>() += u.ext_accel_power;
-  } else if (r_tilt > 0.0) {
+  if (r_tilt > 0.0) {
     const double share = std::min(1.0, p_tilt * p_tilt / (q * r_tilt));
-    tilt_slow.topLeftCorner<2, 2>() +=
-        share * share * u.tilt_innovation_lp.head<2>() * u.tilt_innovation_lp.head<2>().transpose();
+    const Eigen::Vector3d w = share * Eigen::Vector3d(u.tilt_innovation_lp.x(), u.tilt_innovation_lp.y(),
+                                                      g * u.tilt_innovation_at_heading.y());
+    out = w * w.transpose();
   }
-  // heading: the accepted field's disturbance, by the magnetometer's share of the heading's correction
-  const FieldGate& fg = x_.field_gate;
-  const SourceStatus& heading = status(SelectiveEkfAid::kMagHeading);
-  double r_heading = kInf;
-  if (heading.last == Decision::kFused || heading.last == Decision::kFusedInflated) {
-    r_heading = p_.sigma_heading_rad_sqrt_s * p_.sigma_heading_rad_sqrt_s *
-                aids::heading_noise_factor(p_, fg, gp_) *
-                (heading.last == Decision::kFusedInflated ? p_.inflate_factor : 1.0);
-  }
-  const double cos_dip = std::cos(fg.dip_rad);
-  if (std::isfinite(r_heading) && fg.learnt && fg.m_ut > 0.0 && cos_dip > 1e-3) {
-    const double share = std::min(1.0, p_heading * p_heading / (q * r_heading));
-    const double mh = fg.m_ut * cos_dip;
-    const double power = 0.5 * (u.field_dn_lp * u.field_dn_lp + u.field_dv_lp * u.field_dv_lp);
-    cov(2, 2) += share * share * power / (mh * mh);
-    if (x_.mag_corrected) {
-      // the offset removed is b's estimate: its error e (covariance P_b, body, uT^2) stays in every
-      // reading; its part across the horizontal field (body x = R^T e_x, magnetic north +y) turns
-      // the heading by e . x / (m cos dip). b is constant, so the heading's averaging does not
-      // reduce it (the parallel KF's hard_iron term), by the magnetometer's share
-      const Eigen::Vector3d across = x_.q_world_body.conjugate() * Eigen::Vector3d::UnitX();
-      cov(2, 2) += share * share * across.dot(x_.hard_iron.covariance() * across) / (mh * mh);
-    }
-  }
-  // heading: the tilt's error through the dip. The row's innovation is
-  //   dpsi = dth_z + tan(dip) dth_n
-  // with dth_n the world-frame error about magnetic north (+y, the reference's horizontal
-  // direction). The row's H has both terms and considers the tilt (aid_mag_heading.cpp), so P's
-  // own tilt error reaches P's heading. The tilt errors P does not hold (tilt_slow) pull the
-  // heading where the row's two terms cancel: e_z = g e_y with g = -share tan(dip); slower than
-  // the heading's lag they are followed whole: A tilt_slow A^T with A = I + g e_z e_y^T.
-  if (std::isfinite(r_heading) && fg.learnt && cos_dip > 1e-3) {
-    const double share = std::min(1.0, p_heading * p_heading / (q * r_heading));
-    const double g = -share * std::tan(fg.dip_rad);
-    Eigen::Matrix3d follow = Eigen::Matrix3d::Identity();
-    follow(2, 1) = g;
-    tilt_slow = follow * tilt_slow * follow.transpose();
-  }
-  return cov + tilt_slow;
+  return out;
 }
 
 }  // namespace poise

@@ -561,7 +561,15 @@ void SelectiveEkf::field_offsets(ImuInput& in) {
   const Eigen::Matrix3d r_ib = x_.pre.q_ib.toRotationMatrix();
   const Eigen::Vector3d raw = in.mag;
   if (p_.hard_iron) {
+    const double offset_var = unremoved_offset_var() + removed_offset_var();
     x_.hard_iron.update(in.stamp_ns, r_ib, in.gyro - x_.b_rps, raw);
+    if (x_.hard_iron.report().step == HardIronStep::kReset) {
+      // the offset changed: what the old one put in stays (and is corrected away by the rows);
+      // the sensitivities count the new offset's readings from here
+      x_.offset_left_var += offset_var;
+      x_.heading_per_offset.setZero();
+      x_.heading_per_removed_offset.setZero();
+    }
     x_.mag_offset_pending = x_.hard_iron.pending();
     if (x_.hard_iron.applied()) {
       in.mag = raw - x_.hard_iron.offset_ut();

@@ -179,6 +179,18 @@ void update_error_covariance_block(SelectiveEkfState& x, const Eigen::Matrix<dou
   auto z = x.ext_accel_error.template segment<NB>(Off);
   const Eigen::Matrix<double, M, 1> hz = h * z;
   z -= k * hz;
+  // the heading error an offset left in the readings put in (SelectiveEkfState::heading_per_offset):
+  // these rows take back their share of a world heading error, u^T K H u (u: up in the body)
+  if constexpr (Off == 0 && NB >= SelectiveEkf::kTh + 3) {
+    if (!x.heading_per_offset.isZero() || !x.heading_per_removed_offset.isZero() || x.offset_left_var > 0.0) {
+      const Eigen::Vector3d u = x.q_world_body.conjugate() * Eigen::Vector3d::UnitZ();
+      const Eigen::Matrix<double, M, 1> hu = h.template middleCols<3>(SelectiveEkf::kTh) * u;
+      const double kept = 1.0 - u.dot(k.template middleRows<3>(SelectiveEkf::kTh) * hu);
+      x.heading_per_offset *= kept;
+      x.heading_per_removed_offset *= kept;
+      x.offset_left_var *= kept * kept;
+    }
+  }
   const bool selector = selector_rows(h);
   const Eigen::Matrix<double, NB, M> a = times_ht(c, h, selector);
   Eigen::Matrix<double, M, M> s = h_times(h, a, selector);

@@ -54,6 +54,20 @@ inline sim::SimConfig attached_magnet_hand_held(const Eigen::Vector3d& offset_ut
   return cfg;
 }
 
+/// The same with the body tumbling (no levelling: the rotation shows the offset along every axis)
+/// instead of hand-held.
+inline sim::SimConfig attached_magnet_tumbling(const Eigen::Vector3d& offset_ut) {
+  sim::SimConfig cfg = attached_magnet_hand_held(offset_ut);
+  sim::MotionSegment& motion = cfg.segments[1];
+  motion.name = "tumble";
+  motion.rotation_amplitude_rps = 2.0;
+  motion.rotation_freq_hz = 0.3;
+  motion.level_gain_per_s = 0.0;
+  motion.accel_amplitude_mps2 = 2.0;
+  motion.accel_freq_hz = 0.6;
+  return cfg;
+}
+
 /// The same run as BROAD's sensor records it (its figures as the filters' defaults assume them):
 /// 285.7 Hz, gyro noise 0.15 deg/s, accelerometer 0.05 m/s^2 and magnetometer 0.6 uT per sample;
 /// `seed` the noise's.

@@ -267,10 +267,11 @@ struct SelectiveEkfParams {
   /// ones pass at once. Differences above 30 deg (a reset) are taken at once. 0 = the state.
   double output_max_correction_dps = 20.0;
   /// Published covariance only (attitude_covariance(); the estimate does not use it): the
-  /// relative gyro scale error it allows for, per axis. A scale error s turns the estimate by s
-  /// times the rotation the corrections have not caught up with yet (the rotation away from the
-  /// attitude low-passed over the tilt's and the heading's correction lags). MPU6050: +-3 %
-  /// uncalibrated; 0.5 % is the residue after a rate-table or turn calibration. 0 = none.
+  /// relative gyro scale error it allows for, per axis, each axis' independent of the others'. A
+  /// scale error s_i turns the estimate by s_i times axis i's rotation the corrections have not
+  /// caught up with yet (the rotation away from the attitude low-passed over the tilt's and the
+  /// heading's correction lags). MPU6050: +-3 % uncalibrated; 0.5 % is the residue after a
+  /// rate-table or turn calibration. 0 = none.
   double gyro_scale_error = 0.005;
   // ---- figures of the sensor (the estimate's error covariance P_err only; the gains never read
   // them, so the estimate is the same bit for bit whatever their value). NaN (default; null in
@@ -460,10 +461,12 @@ struct SelectiveEkfPreState {
 /// What the published covariance adds to P (attitude_covariance(), src/published_covariance.cpp):
 /// the errors the filter does not model, tracked with the samples (so replays reproduce them).
 struct SelectiveEkfUnmodelled {
-  /// the rotation the tilt's and the heading's corrections have not caught up with yet: the
-  /// world-frame rotation increments R w dt high-passed over each correction lag (rad); a gyro
-  /// scale error s turns the estimate by s times it
-  Eigen::Vector3d rotation_tilt{0.0, 0.0, 0.0};
+  /// the rotation the tilt's and the heading's corrections have not caught up with yet, per body
+  /// axis (a gyro's scale error is its own on each axis): the world-frame rotation increments
+  /// R e_i w_i dt high-passed over each correction lag, column i (rotation_tilt, world x, y, z) and
+  /// its world-z component (rotation_heading, element i), rad; a scale error s_i of axis i turns
+  /// the estimate by s_i times column i
+  Eigen::Matrix3d rotation_tilt = Eigen::Matrix3d::Zero();
   Eigen::Vector3d rotation_heading{0.0, 0.0, 0.0};
   /// the tilt rows' innovation as a world-frame rotation, low-passed over the tilt's correction
   /// lag: the accelerometer's disturbance the tilt is still following, rad
@@ -472,6 +475,12 @@ struct SelectiveEkfUnmodelled {
   /// (ext_accel_error's attitude part, world x, y) squared, low-passed over the tilt's lag: its
   /// variance, rad^2 (accel_noise_density_mps2_per_sqrt_hz known; else zero)
   Eigen::Matrix2d ext_accel_power = Eigen::Matrix2d::Zero();
+  /// the tilt's unmodelled errors above (rotation_tilt, tilt_innovation_lp and ext_accel_error's
+  /// tilt part, world x, y) low-passed again over the heading's lag: the heading follows a tilt
+  /// error about magnetic north through the dip only as its corrections average it, rad
+  Eigen::Vector3d rotation_tilt_at_heading{0.0, 0.0, 0.0};  ///< rotation_tilt's world y per body axis
+  Eigen::Vector2d tilt_innovation_at_heading{0.0, 0.0};
+  Eigen::Vector2d ext_accel_at_heading{0.0, 0.0};
   double field_dn_lp = 0.0;    ///< |m| - reference of the fields used, low-passed over the heading lag, uT
   double field_dv_lp = 0.0;    ///< reference |m| (dip - reference dip), the same, uT
   double last_dt_s = 0.0;      ///< the last sample interval, s
@@ -508,6 +517,24 @@ struct SelectiveEkfState {
   /// so the filter's own response to it (docs/SELECTIVE_EKF.md "External acceleration"). Zero
   /// when the figure is not known.
   Eigen::Matrix<double, 18, 1> ext_accel_error = Eigen::Matrix<double, 18, 1>::Zero();
+  /// kSplit: the world heading error, rad, that a body-fixed offset b (uT) left in the readings
+  /// the heading row fused has put into the estimate is heading_per_offset . b. Driven by the
+  /// heading row while its reading is not corrected (hard_iron not applied): the row's heading
+  /// gain times the innovation's sensitivity to the reading, d dpsi / d m_body; every row's gain
+  /// takes its share back (s <- (1 - u^T K H u) s, u = up in the body: the world heading's
+  /// direction), the prediction leaves a world-frame heading error as it is. So it holds the
+  /// heading row's averaging over the rotation, gyro-only stretches and vision's corrections
+  /// (published_covariance.cpp, "offset").
+  Eigen::Vector3d heading_per_offset{0.0, 0.0, 0.0};
+  /// The same for the readings the hard-iron estimate corrected: their offset is b's estimate's
+  /// error (covariance P_b), the heading error it put in heading_per_removed_offset . (b - b_hat)
+  Eigen::Vector3d heading_per_removed_offset{0.0, 0.0, 0.0};
+  /// The heading variance, rad^2, an offset the readings no longer carry left in the estimate:
+  /// when the hard-iron estimate reopens (HardIronStep::kReset: the offset changed), the two terms
+  /// above as they stood move here and both sensitivities restart at zero (they count only the
+  /// readings of the new offset); every row's gain takes its share back ((1 - u^T K H u)^2, as
+  /// the sensitivities).
+  double offset_left_var = 0.0;
   int64_t stamp_ns = -1;                 ///< time of the state
   int64_t untrusted_until_ns = -1;       ///< magnetometer untrusted until (hold)
   int64_t q_error_fail_since_ns = -1;    ///< start of the current quaternion-error failure run
@@ -678,6 +705,15 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// The heading's correction time constant now, s: the heading density the filter fuses (rad^2
   /// s, inflated while untrusted) over P's heading variance; infinite without a heading row.
   [[nodiscard]] double heading_lag_s() const;
+  /// The heading variance, rad^2, of an offset the hard-iron estimate holds (converged) but does
+  /// not remove (|b| at or below min_applied_ut, or not consistent), through the heading row's
+  /// own gains (SelectiveEkfState::heading_per_offset): (s . b)^2 + s^T P_b s, the mean part only
+  /// while the estimate is consistent (a body offset's; otherwise it fits a field that varies in
+  /// space); 0 otherwise. Part of attitude_covariance(), with SelectiveEkfState::offset_left_var.
+  [[nodiscard]] double unremoved_offset_var() const;
+  /// The heading variance, rad^2, of the removed offset's error (hard_iron applied): s_r^T P_b s_r,
+  /// s_r = SelectiveEkfState::heading_per_removed_offset, while the estimate is converged.
+  [[nodiscard]] double removed_offset_var() const;
   /// The camera-IMU time offset in use (vision_time_offset_s, or its online estimate), its
   /// sigma, convergence and per-frame decisions (vision_time_offset.h).
   [[nodiscard]] const VisionTimeOffsetStatus& vision_time_offset() const { return time_offset_.status(); }
@@ -740,6 +776,9 @@ class SelectiveEkf : private SelectiveEkfFullState {
   /// delay_ns() of the last sample (the state's time = its stamp - this).
   [[nodiscard]] int64_t current_delay_ns() const { return delay_ns(x_.unmodelled.last_dt_s); }
   [[nodiscard]] Eigen::Matrix3d output_error_covariance() const;  ///< P_err at the output (attitude_covariance)
+  [[nodiscard]] double heading_row_density() const;  ///< the last magnetometer row's density, rad^2 s (attitude_covariance)
+  /// the accelerometer's disturbance on the tilt and, through the dip, the heading (attitude_covariance)
+  [[nodiscard]] Eigen::Matrix3d tilt_following(double q, double p_tilt, double g) const;
 };
 
 // ---- Reporting (selective_ekf_report.cpp): the core's outputs in the shapes every node maps 1:1.
