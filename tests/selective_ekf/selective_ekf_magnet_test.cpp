@@ -68,6 +68,20 @@ MagnetRun attached_magnet_run(const sim::SimConfig& cfg, bool told = true) {
   return r;
 }
 
+/// One magnet of a test's cases: its body offset, uT, and how the output names it.
+struct MagnetCase {
+  Eigen::Vector3d offset;
+  const char* what;
+};
+
+/// attached_magnet_run with its figures printed under the case's name.
+MagnetRun reported_run(const sim::SimConfig& cfg, const MagnetCase& c, bool told = true) {
+  const MagnetRun r = attached_magnet_run(cfg, told);
+  std::printf("%s: heading rms over the motion %.2f deg, %.1f %% inside the 95 %% bound\n", c.what, r.heading_rms_deg,
+              100.0 * r.covered);
+  return r;
+}
+
 TEST(SelectiveEkfMagnet, GivenAMagnetAttachedAtRestAndRemovedInMotionWhenTheGateCannotTellThenTheHeadingHoldsAndIsCovered) {
   // GIVEN a hand-held sensor in BROAD's field, a magnet attached at rest and removed in the motion,
   // its body offset
@@ -77,17 +91,12 @@ TEST(SelectiveEkfMagnet, GivenAMagnetAttachedAtRestAndRemovedInMotionWhenTheGate
   //   - 10 uT along +x (across it, at rest: |m| moves by 1.1 uT of 44, the heading by 34 deg).
   // Before (no hard-iron estimate, no moved-at-rest test): 120.4 / 17.5 / 21.7 deg rms, 0 / 24 /
   // 0 % covered.
-  const struct {
-    Eigen::Vector3d offset;
-    const char* what;
-  } cases[] = {{{0.0, -25.0, 0.0}, "25 uT along -y"},
+  const MagnetCase cases[] = {{{0.0, -25.0, 0.0}, "25 uT along -y"},
                {{-25.0, 0.0, 0.0}, "25 uT along -x"},
                {{10.0, 0.0, 0.0}, "10 uT along +x"}};
   for (const auto& c : cases) {
     // WHEN the default filter (IMU only) runs on it
-    const MagnetRun r = attached_magnet_run(testing::attached_magnet_hand_held(c.offset));
-    std::printf("%s: heading rms over the motion %.2f deg, %.1f %% inside the 95 %% bound\n", c.what,
-                r.heading_rms_deg, 100.0 * r.covered);
+    const MagnetRun r = reported_run(testing::attached_magnet_hand_held(c.offset), c);
     // THEN the heading stays within tolerance of the truth (the raw field is not used while the
     // offset cannot be removed, nor when it moved at rest) and the published heading variance
     // covers its error
@@ -102,17 +111,12 @@ TEST(SelectiveEkfMagnet, GivenASmallMagnetTheEstimateDoesNotRemoveWhenTumblingTh
   // estimate converges on it but does not remove it (|b| at or below min_applied_ut, 5 uT), so
   // the heading row fuses the raw field and the heading carries the offset's error (2-6 deg).
   // Before (no "offset" term: the published variance left it out): 72.3 / 19.6 / 62.5 % covered (heading rms 2.63 / 6.10 / 3.94 deg).
-  const struct {
-    Eigen::Vector3d offset;
-    const char* what;
-  } cases[] = {{{3.0, 0.0, 0.0}, "3 uT along +x"},
+  const MagnetCase cases[] = {{{3.0, 0.0, 0.0}, "3 uT along +x"},
                {Eigen::Vector3d(1.0, -1.0, -1.0).normalized() * 3.0, "3 uT along (1, -1, -1)"},
                {{5.0, 0.0, 0.0}, "5 uT along +x"}};
   for (const auto& c : cases) {
     // WHEN the default filter (IMU only) runs on it
-    const MagnetRun r = attached_magnet_run(testing::attached_magnet_tumbling(c.offset));
-    std::printf("%s: heading rms over the motion %.2f deg, %.1f %% inside the 95 %% bound\n", c.what,
-                r.heading_rms_deg, 100.0 * r.covered);
+    const MagnetRun r = reported_run(testing::attached_magnet_tumbling(c.offset), c);
     // THEN the published heading variance covers the error the unremoved offset puts in (the
     // heading row's response to it through its own gains, SelectiveEkfState::heading_per_offset)
     EXPECT_GE(r.covered, kMinCovered) << c.what;
@@ -126,15 +130,10 @@ TEST(SelectiveEkfMagnet, GivenAMagnetRemovedInMotionWhenTheHardIronEstimateReope
   // the removal). What the offset put into the heading before the estimate reopened stays until
   // the rows correct it away (SelectiveEkfState::offset_left_var). Before (the terms dropped at
   // the reopen): 79.2 / 77.7 % covered, heading rms 3.66 / 1.94 deg (the scratch sweep's cells).
-  const struct {
-    Eigen::Vector3d offset;
-    const char* what;
-  } cases[] = {{{0.0, -10.0, 0.0}, "10 uT along -y"}, {{0.0, -15.0, 0.0}, "15 uT along -y"}};
+  const MagnetCase cases[] = {{{0.0, -10.0, 0.0}, "10 uT along -y"}, {{0.0, -15.0, 0.0}, "15 uT along -y"}};
   for (const auto& c : cases) {
     // WHEN the default filter (IMU only, BROAD's sensor's figures) runs on it
-    const MagnetRun r = attached_magnet_run(testing::attached_magnet_hand_held_broad_noise(c.offset, 1), false);
-    std::printf("%s: heading rms over the motion %.2f deg, %.1f %% inside the 95 %% bound\n", c.what,
-                r.heading_rms_deg, 100.0 * r.covered);
+    const MagnetRun r = reported_run(testing::attached_magnet_hand_held_broad_noise(c.offset, 1), c, false);
     // THEN the published heading variance covers the heading error (the accuracy is a bound only:
     // this change is to the covariance)
     EXPECT_GE(r.covered, kMinCovered) << c.what;
