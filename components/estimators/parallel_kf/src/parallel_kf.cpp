@@ -81,6 +81,7 @@ ParallelKfParams ParallelKfParams::paper() {
   p.coning_correction = false;
   p.quadratic_rate = false;
   p.hard_iron = false;
+  p.mag_adaptive_noise = false;
   return p;
 }
 
@@ -967,6 +968,14 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
   // the heading as much as the reading's own noise there, so KF2 takes it as noise (it is constant
   // in the body, so white is an approximation: the body's turning decorrelates it in the world)
   s_.mag_extra_var += removed_offset_var_across_ut2();
+  if (p_.mag_adaptive_noise && p_.mag_gating) {
+    // the heading variance the field's disturbance certainly has (field_rotation_var, rad^2), as
+    // the per-component noise of s_M that gives KF2 that much about the vertical: a heading angle
+    // is the horizontal component's across the field, m cos(dip), and KF2 weighs 2 sigma^2 (its
+    // white disturbance state doubles it; heading_lag_s), so v = 2 sigma^2 / (m cos(dip))^2
+    s_.mag_adapt_var = 0.5 * field_rotation_var() * s_.gate.m_ut * s_.gate.m_ut * s_.c2_dip;
+    s_.mag_extra_var += s_.mag_adapt_var;
+  }
   const Eigen::Vector3d x_prior = s_.kf2.u();
   s_.kf2.correct(mag, s_.gate.m_ut, s_.mag_extra_var);  // (10b), (11f)-(11h)
   s_.mag_extra_var = 0.0;
@@ -1250,7 +1259,7 @@ double ParallelKf::heading_lag_s(double dt) const {
   }
   const double a_h = across.dot(s_.kf2.direction_covariance() * across);
   const double m = s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0;
-  const double noise = 2.0 * p_.sigma_mag_ut * p_.sigma_mag_ut / (m * m);
+  const double noise = 2.0 * (p_.sigma_mag_ut * p_.sigma_mag_ut + s_.mag_adapt_var) / (m * m);
   const double gain = std::min(1.0, a_h / noise);
   return gain > 0.0 ? dt / gain : 0.0;
 }

@@ -249,6 +249,15 @@ struct ParallelKfParams {
   /// > 0: below the gate, sigma_M^2 is inflated by weight * sigma_M^2 * (r_norm^2 + r_dip^2), r =
   /// deviation / tolerance (soft weighting of a nearly disturbed field). 0 = off.
   double mag_soft_weight = 0.0;
+  /// With mag_gating: KF2 weighs an accepted field against the disturbance its own innovation
+  /// shows. The heading variance a rotated field leaves (field_rotation_var: KF2's innovation about
+  /// the vertical, low-passed over KF2's lag, beyond what white noise and the attitude error
+  /// explain) is a lower bound of that field's disturbance variance (the low-pass |H| <= 1 passes
+  /// at most all of it); it is added to the heading's measurement noise (Mehra's innovation-based
+  /// R, its certain part only). A field turned where the sensor moves (a magnet in the room) then
+  /// pulls the heading with a longer lag; a clean field leaves no excess and the gain is as before.
+  /// Off in paper(). docs/ESTIMATORS.md "A field turned in the room".
+  bool mag_adaptive_noise = true;
 
   // --- hard-iron offset (extension; poise/core/hard_iron.h)
   /// Learn a body-fixed field offset b online (a magnet attached to the sensor) from the
@@ -350,6 +359,7 @@ struct ParallelKfState {
 
   FieldGate gate;  ///< magnetic field reference, gate, re-acquisition (poise/core/field_gate.h)
   double mag_extra_var = 0.0;  ///< soft-gating inflation of M2 for the current sample, uT^2
+  double mag_adapt_var = 0.0;  ///< the disturbance noise added to M2 for the last accepted field (mag_adaptive_noise), uT^2
 
   // inertial low-pass of the accelerometer
   /// body -> almost inertial frame, gyro only (accel_lowpass_tau_s > 0 or hard_iron)
