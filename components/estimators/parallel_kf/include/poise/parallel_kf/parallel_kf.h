@@ -39,6 +39,9 @@
 //     samples (quadratic_rate: what low rates need), and the output predicted
 //     over the IMU's group delay (imu_delay_s, a calibrated property of the sensor);
 //   - soft inflation of M2 as the field approaches the gate (mag_soft_weight, off: no gain);
+//   - M2 inflated by the field disturbance KF2's own innovation shows beyond its white noise and
+//     the attitude error (mag_adaptive_noise): a field turned in the room where the sensor moves
+//     (BROAD 30: 2.113 -> 1.273 deg) pulls the heading with a longer lag;
 //   - a hard-iron offset learnt online (hard_iron, poise/core/hard_iron.h: a magnet fixed to the
 //     sensor) from the bias-corrected gyro and the raw s_M, removed from the s_M the gate and KF2
 //     see once known, above 5 uT and consistent (removing it steadies the field's magnitude over
@@ -256,7 +259,8 @@ struct ParallelKfParams {
   /// at most all of it); it is added to the heading's measurement noise (Mehra's innovation-based
   /// R, its certain part only). A field turned where the sensor moves (a magnet in the room) then
   /// pulls the heading with a longer lag; a clean field leaves no excess and the gain is as before.
-  /// Off in paper(). docs/ESTIMATORS.md "A field turned in the room".
+  /// Not for a reading with a hard-iron offset removed (its error is the filter's own). Off in
+  /// paper(). docs/ESTIMATORS.md "A field turned in the room".
   bool mag_adaptive_noise = true;
 
   // --- hard-iron offset (extension; poise/core/hard_iron.h)
@@ -758,6 +762,9 @@ class ParallelKf {
   bool field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, double dt);
   /// KF2's correction (predicted already, before KF1's correction was shared) and the gate
   void heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt);
+  /// M2's inflation for an accepted field: soft gating, the removed offset's error, the disturbance
+  /// KF2's innovation shows (mag_adaptive_noise)
+  void field_noise_step();
   /// KF2 restarted on the field `mag` (a relearnt reference, or the first accepted field after a
   /// start on a gated one): the heading jumps to it, as at a start
   void restart_heading(const Eigen::Vector3d& mag);
