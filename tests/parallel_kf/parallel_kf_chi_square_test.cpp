@@ -12,6 +12,8 @@
 #include "poise/sim/sensor_simulator.h"
 #include "poise/testing/averaged_nees.h"
 #include "poise/testing/chi_square.h"
+#include "poise/testing/rotated_field.h"
+#include "told_sensor.h"
 
 #include <gtest/gtest.h>
 
@@ -45,21 +47,6 @@ constexpr int kMaxAbove = 3;
 // against the accepted dips so that it no longer reads the tilt error): two-sided over all 21 instants,
 // at most 3 outside (P(more | consistent) = 1.9 %, binomial).
 constexpr int kMaxOutsideHeading = 3;
-
-/// The filter told what the simulated sensor is (its keys describe the sensor): the heading's
-/// gyro and magnetometer noise per sample, the simulator's gravity and Earth field (known, as
-/// GaussNewtonChiSquare's), no gyro scale error, no delay (its bias walk: run_at_rest).
-ParallelKfParams told_the_simulated_sensor(const sim::SimConfig& cfg) {
-  ParallelKfParams p = ParallelKfParams::defaults();
-  p.tilt.gravity_mps2 = cfg.gravity_mps2;
-  p.sigma_gyro_heading_rps = cfg.noise.sigma_gyro_rps;
-  p.sigma_mag_ut = cfg.noise.sigma_mag_ut;
-  p.motion_gyro_scale_error = 0.0;
-  p.field_magnitude_ut = cfg.field.magnitude_ut;
-  p.dip_deg = cfg.field.dip_deg;
-  p.imu_delay_s = 0.0;  // the simulator's samples are at their stamps
-  return p;
-}
 
 /// One run of `cfg` through a filter with `p`, its NEES added to `a` at each of a's instants.
 void add_run(const sim::SimConfig& cfg, const ParallelKfParams& p, testing::AveragedNees& a) {
@@ -266,28 +253,6 @@ constexpr double kRotatedLastS = 140.0;    // ... to, s
 constexpr double kRotatedEveryS = 2.0;     // ... every, s
 constexpr int kRotatedRuns = 20;
 
-/// The simulator with the Earth field's horizontal direction turned by delta(t) about the vertical:
-/// mag += R^T (Rz(delta) - I) m_world (the magnetometer is linear in the field).
-class RotatedFieldSim {
- public:
-  explicit RotatedFieldSim(const sim::SimConfig& cfg) : sim_(cfg) {}
-  [[nodiscard]] bool done() const { return sim_.done(); }
-  sim::SimSample next() {
-    sim::SimSample s = sim_.next();
-    const double t = s.truth.t_s - kRotationStartS;
-    if (t > 0.0) {
-      const double delta = kRotationDeg * kRadPerDeg * std::sin(2.0 * kPi * t / kRotationPeriodS);
-      const Eigen::Vector3d m = s.truth.mag_earth_world_ut;
-      const Eigen::Vector3d turned = Eigen::AngleAxisd(delta, Eigen::Vector3d::UnitZ()) * m;
-      s.imu.mag_ut += s.truth.q_world_body.conjugate() * (turned - m);
-    }
-    return s;
-  }
-
- private:
-  sim::SensorSimulator sim_;
-};
-
 TEST(ParallelKfChiSquare, GivenAFieldWhoseHorizontalDirectionTurnsWhereTheSensorMovesWhenRunManyTimesThenTheHeadingsAveragedNeesStaysBelowItsChiSquareBound) {
   testing::AveragedNees a(kRotatedFirstS, kRotatedLastS, kRotatedEveryS, kRotatedRuns);
   testing::AveragedNees control(kRotatedFirstS, kRotatedLastS, kRotatedEveryS, kRotatedRuns);
@@ -297,7 +262,7 @@ TEST(ParallelKfChiSquare, GivenAFieldWhoseHorizontalDirectionTurnsWhereTheSensor
     cfg.duration_s = kRotatedLastS + 0.5;
     const ParallelKfParams p = told_every_figure(cfg, 11000 + static_cast<uint64_t>(run));
     ParallelKf kf(p);
-    RotatedFieldSim simu(cfg);
+    testing::RotatedFieldSim simu(cfg, {kRotationDeg * kRadPerDeg, kRotationPeriodS, kRotationStartS});
     // WHEN the filter runs over every sample
     int next = 0;
     while (!simu.done() && next < a.instants()) {

@@ -50,9 +50,10 @@ struct HeadingScore {
 
 /// Runs the default filter (field reference configured, hard_iron as given) on the tumbling sensor;
 /// the oracle is the simulator's attitude.
-HeadingScore run_tumbling(bool hard_iron) {
+HeadingScore run_tumbling(bool hard_iron, bool adaptive_noise = true) {
   ParallelKfParams p;
   p.hard_iron = hard_iron;
+  p.mag_adaptive_noise = adaptive_noise;
   p.field_magnitude_ut = kFieldWorldUt.norm();
   p.dip_deg = std::atan2(-kFieldWorldUt.z(), kFieldWorldUt.y()) * kDegPerRad;
   p.imu_delay_s = 0.0;
@@ -119,10 +120,13 @@ TEST(ParallelKfHardIron, GivenATumblingSensorWithABodyFixedOffsetWhenRunWithTheD
 }
 
 TEST(ParallelKfHardIron, GivenATumblingSensorWithABodyFixedOffsetWhenHardIronIsOffThenTheHeadingIsWorse) {
-  // GIVEN the same sensor, WHEN the filter runs with hard_iron: false
+  // GIVEN the same sensor, WHEN the filter runs with hard_iron: false (and without
+  // mag_adaptive_noise, which weighs an uncorrected offset's field as a disturbance and so resists
+  // it too, 2.48 deg here: the control isolates what the estimator does)
   const HeadingScore on = run_tumbling(true);
-  const HeadingScore off = run_tumbling(false);
-  std::printf("hard_iron off: heading rms %.3f deg (on: %.3f deg)\n", off.rms_deg, on.rms_deg);
+  const HeadingScore off = run_tumbling(false, false);
+  std::printf("hard_iron off: heading rms %.3f deg (on: %.3f deg; off with mag_adaptive_noise %.3f deg)\n", off.rms_deg,
+              on.rms_deg, run_tumbling(false).rms_deg);
   // THEN nothing is corrected and the heading is clearly worse than with the estimator
   EXPECT_EQ(off.corrected, 0U);
   EXPECT_FALSE(off.reported);

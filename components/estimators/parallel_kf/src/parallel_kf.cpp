@@ -81,6 +81,7 @@ ParallelKfParams ParallelKfParams::paper() {
   p.coning_correction = false;
   p.quadratic_rate = false;
   p.hard_iron = false;
+  p.mag_adaptive_noise = false;
   return p;
 }
 
@@ -957,16 +958,7 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
     case FieldVerdict::kAccepted: break;
     case FieldVerdict::kRelearnt: break;  // restarted above
   }
-  if (p_.mag_soft_weight > 0.0 && std::isfinite(s_.gate.last_norm_ut)) {
-    // inflate M2 smoothly with the gate ratios (1 at the gate)
-    const double rn = s_.gate.norm_ratio(gp_);
-    const double rd = s_.gate.dip_ratio();
-    s_.mag_extra_var = p_.mag_soft_weight * p_.sigma_mag_ut * p_.sigma_mag_ut * (rn * rn + rd * rd);
-  }
-  // The removed offset's error stays in every corrected reading: its part across the field turns
-  // the heading as much as the reading's own noise there, so KF2 takes it as noise (it is constant
-  // in the body, so white is an approximation: the body's turning decorrelates it in the world)
-  s_.mag_extra_var += removed_offset_var_across_ut2();
+  field_noise_step();
   const Eigen::Vector3d x_prior = s_.kf2.u();
   s_.kf2.correct(mag, s_.gate.m_ut, s_.mag_extra_var);  // (10b), (11f)-(11h)
   s_.mag_extra_var = 0.0;
@@ -1002,6 +994,33 @@ void ParallelKf::heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt
         unit ? s_.kf2.u().cross(x_prior) : s_.kf2.u().normalized().cross(x_prior.normalized());
     s_.mb_head += corr.dot(s_.kf1.up_body()) / s_.c2_dip;
     s_.mb_head_used = true;
+  }
+}
+
+void ParallelKf::field_noise_step() {
+  // What KF2 adds to sigma_M^2 for this accepted field (mag_extra_var, uT^2 per component)
+  if (p_.mag_soft_weight > 0.0 && std::isfinite(s_.gate.last_norm_ut)) {
+    // inflate M2 smoothly with the gate ratios (1 at the gate)
+    const double rn = s_.gate.norm_ratio(gp_);
+    const double rd = s_.gate.dip_ratio();
+    s_.mag_extra_var = p_.mag_soft_weight * p_.sigma_mag_ut * p_.sigma_mag_ut * (rn * rn + rd * rd);
+  }
+  // The removed offset's error stays in every corrected reading: its part across the field turns
+  // the heading as much as the reading's own noise there, so KF2 takes it as noise (it is constant
+  // in the body, so white is an approximation: the body's turning decorrelates it in the world)
+  s_.mag_extra_var += removed_offset_var_across_ut2();
+  s_.mag_adapt_var = 0.0;
+  if (p_.mag_adaptive_noise && p_.mag_gating && !s_.mag_corrected) {
+    // the heading variance the field's disturbance certainly has (field_rotation_var, rad^2), as
+    // the per-component noise of s_M that gives KF2 that much about the vertical: a heading angle
+    // is the horizontal component's across the field, m cos(dip), and KF2 weighs 2 sigma^2 (its
+    // white disturbance state doubles it; heading_lag_s), so v = 2 sigma^2 / (m cos(dip))^2.
+    // Not for a reading with an offset removed: the offset estimate's error is the filter's own, it
+    // leaves the heading an error the published covariance does not fully cover, and that error,
+    // read as a disturbance, would slow the very correction that removes it (a tumbling sensor
+    // with a 15 uT magnet: 0.82 -> 9.4 deg, parallel_kf_hard_iron_test)
+    s_.mag_adapt_var = 0.5 * field_rotation_var() * s_.gate.m_ut * s_.gate.m_ut * s_.c2_dip;
+    s_.mag_extra_var += s_.mag_adapt_var;
   }
 }
 
@@ -1250,7 +1269,7 @@ double ParallelKf::heading_lag_s(double dt) const {
   }
   const double a_h = across.dot(s_.kf2.direction_covariance() * across);
   const double m = s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0;
-  const double noise = 2.0 * p_.sigma_mag_ut * p_.sigma_mag_ut / (m * m);
+  const double noise = 2.0 * (p_.sigma_mag_ut * p_.sigma_mag_ut + s_.mag_adapt_var) / (m * m);
   const double gain = std::min(1.0, a_h / noise);
   return gain > 0.0 ? dt / gain : 0.0;
 }

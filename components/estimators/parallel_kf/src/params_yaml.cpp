@@ -60,6 +60,7 @@ ParallelKfParams load_parallel_kf_params(const std::string& path, const Parallel
     r.get("mag_max_reject_s", p.mag_max_reject_s);
     r.get("mag_verify_s", p.mag_verify_s);
     r.get("mag_soft_weight", p.mag_soft_weight);
+    r.get("mag_adaptive_noise", p.mag_adaptive_noise);
     r.get("hard_iron", p.hard_iron);
     YamlParamReader hi = r.child("hard_iron_estimator");
     p.hard_iron_estimator.read(hi);

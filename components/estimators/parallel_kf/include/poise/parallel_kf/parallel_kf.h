@@ -39,6 +39,9 @@
 //     samples (quadratic_rate: what low rates need), and the output predicted
 //     over the IMU's group delay (imu_delay_s, a calibrated property of the sensor);
 //   - soft inflation of M2 as the field approaches the gate (mag_soft_weight, off: no gain);
+//   - M2 inflated by the field disturbance KF2's own innovation shows beyond its white noise and
+//     the attitude error (mag_adaptive_noise): a field turned in the room where the sensor moves
+//     (BROAD 30: 2.113 -> 1.273 deg) pulls the heading with a longer lag;
 //   - a hard-iron offset learnt online (hard_iron, poise/core/hard_iron.h: a magnet fixed to the
 //     sensor) from the bias-corrected gyro and the raw s_M, removed from the s_M the gate and KF2
 //     see once known, above 5 uT and consistent (removing it steadies the field's magnitude over
@@ -249,6 +252,16 @@ struct ParallelKfParams {
   /// > 0: below the gate, sigma_M^2 is inflated by weight * sigma_M^2 * (r_norm^2 + r_dip^2), r =
   /// deviation / tolerance (soft weighting of a nearly disturbed field). 0 = off.
   double mag_soft_weight = 0.0;
+  /// With mag_gating: KF2 weighs an accepted field against the disturbance its own innovation
+  /// shows. The heading variance a rotated field leaves (field_rotation_var: KF2's innovation about
+  /// the vertical, low-passed over KF2's lag, beyond what white noise and the attitude error
+  /// explain) is a lower bound of that field's disturbance variance (the low-pass |H| <= 1 passes
+  /// at most all of it); it is added to the heading's measurement noise (Mehra's innovation-based
+  /// R, its certain part only). A field turned where the sensor moves (a magnet in the room) then
+  /// pulls the heading with a longer lag; a clean field leaves no excess and the gain is as before.
+  /// Not for a reading with a hard-iron offset removed (its error is the filter's own). Off in
+  /// paper(). docs/ESTIMATORS.md "A field turned in the room".
+  bool mag_adaptive_noise = true;
 
   // --- hard-iron offset (extension; poise/core/hard_iron.h)
   /// Learn a body-fixed field offset b online (a magnet attached to the sensor) from the
@@ -350,6 +363,7 @@ struct ParallelKfState {
 
   FieldGate gate;  ///< magnetic field reference, gate, re-acquisition (poise/core/field_gate.h)
   double mag_extra_var = 0.0;  ///< soft-gating inflation of M2 for the current sample, uT^2
+  double mag_adapt_var = 0.0;  ///< the disturbance noise added to M2 for the last accepted field (mag_adaptive_noise), uT^2
 
   // inertial low-pass of the accelerometer
   /// body -> almost inertial frame, gyro only (accel_lowpass_tau_s > 0 or hard_iron)
@@ -748,6 +762,9 @@ class ParallelKf {
   bool field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, double dt);
   /// KF2's correction (predicted already, before KF1's correction was shared) and the gate
   void heading_step(const Eigen::Vector3d& mag, bool mag_ok, double dt);
+  /// M2's inflation for an accepted field: soft gating, the removed offset's error, the disturbance
+  /// KF2's innovation shows (mag_adaptive_noise)
+  void field_noise_step();
   /// KF2 restarted on the field `mag` (a relearnt reference, or the first accepted field after a
   /// start on a gated one): the heading jumps to it, as at a start
   void restart_heading(const Eigen::Vector3d& mag);
