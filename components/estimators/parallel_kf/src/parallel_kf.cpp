@@ -1011,10 +1011,11 @@ void ParallelKf::field_noise_step() {
   s_.mag_extra_var += removed_offset_var_across_ut2();
   s_.mag_adapt_var = 0.0;
   if (p_.mag_adaptive_noise && p_.mag_gating && !s_.mag_corrected) {
-    // the heading variance the field's disturbance certainly has (field_rotation_var, rad^2), as
-    // the per-component noise of s_M that gives KF2 that much about the vertical: a heading angle
-    // is the horizontal component's across the field, m cos(dip), and KF2 weighs 2 sigma^2 (its
-    // white disturbance state doubles it; heading_lag_s), so v = 2 sigma^2 / (m cos(dip))^2.
+    // the heading variance the field's disturbance certainly has (v = field_rotation_var, rad^2),
+    // as the per-component noise s^2 of s_M that gives KF2 that much about the vertical: a heading
+    // angle is the horizontal component across the field over m cos(dip), and KF2 weighs 2 s^2 (its
+    // white disturbance state doubles it; heading_lag_s), so v = 2 s^2 / (m cos(dip))^2, s^2 =
+    // v (m cos(dip))^2 / 2.
     // Not for a reading with an offset removed: the offset estimate's error is the filter's own, it
     // leaves the heading an error the published covariance does not fully cover, and that error,
     // read as a disturbance, would slow the very correction that removes it (a tumbling sensor
