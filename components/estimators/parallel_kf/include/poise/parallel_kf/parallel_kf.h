@@ -47,11 +47,11 @@
 //     see once known, above 5 uT and consistent (removing it steadies the field's magnitude over
 //     rotation); the heading variance then carries its uncertainty;
 //   - exact rotation propagation, renormalisation, c_a/c_d defined at a reference rate.
-// Measured on the 19 BROAD trials in ../shared/broad (mean total RMSE, undisturbed / disturbed):
-//   paper 11.6 / 16.0 deg (first-order propagation lets |sZ| grow without bound at ~1000 deg/s),
-//   default with BROAD's calibrated IMU delay (imu_delay_s 4.18 ms) 1.151 / 1.454 deg in-sample,
-//   1.194 / 1.463 leave-one-trial-out cross-validated (1.151 / 1.870 without the hard-iron
-//   offset); with no delay known (half a sample assumed) 1.240 / 1.556 (docs/ESTIMATORS.md). The Gauss-Newton baseline: 34.4 / 62.4 deg.
+// Measured on the 19 BROAD trials in ../shared/broad (mean total RMSE, undisturbed / disturbed;
+// docs/ESTIMATORS.md "Figures at a glance"): paper 11.6 / 16.0 deg (first-order propagation lets
+// |sZ| grow without bound at ~1000 deg/s); default with BROAD's calibrated IMU delay (imu_delay_s
+// 4.18 ms) 1.138 / 1.256 deg at 285.7 Hz, 1.142 / 1.287 at 95.2 Hz, 1.204 / 1.856 at 40.8 Hz; with
+// no delay known (half a sample assumed) 1.228 / 1.385. The Gauss-Newton baseline: 34.5 / 62.3 deg.
 // Bad input (NaN, zero vectors, non-monotonic stamps, gaps) is rejected and counted; the state is
 // untouched (a gap re-anchors time).
 // 6-axis input (ImuSample::has_mag false, the default: a sample has a magnetometer only when its
