@@ -47,8 +47,8 @@ void restart_heading(const AidContext& c, const Eigen::Vector3d& up, double dpsi
   x.unmodelled.field_dv_lp = 0.0;
   x.unmodelled.rotation_heading.setZero();
   x.unmodelled.rotation_tilt_at_heading.setZero();
-  x.unmodelled.tilt_innovation_at_heading.setZero();
-  x.unmodelled.ext_accel_at_heading.setZero();
+  x.unmodelled.tilt_innovation_at_heading = 0.0;
+  x.unmodelled.ext_accel_at_heading = 0.0;
   x.heading_per_offset.setZero();  // (the caller: the new heading's reading)
   x.heading_per_removed_offset.setZero();
   x.offset_left_var = 0.0;

@@ -165,10 +165,10 @@ void SelectiveEkf::track_unmodelled(const ImuInput& in, bool aided, double aidin
   // the same tilt errors as the heading's corrections average them (the dip term below)
   const double kh = lowpass_gain(in.dt_s, tau_heading);
   u.rotation_tilt_at_heading += kh * (u.rotation_tilt.row(1).transpose() - u.rotation_tilt_at_heading);
-  u.tilt_innovation_at_heading += kh * (u.tilt_innovation_lp.head<2>() - u.tilt_innovation_at_heading);
+  u.tilt_innovation_at_heading += kh * (u.tilt_innovation_lp.y() - u.tilt_innovation_at_heading);
   if (p_.imu_measurement == ImuMeasurement::kSplit && aids::accel_noise_known(p_)) {
-    const Eigen::Vector2d z = (r * x_.ext_accel_error.segment<3>(kTh)).head<2>();
-    u.ext_accel_at_heading += kh * (z - u.ext_accel_at_heading);
+    const double z_north = (r * x_.ext_accel_error.segment<3>(kTh)).y();
+    u.ext_accel_at_heading += kh * (z_north - u.ext_accel_at_heading);
   }
   const SourceStatus& heading = status(SelectiveEkfAid::kMagHeading);
   const FieldGate& g = x_.field_gate;
@@ -331,7 +331,7 @@ Eigen::Matrix3d SelectiveEkf::tilt_following(double q, double p_tilt, double g) 
     const double pyy = u.ext_accel_power(1, 1);
     if (pyy > 0.0) {
       Eigen::Matrix3d b = Eigen::Matrix3d::Identity();
-      b(2, 1) = g * std::abs(u.ext_accel_at_heading.y()) / std::sqrt(pyy);
+      b(2, 1) = g * std::abs(u.ext_accel_at_heading) / std::sqrt(pyy);
       out = b * out * b.transpose();
     }
     return out;
@@ -344,7 +344,7 @@ Eigen::Matrix3d SelectiveEkf::tilt_following(double q, double p_tilt, double g) 
   if (r_tilt > 0.0) {
     const double share = std::min(1.0, p_tilt * p_tilt / (q * r_tilt));
     const Eigen::Vector3d w = share * Eigen::Vector3d(u.tilt_innovation_lp.x(), u.tilt_innovation_lp.y(),
-                                                      g * u.tilt_innovation_at_heading.y());
+                                                      g * u.tilt_innovation_at_heading);
     out = w * w.transpose();
   }
   return out;

@@ -475,12 +475,13 @@ struct SelectiveEkfUnmodelled {
   /// (ext_accel_error's attitude part, world x, y) squared, low-passed over the tilt's lag: its
   /// variance, rad^2 (accel_noise_density_mps2_per_sqrt_hz known; else zero)
   Eigen::Matrix2d ext_accel_power = Eigen::Matrix2d::Zero();
-  /// the tilt's unmodelled errors above (rotation_tilt, tilt_innovation_lp and ext_accel_error's
-  /// tilt part, world x, y) low-passed again over the heading's lag: the heading follows a tilt
-  /// error about magnetic north through the dip only as its corrections average it, rad
+  /// the tilt's unmodelled errors above about magnetic north (world y: rotation_tilt's,
+  /// tilt_innovation_lp's and ext_accel_error's tilt part) low-passed again over the heading's lag:
+  /// the heading follows a tilt error about north through the dip only as its corrections average
+  /// it, rad
   Eigen::Vector3d rotation_tilt_at_heading{0.0, 0.0, 0.0};  ///< rotation_tilt's world y per body axis
-  Eigen::Vector2d tilt_innovation_at_heading{0.0, 0.0};
-  Eigen::Vector2d ext_accel_at_heading{0.0, 0.0};
+  double tilt_innovation_at_heading = 0.0;
+  double ext_accel_at_heading = 0.0;
   double field_dn_lp = 0.0;    ///< |m| - reference of the fields used, low-passed over the heading lag, uT
   double field_dv_lp = 0.0;    ///< reference |m| (dip - reference dip), the same, uT
   double last_dt_s = 0.0;      ///< the last sample interval, s
