@@ -592,6 +592,8 @@ TEST(ParallelKfParams, GivenABadValueOfAKeyWhenTheFilterIsBuiltThenTheErrorNames
     {"gyro_noise_density_rps_per_sqrt_hz", [](ParallelKfParams& p) { p.gyro_noise_density_rps_per_sqrt_hz = 1e308; }},
     {"gyro_noise_density_rps_per_sqrt_hz",
      [](ParallelKfParams& p) { p.gyro_noise_density_rps_per_sqrt_hz = std::numeric_limits<double>::infinity(); }},
+    {"gyro_initial_bias_sd_rps", [](ParallelKfParams& p) { p.gyro_initial_bias_sd_rps = -1e-6; }},
+    {"gyro_initial_bias_sd_rps", [](ParallelKfParams& p) { p.gyro_initial_bias_sd_rps = 1e308; }},
     {"gyro_scale_error", [](ParallelKfParams& p) { p.gyro_scale_error = -1e-6; }},
     {"gyro_scale_error", [](ParallelKfParams& p) { p.gyro_scale_error = 1.0; }}
   }, [](const ParallelKfParams& p) { ParallelKf f(p); });
@@ -655,6 +657,15 @@ TEST(ParallelKfParams, GivenTheGyroNoiseDensityInAFileWhenLoadedThenNullIsNotKno
       "gyro_noise_density_rps_per_sqrt_hz", &ParallelKfParams::gyro_noise_density_rps_per_sqrt_hz, 6.2e-5, 0.05, 5);
   // and a far noisier gyro than the simulated one leaves a less certain bias: more heading variance
   EXPECT_GT(noisy, unknown);
+}
+
+// The spread of the gyro's bias at start is the sensor's figure too: in [0, max_bias_rps] rad/s,
+// the estimate the same bit for bit whatever its value (the bias filter keeps bias_sigma_init_rps,
+// its design).
+TEST(ParallelKfParams, GivenTheGyroBiasAtStartInAFileWhenLoadedThenNullIsNotKnownAHostileValueIsRefusedAndTheEstimateIgnoresIt) {
+  // (what it does to the covariance: ParallelKfChiSquare.GivenAGyroWhoseBiasAtStart...; at the end
+  // of random_motion the start is forgotten)
+  (void)expect_a_sensor_figure("gyro_initial_bias_sd_rps", &ParallelKfParams::gyro_initial_bias_sd_rps, 4.4e-3, 0.0, 7);
 }
 
 // The gyro's scale-factor error is the sensor's figure too: in [0, 1), the estimate the same bit

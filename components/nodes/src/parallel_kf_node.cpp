@@ -5,7 +5,8 @@
 //           own bias walk, rad/s/sqrt(s), for the published covariance; overrides the file; a
 //           simulated IMU's host says its figure), gyro_noise_density_rps_per_sqrt_hz (the gyro's
 //           white noise density, rad/s/sqrt(Hz), for the published covariance; overrides the
-//           file), gyro_scale_error (the gyro's own scale-factor error, relative, the same way),
+//           file), gyro_initial_bias_sd_rps (the spread of the gyro's bias at start, rad/s, the
+//           same way), gyro_scale_error (the gyro's own scale-factor error, relative, the same way),
 //           node keys (NodeParams), north
 //           (declination_deg | location + date: estimator_step.h north_keys())
 //   Without imu_delay_s here or in the file, the delay the IMU's driver publishes on `imu_info`
@@ -24,7 +25,7 @@ ParallelKfParams load_params(const runtime::ComponentSpec& spec, const NorthRefe
   std::vector<std::string> known = NodeParams::keys();
   known.insert(known.end(), north_keys().begin(), north_keys().end());
   known.insert(known.end(), {"preset", "filter_file", "imu_delay_s", "gyro_bias_walk_rps_per_sqrt_s",
-                              "gyro_noise_density_rps_per_sqrt_hz", "gyro_scale_error"});
+                              "gyro_noise_density_rps_per_sqrt_hz", "gyro_initial_bias_sd_rps", "gyro_scale_error"});
   runtime::check_known_params(spec, known);
   const auto file = runtime::param<std::string>(spec, "filter_file", "");
   try {
@@ -35,6 +36,7 @@ ParallelKfParams load_params(const runtime::ComponentSpec& spec, const NorthRefe
         runtime::param<double>(spec, "gyro_bias_walk_rps_per_sqrt_s", p.gyro_bias_walk_rps_per_sqrt_s);
     p.gyro_noise_density_rps_per_sqrt_hz =
         runtime::param<double>(spec, "gyro_noise_density_rps_per_sqrt_hz", p.gyro_noise_density_rps_per_sqrt_hz);
+    p.gyro_initial_bias_sd_rps = runtime::param<double>(spec, "gyro_initial_bias_sd_rps", p.gyro_initial_bias_sd_rps);
     p.gyro_scale_error = runtime::param<double>(spec, "gyro_scale_error", p.gyro_scale_error);
     seed_field_reference(north, p.field_magnitude_ut, p.dip_deg);
     p.validate();

@@ -116,6 +116,9 @@ void ParallelKfParams::validate() const {
   check.require(std::isnan(gyro_bias_walk_rps_per_sqrt_s) ||
                     (gyro_bias_walk_rps_per_sqrt_s >= 0.0 && gyro_bias_walk_rps_per_sqrt_s <= kMaxGyroBiasWalk),
                 "gyro_bias_walk_rps_per_sqrt_s", "in [0, 0.01] (rad/s/sqrt(s)), or null (not known: the design drift)");
+  check.require(std::isnan(gyro_initial_bias_sd_rps) ||
+                    (gyro_initial_bias_sd_rps >= 0.0 && gyro_initial_bias_sd_rps <= max_bias_rps),
+                "gyro_initial_bias_sd_rps", "in [0, max_bias_rps] (rad/s), or null (not known: bias_sigma_init_rps)");
   check.require(std::isnan(gyro_noise_density_rps_per_sqrt_hz) ||
                     (gyro_noise_density_rps_per_sqrt_hz >= 0.0 && gyro_noise_density_rps_per_sqrt_hz <= kMaxGyroNoiseDensity),
                 "gyro_noise_density_rps_per_sqrt_hz",
@@ -160,7 +163,7 @@ void ParallelKf::reset() {
   s_.kf2.reset(Eigen::Vector3d::UnitX(), kInitVarDirection, kInitVarDisturbanceUt2);
   s_.gate.reset(gp_);
   s_.bias_cov = Eigen::Matrix3d::Identity() * (p_.bias_sigma_init_rps * p_.bias_sigma_init_rps);
-  s_.bias_err_cov = s_.bias_cov;
+  s_.bias_err_cov = Eigen::Matrix3d::Identity() * initial_bias_err_var();
   s_.c2_dip_for = std::nan("");
   s_.hard_iron = HardIronEstimator(p_.hard_iron_estimator);
 }
@@ -609,6 +612,11 @@ void ParallelKf::bias_measure(const Eigen::Vector3d& h, double z, double w, cons
   bias_error_update(h, k, gyro_white_var(s_.mb_time), mn);
 }
 
+double ParallelKf::initial_bias_err_var() const {
+  const double sd = std::isnan(p_.gyro_initial_bias_sd_rps) ? p_.bias_sigma_init_rps : p_.gyro_initial_bias_sd_rps;
+  return sd * sd;
+}
+
 double ParallelKf::gyro_white_var(double t) const {
   // the mean of t / dt samples of per-sample variance density^2 / dt
   const double density = p_.gyro_noise_density_rps_per_sqrt_hz;
@@ -756,6 +764,7 @@ void ParallelKf::bias_update() {
   const LagIncrement lag = propagate_lag_error(t);
   const double v = p_.bias_drift_rps * p_.bias_drift_rps * t / p_.bias_forgetting_time_s;
   const double var_max = p_.bias_sigma_init_rps * p_.bias_sigma_init_rps;
+  const double err_var_max = std::max(var_max, initial_bias_err_var());
   s_.bias_cov.diagonal().array() += v;
   // the bias estimate's real error grows by the gyro's own bias walk when the sensor says it
   const double walk = p_.gyro_bias_walk_rps_per_sqrt_s;
@@ -766,8 +775,8 @@ void ParallelKf::bias_update() {
       s_.bias_cov.row(i) *= f;
       s_.bias_cov.col(i) *= f;
     }
-    if (s_.bias_err_cov(i, i) > var_max) {
-      const double f = std::sqrt(var_max / s_.bias_err_cov(i, i));
+    if (s_.bias_err_cov(i, i) > err_var_max) {
+      const double f = std::sqrt(err_var_max / s_.bias_err_cov(i, i));
       s_.bias_err_cov.row(i) *= f;
       s_.bias_err_cov.col(i) *= f;
       s_.lag_bias_cov.col(i) *= f;

@@ -44,6 +44,7 @@ ParallelKfParams load_parallel_kf_params(const std::string& path, const Parallel
     r.get("bias_drift_rps", p.bias_drift_rps);
     r.get("bias_forgetting_time_s", p.bias_forgetting_time_s);
     r.get_nullable("gyro_bias_walk_rps_per_sqrt_s", p.gyro_bias_walk_rps_per_sqrt_s);
+    r.get_nullable("gyro_initial_bias_sd_rps", p.gyro_initial_bias_sd_rps);
     r.get_nullable("gyro_noise_density_rps_per_sqrt_hz", p.gyro_noise_density_rps_per_sqrt_hz);
     r.get("motion_bias_sigma_rps", p.motion_bias_sigma_rps);
     r.get("motion_bias_heading", p.motion_bias_heading);

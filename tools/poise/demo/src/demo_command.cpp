@@ -275,12 +275,21 @@ void run_demo(const DemoOptions& o) {
       }
       if (simulated_imu && (std::string(f) == "parallel_kf" || std::string(f) == "selective_ekf")) {
         // the simulated sensor's own figures, for the published covariance: its gyro's bias walk
-        // (its scenario's; 0: a constant bias) and white noise density (its per-sample sigma over
+        // (its scenario's; 0: a constant bias), bias at start and white noise density (its per-sample sigma over
         // sqrt(rate); docs/ESTIMATORS.md "The gyro's bias walk"), and for the selective EKF the
         // accelerometer's density too (docs/SELECTIVE_EKF.md "The sensor's own figures")
         const sim::SensorNoise noise = sim::make_scenario(o.scenario, o.rate_hz, o.seed).noise;
         params["gyro_bias_walk_rps_per_sqrt_s"] = noise.gyro_bias_walk_rps_per_sqrt_s;
         params["gyro_noise_density_rps_per_sqrt_hz"] = noise.sigma_gyro_rps / std::sqrt(o.rate_hz);
+        const double bias_rms = std::sqrt(noise.gyro_bias_rps.squaredNorm() / 3.0);
+        if (std::string(f) == "parallel_kf" && bias_rms > 0.0) {
+          // its bias at start: the RMS per axis of the constant one it draws (docs/ESTIMATORS.md
+          // "The gyro's bias at start")
+          params["gyro_initial_bias_sd_rps"] = bias_rms;
+        }
+        if (std::string(f) == "parallel_kf") {
+          params["gyro_scale_error"] = 0.0;  // the simulated gyro has none (as simulated.yaml says)
+        }
         if (std::string(f) == "selective_ekf") {
           params["accel_noise_density_mps2_per_sqrt_hz"] = noise.sigma_accel_mps2 / std::sqrt(o.rate_hz);
         }

@@ -189,6 +189,16 @@ struct ParallelKfParams {
   /// rad/s/sqrt(s)). In [0, 0.01] rad/s/sqrt(s) otherwise (docs/ESTIMATORS.md "The gyro's bias
   /// walk": where the figure comes from).
   double gyro_bias_walk_rps_per_sqrt_s = std::nan("");
+  /// The spread of the gyro's bias when the filter starts (its turn-on bias, the datasheet's
+  /// zero-rate offset tolerance as one sigma per axis, or what a simulated gyro draws), rad/s: a
+  /// property of the sensor, not of the filter. Only the published covariance uses it: the bias
+  /// estimate's real error (bias_err_cov) starts at its square, and with it the attitude error
+  /// the unknown bias leaves before the first rest has measured it (lag_cov), which the lags then
+  /// forget over tens of seconds. The estimate is the same whatever its value (the bias filter
+  /// starts at bias_sigma_init_rps, its design: the first rest averages fast). NaN (the default;
+  /// `null` in YAML) = not known: bias_sigma_init_rps taken as the sensor's. In [0, max_bias_rps]
+  /// otherwise (docs/ESTIMATORS.md "The gyro's bias at start").
+  double gyro_initial_bias_sd_rps = std::nan("");
   /// The gyro's white noise density, rad/s/sqrt(Hz): a property of the sensor (its Allan
   /// deviation's angle random walk N, the -1/2 slope; per-sample sigma = density * sqrt(rate)),
   /// not of the filter. Only the published covariance uses it: the noise of the bias filter's
@@ -754,6 +764,9 @@ class ParallelKf {
   /// The white gyro noise of the mean of a window of t seconds, (rad/s)^2: the sensor's density
   /// gyro_noise_density_rps_per_sqrt_hz squared over t, or not known, KF2's sigma_G per sample.
   [[nodiscard]] double gyro_white_var(double t) const;
+  /// The bias estimate's real error variance per axis at start, (rad/s)^2: the sensor's
+  /// gyro_initial_bias_sd_rps squared, or not known, the design's bias_sigma_init_rps squared.
+  [[nodiscard]] double initial_bias_err_var() const;
   /// bias_err_cov (and bias_err_att_cov) after a bias measurement along h with gain k, whose
   /// noise is white of variance w_white plus, with `mn`, the window's attitude error rate.
   void bias_error_update(const Eigen::Vector3d& h, const Eigen::Vector3d& k, double w_white, MotionNoise* mn);
