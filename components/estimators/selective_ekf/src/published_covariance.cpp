@@ -237,7 +237,7 @@ double SelectiveEkf::unremoved_offset_var() const {
   // on it: the field term's), and of a body offset only P_b is known
   const Eigen::Vector3d& s = x_.heading_per_offset;
   const double mean = hi.report().consistent ? s.dot(hi.offset_ut()) : 0.0;
-  return mean * mean + s.dot(hi.covariance() * s);
+  return mean * mean + s.dot(hi.error_covariance() * s);
 }
 
 double SelectiveEkf::removed_offset_var() const {
@@ -246,7 +246,7 @@ double SelectiveEkf::removed_offset_var() const {
     return 0.0;
   }
   const Eigen::Vector3d& s = x_.heading_per_removed_offset;
-  return s.dot(hi.covariance() * s);
+  return s.dot(hi.error_covariance() * s);
 }
 
 Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {
