@@ -5,6 +5,7 @@
 #include <Eigen/Dense>
 
 #include <cmath>
+#include <utility>
 
 namespace poise {
 
@@ -287,15 +288,10 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   // and the model errors that persist over an interval are not counted many times over.
   const Entry j = start_;
   start_ = k;
-  // E[(b_hat - b) n_j^T]: j's noise entered b_hat through the last comparison used, if it was (k's
-  // enters through this one only if it is used)
-  const Eigen::Matrix3d shared = shared_;
-  shared_.setZero();
-  // b's random walk over the interval, added once per comparison (P is constant in between)
-  const double walk = p_.walk_ut_per_sqrt_s * p_.walk_ut_per_sqrt_s * (static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9);
-  P_.diagonal().array() += walk;
-  P_err_.diagonal().array() += walk;
-  refresh();
+  const double interval_s = static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9;
+  // E[(b_hat - b) n_j^T] (k's noise is in b_hat once this comparison is used)
+  const Eigen::Matrix3d shared = std::exchange(shared_, Eigen::Matrix3d::Zero());
+  add_walk(interval_s);
   // R_k^T R_j, made a rotation again (the caller's orientation is renormalised only now and then)
   const Eigen::Quaterniond rel = Eigen::Quaterniond(Eigen::Matrix3d(k.r.transpose() * j.r)).normalized();
   report_.rotation_rad = Eigen::AngleAxisd(rel).angle();
@@ -309,17 +305,17 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   const Eigen::LDLT<Eigen::Matrix3d> ldlt(S);
   const double nis = r.dot(ldlt.solve(r));
   // whether the offset is gone is judged at every grid reading, the body turning or not
-  if (removed(k.r, k.m, k.var_ut2, static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9)) {
+  if (removed(k.r, k.m, k.var_ut2, interval_s)) {
     reopen(true);  // the readings fit no offset better than the estimate, beyond chance: the magnet is gone
     return finish(HardIronStep::kReset);
   }
   if (report_.rotation_rad < p_.min_rotation_rad) {
     return finish(HardIronStep::kNotEnoughRotation);
   }
-  consistency(j.m, k.m, static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9);
+  consistency(j.m, k.m, interval_s);
   report_.nis = nis;
   if (!(report_.nis <= p_.gate_chi2)) {
-    refused_s_ += static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9;
+    refused_s_ += interval_s;
     if (refused_s_ >= p_.reset_after_s) {
       reopen(false);
       return finish(HardIronStep::kReset);
@@ -327,13 +323,8 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
     return finish(HardIronStep::kGated);
   }
   refused_s_ = 0.0;
-  if (p_.noise_tau_s > 0.0) {
-    const double keep = std::exp(-static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9 / p_.noise_tau_s);
-    nis_sum_ = keep * nis_sum_ + nis;
-    nis_w_ = keep * nis_w_ + 1.0;
-  }
   correct(H, r, R, ldlt);
-  track_error(H, C, k.var_ut2, j.var_ut2, shared);
+  track_error(H, C, {k.var_ut2, j.var_ut2, nis, interval_s}, shared);
   return finish(HardIronStep::kUpdated);
 }
 
@@ -348,8 +339,21 @@ void HardIronEstimator::correct(const Eigen::Matrix3d& h, const Eigen::Vector3d&
   refresh();
 }
 
-void HardIronEstimator::track_error(const Eigen::Matrix3d& h, const Eigen::Matrix3d& c, double var_k, double var_j,
+void HardIronEstimator::add_walk(double interval_s) {
+  // b's random walk over the interval, added once per comparison (P is constant in between)
+  const double walk = p_.walk_ut_per_sqrt_s * p_.walk_ut_per_sqrt_s * interval_s;
+  P_.diagonal().array() += walk;
+  P_err_.diagonal().array() += walk;
+  refresh();
+}
+
+void HardIronEstimator::track_error(const Eigen::Matrix3d& h, const Eigen::Matrix3d& c, const Comparison& z,
                                     const Eigen::Matrix3d& shared) {
+  if (p_.noise_tau_s > 0.0) {  // the noise the accepted comparisons show (noise_ratio)
+    const double keep = std::exp(-z.interval_s / p_.noise_tau_s);
+    nis_sum_ = keep * nis_sum_ + z.nis;
+    nis_w_ = keep * nis_w_ + 1.0;
+  }
   // The comparison's noise is n_k - C n_j, and n_j was the later reading of the last comparison
   // used: b_hat's error e and that noise are correlated (shared), which P, taking each comparison's
   // noise as its own, leaves out. With the same gain K: e' = (I - K H) e + K n_k - K C n_j, each
@@ -360,9 +364,9 @@ void HardIronEstimator::track_error(const Eigen::Matrix3d& h, const Eigen::Matri
   const Eigen::Matrix3d& k = gain_;
   const Eigen::Matrix3d a = Eigen::Matrix3d::Identity() - k * h;
   const Eigen::Matrix3d cross = a * shared * c.transpose() * k.transpose();
-  P_err_ = a * P_err_ * a.transpose() + rho * (var_k + var_j) * (k * k.transpose()) - cross - cross.transpose();
+  P_err_ = a * P_err_ * a.transpose() + rho * (z.var_k + z.var_j) * (k * k.transpose()) - cross - cross.transpose();
   P_err_ = 0.5 * (P_err_ + P_err_.transpose());
-  shared_ = rho * var_k * k;
+  shared_ = rho * z.var_k * k;
 }
 
 void HardIronEstimator::reopen(bool zero) {

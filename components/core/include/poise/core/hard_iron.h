@@ -205,9 +205,16 @@ class HardIronEstimator {
   void correct(const Eigen::Matrix3d& h, const Eigen::Vector3d& r, const Eigen::Matrix3d& noise,
                const Eigen::LDLT<Eigen::Matrix3d>& s_ldlt);
   /// b learnt again: P back to the prior (and b to zero when `zero`: the offset is gone).
-  /// error_covariance() through the comparison just used (its gain gain_, H = I - C, the two
-  /// readings' variances and E[(b_hat - b) n_j^T] before it), and shared_ for the next.
-  void track_error(const Eigen::Matrix3d& h, const Eigen::Matrix3d& c, double var_k, double var_j,
+  void add_walk(double interval_s);  ///< b's random walk over one comparison's interval, to both covariances
+  struct Comparison {
+    double var_k = 0.0;       ///< the later reading's variance per axis (the model's), uT^2
+    double var_j = 0.0;       ///< the earlier one's
+    double nis = 0.0;         ///< its normalised innovation squared
+    double interval_s = 0.0;  ///< between the two readings
+  };
+  /// error_covariance() through the comparison just used (its gain gain_, H = I - C, and
+  /// E[(b_hat - b) n_j^T] before it), after its NIS joins noise_ratio(); shared_ for the next.
+  void track_error(const Eigen::Matrix3d& h, const Eigen::Matrix3d& c, const Comparison& z,
                    const Eigen::Matrix3d& shared);
   void reopen(bool zero);
   [[nodiscard]] bool usable(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
