@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <random>
 #include <stdexcept>
@@ -167,6 +168,66 @@ TEST(HardIron, GivenACleanSensorWhenTumbledThenTheEstimateStaysNearZeroAndIsNotA
   EXPECT_LT(h.offset_ut().norm(), kConvergedTolUt);
   EXPECT_FALSE(h.applied()) << "|b| " << h.offset_ut().norm() << " <= min_applied_ut "
                             << h.params().min_applied_ut;
+}
+
+// error_covariance(): b's error under the reading noise the comparisons show (noise_tau_s), the
+// gains, gate and convergence staying covariance()'s. Oracle: the spread of b_hat - b over seeds of
+// the simulated sensor, whose reading noise is known, against the mean published 3 x 3's diagonal,
+// pooled over the three axes (3 x kSeeds squares: the ratio's 1-sigma about 0.13). The simulated
+// offset is constant, so the estimator is told no walk (the walk is the same in both covariances).
+struct SpreadCase {
+  double reading_sigma_ut;  // the simulated sensor's noise per axis
+  double spread_ratio = 0;  // sum of the squared errors over the sum of error_covariance()'s variances
+  double model_ratio = 0;   // the same against covariance()'s
+  double noise_ratio = 0;   // mean noise_ratio() at the end
+};
+
+void run_spread(SpreadCase& c) {
+  constexpr int kSeeds = 40;
+  const Eigen::Vector3d b(12.0, -25.0, 40.0);
+  double e2 = 0.0, v_err = 0.0, v_model = 0.0, ratio = 0.0;
+  HardIronParams p;
+  p.walk_ut_per_sqrt_s = 0.0;
+  for (int seed = 0; seed < kSeeds; ++seed) {
+    HardIronEstimator h(p);
+    Sim sim;
+    sim.rng.seed(1000 + seed);
+    sim.noise = std::normal_distribution<double>(0.0, c.reading_sigma_ut);
+    for (int i = 0; i < static_cast<int>(20 * kRateHz); ++i) {
+      h.update(sim.next(b, tumbling_rate));
+    }
+    e2 += (h.offset_ut() - b).squaredNorm();
+    v_err += h.error_covariance().trace();
+    v_model += h.covariance().trace();
+    ratio += h.noise_ratio() / kSeeds;
+  }
+  c.spread_ratio = e2 / v_err;
+  c.model_ratio = e2 / v_model;
+  c.noise_ratio = ratio;
+}
+
+TEST(HardIron, GivenReadingsQuieterThanTheModelsNoiseWhenTumbledThenTheErrorCovarianceMatchesTheSpreadOverSeeds) {
+  constexpr double kSpreadLo = 0.6;  // 3 sigma of a 120-square mean about 1
+  constexpr double kSpreadHi = 1.5;
+  // 0.5 uT against the model's 1.5 uT (noise_ut): the model's variance is 9 times the noise's
+  SpreadCase quiet{kReadingNoiseUt};
+  run_spread(quiet);
+  EXPECT_GT(quiet.spread_ratio, kSpreadLo);
+  EXPECT_LT(quiet.spread_ratio, kSpreadHi);
+  EXPECT_LT(quiet.model_ratio, 0.25) << "covariance() is the model noise's, far above the spread";
+  EXPECT_NEAR(quiet.noise_ratio, (kReadingNoiseUt * kReadingNoiseUt) / (1.5 * 1.5), 0.05);
+  // readings as noisy as the model says: the spread is error_covariance()'s, and covariance() is
+  // still far above it (a reading is in two comparisons; it takes their noises as independent)
+  SpreadCase model{HardIronParams{}.noise_ut};
+  run_spread(model);
+  EXPECT_GT(model.spread_ratio, kSpreadLo);
+  EXPECT_LT(model.spread_ratio, kSpreadHi);
+  EXPECT_LT(model.model_ratio, 0.25);
+  EXPECT_NEAR(model.noise_ratio, 1.0, 0.1);
+  std::printf("spread / error_covariance: %.3f (0.5 uT), %.3f (1.5 uT); spread / covariance: %.3f, %.3f; "
+              "noise_ratio %.3f, %.3f\n",
+              quiet.spread_ratio, model.spread_ratio, quiet.model_ratio, model.model_ratio, quiet.noise_ratio,
+              model.noise_ratio);
 }
 
 TEST(HardIron, GivenTheOffsetRemovedMidRunWhenTumblingThenItResetsAndLearnsZero) {
@@ -344,15 +405,20 @@ TEST(HardIron, GivenHostileReadingsWhenFedThenEachIsRejectedCountedAndTheEstimat
   EXPECT_EQ(h.update(back).step, HardIronStep::kGap);
 }
 
+// The estimator refuses p, and the message names the key ("hard_iron parameter <key>").
+void expect_refused_naming(const HardIronParams& p, const std::string& key) {
+  try {
+    HardIronEstimator h(p);
+    FAIL() << "accepted a bad " << key;
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("hard_iron parameter " + key), std::string::npos) << e.what();
+  }
+}
+
 TEST(HardIronParams, GivenABadValueOfAKeyWhenConstructedThenTheMessageNamesIt) {
   HardIronParams p;
   p.noise_ut = -1.0;
-  try {
-    HardIronEstimator h(p);
-    FAIL() << "accepted noise_ut = -1";
-  } catch (const std::invalid_argument& e) {
-    EXPECT_NE(std::string(e.what()).find("hard_iron parameter noise_ut"), std::string::npos) << e.what();
-  }
+  expect_refused_naming(p, "noise_ut");
   HardIronParams q;
   q.lag_s = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THROW(HardIronEstimator{q}, std::invalid_argument);
@@ -363,6 +429,9 @@ TEST(HardIronParams, GivenABadValueOfAKeyWhenConstructedThenTheMessageNamesIt) {
   HardIronParams huge;
   huge.prior_sigma_ut = 1e308;
   EXPECT_THROW(HardIronEstimator{huge}, std::invalid_argument);
+  HardIronParams window;
+  window.noise_tau_s = -1.0;
+  expect_refused_naming(window, "noise_tau_s");
 }
 
 }  // namespace

@@ -5,6 +5,7 @@
 #include <Eigen/Dense>
 
 #include <cmath>
+#include <utility>
 
 namespace poise {
 
@@ -26,6 +27,8 @@ void HardIronParams::validate(const char* filter) const {
   check.require(removed_log_lr <= 1e6, "removed_log_lr", "<= 1e6");
   check.positive(removed_tau_s, "removed_tau_s", "s");
   check.require(removed_tau_s <= 1e6, "removed_tau_s", "<= 1e6 (s)");
+  check.non_negative(noise_tau_s, "noise_tau_s", "s, 0 = noise_ut's");
+  check.require(noise_tau_s <= 1e6, "noise_tau_s", "<= 1e6 (s)");
   check.positive(max_dt_s, "max_dt_s", "s");
   check.require(lag_s < 100.0, "lag_s", "< 100 (s)");
   check.positive(max_mag_ut, "max_mag_ut", "uT");
@@ -68,6 +71,11 @@ HardIronEstimator::HardIronEstimator(const HardIronParams& p) : p_(p) {
 void HardIronEstimator::reset() {
   b_.setZero();
   P_ = Eigen::Matrix3d::Identity() * (p_.prior_sigma_ut * p_.prior_sigma_ut);
+  P_err_ = P_;
+  shared_.setZero();
+  gain_.setZero();
+  nis_sum_ = 0.0;
+  nis_w_ = 0.0;
   start_ = Entry{};
   have_start_ = false;
   prev_ = Entry{};
@@ -271,6 +279,7 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   next_grid_ns_ = g + ((stamp_ns - g) / lag_ns_ + 1) * lag_ns_;
   if (!have_start_) {
     start_ = k;
+    shared_.setZero();  // its noise is in no comparison used yet
     have_start_ = true;
     return finish(HardIronStep::kInterval);
   }
@@ -279,10 +288,10 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   // and the model errors that persist over an interval are not counted many times over.
   const Entry j = start_;
   start_ = k;
-  // b's random walk over the interval, added once per comparison (P is constant in between)
-  P_.diagonal().array() +=
-      p_.walk_ut_per_sqrt_s * p_.walk_ut_per_sqrt_s * (static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9);
-  refresh();
+  const double interval_s = static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9;
+  // E[(b_hat - b) n_j^T] (k's noise is in b_hat once this comparison is used)
+  const Eigen::Matrix3d shared = std::exchange(shared_, Eigen::Matrix3d::Zero());
+  add_walk(interval_s);
   // R_k^T R_j, made a rotation again (the caller's orientation is renormalised only now and then)
   const Eigen::Quaterniond rel = Eigen::Quaterniond(Eigen::Matrix3d(k.r.transpose() * j.r)).normalized();
   report_.rotation_rad = Eigen::AngleAxisd(rel).angle();
@@ -296,17 +305,17 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   const Eigen::LDLT<Eigen::Matrix3d> ldlt(S);
   const double nis = r.dot(ldlt.solve(r));
   // whether the offset is gone is judged at every grid reading, the body turning or not
-  if (removed(k.r, k.m, k.var_ut2, static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9)) {
+  if (removed(k.r, k.m, k.var_ut2, interval_s)) {
     reopen(true);  // the readings fit no offset better than the estimate, beyond chance: the magnet is gone
     return finish(HardIronStep::kReset);
   }
   if (report_.rotation_rad < p_.min_rotation_rad) {
     return finish(HardIronStep::kNotEnoughRotation);
   }
-  consistency(j.m, k.m, static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9);
+  consistency(j.m, k.m, interval_s);
   report_.nis = nis;
   if (!(report_.nis <= p_.gate_chi2)) {
-    refused_s_ += static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9;
+    refused_s_ += interval_s;
     if (refused_s_ >= p_.reset_after_s) {
       reopen(false);
       return finish(HardIronStep::kReset);
@@ -315,6 +324,7 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   }
   refused_s_ = 0.0;
   correct(H, r, R, ldlt);
+  track_error(H, C, {k.var_ut2, j.var_ut2, nis, interval_s}, shared);
   return finish(HardIronStep::kUpdated);
 }
 
@@ -325,7 +335,38 @@ void HardIronEstimator::correct(const Eigen::Matrix3d& h, const Eigen::Vector3d&
   const Eigen::Matrix3d IKH = Eigen::Matrix3d::Identity() - K * h;
   P_ = IKH * P_ * IKH.transpose() + K * noise * K.transpose();
   P_ = 0.5 * (P_ + P_.transpose());
+  gain_ = K;
   refresh();
+}
+
+void HardIronEstimator::add_walk(double interval_s) {
+  // b's random walk over the interval, added once per comparison (P is constant in between)
+  const double walk = p_.walk_ut_per_sqrt_s * p_.walk_ut_per_sqrt_s * interval_s;
+  P_.diagonal().array() += walk;
+  P_err_.diagonal().array() += walk;
+  refresh();
+}
+
+void HardIronEstimator::track_error(const Eigen::Matrix3d& h, const Eigen::Matrix3d& c, const Comparison& z,
+                                    const Eigen::Matrix3d& shared) {
+  if (p_.noise_tau_s > 0.0) {  // the noise the accepted comparisons show (noise_ratio)
+    const double keep = std::exp(-z.interval_s / p_.noise_tau_s);
+    nis_sum_ = keep * nis_sum_ + z.nis;
+    nis_w_ = keep * nis_w_ + 1.0;
+  }
+  // The comparison's noise is n_k - C n_j, and n_j was the later reading of the last comparison
+  // used: b_hat's error e and that noise are correlated (shared), which P, taking each comparison's
+  // noise as its own, leaves out. With the same gain K: e' = (I - K H) e + K n_k - K C n_j, each
+  // reading's variance the model's times noise_ratio() (the comparisons' NIS), so
+  //   P_err' = A P_err A^T + K (v_k I + v_j C C^T) K^T - A X C^T K^T - K C X^T A^T,  A = I - K H,
+  // X = E[e n_j^T] = shared; then E[e' n_k^T] = K v_k (k's noise, shared with the next comparison).
+  const double rho = noise_ratio();
+  const Eigen::Matrix3d& k = gain_;
+  const Eigen::Matrix3d a = Eigen::Matrix3d::Identity() - k * h;
+  const Eigen::Matrix3d cross = a * shared * c.transpose() * k.transpose();
+  P_err_ = a * P_err_ * a.transpose() + rho * (z.var_k + z.var_j) * (k * k.transpose()) - cross - cross.transpose();
+  P_err_ = 0.5 * (P_err_ + P_err_.transpose());
+  shared_ = rho * z.var_k * k;
 }
 
 void HardIronEstimator::reopen(bool zero) {
@@ -335,6 +376,8 @@ void HardIronEstimator::reopen(bool zero) {
     b_.setZero();
   }
   P_ = Eigen::Matrix3d::Identity() * (p_.prior_sigma_ut * p_.prior_sigma_ut);
+  P_err_ = P_;  // (the noise seen stays: the sensor's, not the offset's)
+  shared_.setZero();
   refresh();
 }
 

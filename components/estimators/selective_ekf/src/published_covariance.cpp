@@ -35,8 +35,10 @@
 //              dip deviation dv = m (dip - dip_ref) low-passed over the heading's lag; the part
 //              across the horizontal field, which turns the heading, is taken as large as those
 //              two: share^2 (dn^2 + dv^2) / 2 / (m cos dip)^2
-//   hard_iron  heading: the removed hard-iron offset's estimate's error (covariance P_b) in the
-//              readings corrected: s_r^T P_b s_r, s_r the heading row's response to it through
+//   hard_iron  heading: the removed hard-iron offset's estimate's error (covariance P_b, the
+//              estimate's error_covariance(): its comparisons' noise as it is, not the gains'
+//              covariance(), session 23) in the readings corrected: s_r^T P_b s_r, s_r the
+//              heading row's response to it through
 //              its own gains (SelectiveEkfState::heading_per_removed_offset, as "offset" below)
 //   offset     heading: an offset the hard-iron estimate holds (converged) but does not remove
 //              (|b| <= min_applied_ut, or not consistent; significant or not): the
@@ -237,7 +239,7 @@ double SelectiveEkf::unremoved_offset_var() const {
   // on it: the field term's), and of a body offset only P_b is known
   const Eigen::Vector3d& s = x_.heading_per_offset;
   const double mean = hi.report().consistent ? s.dot(hi.offset_ut()) : 0.0;
-  return mean * mean + s.dot(hi.covariance() * s);
+  return mean * mean + s.dot(hi.error_covariance() * s);
 }
 
 double SelectiveEkf::removed_offset_var() const {
@@ -246,7 +248,7 @@ double SelectiveEkf::removed_offset_var() const {
     return 0.0;
   }
   const Eigen::Vector3d& s = x_.heading_per_removed_offset;
-  return s.dot(hi.covariance() * s);
+  return s.dot(hi.error_covariance() * s);
 }
 
 Eigen::Matrix3d SelectiveEkf::attitude_covariance() const {

@@ -65,6 +65,11 @@ struct HardIronParams {
   /// frame's drift and the field's variation in space must stay within the noise over it. The
   /// same window as consistency_tau_s (recent comparisons), not chosen on data.
   double removed_tau_s = 5.0;
+  /// error_covariance() only (published covariances; the estimate's gains, gate and convergence
+  /// read covariance()): the reading noise the accepted comparisons show, their NIS / 3 averaged
+  /// over this, s, scales noise_ut's variance in b's error covariance. The same window as
+  /// consistency_tau_s (recent comparisons), not chosen on data. 0 = noise_ut's, as covariance().
+  double noise_tau_s = 5.0;
   double max_dt_s = 0.1;              ///< a longer gap between samples restarts the comparison, s
   double max_mag_ut = 5000.0;         ///< |m| above this (or non-finite) is refused, uT
   double max_gyro_rps = 100.0;        ///< |w| above this (or non-finite) is refused, rad/s
@@ -88,6 +93,7 @@ struct HardIronParams {
     r.get("consistency_tau_s", consistency_tau_s);
     r.get("removed_log_lr", removed_log_lr);
     r.get("removed_tau_s", removed_tau_s);
+    r.get("noise_tau_s", noise_tau_s);
     r.get("max_dt_s", max_dt_s);
     r.get("max_mag_ut", max_mag_ut);
     r.get("max_gyro_rps", max_gyro_rps);
@@ -156,6 +162,16 @@ class HardIronEstimator {
   [[nodiscard]] const Eigen::Vector3d& offset_ut() const { return b_; }
   [[nodiscard]] const Eigen::Matrix3d& covariance() const { return P_; }
   [[nodiscard]] Eigen::Vector3d sigma_ut() const { return P_.diagonal().cwiseSqrt(); }
+  /// b's error covariance, uT^2: the same gains, walk and prior as covariance(), with the
+  /// comparisons' noise as it is: a reading is the later of one comparison and the earlier of the
+  /// next, so their noises are correlated (covariance() takes them as independent), and each
+  /// reading's variance is noise_ratio() times the model's (noise_tau_s). What a published
+  /// covariance should read; the estimate never does.
+  [[nodiscard]] const Eigen::Matrix3d& error_covariance() const { return P_err_; }
+  /// The accepted comparisons' NIS / 3 averaged over noise_tau_s (1 before any, or with
+  /// noise_tau_s 0): about 1 while b is uncertain whatever the noise, the reading noise's variance
+  /// over the model's once b is known.
+  [[nodiscard]] double noise_ratio() const { return nis_w_ > 0.0 ? nis_sum_ / (3.0 * nis_w_) : 1.0; }
   [[nodiscard]] bool converged() const { return report_.converged; }
   /// Whether corrected() removes the offset: converged, |b| > min_applied_ut and consistent (the
   /// corrected field's magnitude changes less over rotation than the raw one's).
@@ -189,6 +205,17 @@ class HardIronEstimator {
   void correct(const Eigen::Matrix3d& h, const Eigen::Vector3d& r, const Eigen::Matrix3d& noise,
                const Eigen::LDLT<Eigen::Matrix3d>& s_ldlt);
   /// b learnt again: P back to the prior (and b to zero when `zero`: the offset is gone).
+  void add_walk(double interval_s);  ///< b's random walk over one comparison's interval, to both covariances
+  struct Comparison {
+    double var_k = 0.0;       ///< the later reading's variance per axis (the model's), uT^2
+    double var_j = 0.0;       ///< the earlier one's
+    double nis = 0.0;         ///< its normalised innovation squared
+    double interval_s = 0.0;  ///< between the two readings
+  };
+  /// error_covariance() through the comparison just used (its gain gain_, H = I - C, and
+  /// E[(b_hat - b) n_j^T] before it), after its NIS joins noise_ratio(); shared_ for the next.
+  void track_error(const Eigen::Matrix3d& h, const Eigen::Matrix3d& c, const Comparison& z,
+                   const Eigen::Matrix3d& shared);
   void reopen(bool zero);
   [[nodiscard]] bool usable(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
   [[nodiscard]] double reading_var(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
@@ -209,6 +236,11 @@ class HardIronEstimator {
   int64_t last_w_ns_ = 0;
   bool have_w_ = false;
   double refused_s_ = 0.0;  ///< time of consecutive refused comparisons
+  Eigen::Matrix3d P_err_;     ///< error_covariance()
+  Eigen::Matrix3d gain_ = Eigen::Matrix3d::Zero();    ///< the last comparison's gain K
+  Eigen::Matrix3d shared_ = Eigen::Matrix3d::Zero();  ///< E[(b_hat - b) n^T], n the interval's start reading's noise
+  double nis_sum_ = 0.0;      ///< forgetting sums of the accepted comparisons' NIS and weights (noise_tau_s)
+  double nis_w_ = 0.0;
   double raw_change2_ = 0.0;  ///< forgetting sums of the squared |m| / |m - b| changes, uT^2
   double cor_change2_ = 0.0;
   double change_weight_ = 0.0;  ///< the same sum of the weights (for the rms)
