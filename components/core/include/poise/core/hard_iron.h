@@ -204,7 +204,6 @@ class HardIronEstimator {
   /// The Kalman update of b and P with one comparison (H = I - C, innovation r, its noise, S's LDLT).
   void correct(const Eigen::Matrix3d& h, const Eigen::Vector3d& r, const Eigen::Matrix3d& noise,
                const Eigen::LDLT<Eigen::Matrix3d>& s_ldlt);
-  /// b learnt again: P back to the prior (and b to zero when `zero`: the offset is gone).
   void add_walk(double interval_s);  ///< b's random walk over one comparison's interval, to both covariances
   struct Comparison {
     double var_k = 0.0;       ///< the later reading's variance per axis (the model's), uT^2
@@ -216,6 +215,7 @@ class HardIronEstimator {
   /// E[(b_hat - b) n_j^T] before it), after its NIS joins noise_ratio(); shared_ for the next.
   void track_error(const Eigen::Matrix3d& h, const Eigen::Matrix3d& c, const Comparison& z,
                    const Eigen::Matrix3d& shared);
+  /// b learnt again: P back to the prior (and b to zero when `zero`: the offset is gone).
   void reopen(bool zero);
   [[nodiscard]] bool usable(int64_t stamp_ns, const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
   [[nodiscard]] double reading_var(const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) const;
