@@ -35,10 +35,10 @@ constexpr int kLagPattern[5][2] = {{0, 3}, {1, 4}, {1, 2}, {0, 3}, {1, 4}};
 // Gamma B's one entry per row: the world axis of the bias error's drift each state integrates
 constexpr int kLagInput[5] = {0, 1, 2, 0, 1};
 
-template <int C>
-Eigen::Matrix<double, 5, C> lag_left(const Eigen::Matrix<double, 5, 5>& phi, const Eigen::Matrix<double, 5, C>& x) {
-  Eigen::Matrix<double, 5, C> r;  // phi x
-  for (int i = 0; i < 5; ++i) {
+template <int R, int C>
+Eigen::Matrix<double, R, C> lag_left(const Eigen::Matrix<double, 5, 5>& phi, const Eigen::Matrix<double, 5, C>& x) {
+  Eigen::Matrix<double, R, C> r;  // the first R rows of phi x
+  for (int i = 0; i < R; ++i) {
     const int a = kLagPattern[i][0];
     const int b = kLagPattern[i][1];
     r.row(i) = phi(i, a) * x.row(a) + phi(i, b) * x.row(b);
@@ -46,9 +46,10 @@ Eigen::Matrix<double, 5, C> lag_left(const Eigen::Matrix<double, 5, 5>& phi, con
   return r;
 }
 
-Eigen::Matrix<double, 5, 5> lag_right(const Eigen::Matrix<double, 5, 5>& x, const Eigen::Matrix<double, 5, 5>& phi) {
-  Eigen::Matrix<double, 5, 5> r;  // x phi^T
-  for (int j = 0; j < 5; ++j) {
+template <int C>
+Eigen::Matrix<double, 5, C> lag_right(const Eigen::Matrix<double, 5, 5>& x, const Eigen::Matrix<double, 5, 5>& phi) {
+  Eigen::Matrix<double, 5, C> r;  // the first C columns of x phi^T
+  for (int j = 0; j < C; ++j) {
     const int a = kLagPattern[j][0];
     const int b = kLagPattern[j][1];
     r.col(j) = x.col(a) * phi(j, a) + x.col(b) * phi(j, b);
@@ -876,23 +877,24 @@ ParallelKf::LagIncrement ParallelKf::propagate_lag_error(double t) {
   }
   const Matrix53 c = s_.lag_bias_cov;
   const Matrix53 gp = g * s_.bias_err_cov;
-  const Matrix53 phi_c = lag_left(phi, c);
+  const Matrix53 phi_c = lag_left<5>(phi, c);
   const Matrix5 pc = phi_c * g.transpose();
   // the increment d = (Phi - I) x + G b_err (LagIncrement, its first three rows), from the moments
   // before the step: E[d b^T] = (Phi - I) C + G B, E[y d^T] = Y X (Phi - I)^T + Y C G^T + G C^T
-  // (Phi - I)^T + G B G^T for y = Y x + G b_err (Y = Phi: x_j; Y = Phi - I: d)
+  // (Phi - I)^T + G B G^T for y = Y x + G b_err (Y = Phi: x_j; Y = Phi - I: d); of E[x_j d^T]
+  // only the columns of d's first three rows are kept, of E[d d^T] and E[d b^T] only d's
   const Matrix5 pm = phi - Matrix5::Identity();
   const Matrix5 gpg = gp * g.transpose();
   const Matrix5 gc = g * c.transpose();
-  const Matrix5 common = lag_right(gc, pm) + gpg;
-  const Matrix5 phi_x = lag_left(phi, s_.lag_cov);
-  const Matrix5 x_d = lag_right(phi_x, pm) + pc + common;
+  const Matrix53 common = lag_right<3>(gc, pm) + gpg.leftCols<3>();
+  const Matrix5 phi_x = lag_left<5>(phi, s_.lag_cov);
   LagIncrement inc;
-  inc.x_d = x_d.leftCols<3>();
-  const Matrix5 cg = c * g.transpose();
-  inc.d_d = (x_d - lag_right(s_.lag_cov, pm) - cg).topLeftCorner<3, 3>();
-  inc.b_d = (lag_left(pm, c) + gp).topRows<3>().transpose();
-  Matrix5 p = lag_right(phi_x, phi) + pc + pc.transpose() + gpg;
+  inc.x_d = lag_right<3>(phi_x, pm) + pc.leftCols<3>() + common;
+  // c g^T's first three rows as a 4-row product: the rows a 5-row product sums in the same order
+  const Eigen::Matrix<double, 4, 3> cg = c.topRows<4>() * g.topRows<3>().transpose();
+  inc.d_d = inc.x_d.topRows<3>() - lag_right<3>(s_.lag_cov, pm).topRows<3>() - cg.topRows<3>();
+  inc.b_d = (lag_left<3>(pm, c) + gp.topRows<3>()).transpose();
+  Matrix5 p = lag_right<5>(phi_x, phi) + pc + pc.transpose() + gpg;
   s_.lag_cov = 0.5 * (p + p.transpose());
   s_.lag_bias_cov = phi_c + gp;
   s_.lag_keep_z = 1.0;
