@@ -38,10 +38,12 @@ constexpr int kLagInput[5] = {0, 1, 2, 0, 1};
 template <int R, int C>
 Eigen::Matrix<double, R, C> lag_left(const Eigen::Matrix<double, 5, 5>& phi, const Eigen::Matrix<double, 5, C>& x) {
   Eigen::Matrix<double, R, C> r;  // the first R rows of phi x
-  for (int i = 0; i < R; ++i) {
-    const int a = kLagPattern[i][0];
-    const int b = kLagPattern[i][1];
-    r.row(i) = phi(i, a) * x.row(a) + phi(i, b) * x.row(b);
+  for (int j = 0; j < C; ++j) {
+    for (int i = 0; i < R; ++i) {
+      const int a = kLagPattern[i][0];
+      const int b = kLagPattern[i][1];
+      r(i, j) = phi(i, a) * x(a, j) + phi(i, b) * x(b, j);
+    }
   }
   return r;
 }
