@@ -172,15 +172,16 @@ void ParallelKf::reset() {
 }
 
 ParallelKf::StepRate ParallelKf::step_rate(const Eigen::Vector3d& gyro, double dt) const {
-  StepRate r{s_.prev_gyro + p_.gyro_current_weight * (gyro - s_.prev_gyro), Eigen::Vector3d::Zero()};
-  if (!p_.tilt.exact_rotation || !p_.coning_correction || p_.gyro_current_weight != 0.5) {
-    return r;
-  }
+  StepRate r{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
   const double h0 = s_.prev_dt_s;
-  if (!p_.quadratic_rate || h0 < 0.5 * dt || h0 > 2.0 * dt) {
-    // the rotation over the step for a rate linear between the two samples (w1 + (w2 - w1) s / h):
-    // h (w1 + w2) / 2 + (h^2 / 12) w1 x w2 (the rotation vector's rate is w + theta x w / 2)
-    r.coning = (dt * dt / 12.0) * s_.prev_gyro.cross(gyro);
+  const bool coning = p_.tilt.exact_rotation && p_.coning_correction && p_.gyro_current_weight == 0.5;
+  if (!coning || !p_.quadratic_rate || h0 < 0.5 * dt || h0 > 2.0 * dt) {
+    r.w = s_.prev_gyro + p_.gyro_current_weight * (gyro - s_.prev_gyro);  // the line's mean
+    if (coning) {
+      // the rotation over the step for a rate linear between the two samples (w1 + (w2 - w1) s / h):
+      // h (w1 + w2) / 2 + (h^2 / 12) w1 x w2 (the rotation vector's rate is w + theta x w / 2)
+      r.coning = (dt * dt / 12.0) * s_.prev_gyro.cross(gyro);
+    }
     return r;
   }
   // w(t) = a + b t + c t^2 for t in [0, dt] through w(-h0) = prev2, w(0) = prev, w(dt) = gyro; its
@@ -391,7 +392,8 @@ bool ParallelKf::field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, do
     s_.rest_field.reset();
     return false;
   }
-  const Eigen::Vector3d f = (gyro_frame_kept() ? s_.r_ib : s_.q_ib.toRotationMatrix()) * mag;
+  const Eigen::Vector3d f = gyro_frame_kept() ? Eigen::Vector3d(s_.r_ib * mag)
+                                                : Eigen::Vector3d(s_.q_ib.toRotationMatrix() * mag);
   const bool rest = s_.rest_det.rest;
   const double tol = p_.mag_norm_tol * s_.gate.m_ut;
   const bool was_held = s_.rest_field.held;
