@@ -267,8 +267,11 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   const bool motion_bias = p_.bias_estimation && p_.motion_bias_sigma_rps > 0.0;
   if (motion_bias) {
     s_.mb_corr += s_.kf1.last_correction_rotvec();
-    s_.mb_rate2 += w.squaredNorm() * dt;
-    s_.mb_rate_i += (s_.r_ib * w) * dt;  // the rate in the almost inertial frame (accel_lowpass_tau_s > 0)
+    if (p_.accel_lowpass_tau_s > 0.0) {
+      s_.mb_rate_i += (s_.r_ib * w) * dt;  // the rate in the almost inertial frame
+    } else {
+      s_.mb_rate2 += w.squaredNorm() * dt;
+    }
   }
   if (s_.heading_initialized) {
     // KF2 predicted to this sample's body frame (9a), (9b), (11a)-(11e), where KF1's correction is;
@@ -633,7 +636,7 @@ double ParallelKf::gyro_white_var(double t) const {
 }
 
 Eigen::Matrix3d ParallelKf::reference_error_cov() const {
-  const ParallelKfCovarianceTerms c = covariance_terms(covariance_output());
+  const ParallelKfCovarianceTerms c = covariance_terms(covariance_output(), false);  // without the terms not read
   Eigen::Matrix3d px = c.kf + c.external_accel + c.gyro_scale + c.field + c.hard_iron;
   px(2, 2) -= c.external_accel(2, 2);  // carried in full below
   px.block<2, 1>(0, 2) -= c.external_accel.block<2, 1>(0, 2);
@@ -727,7 +730,6 @@ void ParallelKf::motion_bias_measure(const LagIncrement& lag) {
   if (p_.accel_lowpass_tau_s > 0.0) {
     // first order with the same lag for a ramp (tau) as the accelerometer's low-pass
     const double k = t / (p_.accel_lowpass_tau_s + t);
-    s_.rate2_lp += k * (s_.mb_rate2 / t - s_.rate2_lp);
     // a scale error s turns the attitude by s times the rotation; KF1 removes its tilt through the
     // accelerometer low-pass, so its correction rate carries s times the rate low-passed over tau
     // in the inertial frame (a rotation back and forth averages out there), not s times its rms
@@ -1338,6 +1340,10 @@ Eigen::Matrix3d ParallelKf::external_accel_covariance(const Eigen::Matrix3d& r) 
 }
 
 ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& out) const {
+  return covariance_terms(out, true);
+}
+
+ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& out, bool lag_and_delay) const {
   ParallelKfCovarianceTerms t;
   const Eigen::Matrix3d r = out.q_world_body.toRotationMatrix();
   const Eigen::Matrix3d p_up = r * s_.kf1.direction_kf().direction_covariance() * r.transpose();
@@ -1354,7 +1360,7 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
   t.kf(0, 1) = t.kf(1, 0) = -p_up(0, 1);
   t.kf(2, 2) = p_field(0, 0) / (c * c);
   // what the KFs do not model (see the header)
-  if (p_.bias_estimation) {
+  if (p_.bias_estimation && lag_and_delay) {
     // the error past bias errors left (propagated), and at least what the present bias
     // uncertainty gives over the lags (tau^2 P_b for the tilt, P_b,z t^2 for the heading): the
     // bias filter takes its motion measurements as independent of the attitude error, although
@@ -1386,7 +1392,7 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
     // + the horizontal rotation KF2's innovations show beyond the model (field_rotation_step), rad^2
     t.field(2, 2) = power / (m * m * c * c) + field_rotation_var();
   }
-  if (std::isnan(p_.imu_delay_s)) {
+  if (std::isnan(p_.imu_delay_s) && lag_and_delay) {
     // the delay not known: predicted over half a sample, the true one taken as uniform over
     // none to one sample (variance dt^2 / 12); its error turns the output about the rate axis
     const Eigen::Vector3d w_world = r * s_.prev_gyro;
