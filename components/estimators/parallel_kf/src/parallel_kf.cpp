@@ -35,20 +35,23 @@ constexpr int kLagPattern[5][2] = {{0, 3}, {1, 4}, {1, 2}, {0, 3}, {1, 4}};
 // Gamma B's one entry per row: the world axis of the bias error's drift each state integrates
 constexpr int kLagInput[5] = {0, 1, 2, 0, 1};
 
-template <int C>
-Eigen::Matrix<double, 5, C> lag_left(const Eigen::Matrix<double, 5, 5>& phi, const Eigen::Matrix<double, 5, C>& x) {
-  Eigen::Matrix<double, 5, C> r;  // phi x
-  for (int i = 0; i < 5; ++i) {
-    const int a = kLagPattern[i][0];
-    const int b = kLagPattern[i][1];
-    r.row(i) = phi(i, a) * x.row(a) + phi(i, b) * x.row(b);
+template <int R, int C>
+Eigen::Matrix<double, R, C> lag_left(const Eigen::Matrix<double, 5, 5>& phi, const Eigen::Matrix<double, 5, C>& x) {
+  Eigen::Matrix<double, R, C> r;  // the first R rows of phi x
+  for (int j = 0; j < C; ++j) {
+    for (int i = 0; i < R; ++i) {
+      const int a = kLagPattern[i][0];
+      const int b = kLagPattern[i][1];
+      r(i, j) = phi(i, a) * x(a, j) + phi(i, b) * x(b, j);
+    }
   }
   return r;
 }
 
-Eigen::Matrix<double, 5, 5> lag_right(const Eigen::Matrix<double, 5, 5>& x, const Eigen::Matrix<double, 5, 5>& phi) {
-  Eigen::Matrix<double, 5, 5> r;  // x phi^T
-  for (int j = 0; j < 5; ++j) {
+template <int C>
+Eigen::Matrix<double, 5, C> lag_right(const Eigen::Matrix<double, 5, 5>& x, const Eigen::Matrix<double, 5, 5>& phi) {
+  Eigen::Matrix<double, 5, C> r;  // the first C columns of x phi^T
+  for (int j = 0; j < C; ++j) {
     const int a = kLagPattern[j][0];
     const int b = kLagPattern[j][1];
     r.col(j) = x.col(a) * phi(j, a) + x.col(b) * phi(j, b);
@@ -169,15 +172,16 @@ void ParallelKf::reset() {
 }
 
 ParallelKf::StepRate ParallelKf::step_rate(const Eigen::Vector3d& gyro, double dt) const {
-  StepRate r{s_.prev_gyro + p_.gyro_current_weight * (gyro - s_.prev_gyro), Eigen::Vector3d::Zero()};
-  if (!p_.tilt.exact_rotation || !p_.coning_correction || p_.gyro_current_weight != 0.5) {
-    return r;
-  }
+  StepRate r{Eigen::Vector3d::Zero(), Eigen::Vector3d::Zero()};
   const double h0 = s_.prev_dt_s;
-  if (!p_.quadratic_rate || h0 < 0.5 * dt || h0 > 2.0 * dt) {
-    // the rotation over the step for a rate linear between the two samples (w1 + (w2 - w1) s / h):
-    // h (w1 + w2) / 2 + (h^2 / 12) w1 x w2 (the rotation vector's rate is w + theta x w / 2)
-    r.coning = (dt * dt / 12.0) * s_.prev_gyro.cross(gyro);
+  const bool coning = p_.tilt.exact_rotation && p_.coning_correction && p_.gyro_current_weight == 0.5;
+  if (!coning || !p_.quadratic_rate || h0 < 0.5 * dt || h0 > 2.0 * dt) {
+    r.w = s_.prev_gyro + p_.gyro_current_weight * (gyro - s_.prev_gyro);  // the line's mean
+    if (coning) {
+      // the rotation over the step for a rate linear between the two samples (w1 + (w2 - w1) s / h):
+      // h (w1 + w2) / 2 + (h^2 / 12) w1 x w2 (the rotation vector's rate is w + theta x w / 2)
+      r.coning = (dt * dt / 12.0) * s_.prev_gyro.cross(gyro);
+    }
     return r;
   }
   // w(t) = a + b t + c t^2 for t in [0, dt] through w(-h0) = prev2, w(0) = prev, w(dt) = gyro; its
@@ -263,8 +267,11 @@ bool ParallelKf::step(const ImuSample& s, SampleCheck& c) {
   const bool motion_bias = p_.bias_estimation && p_.motion_bias_sigma_rps > 0.0;
   if (motion_bias) {
     s_.mb_corr += s_.kf1.last_correction_rotvec();
-    s_.mb_rate2 += w.squaredNorm() * dt;
-    s_.mb_rate_i += (s_.r_ib * w) * dt;  // the rate in the almost inertial frame (accel_lowpass_tau_s > 0)
+    if (p_.accel_lowpass_tau_s > 0.0) {
+      s_.mb_rate_i += (s_.r_ib * w) * dt;  // the rate in the almost inertial frame
+    } else {
+      s_.mb_rate2 += w.squaredNorm() * dt;
+    }
   }
   if (s_.heading_initialized) {
     // KF2 predicted to this sample's body frame (9a), (9b), (11a)-(11e), where KF1's correction is;
@@ -388,7 +395,8 @@ bool ParallelKf::field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, do
     s_.rest_field.reset();
     return false;
   }
-  const Eigen::Vector3d f = (gyro_frame_kept() ? s_.r_ib : s_.q_ib.toRotationMatrix()) * mag;
+  const Eigen::Vector3d f = gyro_frame_kept() ? Eigen::Vector3d(s_.r_ib * mag)
+                                                : Eigen::Vector3d(s_.q_ib.toRotationMatrix() * mag);
   const bool rest = s_.rest_det.rest;
   const double tol = p_.mag_norm_tol * s_.gate.m_ut;
   const bool was_held = s_.rest_field.held;
@@ -628,7 +636,7 @@ double ParallelKf::gyro_white_var(double t) const {
 }
 
 Eigen::Matrix3d ParallelKf::reference_error_cov() const {
-  const ParallelKfCovarianceTerms c = covariance_terms(covariance_output());
+  const ParallelKfCovarianceTerms c = covariance_terms(covariance_output(), false);  // without the terms not read
   Eigen::Matrix3d px = c.kf + c.external_accel + c.gyro_scale + c.field + c.hard_iron;
   px(2, 2) -= c.external_accel(2, 2);  // carried in full below
   px.block<2, 1>(0, 2) -= c.external_accel.block<2, 1>(0, 2);
@@ -722,7 +730,6 @@ void ParallelKf::motion_bias_measure(const LagIncrement& lag) {
   if (p_.accel_lowpass_tau_s > 0.0) {
     // first order with the same lag for a ramp (tau) as the accelerometer's low-pass
     const double k = t / (p_.accel_lowpass_tau_s + t);
-    s_.rate2_lp += k * (s_.mb_rate2 / t - s_.rate2_lp);
     // a scale error s turns the attitude by s times the rotation; KF1 removes its tilt through the
     // accelerometer low-pass, so its correction rate carries s times the rate low-passed over tau
     // in the inertial frame (a rotation back and forth averages out there), not s times its rms
@@ -876,23 +883,24 @@ ParallelKf::LagIncrement ParallelKf::propagate_lag_error(double t) {
   }
   const Matrix53 c = s_.lag_bias_cov;
   const Matrix53 gp = g * s_.bias_err_cov;
-  const Matrix53 phi_c = lag_left(phi, c);
+  const Matrix53 phi_c = lag_left<5>(phi, c);
   const Matrix5 pc = phi_c * g.transpose();
   // the increment d = (Phi - I) x + G b_err (LagIncrement, its first three rows), from the moments
   // before the step: E[d b^T] = (Phi - I) C + G B, E[y d^T] = Y X (Phi - I)^T + Y C G^T + G C^T
-  // (Phi - I)^T + G B G^T for y = Y x + G b_err (Y = Phi: x_j; Y = Phi - I: d)
+  // (Phi - I)^T + G B G^T for y = Y x + G b_err (Y = Phi: x_j; Y = Phi - I: d); of E[x_j d^T]
+  // only the columns of d's first three rows are kept, of E[d d^T] and E[d b^T] only d's
   const Matrix5 pm = phi - Matrix5::Identity();
   const Matrix5 gpg = gp * g.transpose();
   const Matrix5 gc = g * c.transpose();
-  const Matrix5 common = lag_right(gc, pm) + gpg;
-  const Matrix5 phi_x = lag_left(phi, s_.lag_cov);
-  const Matrix5 x_d = lag_right(phi_x, pm) + pc + common;
+  const Matrix53 common = lag_right<3>(gc, pm) + gpg.leftCols<3>();
+  const Matrix5 phi_x = lag_left<5>(phi, s_.lag_cov);
   LagIncrement inc;
-  inc.x_d = x_d.leftCols<3>();
-  const Matrix5 cg = c * g.transpose();
-  inc.d_d = (x_d - lag_right(s_.lag_cov, pm) - cg).topLeftCorner<3, 3>();
-  inc.b_d = (lag_left(pm, c) + gp).topRows<3>().transpose();
-  Matrix5 p = lag_right(phi_x, phi) + pc + pc.transpose() + gpg;
+  inc.x_d = lag_right<3>(phi_x, pm) + pc.leftCols<3>() + common;
+  // c g^T's first three rows as a 4-row product: the rows a 5-row product sums in the same order
+  const Eigen::Matrix<double, 4, 3> cg = c.topRows<4>() * g.topRows<3>().transpose();
+  inc.d_d = inc.x_d.topRows<3>() - lag_right<3>(s_.lag_cov, pm).topRows<3>() - cg.topRows<3>();
+  inc.b_d = (lag_left<3>(pm, c) + gp.topRows<3>()).transpose();
+  Matrix5 p = lag_right<5>(phi_x, phi) + pc + pc.transpose() + gpg;
   s_.lag_cov = 0.5 * (p + p.transpose());
   s_.lag_bias_cov = phi_c + gp;
   s_.lag_keep_z = 1.0;
@@ -1332,6 +1340,10 @@ Eigen::Matrix3d ParallelKf::external_accel_covariance(const Eigen::Matrix3d& r) 
 }
 
 ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& out) const {
+  return covariance_terms(out, true);
+}
+
+ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& out, bool lag_and_delay) const {
   ParallelKfCovarianceTerms t;
   const Eigen::Matrix3d r = out.q_world_body.toRotationMatrix();
   const Eigen::Matrix3d p_up = r * s_.kf1.direction_kf().direction_covariance() * r.transpose();
@@ -1348,7 +1360,7 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
   t.kf(0, 1) = t.kf(1, 0) = -p_up(0, 1);
   t.kf(2, 2) = p_field(0, 0) / (c * c);
   // what the KFs do not model (see the header)
-  if (p_.bias_estimation) {
+  if (p_.bias_estimation && lag_and_delay) {
     // the error past bias errors left (propagated), and at least what the present bias
     // uncertainty gives over the lags (tau^2 P_b for the tilt, P_b,z t^2 for the heading): the
     // bias filter takes its motion measurements as independent of the attitude error, although
@@ -1380,7 +1392,7 @@ ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& o
     // + the horizontal rotation KF2's innovations show beyond the model (field_rotation_step), rad^2
     t.field(2, 2) = power / (m * m * c * c) + field_rotation_var();
   }
-  if (std::isnan(p_.imu_delay_s)) {
+  if (std::isnan(p_.imu_delay_s) && lag_and_delay) {
     // the delay not known: predicted over half a sample, the true one taken as uniform over
     // none to one sample (variance dt^2 / 12); its error turns the output about the rate axis
     const Eigen::Vector3d w_world = r * s_.prev_gyro;

@@ -394,11 +394,11 @@ struct ParallelKfState {
   /// is the rate of; motion_noise_window), rad^2/s
   Eigen::Matrix3d bias_err_att_cov = Eigen::Matrix3d::Zero();
   Eigen::Vector3d bias_lp_i{0, 0, 0};  ///< the bias in the inertial frame, low-passed as the accelerometer
-  double rate2_lp = 0.0;    ///< |s_G|^2 low-passed over accel_lowpass_tau_s, rad^2/s^2
+  double rate2_lp = 0.0;    ///< |s_G|^2 low-passed over rest_filter_tau_s (without the accelerometer low-pass), rad^2/s^2
   // motion bias window (summed between updates)
   Eigen::Vector3d mb_corr{0, 0, 0};  ///< KF1's correction rotations, rad (body)
-  double mb_rate2 = 0.0;             ///< integral of |s_G|^2 dt, rad^2/s
-  Eigen::Vector3d mb_rate_i{0, 0, 0};  ///< integral of R_ib s_G dt (almost inertial frame), rad
+  double mb_rate2 = 0.0;             ///< integral of |s_G|^2 dt, rad^2/s (without the accelerometer low-pass)
+  Eigen::Vector3d mb_rate_i{0, 0, 0};  ///< integral of R_ib s_G dt (almost inertial frame; with the low-pass), rad
   Eigen::Vector3d rate_lp_i{0, 0, 0};  ///< R_ib s_G low-passed over accel_lowpass_tau_s, rad/s
   double mb_head = 0.0;              ///< KF2's heading corrections about sZ / cos^2(dip), rad
   double mb_time = 0.0;              ///< s
@@ -792,6 +792,9 @@ class ParallelKf {
   /// the low-pass let through, the heading KF2 takes from it, and their cross-covariance
   [[nodiscard]] Eigen::Matrix3d external_accel_covariance(const Eigen::Matrix3d& r) const;
 
+  /// covariance_terms(out) with the bias_lag and delay terms left zero unless `lag_and_delay`
+  /// (reference_error_cov does not read them)
+  [[nodiscard]] ParallelKfCovarianceTerms covariance_terms(const ParallelKfOutput& out, bool lag_and_delay) const;
   /// output()'s attitude and dip, the only fields covariance_terms reads (the rest left default)
   [[nodiscard]] ParallelKfOutput covariance_output() const;
   /// The delay the output is predicted over, s: imu_delay_s, or half the last step when not known.
