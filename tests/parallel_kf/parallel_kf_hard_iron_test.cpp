@@ -369,6 +369,9 @@ TEST(ParallelKfHardIron, GivenTheHardIronKeysInYamlWhenLoadedThenTheyAreReadAndH
       {"  hard_iron_estimator:\n    removed_log_lr: .inf\n", "removed_log_lr"},
       {"  hard_iron_estimator:\n    removed_tau_s: 0\n", "removed_tau_s"},
       {"  hard_iron_estimator:\n    removed_tau_s: .nan\n", "removed_tau_s"},
+      {"  hard_iron_estimator:\n    noise_tau_s: -1\n", "noise_tau_s"},
+      {"  hard_iron_estimator:\n    noise_tau_s: 1e308\n", "noise_tau_s"},
+      {"  hard_iron_estimator:\n    noise_tau_s: .nan\n", "noise_tau_s"},
       {"  hard_iron_estimator:\n    no_such_key: 1\n", "no_such_key"},
       {"  hard_iron_estimator:\n    prior_sigma_ut: [1, 2]\n", "prior_sigma_ut"},
   };
