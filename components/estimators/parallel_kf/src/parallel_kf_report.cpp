@@ -28,12 +28,11 @@ bool ParallelKf::update(const ImuSample& s) {
 bool ParallelKf::healthy() {
   // per sample: one sum over the state and the three covariances' diagonals, and their signs;
   // every kFullCheckEvery-th sample the full check of each covariance (state_health.h)
-  // (the diagonals without writing the KFs' implicit blocks: DirectionKf::covariance_diagonal)
-  const Eigen::Matrix<double, 6, 1> d1 = s_.kf1.direction_kf().covariance_diagonal();
-  const Eigen::Matrix<double, 6, 1> d2 = s_.kf2.covariance_diagonal();
+  // (the KFs' variances without writing their implicit blocks: DirectionKf::variances_ok)
   if (!all_finite(s_.kf1.up_body(), s_.kf1.ext_accel_body(), s_.kf2.u(), s_.kf2.e(), s_.bias, s_.lp_accel_i,
-                  s_.gate.m_ut, s_.gate.dip_rad, d1, d2, s_.bias_cov.diagonal()) ||
-      !(std::min({d1.minCoeff(), d2.minCoeff(), s_.bias_cov.diagonal().minCoeff()}) >= 0.0)) {
+                  s_.gate.m_ut, s_.gate.dip_rad, s_.bias_cov.diagonal()) ||
+      !(s_.bias_cov.diagonal().minCoeff() >= 0.0) || !s_.kf1.direction_kf().variances_ok() ||
+      !s_.kf2.variances_ok()) {
     return false;
   }
   return !s_.health.full_due() || (covariance_ok(s_.kf1.covariance(), true) &&

@@ -17,12 +17,24 @@
 // exp(-h w) instead of (I - h[w x]) (first order, grows |u|), renormalisation of u after each
 // step, c given at a reference rate and converted to the actual step (c^(rate * h)), and an extra
 // gyro-error process noise (bias drift) on u.
+//
+// The tangent form (exact rotation, renormalised u, c = 0: the default's KF1 and KF2). u is a unit
+// direction, so its error lies across u; Q11 (above) is isotropic across u and zero along it, M is
+// isotropic, the start is var_u I, and a rotation carries u and P11 alike. P11 then keeps the form
+// alpha (I - u u^T) + beta u u^T under the prediction, and the closed-form correction (S = k^2 P11 +
+// (d + r) I shares P11's eigenvectors) maps it to the same form with alpha' = (d + r) alpha /
+// (k^2 alpha + d + r) (beta likewise). The filter keeps the two numbers instead of the 3x3 matrix:
+// what is across u is alpha, what is along it beta (only the start's share, which the corrections
+// shrink). Approximation: the correction moves u by the step's correction angle while the
+// posterior's eigenvectors stay with the prior's u; the form takes them along with u (as the
+// renormalisation takes u's length). Any other case keeps the full 6x6 P.
 #pragma once
 
 #include "poise/core/attitude.h"
 
 #include <Eigen/Core>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 
@@ -88,6 +100,10 @@ class DirectionKf {
     // (7e), (11e); with c = 0 exactly sigma^2 (e is finite: the state-health check)
     const double s2 = p_.sigma_meas * p_.sigma_meas;
     const double q22 = c == 0.0 ? s2 : c * c / 3.0 * e_.squaredNorm() + s2;
+    if (c == 0.0 && p_.exact_rotation && p_.renormalize) {
+      predict_tangent(a, qg, q22);
+      return;
+    }
     const Eigen::Vector3d u_prev = u_;
 
     u_.noalias() = a * u_prev;  // (5a), (9a)
@@ -126,6 +142,10 @@ class DirectionKf {
     const double r = p_.sigma_meas * p_.sigma_meas + extra_var;  // (7h), (11h)
     if (layout_ == Layout::kBlockDiagonal) {
       correct_decoupled(innov, k, r);
+      return innov;
+    }
+    if (layout_ == Layout::kTangentPrior) {
+      correct_tangent(innov, k, r);
       return innov;
     }
     materialize();
@@ -173,13 +193,35 @@ class DirectionKf {
     return p;
   }
   /// P11, the direction's block, without writing the others
-  [[nodiscard]] Eigen::Block<const Matrix6, 3, 3> direction_covariance() const {
-    const Matrix6& p = p_mat_;
-    return p.topLeftCorner<3, 3>();
+  [[nodiscard]] Eigen::Matrix3d direction_covariance() const {
+    if (tangent()) {
+      return tangent_matrix(alpha_, beta_);
+    }
+    return p_mat_.topLeftCorner<3, 3>();
+  }
+  /// The direction's variance along a unit vector across u: alpha in the tangent form; NaN
+  /// otherwise (then variance_along() of that vector)
+  [[nodiscard]] double variance_across() const { return tangent() ? alpha_ : std::nan(""); }
+  /// v^T P11 v, the direction's variance along v (direction units^2 |v|^2)
+  [[nodiscard]] double variance_along(const Eigen::Vector3d& v) const {
+    if (tangent()) {
+      const double along = v.dot(u_) / u_.squaredNorm() * v.dot(u_);
+      return alpha_ * (v.squaredNorm() - along) + beta_ * along;
+    }
+    return v.dot(p_mat_.topLeftCorner<3, 3>() * v);
   }
   /// The diagonal of P without writing the blocks
   [[nodiscard]] Eigen::Matrix<double, 6, 1> covariance_diagonal() const {
     Eigen::Matrix<double, 6, 1> v;
+    if (tangent()) {
+      const Eigen::Vector3d uu = u_.cwiseAbs2() / u_.squaredNorm();
+      v.head<3>() = (beta_ - alpha_) * uu.array() + alpha_;
+      v.tail<3>().setConstant(d_);
+      if (layout_ == Layout::kTangentPosterior) {
+        v.tail<3>() -= (d_ * d_) * ((ib_ - ia_) * uu.array() + ia_).matrix();
+      }
+      return v;
+    }
     v.head<3>() = p_mat_.diagonal().head<3>();
     if (layout_ == Layout::kBlockDiagonal) {
       v.tail<3>().setConstant(d_);
@@ -189,6 +231,16 @@ class DirectionKf {
       v.tail<3>() = p_mat_.diagonal().tail<3>();
     }
     return v;
+  }
+  /// The per-sample health check's part: every variance of P finite and none negative (in the
+  /// tangent form from its numbers, without building the diagonal)
+  [[nodiscard]] bool variances_ok() const {
+    if (tangent()) {
+      const double p22 = layout_ == Layout::kTangentPosterior ? d_ - d_ * d_ * std::max(ia_, ib_) : d_;
+      return std::isfinite(alpha_ + beta_ + d_ + ia_ + ib_) && std::min({alpha_, beta_, p22}) >= 0.0;
+    }
+    const Eigen::Matrix<double, 6, 1> v = covariance_diagonal();
+    return v.allFinite() && v.minCoeff() >= 0.0;
   }
   /// Replaces u (e.g. after an external correction); the caller keeps it unit if it wants.
   void set_u(const Eigen::Vector3d& u) { u_ = u; }
@@ -210,6 +262,61 @@ class DirectionKf {
   }
 
  private:
+  [[nodiscard]] bool tangent() const {
+    return layout_ == Layout::kTangentPrior || layout_ == Layout::kTangentPosterior;
+  }
+  /// x (I - u u^T) + y u u^T for the current u (normalised here)
+  [[nodiscard]] Eigen::Matrix3d tangent_matrix(double x, double y) const {
+    Eigen::Matrix3d m = ((y - x) / u_.squaredNorm()) * (u_ * u_.transpose());
+    m.diagonal().array() += x;
+    return m;
+  }
+
+  /// The prediction in the tangent form (notation): u_k = a u_{k-1}; Q11 = h^2 sigma^2 (|u|^2 I -
+  /// u u^T) adds h^2 sigma^2 |u|^2 across u and nothing along it; e = 0, P12 = 0, P22 = q22 I.
+  void predict_tangent(const Eigen::Matrix3d& a, double qg, double q22) {
+    if (!tangent()) {  // from the full P (after reset(), set_e() or a full update): its two numbers
+      materialize();
+      const Eigen::Matrix3d p11 = p_mat_.topLeftCorner<3, 3>();
+      beta_ = u_.dot(p11 * u_) / u_.squaredNorm();
+      alpha_ = 0.5 * (p11.trace() - beta_);
+    }
+    const double n2 = u_.squaredNorm();
+    const Eigen::Vector3d u_prev = u_;
+    u_ = a.col(0) * u_prev[0] + a.col(1) * u_prev[1] + a.col(2) * u_prev[2];  // (5a), (9a)
+    alpha_ += qg * n2;
+    e_.setZero();
+    d_ = q22;
+    layout_ = Layout::kTangentPrior;
+  }
+
+  /// correct_decoupled() in the tangent form: S = k^2 P11 + (d + r) I has the eigenvalues
+  /// s_a = k^2 alpha + d + r across u and s_b = k^2 beta + d + r along it, so with v = v_across +
+  /// v_along: u += k (alpha / s_a v_across + beta / s_b v_along), e = d (v_across / s_a + v_along /
+  /// s_b), alpha' = (d + r) alpha / s_a, beta' = (d + r) beta / s_b; P12 = -k d P11 S^-1 and P22 =
+  /// d I - d^2 S^-1 are kept as the two inverses.
+  void correct_tangent(const Eigen::Vector3d& innov, double k, double r) {
+    const double dr = d_ + r;
+    const double sa = k * k * alpha_ + dr;
+    const double sb = k * k * beta_ + dr;
+    const double inv = 1.0 / (sa * sb);
+    ia_ = sb * inv;
+    ib_ = sa * inv;
+    // u is unit here (renormalised after each correction, rotated by predictions, set unit)
+    const double along = u_.dot(innov);
+    const double ga = k * alpha_ * ia_;
+    const double ea = d_ * ia_;
+    const Eigen::Vector3d u_prior = u_;
+    u_.noalias() += ga * innov + ((k * beta_ * ib_ - ga) * along) * u_prior;
+    e_.noalias() = ea * innov + ((d_ * ib_ - ea) * along) * u_prior;
+    alpha_ *= dr * ia_;
+    beta_ *= dr * ib_;
+    kd_ = -k * d_;
+    dr_ = dr;
+    layout_ = Layout::kTangentPosterior;
+    u_.normalize();
+  }
+
   /// The update of correct() when P = blkdiag(A, d I) and e = 0 (right after a prediction with
   /// c = 0), in closed form with S = k^2 A + (d + r) I: u += k A S^-1 v, e = d S^-1 v,
   /// P11 = A - k^2 A S^-1 A = (d + r) A S^-1 (as S - k^2 A = (d + r) I), P12 = -k d A S^-1,
@@ -235,10 +342,19 @@ class DirectionKf {
     }
   }
 
-  /// Writes the blocks of p_mat_ the layout keeps implicit (P11 is always written).
+  /// Writes the blocks of p_mat_ the layout keeps implicit (P11 too in the tangent form).
   /// Writes P12, P21 and P22 of `p` (P11 already in it) from the layout's kept quantities.
   void fill_blocks(Matrix6& p) const {
-    if (layout_ == Layout::kBlockDiagonal) {
+    if (tangent()) {
+      p.topLeftCorner<3, 3>() = tangent_matrix(alpha_, beta_);
+      if (layout_ == Layout::kTangentPosterior) {  // P11_prior S^-1 = P11 / (d + r); S^-1's eigenvalues
+        p.topRightCorner<3, 3>() = tangent_matrix(kd_ * alpha_ / dr_, kd_ * beta_ / dr_);
+        p.bottomLeftCorner<3, 3>() = p.topRightCorner<3, 3>();
+        p.bottomRightCorner<3, 3>() = tangent_matrix(d_ - d_ * d_ * ia_, d_ - d_ * d_ * ib_);
+        return;
+      }
+    }
+    if (layout_ == Layout::kBlockDiagonal || layout_ == Layout::kTangentPrior) {
       p.topRightCorner<3, 3>().setZero();
       p.bottomLeftCorner<3, 3>().setZero();
       p.bottomRightCorner<3, 3>().setZero();
@@ -262,11 +378,19 @@ class DirectionKf {
   // How much of P p_mat_ holds: all of it; P11 of blkdiag(P11, d_ I) with e = 0 (a prediction
   // with c = 0, which correct() then updates in closed form); P11 of the closed-form posterior,
   // P12 = kd_ as_, P22 = d_ I - d_^2 s_inv_ (correct_decoupled).
-  enum class Layout : uint8_t { kFull, kBlockDiagonal, kDecoupledPosterior };
+  // kTangentPrior / kTangentPosterior: the same two layouts in the tangent form (notation): P11 =
+  // alpha_ (I - u u^T) + beta_ u u^T (p_mat_'s P11 not written); the posterior's P12 = kd_ P11 /
+  // dr_, P22 = d_ I - d_^2 S^-1 with S^-1's eigenvalues ia_ across u, ib_ along it.
+  enum class Layout : uint8_t { kFull, kBlockDiagonal, kDecoupledPosterior, kTangentPrior, kTangentPosterior };
   Matrix6 p_mat_ = Matrix6::Identity();
   Layout layout_ = Layout::kFull;
   double d_ = 0.0;
   double kd_ = 0.0;
+  double alpha_ = 0.0;
+  double beta_ = 0.0;
+  double ia_ = 0.0;
+  double ib_ = 0.0;
+  double dr_ = 1.0;
   Eigen::Matrix3d as_ = Eigen::Matrix3d::Zero();
   Eigen::Matrix3d s_inv_ = Eigen::Matrix3d::Zero();
   mutable double cached_h_ = -1.0;  // step_c() cache (the pow is only recomputed when h changes)
