@@ -506,7 +506,8 @@ void ParallelKf::external_accel_step(const Eigen::Vector3d& accel_i, double dt) 
       s_.accel_h_cov_i(j, i) = s_.accel_h_cov_i(i, j);
     }
   }
-  s_.accel_h_cross_i += k_lp * (d * s_.accel_h_heading_i.transpose() - s_.accel_h_cross_i);
+  s_.accel_h_cross_d += k_lp * (d - s_.accel_h_cross_d);  // the cross moment's d (accel_h_cross())
+  s_.accel_h_cross_decay *= 1.0 - k_lp;
   // KF2 pulls the heading towards -tan(dip) times the tilt error about magnetic north, with its
   // lag: that error's horizontal acceleration low-passed over the lag (covariance_terms), stepped
   // once per bias period on the period's mean (the lag is 10 s or more)
@@ -515,6 +516,9 @@ void ParallelKf::external_accel_step(const Eigen::Vector3d& accel_i, double dt) 
   if (s_.accel_h_heading_span_s >= kBiasPeriodS) {
     const double h = s_.accel_h_heading_span_s;
     const double k = h / (heading_lag_s(dt) + h);
+    s_.accel_h_cross_i = accel_h_cross();  // folded before accel_h_heading_i moves
+    s_.accel_h_cross_decay = 1.0;
+    s_.accel_h_cross_d.setZero();
     s_.accel_h_heading_i += k * (s_.accel_h_heading_sum_i / h - s_.accel_h_heading_i);
     s_.accel_h_heading_sum_i.setZero();
     s_.accel_h_heading_span_s = 0.0;
@@ -1321,7 +1325,7 @@ Eigen::Matrix3d ParallelKf::external_accel_covariance(const Eigen::Matrix3d& r) 
       // A_x / g with A low-passed over KF2's lag: their cross-covariance is the cross moment of a
       // and A times those factors. At most full correlation (a slowly varying acceleration, as a
       // start's turning frame, gives it): xc^T T^-1 xc <= the heading's share, T the tilt's block.
-      const Eigen::Matrix3d x = w * s_.accel_h_cross_i * w.transpose() / (g * g);
+      const Eigen::Matrix3d x = w * accel_h_cross() * w.transpose() / (g * g);
       Eigen::Vector2d xc(tan_dip * x(1, 0), -tan_dip * x(0, 0));
       const double det = tilt.determinant();
       if (det > 0.0) {
@@ -1340,6 +1344,11 @@ Eigen::Matrix3d ParallelKf::external_accel_covariance(const Eigen::Matrix3d& r) 
     e.topLeftCorner<2, 2>().diagonal().array() += s_.accel_dev2_lp / (g * g);
   }
   return e;
+}
+
+Eigen::Matrix3d ParallelKf::accel_h_cross() const {
+  // the low-pass of d h^T with h constant: the held moment decayed, plus d's low-pass times h^T
+  return s_.accel_h_cross_decay * s_.accel_h_cross_i + s_.accel_h_cross_d * s_.accel_h_heading_i.transpose();
 }
 
 ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& out) const {

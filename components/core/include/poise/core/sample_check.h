@@ -164,6 +164,14 @@ inline TimeStep time_step(int64_t stamp_ns, int64_t last_stamp_ns, double max_dt
 /// are ns of the sensor's clock (>= 0); beyond this, differences of two stamps could overflow.
 constexpr int64_t kMaxStampNs = int64_t{1} << 62;
 
+/// Why the gyro or accelerometer values of `s` are unusable, in the order check_imu_sample tests
+/// them (non-finite gyro, non-finite accel, gyro out of range, accel out of range, zero accel);
+/// kCount when usable. Out of line (sample_check.cpp): the usual sample does not need it.
+RejectReason imu_values_reject(const ImuSample& s, const SampleLimits& lim);
+/// Why the magnetometer reading is unusable (non-finite, zero, out of range), kCount when usable
+/// (sample_check.cpp).
+RejectReason mag_value_reject(const Eigen::Vector3d& mag_ut, const SampleLimits& lim);
+
 /// Validates `s`; counts every problem found in `counters`. `last_stamp_ns` < 0 means "no
 /// previous sample". Non-monotonic stamps are rejected; a gap above max_dt_s is rejected
 /// (counted) with reanchor = true. When to restart time after either: StampAnchor. `mag_use`:
@@ -174,46 +182,24 @@ inline SampleCheck check_imu_sample(const ImuSample& s, int64_t last_stamp_ns,
   SampleCheck out;
   if (s.stamp_ns < 0 || s.stamp_ns > kMaxStampNs) {  // keeps every stamp difference in int64
     out.reject = RejectReason::kStampOutOfRange;
-    counters.add(out.reject);
-    return out;
-  }
-  if (!s.has_gyro) {
+  } else if (!s.has_gyro) {
     out.reject = RejectReason::kMissingGyro;
-    counters.add(out.reject);
-    return out;
-  }
-  if (!s.has_accel) {
+  } else if (!s.has_accel) {
     out.reject = RejectReason::kMissingAccel;
-    counters.add(out.reject);
-    return out;
-  }
-  if (!s.has_mag && mag_use == MagnetometerUse::kRequired) {
+  } else if (!s.has_mag && mag_use == MagnetometerUse::kRequired) {
     out.reject = RejectReason::kNoMagnetometer;
-    counters.add(out.reject);
-    return out;
+  } else {
+    // finite norms within the limits have finite components (a non-finite one makes its norm inf
+    // or NaN): the usual sample takes two norms; otherwise the tests in their order
+    const double gyro_norm = s.gyro_rps.norm();
+    const double accel_norm = s.accel_mps2.norm();
+    const bool usable = std::isfinite(gyro_norm) && std::isfinite(accel_norm) && gyro_norm <= lim.max_gyro_rps &&
+                        accel_norm <= lim.max_accel_mps2 && accel_norm >= lim.min_accel_norm_mps2;
+    if (!usable) {
+      out.reject = imu_values_reject(s, lim);
+    }
   }
-  if (!s.gyro_rps.allFinite()) {
-    out.reject = RejectReason::kNonFiniteGyro;
-    counters.add(out.reject);
-    return out;
-  }
-  if (!s.accel_mps2.allFinite()) {
-    out.reject = RejectReason::kNonFiniteAccel;
-    counters.add(out.reject);
-    return out;
-  }
-  if (!(s.gyro_rps.norm() <= lim.max_gyro_rps)) {
-    out.reject = RejectReason::kGyroOutOfRange;
-    counters.add(out.reject);
-    return out;
-  }
-  if (!(s.accel_mps2.norm() <= lim.max_accel_mps2)) {
-    out.reject = RejectReason::kAccelOutOfRange;
-    counters.add(out.reject);
-    return out;
-  }
-  if (!(s.accel_mps2.norm() >= lim.min_accel_norm_mps2)) {
-    out.reject = RejectReason::kZeroAccel;
+  if (out.reject != RejectReason::kCount) {
     counters.add(out.reject);
     return out;
   }
@@ -234,17 +220,17 @@ inline SampleCheck check_imu_sample(const ImuSample& s, int64_t last_stamp_ns,
   if (mag_use == MagnetometerUse::kOff) {
     out.mag_absent = "use_magnetometer_false";
   } else if (s.has_mag) {
-    if (!s.mag_ut.allFinite()) {
-      out.mag_reject = RejectReason::kNonFiniteMag;
-      counters.add(out.mag_reject);
-    } else if (!(s.mag_ut.norm() >= lim.min_mag_norm_ut)) {
-      out.mag_reject = RejectReason::kZeroMag;
-      counters.add(out.mag_reject);
-    } else if (!(s.mag_ut.norm() <= lim.max_mag_ut)) {
-      out.mag_reject = RejectReason::kMagOutOfRange;
-      counters.add(out.mag_reject);
-    } else {
+    // a finite norm within the limits has finite components: the usual reading takes one norm
+    const double mag_norm = s.mag_ut.norm();
+    if (std::isfinite(mag_norm) && mag_norm >= lim.min_mag_norm_ut && mag_norm <= lim.max_mag_ut) {
       out.mag_ok = true;
+    } else {
+      out.mag_reject = mag_value_reject(s.mag_ut, lim);
+      if (out.mag_reject != RejectReason::kCount) {
+        counters.add(out.mag_reject);
+      } else {
+        out.mag_ok = true;
+      }
     }
   }
   return out;

@@ -453,8 +453,13 @@ struct ParallelKfState {
   Eigen::Vector3d accel_h_heading_i{0, 0, 0};
   /// the deviation times that low-passed one (d accel_h_heading_i^T), low-passed over
   /// accel_lowpass_tau_s as accel_h_cov_i (inertial frame, (m/s^2)^2): the tilt's and the heading's
-  /// shares of the acceleration come from one realisation, and this is their cross moment
+  /// shares of the acceleration come from one realisation, and this is their cross moment.
+  /// accel_h_heading_i moves once per period, so within one the low-pass of d h^T is that of d
+  /// times h^T: held as accel_h_cross_decay accel_h_cross_i + accel_h_cross_d accel_h_heading_i^T
+  /// (ParallelKf::accel_h_cross()), folded into accel_h_cross_i when accel_h_heading_i moves
   Eigen::Matrix3d accel_h_cross_i = Eigen::Matrix3d::Zero();
+  double accel_h_cross_decay = 1.0;          ///< prod (1 - k) of the period's steps
+  Eigen::Vector3d accel_h_cross_d{0, 0, 0};  ///< the deviation d low-passed as the cross moment, from 0, m/s^2
   Eigen::Vector3d accel_h_heading_sum_i{0, 0, 0};  ///< the deviation's integral over the period so far, m/s
   double accel_h_heading_span_s = 0.0;             ///< that period so far, s
   /// The tilt's low-pass run again on the same input (accel_bw's twin), for the external
@@ -791,6 +796,8 @@ class ParallelKf {
   /// The external acceleration's term of covariance_terms (world axes; r = R_world_body): the tilt
   /// the low-pass let through, the heading KF2 takes from it, and their cross-covariance
   [[nodiscard]] Eigen::Matrix3d external_accel_covariance(const Eigen::Matrix3d& r) const;
+  /// The cross moment of the deviation and its heading low-pass (ParallelKfState::accel_h_cross_i)
+  [[nodiscard]] Eigen::Matrix3d accel_h_cross() const;
 
   /// covariance_terms(out) with the bias_lag and delay terms left zero unless `lag_and_delay`
   /// (reference_error_cov does not read them)
