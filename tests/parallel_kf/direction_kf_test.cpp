@@ -151,6 +151,32 @@ TEST(DirectionKf, GivenUnitDirectionsInTheTangentFormThenStateAndCovarianceStayW
   run_tangent_against_oracle(50.0, 0.4);     // KF2 of the default
 }
 
+// New parameters that do not keep the tangent form (here: no renormalisation) take P over in full:
+// the covariance the filter had is the one it goes on from, and the next update is the textbook's.
+TEST(DirectionKf, GivenTheTangentFormWhenTheParametersChangeThenTheFullFormGoesOnFromTheSameCovariance) {
+  DirectionKf kf(test_params(0.0, 0.0003, true));
+  Oracle o = start(kf);
+  const Eigen::Matrix3d a = rot_exp(Eigen::Vector3d(0.01, -0.02, 0.005));
+  for (int step = 0; step < 20; ++step) {
+    kf.predict_with_transition(a, 0.0035);
+    kf.correct(9.81 * kf.u() + Eigen::Vector3d(0.0002, -0.0001, 0.0003), 9.81);
+  }
+  o.x << kf.u(), kf.e();
+  o.p = kf.covariance();
+  const DirectionKfParams full = test_params(0.0, 0.0003, false);
+  kf.set_params(full);
+  const double p_scale = o.p.cwiseAbs().maxCoeff();
+  EXPECT_LE((kf.covariance() - o.p).cwiseAbs().maxCoeff(), kCovRelTol * p_scale);
+  const Eigen::Vector3d z = 9.81 * (a * kf.u()) + Eigen::Vector3d(0.0003, 0.0002, -0.0001);
+  o = textbook_step(o, a, 0.0035, 0.0, full.sigma_gyro_rps, full.sigma_meas, 9.81, z);
+  kf.predict_with_transition(a, 0.0035);
+  kf.correct(z, 9.81);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(kf.u()[i], o.x[i], kStateTol) << "u[" << i << "]";
+  }
+  EXPECT_LE((kf.covariance() - o.p).cwiseAbs().maxCoeff(), kCovRelTol * p_scale);
+}
+
 TEST(DirectionKf, SymmetricInverseIsTheInverse) {
   Eigen::Matrix3d m;
   m << 4.0, 1.0, -0.5, 1.0, 3.0, 0.25, -0.5, 0.25, 2.0;

@@ -64,6 +64,9 @@ class DirectionKf {
   explicit DirectionKf(const DirectionKfParams& p) : p_(p) {}
 
   void set_params(const DirectionKfParams& p) {
+    if (tangent()) {
+      materialize();  // the new parameters may not keep the tangent form: P written in full
+    }
     p_ = p;
     cached_h_ = -1.0;
   }
