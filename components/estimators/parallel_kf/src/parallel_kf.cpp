@@ -1286,13 +1286,11 @@ double ParallelKf::heading_lag_s(double dt) const {
   // (direction units); the lag is dt over that gain.
   const Eigen::Vector3d& up = s_.kf1.up_body();
   const Eigen::Vector3d up_x_field = up.cross(s_.kf2.u());
-  double a_h = s_.kf2.variance_across();  // the tangent form: the same across sX' in every direction
-  if (!(up_x_field.squaredNorm() > 1e-18)) {  // field along the vertical: no heading to hold
+  const double n2 = up_x_field.squaredNorm();
+  if (!(n2 > 1e-18)) {  // field along the vertical: no heading to hold
     return 0.0;
   }
-  if (std::isnan(a_h)) {
-    a_h = s_.kf2.variance_along(up_x_field.normalized());
-  }
+  const double a_h = s_.kf2.variance_along(up_x_field) / n2;  // along the unit vector across sX'
   const double m = s_.gate.m_ut > 0.0 ? s_.gate.m_ut : 1.0;
   const double noise = 2.0 * (p_.sigma_mag_ut * p_.sigma_mag_ut + s_.mag_adapt_var) / (m * m);
   const double gain = std::min(1.0, a_h / noise);

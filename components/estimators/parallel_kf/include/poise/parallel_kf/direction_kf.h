@@ -202,9 +202,6 @@ class DirectionKf {
     }
     return p_mat_.topLeftCorner<3, 3>();
   }
-  /// The direction's variance along a unit vector across u: alpha in the tangent form; NaN
-  /// otherwise (then variance_along() of that vector)
-  [[nodiscard]] double variance_across() const { return tangent() ? alpha_ : std::nan(""); }
   /// v^T P11 v, the direction's variance along v (direction units^2 |v|^2)
   [[nodiscard]] double variance_along(const Eigen::Vector3d& v) const {
     if (tangent()) {
