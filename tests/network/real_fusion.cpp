@@ -2,6 +2,8 @@
 // Host) as the fusion host's process in the fault tests, instead of poise_net_node's relay.
 // Usage: poise_net_real_fusion DOMAIN NAME   (runs until SIGINT/SIGTERM; publishes attitude/NAME)
 // Participant profile and security come from the environment, as for every poise process.
+// Prints "@start", then once a second "status t_ns=... <the component's status line>" (what it
+// received, fused, refused as stale or rejected), so that a test that fails shows the fusion's side.
 #include "poise/nodes/register.h"
 #include "poise/runtime/host.h"
 
@@ -14,6 +16,7 @@
 #include <cstdlib>
 #include <ctime>
 #include <exception>
+#include <string>
 #include <thread>
 
 namespace {
@@ -49,8 +52,16 @@ int main(int argc, char** argv) {
     spec.components.push_back(component);
     poise::runtime::Host host(spec, std::atoi(argv[1]));
     host.start();
+    long long next_status = now_ns() + 1000000000LL;
     while (!g_stop.load()) {
       std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      if (now_ns() >= next_status) {
+        next_status += 1000000000LL;
+        for (const std::string& line : host.status()) {
+          std::printf("status t_ns=%lld %s\n", now_ns(), line.c_str());
+        }
+        std::fflush(stdout);
+      }
     }
     host.stop();
   } catch (const std::exception& e) {
