@@ -13,7 +13,15 @@ constexpr double kInitVarDirection = 1e-2;  // P11 / P21 at (re)initialisation, 
 constexpr double kInitVarDisturbanceUt2 = 4.0;  // P22 of KF2 at initialisation, uT^2
 constexpr double kMinCos2Dip = 0.05;        // guard for the heading part of the KF2 correction
 constexpr double kMinTiltVarRad2 = 1e-14;   // numerical guard for an inverse-variance weight
-constexpr double kBiasPeriodS = 0.04;  // the bias filter runs once per window of this length, s (25 Hz)
+// The bias filter, and the bookkeeping of the published covariance that moves over seconds (lag
+// errors, the external acceleration's reference and KF2's share, the scale error's low-passes, the
+// dip's tilt variance), run once per window of this length, s (10 Hz). What they step has time
+// constants of seconds: the tilt's low-pass and its twin (accel_lowpass_tau_s, 3 s by default),
+// KF2's lag (10 s and more), the reference's 10 s stages, the bias filter's 100 s; 0.1 s is a
+// thirtieth of the shortest (without the low-pass, rest_filter_tau_s's 0.5 s: a fifth). It was
+// 0.04 s until session 25: on BROAD the means move by at most 0.01 deg between 0.04 and 0.2 s at
+// 285.7, 95.2 and 40.8 Hz (docs/ESTIMATORS.md, cost), the cost by 424 instructions per sample.
+constexpr double kBiasPeriodS = 0.1;
 // The gravity reference of the external-acceleration term follows the accelerometer with a time
 // constant of this many tilt low-pass time constants: a horizontal acceleration integrates to a
 // velocity change dv, which the reference holds as about dv / (this * tau), a tenth of what the
@@ -312,7 +320,7 @@ void ParallelKf::scale_error_step(const Eigen::Vector3d& w, double dt) {
   // error s turns the estimate by s times the rotation away from them. The gyro-only attitude is
   // r_ib where the filter keeps it (the low-pass frame, the hard-iron estimate), else integrated
   // here. The low-passes step once per bias period on the time elapsed: their lags are seconds,
-  // kBiasPeriodS 0.04 s, and only the published covariance reads them.
+  // kBiasPeriodS 0.1 s, and only the published covariance reads them.
   if (!gyro_frame_kept()) {
     s_.q_ib = (s_.q_ib * quat_exp(dt * w)).normalized();
   }
