@@ -483,54 +483,39 @@ void ParallelKf::external_accel_step(const Eigen::Vector3d& accel_i, double dt) 
   // that as an acceleration). The low-pass is a twin of the tilt's (the tilt's own state is the
   // estimate's, never turned); a first-order one (accel_lowpass_order 1) is the tilt's itself, not
   // turned.
-  const double tau = p_.accel_lowpass_tau_s;
-  s_.accel_ref_sum_i += dt * accel_i;
-  s_.accel_ref_sum_s += dt;
-  if (s_.accel_ref_sum_s >= kBiasPeriodS) {
-    reference_step();
-  }
-  const Eigen::Vector3d& ref = s_.accel_ref_i;
-  const double k_lp = dt / (tau + dt);
-  const Eigen::Matrix3d step_age = dt * s_.r_ib;
-  s_.accel_twin_age = (1.0 - k_lp) * (s_.accel_twin_age + step_age);
+  // The twin steps on every sample, as the tilt's low-pass does: what it lets through of a fast
+  // acceleration (vibration, tapping) reaches KF1 sample by sample. The rest steps once per bias
+  // period h: the reference on the period's mean (10 s stages), the twin's age, and the moments
+  // (low-passes over tau, 3 s by default, and KF2's lag, 10 s and more) on d at the period's end,
+  // one draw of d per period: the same second moment as every sample's over those seconds.
   const Eigen::Vector3d& twin =
       p_.accel_lowpass_order == 2 ? s_.accel_bw_twin.step(accel_i, dt) : s_.lp_accel_i;
-  if (!(s_.accel_ref_up_for == ref)) {  // the reference moves once per bias period: its direction with it
-    s_.accel_ref_up_ok = safe_normalize(ref, s_.accel_ref_up_i);
-    s_.accel_ref_up_for = ref;
-  }
-  if (!s_.accel_ref_up_ok) {
+  s_.accel_ref_sum_i += dt * accel_i;
+  s_.accel_ref_sum_s += dt;
+  if (s_.accel_ref_sum_s < kBiasPeriodS) {
     return;
   }
-  const Eigen::Vector3d& up = s_.accel_ref_up_i;
-  Eigen::Vector3d d = twin - ref;
+  const double h = s_.accel_ref_sum_s;
+  reference_step();
+  const double k_lp = h / (p_.accel_lowpass_tau_s + h);
+  // the held samples' ages grow by r_ib h, the period's samples take their weight at about h / 2
+  // (as each reference stage's, reference_step)
+  const Eigen::Matrix3d step_age = h * s_.r_ib;
+  s_.accel_twin_age = (1.0 - k_lp) * (s_.accel_twin_age + step_age) + (0.5 * k_lp) * step_age;
+  Eigen::Vector3d up;
+  if (!safe_normalize(s_.accel_ref_i, up)) {
+    return;
+  }
+  Eigen::Vector3d d = twin - s_.accel_ref_i;
   d -= d.dot(up) * up;
   d /= 1.0 - s_.accel_ref_g_ratio;  // what the reference let through in phase (reference_step)
-  // d d^T is symmetric to the bit (d_i d_j = d_j d_i), and so is the low-passed one: its upper
-  // triangle, mirrored
-  for (int j = 0; j < 3; ++j) {
-    for (int i = 0; i <= j; ++i) {
-      s_.accel_h_cov_i(i, j) += k_lp * (d(i) * d(j) - s_.accel_h_cov_i(i, j));
-      s_.accel_h_cov_i(j, i) = s_.accel_h_cov_i(i, j);
-    }
-  }
-  s_.accel_h_cross_d += k_lp * (d - s_.accel_h_cross_d);  // the cross moment's d (accel_h_cross())
-  s_.accel_h_cross_decay *= 1.0 - k_lp;
+  s_.accel_h_cov_i += k_lp * (d * d.transpose() - s_.accel_h_cov_i);
   // KF2 pulls the heading towards -tan(dip) times the tilt error about magnetic north, with its
-  // lag: that error's horizontal acceleration low-passed over the lag (covariance_terms), stepped
-  // once per bias period on the period's mean (the lag is 10 s or more)
-  s_.accel_h_heading_sum_i += dt * d;
-  s_.accel_h_heading_span_s += dt;
-  if (s_.accel_h_heading_span_s >= kBiasPeriodS) {
-    const double h = s_.accel_h_heading_span_s;
-    const double k = h / (heading_lag_s(dt) + h);
-    s_.accel_h_cross_i = accel_h_cross();  // folded before accel_h_heading_i moves
-    s_.accel_h_cross_decay = 1.0;
-    s_.accel_h_cross_d.setZero();
-    s_.accel_h_heading_i += k * (s_.accel_h_heading_sum_i / h - s_.accel_h_heading_i);
-    s_.accel_h_heading_sum_i.setZero();
-    s_.accel_h_heading_span_s = 0.0;
-  }
+  // lag: that error's horizontal acceleration low-passed over the lag (covariance_terms); the
+  // cross moment of d and that low-pass, d h^T low-passed over tau, with h before this step
+  s_.accel_h_cross_i += k_lp * (d * s_.accel_h_heading_i.transpose() - s_.accel_h_cross_i);
+  const double k = h / (heading_lag_s(dt) + h);
+  s_.accel_h_heading_i += k * (d - s_.accel_h_heading_i);
 }
 
 void ParallelKf::reference_step() {
@@ -1058,11 +1043,26 @@ void ParallelKf::field_deviation_step(const Eigen::Vector3d& mag, double lag, do
   // The heading follows the field with KF2's lag, so what moves it is the disturbance averaged
   // over that lag: its part along the reference (norm) and across it in the vertical plane
   // (dip), each low-passed over the lag, are what the gate can see of it.
+  // Both low-passes, and the dip's reference, step once per bias period on the period's means of
+  // the accepted fields' norm and sine of dip: the lag is 10 s and more, the period 0.1 s, and
+  // the dip is one asin per period, not per sample.
+  field_variances_step(dt);  // on every accepted field: field_rotation_step reads them next
+  const double norm = mag.norm();
+  s_.field_dev_norm_sum += dt * norm;
+  s_.field_dev_sin_dip_sum += dt * (-s_.kf1.up_body().dot(mag) / norm);
+  s_.field_dev_span_s += dt;
+  if (s_.field_dev_span_s < kBiasPeriodS) {
+    return;
+  }
+  const double h = s_.field_dev_span_s;
   const double m = s_.gate.m_ut;
-  const double dip = std::asin(std::clamp(-s_.kf1.up_body().dot(mag) / mag.norm(), -1.0, 1.0));
-  const double k = dt / (lag + dt);
-  s_.field_dn_lp += k * (mag.norm() - m - s_.field_dn_lp);
-  s_.field_dv_lp += k * (m * (dip - field_dip_reference(dip, dt)) - s_.field_dv_lp);
+  const double dip = std::asin(std::clamp(s_.field_dev_sin_dip_sum / h, -1.0, 1.0));
+  const double k = h / (lag + h);
+  s_.field_dn_lp += k * (s_.field_dev_norm_sum / h - m - s_.field_dn_lp);
+  s_.field_dv_lp += k * (m * (dip - field_dip_reference(dip, h)) - s_.field_dv_lp);
+  s_.field_dev_norm_sum = 0.0;
+  s_.field_dev_sin_dip_sum = 0.0;
+  s_.field_dev_span_s = 0.0;
 }
 
 void ParallelKf::field_rotation_step(const Eigen::Vector3d& mag, const Eigen::Vector3d& x_prior, double lag,
@@ -1104,6 +1104,35 @@ double ParallelKf::field_rotation_var() const {
   return 2.0 * std::max(s_.field_nu2_lp - s_.field_nu_model, 0.0);
 }
 
+void ParallelKf::field_variances_step(double dt) {
+  // The published tilt variance about magnetic east changes over the bias filter's and the
+  // low-pass's seconds, not from sample to sample: it is taken once per bias window (kBiasPeriodS),
+  // which keeps the whole covariance (about 1800 instructions) out of the per-sample cost.
+  if (!s_.initialized) {
+    return;
+  }
+  s_.field_dip_var_age_s += dt;
+  if (s_.field_dip_tilt_var >= 0.0 && s_.field_dip_var_age_s < kBiasPeriodS) {
+    return;
+  }
+  const ParallelKfOutput out = covariance_output();
+  Eigen::Vector3d east;
+  if (!safe_normalize(Eigen::Vector3d::UnitZ().cross(out.q_world_body * s_.kf2.u()), east, 1e-9)) {
+    return;  // no magnetic east (a vertical field): taken at the next field
+  }
+  const ParallelKfCovarianceTerms terms = covariance_terms(out);
+  Eigen::Matrix3d cov = terms.sum();
+  s_.field_dip_tilt_var = east.dot(cov * east);
+  // what field_rotation_step's model expects of its innovation: the heading error and tan(dip)
+  // times the tilt about magnetic north (east x up), the rotation term itself left out, and an
+  // unknown heading's (a reference not yet verified: the heading is the field's all the same)
+  cov -= terms.unknown_heading;
+  cov(2, 2) -= field_rotation_var();
+  const Eigen::Vector3d v = Eigen::Vector3d::UnitZ() + guarded_tan_dip() * east.cross(Eigen::Vector3d::UnitZ());
+  s_.field_heading_var = v.dot(cov * v);
+  s_.field_dip_var_age_s = 0.0;
+}
+
 double ParallelKf::field_dip_reference(double dip, double dt) {
   // A dip measured against sZ carries sZ's tilt error about magnetic east, which does not turn
   // the heading (sY = sZ x sX' keeps its direction), yet dv would read it as a disturbance: the
@@ -1118,28 +1147,6 @@ double ParallelKf::field_dip_reference(double dip, double dt) {
   const uint64_t epoch = s_.gate.reacquired + s_.gate.relearnt;
   if (!s_.initialized) {
     return s_.gate.dip_rad;
-  }
-  // The published tilt variance about magnetic east changes over the bias filter's and the
-  // low-pass's seconds, not from sample to sample: it is taken once per bias window (kBiasPeriodS),
-  // which keeps the whole covariance (about 1800 instructions) out of the per-sample cost.
-  s_.field_dip_var_age_s += dt;
-  if (!(s_.field_dip_tilt_var >= 0.0) || s_.field_dip_var_age_s >= kBiasPeriodS) {
-    const ParallelKfOutput out = covariance_output();
-    Eigen::Vector3d east;
-    if (!safe_normalize(Eigen::Vector3d::UnitZ().cross(out.q_world_body * s_.kf2.u()), east, 1e-9)) {
-      return s_.gate.dip_rad;
-    }
-    const ParallelKfCovarianceTerms terms = covariance_terms(out);
-    Eigen::Matrix3d cov = terms.sum();
-    s_.field_dip_tilt_var = east.dot(cov * east);
-    // what field_rotation_step's model expects of its innovation: the heading error and tan(dip)
-    // times the tilt about magnetic north (east x up), the rotation term itself left out, and an
-    // unknown heading's (a reference not yet verified: the heading is the field's all the same)
-    cov -= terms.unknown_heading;
-    cov(2, 2) -= field_rotation_var();
-    const Eigen::Vector3d v = Eigen::Vector3d::UnitZ() + guarded_tan_dip() * east.cross(Eigen::Vector3d::UnitZ());
-    s_.field_heading_var = v.dot(cov * v);
-    s_.field_dip_var_age_s = 0.0;
   }
   // each dip's error: the tilt about magnetic east (slow, shared by neighbouring dips) and the
   // magnetometer's white noise across the field in the vertical plane, sigma_M / m (independent
@@ -1156,7 +1163,7 @@ double ParallelKf::field_dip_reference(double dip, double dt) {
     s_.field_dip_epoch = epoch;
   }
   if (gp_.reference_tau_s > 0.0) {
-    if (dt != dip_forget_dt_) {  // the step changes rarely: its exp with it
+    if (dt != dip_forget_dt_) {  // a bias period's length: its exp when it changes
       dip_forget_dt_ = dt;
       dip_forget_ = std::exp(-dt / gp_.reference_tau_s);
     }
@@ -1180,6 +1187,9 @@ void ParallelKf::restart_heading(const Eigen::Vector3d& mag) {
   s_.bias_err_att_cov.col(2).setZero();  // and no error the bias filter has seen the rate of
   s_.field_dn_lp = 0.0;  // deviations from the reference it replaced
   s_.field_dv_lp = 0.0;
+  s_.field_dev_norm_sum = 0.0;
+  s_.field_dev_sin_dip_sum = 0.0;
+  s_.field_dev_span_s = 0.0;
   s_.field_nu_lp = 0.0;  // the heading starts on the field: no innovation left
   s_.field_nu2_lp = 0.0;
   s_.field_model_lp = 0.0;
@@ -1331,7 +1341,7 @@ Eigen::Matrix3d ParallelKf::external_accel_covariance(const Eigen::Matrix3d& r) 
       // A_x / g with A low-passed over KF2's lag: their cross-covariance is the cross moment of a
       // and A times those factors. At most full correlation (a slowly varying acceleration, as a
       // start's turning frame, gives it): xc^T T^-1 xc <= the heading's share, T the tilt's block.
-      const Eigen::Matrix3d x = w * accel_h_cross() * w.transpose() / (g * g);
+      const Eigen::Matrix3d x = w * s_.accel_h_cross_i * w.transpose() / (g * g);
       Eigen::Vector2d xc(tan_dip * x(1, 0), -tan_dip * x(0, 0));
       const double det = tilt.determinant();
       if (det > 0.0) {
@@ -1350,11 +1360,6 @@ Eigen::Matrix3d ParallelKf::external_accel_covariance(const Eigen::Matrix3d& r) 
     e.topLeftCorner<2, 2>().diagonal().array() += s_.accel_dev2_lp / (g * g);
   }
   return e;
-}
-
-Eigen::Matrix3d ParallelKf::accel_h_cross() const {
-  // the low-pass of d h^T with h constant: the held moment decayed, plus d's low-pass times h^T
-  return s_.accel_h_cross_decay * s_.accel_h_cross_i + s_.accel_h_cross_d * s_.accel_h_heading_i.transpose();
 }
 
 ParallelKfCovarianceTerms ParallelKf::covariance_terms(const ParallelKfOutput& out) const {

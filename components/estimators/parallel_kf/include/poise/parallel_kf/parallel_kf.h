@@ -453,15 +453,8 @@ struct ParallelKfState {
   Eigen::Vector3d accel_h_heading_i{0, 0, 0};
   /// the deviation times that low-passed one (d accel_h_heading_i^T), low-passed over
   /// accel_lowpass_tau_s as accel_h_cov_i (inertial frame, (m/s^2)^2): the tilt's and the heading's
-  /// shares of the acceleration come from one realisation, and this is their cross moment.
-  /// accel_h_heading_i moves once per period, so within one the low-pass of d h^T is that of d
-  /// times h^T: held as accel_h_cross_decay accel_h_cross_i + accel_h_cross_d accel_h_heading_i^T
-  /// (ParallelKf::accel_h_cross()), folded into accel_h_cross_i when accel_h_heading_i moves
+  /// shares of the acceleration come from one realisation, and this is their cross moment
   Eigen::Matrix3d accel_h_cross_i = Eigen::Matrix3d::Zero();
-  double accel_h_cross_decay = 1.0;          ///< prod (1 - k) of the period's steps
-  Eigen::Vector3d accel_h_cross_d{0, 0, 0};  ///< the deviation d low-passed as the cross moment, from 0, m/s^2
-  Eigen::Vector3d accel_h_heading_sum_i{0, 0, 0};  ///< the deviation's integral over the period so far, m/s
-  double accel_h_heading_span_s = 0.0;             ///< that period so far, s
   /// The tilt's low-pass run again on the same input (accel_bw's twin), for the external
   /// acceleration term only: it and the reference are turned by each bias change into the frame the
   /// new bias would have propagated (external_accel_return), so their difference holds no turn of
@@ -474,9 +467,6 @@ struct ParallelKfState {
   std::array<Eigen::Matrix3d, 3> accel_ref_stage_age{Eigen::Matrix3d::Zero(), Eigen::Matrix3d::Zero(),
                                                      Eigen::Matrix3d::Zero()};
   Eigen::Vector3d accel_ref_i{0, 0, 0};      ///< the reference, L3 + c (L2 - L3) (reference_step), m/s^2
-  Eigen::Vector3d accel_ref_up_i{0, 0, 1};   ///< accel_ref_up_for normalised (if accel_ref_up_ok)
-  Eigen::Vector3d accel_ref_up_for{std::nan(""), 0, 0};
-  bool accel_ref_up_ok = false;
   double accel_ref_c = 0.0;                   ///< its c, for a ramp lag of tau
   double accel_ref_g_ratio = 0.0;             ///< what it lets through of an acceleration, in phase, over the twin's
   Eigen::Vector3d accel_ref_sum_i{0, 0, 0};   ///< the accelerometer's integral over the bias period so far, m/s
@@ -485,6 +475,11 @@ struct ParallelKfState {
   double accel_ref_span_s = 0.0;  ///< time the reference has averaged (its stages' window until their time constant), s
   double field_dn_lp = 0.0;    ///< |s_M| - m of the fields used for heading, low-passed over KF2's lag, uT
   double field_dv_lp = 0.0;    ///< m (dip - alpha) of the same, low-passed the same way, uT
+  /// the bias period's integrals of the accepted fields' norm (uT s) and sine of dip (s), and
+  /// their span (s), on which field_dn_lp / field_dv_lp step
+  double field_dev_norm_sum = 0.0;
+  double field_dev_sin_dip_sum = 0.0;
+  double field_dev_span_s = 0.0;
   /// KF2's innovations about the vertical (field_rotation_step), rad: their horizontal angle from
   /// the prior direction low-passed over KF2's lag (nu_lp), its square low-passed the same way
   /// (nu2_lp, rad^2), and what the model expects of that square (the white noise's and the bias
@@ -793,11 +788,12 @@ class ParallelKf {
   void field_rotation_step(const Eigen::Vector3d& mag, const Eigen::Vector3d& x_prior, double lag, double dt);
   /// The dip the field term measures dv against (updated with the accepted dip `dip`), rad
   double field_dip_reference(double dip, double dt);
+  /// field_dip_tilt_var and field_heading_var from the published covariance, once per bias window
+  /// of accepted fields (and at once when not taken yet)
+  void field_variances_step(double dt);
   /// The external acceleration's term of covariance_terms (world axes; r = R_world_body): the tilt
   /// the low-pass let through, the heading KF2 takes from it, and their cross-covariance
   [[nodiscard]] Eigen::Matrix3d external_accel_covariance(const Eigen::Matrix3d& r) const;
-  /// The cross moment of the deviation and its heading low-pass (ParallelKfState::accel_h_cross_i)
-  [[nodiscard]] Eigen::Matrix3d accel_h_cross() const;
 
   /// covariance_terms(out) with the bias_lag and delay terms left zero unless `lag_and_delay`
   /// (reference_error_cov does not read them)
