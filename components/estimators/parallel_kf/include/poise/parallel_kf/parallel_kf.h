@@ -722,7 +722,8 @@ class ParallelKf {
   void motion_bias_measure(const LagIncrement& lag);
   /// The horizontal external acceleration the tilt's low-pass let through (accel_h_cov_i), from
   /// the raw accelerometer in the almost inertial frame `accel_i` (r_ib times the body's, which
-  /// step() computes once for the tilt's low-pass) of a step of dt; for the covariance.
+  /// step() computes once for the tilt's low-pass) of a step of dt; for the covariance. The twin
+  /// steps every sample, the reference, the twin's age and the moments once per bias period.
   void external_accel_step(const Eigen::Vector3d& accel_i, double dt);
   /// Steps the gravity reference (accel_ref_i, its stages, ages and lags) over the bias period on
   /// the period's mean of the accelerometer in the almost inertial frame.
