@@ -23,6 +23,8 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <utility>
+#include <vector>
 #include <sys/file.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -220,7 +222,13 @@ void wait_quiet(Count count) {
 
 /// The project's QoS profiles with the sensor streams made reliable and deep, so that no sample
 /// is lost between publisher, component, recorder and replayer on a loaded machine (for tests
-/// about reproducing estimates, not about best-effort loss, which test_record_dds covers).
+/// about reproducing estimates, not about best-effort loss, which test_record_dds covers). The
+/// estimates are kept too (transient-local, 1024 deep, 16 instances: a transient-local endpoint's
+/// max_samples must hold them all): a reader matches a writer when it has
+/// the writer's announcement, the writer sends to it only when it has the reader's, and on a
+/// loaded machine the second can come later than the whole run (session 25's fresh-clone run: the
+/// recorder matched every estimator, the estimators' 300 estimates each reached it none). The
+/// recorder follows a transient-local writer with a transient-local reader and gets its history.
 /// Returns the file path (in DIR).
 inline std::string lossless_profiles(const std::string& dir) {
   std::ifstream in(poise::testing::source_path("config/qos/poise_profiles.xml"));
@@ -234,6 +242,24 @@ inline std::string lossless_profiles(const std::string& dir) {
   };
   replace_all("<kind>BEST_EFFORT</kind>", "<kind>RELIABLE</kind>");
   replace_all("<depth>32</depth>", "<depth>4096</depth>");
+  // the estimate profiles (writer and reader) alone: durability and depth
+  for (size_t at = xml.find("profile_name=\"estimate\""); at != std::string::npos;
+       at = xml.find("profile_name=\"estimate\"", at + 1)) {
+    const size_t end = xml.find("</data_", at);
+    std::string block = xml.substr(at, end - at);
+    for (const auto& [from, to] : std::vector<std::pair<std::string, std::string>>{
+             {"<kind>VOLATILE</kind>", "<kind>TRANSIENT_LOCAL</kind>"},
+             {"<depth>64</depth>", "<depth>1024</depth>"},
+             {"<max_instances>256</max_instances>", "<max_instances>16</max_instances>"},
+             {"<max_samples_per_instance>64</max_samples_per_instance>",
+              "<max_samples_per_instance>1024</max_samples_per_instance>"}}) {
+      const size_t p = block.find(from);
+      if (p != std::string::npos) {
+        block.replace(p, from.size(), to);
+      }
+    }
+    xml.replace(at, end - at, block);
+  }
   const std::string path = dir + "/lossless_profiles.xml";
   std::ofstream(path) << xml;
   return path;

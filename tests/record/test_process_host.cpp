@@ -216,6 +216,12 @@ TEST(ProcessHost, GivenALiveRunFromAKnownInputOrderWhenProcessedThenEveryEstimat
             kStepTimeout);
       }
     }
+    // Every input and estimate in the file before the writers go (bounded): a writer that matched
+    // the recorder late sends its history then (lossless_profiles); the diagnostics settle after.
+    const uint64_t inputs_and_estimates = static_cast<uint64_t>(kSamples) + vision_seq + vehicle_seq +
+                                          5U * static_cast<uint64_t>(kSamples) +
+                                          static_cast<uint64_t>(kSamples - kStartZeroSamples);
+    poise::testing::wait_until([&] { return recorder->written() >= inputs_and_estimates; }, kMatchTimeout);
     testing::wait_quiet([&] { return recorder->written(); });
     const std::vector<std::string> status = host.status();
     host.stop();
