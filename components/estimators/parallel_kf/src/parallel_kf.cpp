@@ -34,6 +34,15 @@ constexpr double kMaxGyroBiasWalk = 0.01;
 // sample at 200 Hz, no longer a rate sensor).
 constexpr double kMaxGyroNoiseDensity = 0.1;
 
+// A low-pass's age (its samples' weighted integral of r_ib up to now, s) after a step of gain k:
+// every held sample's grows by step_age (r_ib h; the weights sum to one), and the new input takes
+// weight k with its own age (a bias period's mean: about step_age / 2; a reference stage's input:
+// the previous stage's age).
+Eigen::Matrix3d aged(const Eigen::Matrix3d& age, double k, const Eigen::Matrix3d& step_age,
+                     const Eigen::Matrix3d& input_age) {
+  return (1.0 - k) * (age + step_age) + k * input_age;
+}
+
 // propagate_lag_error's transition Phi over the state (tilt error x, y, heading, the Butterworth's
 // second state x, y) has two entries per row that are not structurally zero (each tilt axis's two
 // states; the heading and the tilt about north), Phi - I the same: a product with it is a sum of
@@ -498,10 +507,9 @@ void ParallelKf::external_accel_step(const Eigen::Vector3d& accel_i, double dt) 
   const double h = s_.accel_ref_sum_s;
   reference_step();
   const double k_lp = h / (p_.accel_lowpass_tau_s + h);
-  // the held samples' ages grow by r_ib h, the period's samples take their weight at about h / 2
-  // (as each reference stage's, reference_step)
+  // the period's samples take their weight at about h / 2, as each reference stage's input
   const Eigen::Matrix3d step_age = h * s_.r_ib;
-  s_.accel_twin_age = (1.0 - k_lp) * (s_.accel_twin_age + step_age) + (0.5 * k_lp) * step_age;
+  s_.accel_twin_age = aged(s_.accel_twin_age, k_lp, step_age, 0.5 * step_age);
   Eigen::Vector3d up;
   if (!safe_normalize(s_.accel_ref_i, up)) {
     return;
@@ -546,7 +554,7 @@ void ParallelKf::reference_step() {
   for (int i = 0; i < 3; ++i) {
     Eigen::Matrix3d& age = s_.accel_ref_stage_age[static_cast<size_t>(i)];
     s_.accel_ref_stages_i.col(i) += k * (input - s_.accel_ref_stages_i.col(i));
-    age = (1.0 - k) * (age + step_age) + k * input_age;
+    age = aged(age, k, step_age, input_age);
     s_.accel_ref_stage_lag(i) = (1.0 - k) * (s_.accel_ref_stage_lag(i) + h) + k * input_lag;
     input = s_.accel_ref_stages_i.col(i);
     input_age = age;
