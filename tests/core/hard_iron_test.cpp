@@ -158,6 +158,80 @@ TEST(HardIron, GivenAStillSensorWhenFedThenNothingIsLearntAndTheReportSaysNotEno
   EXPECT_EQ(h.corrected(m), m);
 }
 
+// A step of the offset (a magnet put on) with the body not turning (step_detection, off by
+// default): the comparisons cannot see a constant offset, but the step shows between two readings
+// whatever the rotation, m_k - C m_j = b_new - b_old (session 26). Oracle: the offset the simulator adds. The step's estimate is the
+// mean of two comparisons sharing their earlier reading: its error per axis has the sigma
+// sqrt(s^2 + (s^2 + s^2) / 4) for the readings' noise s.
+constexpr double kStepSigmaUt = 0.612;  // sqrt(1.5) x kReadingNoiseUt
+constexpr double kStepTolUt = 4.0 * kStepSigmaUt;
+
+/// Feeds a still sensor: no offset until `on_s`, then `offset` (with `first` for the one sample at
+/// on_s exactly: a magnet caught half-way), for `run_s` in all.
+HardIronEstimator still_with_step(const Eigen::Vector3d& offset, double on_s, double run_s,
+                                  const Eigen::Vector3d& first, bool step_detection = true) {
+  HardIronParams p;
+  p.step_detection = step_detection;
+  HardIronEstimator h(p);
+  Sim sim;
+  for (int i = 0; i < static_cast<int>(run_s * kRateHz); ++i) {
+    const double t = static_cast<double>(i) / kRateHz;
+    const bool at_on = std::abs(t - on_s) < 0.5 / kRateHz;
+    h.update(sim.next(t < on_s && !at_on ? Eigen::Vector3d::Zero() : (at_on ? first : offset), still));
+  }
+  return h;
+}
+
+TEST(HardIron, GivenAStillSensorWhenAMagnetIsPutOnThenTheStepIsTakenAsTheOffsetAndApplied) {
+  // GIVEN a still sensor with no offset, then a 10 uT offset from 5.13 s (between grid instants)
+  const Eigen::Vector3d b(8.0, -5.0, 3.5);
+  // WHEN fed 8 s
+  const HardIronEstimator h = still_with_step(b, 5.13, 8.0, b);
+  // THEN one step was taken, the estimate is the offset within the step's noise, and it is applied
+  EXPECT_EQ(h.report().count(HardIronStep::kStep), 1U);
+  EXPECT_EQ(h.report().count(HardIronStep::kUpdated), 0U);  // nothing turned
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(h.offset_ut()[i], b[i], kStepTolUt) << "axis " << i;
+  }
+  EXPECT_TRUE(h.applied());
+  // and without step_detection (the default) nothing is learnt without a turn
+  const HardIronEstimator off = still_with_step(b, 5.13, 8.0, b, HardIronParams{}.step_detection);
+  EXPECT_EQ(off.report().count(HardIronStep::kStep), 0U);
+  EXPECT_FALSE(off.report().present);
+}
+
+TEST(HardIron, GivenAMagnetCaughtHalfWayAtAGridInstantWhenStillThenTheWholeStepIsTaken) {
+  // GIVEN the same step with the one reading at the grid instant 5 s half-way (a magnet put on over
+  // a few samples): the comparisons each side of 5 s see half of it
+  const Eigen::Vector3d b(-6.0, 7.0, 4.0);
+  // WHEN fed 8 s
+  const HardIronEstimator h = still_with_step(b, 5.0, 8.0, 0.5 * b);
+  // THEN the step is taken whole (against the reading before the half-way one)
+  EXPECT_EQ(h.report().count(HardIronStep::kStep), 1U);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_NEAR(h.offset_ut()[i], b[i], kStepTolUt) << "axis " << i;
+  }
+  EXPECT_TRUE(h.applied());
+}
+
+TEST(HardIron, GivenATransientFieldWhenStillThenNoStepIsTaken) {
+  // GIVEN a still sensor whose field jumps by 20 uT for 0.3 s and comes back (a tap, a magnet
+  // passing by), twice
+  HardIronParams p;
+  p.step_detection = true;
+  HardIronEstimator h(p);
+  Sim sim;
+  for (int i = 0; i < static_cast<int>(8.0 * kRateHz); ++i) {
+    const double t = static_cast<double>(i) / kRateHz;
+    const bool jump = (t >= 3.1 && t < 3.4) || (t >= 5.9 && t < 6.2);
+    h.update(sim.next(jump ? Eigen::Vector3d(0.0, 20.0, 0.0) : Eigen::Vector3d::Zero(), still));
+  }
+  // THEN no step is taken and nothing is applied
+  EXPECT_EQ(h.report().count(HardIronStep::kStep), 0U);
+  EXPECT_FALSE(h.applied());
+  EXPECT_FALSE(h.report().present);
+}
+
 TEST(HardIron, GivenACleanSensorWhenTumbledThenTheEstimateStaysNearZeroAndIsNotApplied) {
   HardIronEstimator h;
   Sim sim;

@@ -14,6 +14,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -210,6 +211,38 @@ TEST(Decimate, GivenATrialWhenEveryThirdSampleIsKeptThenTheRowsAreThoseSamplesAn
   EXPECT_EQ(d.opt_quat_wxyz.size(), 4u);
   EXPECT_THROW(decimate_trial(t, 0), std::invalid_argument);
   EXPECT_THROW(decimate_trial(t, 6), std::invalid_argument);  // one sample left
+}
+
+TEST(AttachMagnet, GivenATrialWhenAMagnetIsAttachedThenEveryRowFromItsTimeOnCarriesTheOffsetAndNoneBefore) {
+  BroadTrial t;
+  t.stem = "t";
+  t.number = 11;
+  t.rate_hz = 10.0;
+  for (int k = 0; k < 20; ++k) {
+    t.gyr_rps.emplace_back(k, 0, 0);
+    t.acc_mps2.emplace_back(0, k, 0);
+    t.mag_ut.emplace_back(1.0 * k, 2.0, 3.0);
+    t.opt_quat_wxyz.push_back(Eigen::Vector4d(1, 0, 0, 0));
+    t.movement.push_back(1);
+  }
+  const Eigen::Vector3d b(4.0, -5.0, 6.0);
+  const BroadTrial a = attach_magnet(t, b, 1.2);  // from row 12 (t = 1.2 s) on
+  ASSERT_EQ(a.size(), t.size());
+  for (size_t k = 0; k < t.size(); ++k) {
+    const Eigen::Vector3d expected = k >= 12 ? Eigen::Vector3d(t.mag_ut[k] + b) : t.mag_ut[k];
+    EXPECT_EQ(a.mag_ut[k], expected) << "row " << k;
+    EXPECT_EQ(a.gyr_rps[k], t.gyr_rps[k]);
+    EXPECT_EQ(a.acc_mps2[k], t.acc_mps2[k]);
+  }
+  EXPECT_THROW(attach_magnet(t, Eigen::Vector3d(std::nan(""), 0, 0), 1.0), std::invalid_argument);
+  EXPECT_THROW(attach_magnet(t, b, std::numeric_limits<double>::infinity()), std::invalid_argument);
+  // the offset for a trial: the magnitude asked for, the same direction on every call, another one
+  // for another trial
+  const Eigen::Vector3d o11 = attached_magnet_offset(11, 10.0);
+  EXPECT_NEAR(o11.norm(), 10.0, 1e-12);
+  EXPECT_EQ(o11, attached_magnet_offset(11, 10.0));
+  EXPECT_GT((o11 - attached_magnet_offset(14, 10.0)).norm(), 1e-6);
+  EXPECT_NEAR(attached_magnet_offset(14, 20.0).norm(), 20.0, 1e-12);
 }
 
 /// The 19 BROAD files of the shared directory.

@@ -54,6 +54,7 @@ const char* to_string(HardIronStep s) {
     case HardIronStep::kNotEnoughRotation: return "not_enough_rotation";
     case HardIronStep::kGated: return "gated";
     case HardIronStep::kReset: return "reset";
+    case HardIronStep::kStep: return "step";
     case HardIronStep::kGap: return "gap";
     case HardIronStep::kRejectedInput: return "rejected_input";
     case HardIronStep::kNoMagnetometer: return "no_magnetometer";
@@ -78,6 +79,7 @@ void HardIronEstimator::reset() {
   nis_w_ = 0.0;
   start_ = Entry{};
   have_start_ = false;
+  have_before_ = false;
   prev_ = Entry{};
   next_grid_ns_ = 0;
   have_last_ = false;
@@ -87,6 +89,8 @@ void HardIronEstimator::reset() {
   last_w_ns_ = 0;
   have_w_ = false;
   refused_s_ = 0.0;
+  have_step_ = false;
+  step_provisional_ = false;
   raw_change2_ = 0.0;
   cor_change2_ = 0.0;
   change_weight_ = 0.0;
@@ -103,7 +107,8 @@ const HardIronReport& HardIronEstimator::finish(HardIronStep s) {
 
 void HardIronEstimator::refresh() {
   report_.converged = (P_.diagonal().array() < p_.converged_sigma_ut * p_.converged_sigma_ut).all();
-  report_.consistent = !(p_.consistency_tau_s > 0.0) || cor_change2_ < raw_change2_;
+  // (undecided, no comparison that turned since the last step or reset: consistent)
+  report_.consistent = !(p_.consistency_tau_s > 0.0) || change_weight_ == 0.0 || cor_change2_ < raw_change2_;
   const bool large = b_.squaredNorm() > p_.min_applied_ut * p_.min_applied_ut && report_.consistent;
   applied_ = report_.converged && large;
   report_.present = applied_ || (large && b_.dot(P_.ldlt().solve(b_)) > p_.gate_chi2);
@@ -228,7 +233,8 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::V
 }
 
 const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::Matrix3d& r_body,
-                                                const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) {
+                                                const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut,
+                                                bool at_rest) {
   if (!usable(stamp_ns, gyro_rps, mag_ut)) {
     return finish(HardIronStep::kRejectedInput);
   }
@@ -241,6 +247,7 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
     have_last_ = true;
     last_ns_ = stamp_ns;
     have_start_ = false;
+    have_before_ = false;
     clear_field();  // the frame across a gap is not known
     prev_ = {stamp_ns, mag_ut, 0.0, r_body};
     int64_t q = stamp_ns / lag_ns_;  // the first multiple of lag_s at or after this stamp
@@ -288,6 +295,10 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   // and the model errors that persist over an interval are not counted many times over.
   const Entry j = start_;
   start_ = k;
+  const Entry i = before_;  // the reading before j, if one is
+  const bool have_i = have_before_;
+  before_ = j;
+  have_before_ = true;
   const double interval_s = static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9;
   // E[(b_hat - b) n_j^T] (k's noise is in b_hat once this comparison is used)
   const Eigen::Matrix3d shared = std::exchange(shared_, Eigen::Matrix3d::Zero());
@@ -304,16 +315,45 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   const Eigen::Matrix3d S = H * P_ * H.transpose() + R;
   const Eigen::LDLT<Eigen::Matrix3d> ldlt(S);
   const double nis = r.dot(ldlt.solve(r));
+  start_.fitted = nis <= p_.gate_chi2;  // k's: a later candidate may start from it only if it fitted
+  const bool steps = p_.step_detection && !at_rest;  // at rest the caller's own test judges a moved field
+  if (!steps) {
+    have_step_ = false;
+  }
+  const bool followed = have_step_;
+  if (step_confirmed(k)) {
+    return finish(HardIronStep::kStep);
+  }
   // whether the offset is gone is judged at every grid reading, the body turning or not
   if (removed(k.r, k.m, k.var_ut2, interval_s)) {
     reopen(true);  // the readings fit no offset better than the estimate, beyond chance: the magnet is gone
     return finish(HardIronStep::kReset);
   }
+  if (!followed && steps) {
+    step_candidate(have_i ? &i : nullptr, j, k, y, C, nis);
+  }
   if (report_.rotation_rad < p_.min_rotation_rad) {
     return finish(HardIronStep::kNotEnoughRotation);
   }
-  consistency(j.m, k.m, interval_s);
   report_.nis = nis;
+  if (step_provisional_) {
+    // the first comparison that turns after a step judges it: a field that moved with the world
+    // (a magnet near the sensor, not on it) does not turn with the body, and the step is undone
+    step_provisional_ = false;
+    if (!(nis <= p_.gate_chi2)) {
+      b_ = step_undo_b_;
+      P_ = step_undo_p_;
+      P_err_ = P_;
+      shared_.setZero();
+      raw_change2_ = 0.0;
+      cor_change2_ = 0.0;
+      change_weight_ = 0.0;
+      clear_field();
+      refresh();
+      return finish(HardIronStep::kGated);
+    }
+  }
+  consistency(j.m, k.m, interval_s);
   if (!(report_.nis <= p_.gate_chi2)) {
     refused_s_ += interval_s;
     if (refused_s_ >= p_.reset_after_s) {
@@ -326,6 +366,119 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   correct(H, r, R, ldlt);
   track_error(H, C, {k.var_ut2, j.var_ut2, nis, interval_s}, shared);
   return finish(HardIronStep::kUpdated);
+}
+
+void HardIronEstimator::step_candidate(const Entry* before, const Entry& j, const Entry& k,
+                                       const Eigen::Vector3d& y, const Eigen::Matrix3d& c, double nis) {
+  // A comparison the estimate does not fit, the body turning or not, starts a step candidate from
+  // its earlier reading j (the last one that fitted): if the offset stepped after j (b_old -> b_new,
+  // b_hat = b_old), r = b_new - b_old + n_k - C n_j whatever C; the next readings tell
+  // (step_confirmed). A candidate being followed keeps its reading.
+  if (!(nis <= p_.gate_chi2)) {
+    if (!j.fitted) {
+      return;  // j did not fit the reading before it either: no reading to measure a step from
+    }
+    have_step_ = true;
+    step_from_ = j;
+    step_y_ = y;
+    step_c_ = c;
+    step_var_k_ = k.var_ut2;
+    return;
+  }
+  // the same over the two intervals before k (once per comparison: its cost is a comparison's)
+  if (before == nullptr || !before->fitted || k.stamp_ns - before->stamp_ns > 2 * lag_ns_) {
+    return;
+  }
+  const Entry& i = *before;
+  const Eigen::Matrix3d c2 = Eigen::Quaterniond(Eigen::Matrix3d(k.r.transpose() * i.r)).normalized().toRotationMatrix();
+  const Eigen::Matrix3d h = Eigen::Matrix3d::Identity() - c2;
+  const Eigen::Vector3d y2 = k.m - c2 * i.m;
+  const Eigen::Vector3d r2 = y2 - h * b_;
+  Eigen::Matrix3d s = h * P_ * h.transpose();
+  s.diagonal().array() += k.var_ut2 + i.var_ut2;
+  if (!(r2.dot(s.ldlt().solve(r2)) <= p_.gate_chi2)) {
+    have_step_ = true;
+    step_from_ = i;
+    step_y_ = y2;
+    step_c_ = c2;
+    step_var_k_ = k.var_ut2;
+  }
+}
+
+bool HardIronEstimator::step_confirmed(const Entry& k) {
+  if (!have_step_) {
+    return false;
+  }
+  have_step_ = false;
+  const Entry& j = step_from_;
+  if (k.stamp_ns - j.stamp_ns > kStepReadings * lag_ns_) {
+    return false;  // the field kept moving (or a gap): no step it settled after
+  }
+  // The step is measured from the offset the readings were used with: the estimate where one is
+  // (applied, or present and not yet removable), else none: the raw readings were what the caller
+  // took as the Earth's field, whatever offset they held, and the step is relative to them (b_ref
+  // exact). With b_ref, r = y - (I - C) b_ref = step + (I - C) (b_old - b_ref) + n_k - C n_j.
+  const bool raw = !report_.present;
+  const Eigen::Vector3d b_ref = raw ? Eigen::Vector3d::Zero() : b_;
+  // k against the candidate's earlier reading j: a step that stayed gives r2 = r1 up to the later
+  // readings' noise and what the two rotations make of b_ref's error and j's noise, r2 - r1 =
+  // n_k2 - n_k + (C1 - C2) (b_old - b_ref + n_j); a transient (a tap, a magnet passing by) or a
+  // field that keeps moving does not.
+  const Eigen::Quaterniond rel = Eigen::Quaterniond(Eigen::Matrix3d(k.r.transpose() * j.r)).normalized();
+  const Eigen::Matrix3d c2 = rel.toRotationMatrix();
+  const Eigen::Matrix3d& c1 = step_c_;
+  const Eigen::Vector3d r1 = step_y_ - b_ref + c1 * b_ref;
+  const Eigen::Vector3d r2 = k.m - c2 * j.m - b_ref + c2 * b_ref;
+  // k fits the estimate against j (the field came back: a tap, a magnet passing by, a lone
+  // outlier): no step
+  const Eigen::Matrix3d h2 = Eigen::Matrix3d::Identity() - c2;
+  Eigen::Matrix3d s2 = h2 * P_ * h2.transpose();
+  s2.diagonal().array() += k.var_ut2 + j.var_ut2;
+  const Eigen::Vector3d r2_hat = k.m - c2 * j.m - h2 * b_;
+  if (r2_hat.dot(s2.ldlt().solve(r2_hat)) <= p_.gate_chi2) {
+    return false;
+  }
+  const Eigen::Matrix3d dc = c1 - c2;
+  Eigen::Matrix3d pj = raw ? Eigen::Matrix3d::Zero() : P_;
+  pj.diagonal().array() += j.var_ut2;
+  Eigen::Matrix3d s = dc * pj * dc.transpose();
+  s.diagonal().array() += k.var_ut2 + step_var_k_;
+  const Eigen::Vector3d d = r2 - r1;
+  if (!(d.dot(s.ldlt().solve(d)) <= p_.gate_chi2)) {
+    // not settled yet (a reading taken while the offset changed, a magnet on its way): k is the
+    // candidate's later reading now, j stays the last reading before the change
+    have_step_ = true;
+    step_y_ = k.m - c2 * j.m;
+    step_c_ = c2;
+    step_var_k_ = k.var_ut2;
+    return false;
+  }
+  // b_ref + the step's mean; its error: -(C1 + C2) / 2 (b_old - b_ref) where b_ref is the estimate
+  // (none where the readings were used raw), and the readings' noise
+  // (n_j once, the two later readings' averaged)
+  const Eigen::Matrix3d P_undo = P_;
+  const Eigen::Matrix3d cm = 0.5 * (c1 + c2);
+  if (raw) {
+    P_.setZero();
+  } else {
+    P_ = cm * P_ * cm.transpose();
+  }
+  P_.diagonal().array() += j.var_ut2 + 0.25 * (k.var_ut2 + step_var_k_);
+  P_ = 0.5 * (P_ + P_.transpose());
+  step_undo_b_ = b_;
+  step_undo_p_ = P_undo;
+  step_provisional_ = true;
+  b_ = b_ref + 0.5 * (r1 + r2);
+  P_err_ = P_;
+  shared_.setZero();
+  refused_s_ = 0.0;
+  clear_field();  // f(b) holds for one offset over the window: it changed
+  // whether removing b makes |m| more constant is judged again from the comparisons that turn
+  raw_change2_ = 0.0;
+  cor_change2_ = 0.0;
+  change_weight_ = 0.0;
+  refresh();
+  return true;
 }
 
 void HardIronEstimator::correct(const Eigen::Matrix3d& h, const Eigen::Vector3d& r, const Eigen::Matrix3d& noise,
@@ -371,6 +524,7 @@ void HardIronEstimator::track_error(const Eigen::Matrix3d& h, const Eigen::Matri
 
 void HardIronEstimator::reopen(bool zero) {
   refused_s_ = 0.0;
+  step_provisional_ = false;
   clear_field();  // f(b) = mean(z) - mean(R) b holds for one offset over the window: it changed
   if (zero) {
     b_.setZero();

@@ -386,7 +386,8 @@ Eigen::Vector3d ParallelKf::hard_iron_corrected(int64_t stamp_ns, const Eigen::V
   if (!p_.hard_iron || !mag_ok) {
     return mag;
   }
-  s_.hard_iron.update(stamp_ns, s_.r_ib, gyro, mag);  // the filter's gyro-only orientation: integrated once
+  // the filter's gyro-only orientation: integrated once; at rest no step is taken (field_moved_at_rest)
+  s_.hard_iron.update(stamp_ns, s_.r_ib, gyro, mag, p_.bias_estimation && s_.rest_det.rest);
   s_.mag_offset_pending = s_.hard_iron.pending();
   if (!s_.hard_iron.applied()) {
     return mag;

@@ -562,9 +562,11 @@ void SelectiveEkf::field_offsets(ImuInput& in) {
   const Eigen::Vector3d raw = in.mag;
   if (p_.hard_iron) {
     const double offset_var = unremoved_offset_var() + removed_offset_var();
-    x_.hard_iron.update(in.stamp_ns, r_ib, in.gyro - x_.b_rps, raw);
-    if (x_.hard_iron.report().step == HardIronStep::kReset) {
-      // the offset changed: what the old one put in stays (and is corrected away by the rows);
+    x_.hard_iron.update(in.stamp_ns, r_ib, in.gyro - x_.b_rps, raw, p_.rest_detection && in.rest);
+    const HardIronStep step = x_.hard_iron.report().step;
+    if (step == HardIronStep::kReset || step == HardIronStep::kStep) {
+      // the offset changed (learnt again, or stepped): what the old one put in stays (and is
+      // corrected away by the rows);
       // the sensitivities count the new offset's readings from here
       x_.offset_left_var += offset_var;
       x_.heading_per_offset.setZero();

@@ -73,15 +73,32 @@ void add_north_set_option(CLI::App* sub, std::vector<std::string>* sets) {
       ->type_name("KEY=VALUE");
 }
 
-/// EVERY > 1: every EVERY-th row as recorded (eval::decimate_trial), a lower-rate sensor.
-std::vector<eval::BroadTrial> load_trials(const std::vector<std::string>& files, size_t every = 1) {
+/// What `poise eval broad` and `poise tune` do to each trial before a filter sees it.
+struct TrialTransform {
+  size_t every = 1;          ///< every N-th row of each trial (1 = all): a lower-rate sensor
+  double magnet_ut = 0.0;    ///< an attached magnet emulated: offset magnitude, uT (0 = none)
+  double magnet_at = 1.0 / 3.0;  ///< ... from this fraction of the trial's duration on
+};
+
+/// Loads each file; EVERY > 1: every EVERY-th row as recorded (eval::decimate_trial); MAGNET_UT > 0:
+/// a body-fixed offset from MAGNET_AT of the trial on (eval::attach_magnet), its direction drawn
+/// from the trial's number.
+std::vector<eval::BroadTrial> load_trials(const std::vector<std::string>& files, const TrialTransform& t = {}) {
   std::vector<eval::BroadTrial> trials;
   for (size_t i = 0; i < files.size(); ++i) {
     if (stop_requested()) {
       throw Error("interrupted");
     }
     try {
-      trials.push_back(every == 1 ? eval::load_broad(files[i]) : eval::decimate_trial(eval::load_broad(files[i]), every));
+      eval::BroadTrial trial = eval::load_broad(files[i]);
+      if (t.every != 1) {
+        trial = eval::decimate_trial(trial, t.every);
+      }
+      if (t.magnet_ut > 0.0) {
+        const double from_s = t.magnet_at * static_cast<double>(trial.size()) / trial.rate_hz;
+        trial = eval::attach_magnet(trial, eval::attached_magnet_offset(trial.number, t.magnet_ut), from_s);
+      }
+      trials.push_back(std::move(trial));
     } catch (const std::exception& e) {
       throw Error(std::string(e.what()) + " (pass BROAD-layout .hdf5 files, e.g. ../shared/broad/*.hdf5)");
     }
@@ -116,7 +133,7 @@ void make_dir(const std::string& dir) {
 }
 
 void run_eval(const std::string& filter_name, const std::string& config, const std::string& out_dir,
-              const std::vector<std::string>& files, const NorthReference& north, size_t every) {
+              const std::vector<std::string>& files, const NorthReference& north, const TrialTransform& transform) {
   make_dir(out_dir);
   auto filter = make_or_throw(filter_name, config, north);
   std::vector<eval::TrialResult> results;
@@ -125,7 +142,7 @@ void run_eval(const std::string& filter_name, const std::string& config, const s
   Progress progress("poise eval broad", files.size());
   for (size_t i = 0; i < files.size(); ++i) {
     progress.update(i, files[i]);
-    const eval::BroadTrial trial = load_trials({files[i]}, every).front();
+    const eval::BroadTrial trial = load_trials({files[i]}, transform).front();
     size_t estimated = 0;
     const eval::TrialEstimates est = eval::run_filter_estimates(*filter, trial, &estimated);
     const std::string csv = (std::filesystem::path(out_dir) / (trial.stem + ".csv")).string();
@@ -156,7 +173,7 @@ void run_eval(const std::string& filter_name, const std::string& config, const s
 struct GridOptions {
   std::vector<std::string> grid;
   int folds = 0;  ///< 0 = leave one trial out
-  size_t every = 1;  ///< every N-th row of each trial (1 = all)
+  TrialTransform trials;
 };
 
 /// Runs every grid candidate on every trial, prints the in-sample and cross-validated figures,
@@ -191,7 +208,7 @@ std::pair<eval::CrossValidation, std::vector<eval::Overrides>> run_grid(
                 "); 0 = leave one trial out");
   }
   std::cerr << "loading " << files.size() << " trial(s) ...\n";
-  const std::vector<eval::BroadTrial> trials = load_trials(files, g.every);
+  const std::vector<eval::BroadTrial> trials = load_trials(files, g.trials);
   const std::string cand_dir = (std::filesystem::path(out_dir) / "candidates").string();
   make_dir(cand_dir);
   const std::string table_path = (std::filesystem::path(out_dir) / "grid_results.csv").string();
@@ -462,10 +479,20 @@ void register_eval_cli(CLI::App& app) {
                     "Cross-validation folds for --grid (trial i is in fold i mod K; 0 = leave one trial out)")
       ->check(CLI::Range(0, 1000))
       ->capture_default_str();
-  broad->add_option("--every", grid->every,
+  broad->add_option("--every", grid->trials.every,
                     "Use every N-th sample of each trial as recorded (a lower-rate sensor: 3 = 95.2 Hz, 7 = 40.8 Hz "
                     "from BROAD's 285.7 Hz)")
       ->check(CLI::Range(1, 1000))
+      ->capture_default_str();
+  broad->add_option("--attach-magnet-ut", grid->trials.magnet_ut,
+                    "Emulate a magnet attached to the sensor: from --attach-magnet-at of each trial on, a constant "
+                    "body-frame offset of this many uT (direction drawn from the trial's number) is added to the "
+                    "magnetometer (0 = none)")
+      ->check(CLI::Range(0.0, 1000.0))
+      ->capture_default_str();
+  broad->add_option("--attach-magnet-at", grid->trials.magnet_at,
+                    "With --attach-magnet-ut: the fraction of each trial's duration after which the magnet is on")
+      ->check(CLI::Range(0.0, 1.0))
       ->capture_default_str();
   auto sets = std::make_shared<std::vector<std::string>>();
   add_north_set_option(broad, sets.get());
@@ -477,7 +504,7 @@ void register_eval_cli(CLI::App& app) {
         std::cerr << "poise eval broad: --folds without --grid: no parameter is chosen, so the in-sample "
                      "figure below is also the cross-validated one\n";
       }
-      run_eval(*filter, *config, *out, *files, north, grid->every);
+      run_eval(*filter, *config, *out, *files, north, grid->trials);
       return;
     }
     run_grid(*filter, *config, *out, *files, *grid, true, north);

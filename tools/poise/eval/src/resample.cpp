@@ -1,7 +1,10 @@
 #include "poise/core/attitude.h"
 #include "poise/eval/broad.h"
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <random>
 #include <stdexcept>
 #include <string>
 
@@ -30,6 +33,29 @@ BroadTrial decimate_trial(const BroadTrial& in, size_t every) {
     keep(out.opt_pos_m);
   }
   return out;
+}
+
+BroadTrial attach_magnet(const BroadTrial& in, const Eigen::Vector3d& offset_ut, double from_s) {
+  if (!offset_ut.allFinite() || !std::isfinite(from_s)) {
+    throw std::invalid_argument("attach_magnet: trial '" + in.stem + "': the offset and its start must be finite");
+  }
+  BroadTrial out = in;
+  for (size_t k = 0; k < out.mag_ut.size(); ++k) {
+    if (static_cast<double>(k) / out.rate_hz >= from_s) {
+      out.mag_ut[k] += offset_ut;
+    }
+  }
+  return out;
+}
+
+Eigen::Vector3d attached_magnet_offset(int number, double magnitude_ut) {
+  std::mt19937_64 rng(static_cast<uint64_t>(number) + 0x9e3779b97f4a7c15ULL);
+  // the engine's numbers are fixed by the standard, a distribution's are not: [0, 1) from the top 53 bits
+  auto unit = [&rng] { return static_cast<double>(rng() >> 11) * 0x1.0p-53; };
+  const double z = 2.0 * unit() - 1.0;  // uniform on the sphere: z uniform in [-1, 1], azimuth uniform
+  const double az = 2.0 * kPi * unit();
+  const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
+  return magnitude_ut * Eigen::Vector3d(r * std::cos(az), r * std::sin(az), z);
 }
 
 BroadTrial resample_trial(const BroadTrial& in, double rate_hz) {

@@ -70,6 +70,15 @@ struct HardIronParams {
   /// over this, s, scales noise_ut's variance in b's error covariance. The same window as
   /// consistency_tau_s (recent comparisons), not chosen on data. 0 = noise_ut's, as covariance().
   double noise_tau_s = 5.0;
+  /// Steps of the offset (a magnet put on, moved or taken off) are taken from the readings whatever
+  /// the rotation (HardIronStep::kStep): a comparison the estimate does not fit, confirmed by the
+  /// next reading against the same earlier one. Off by default (an offset is learnt from rotation
+  /// only): a field that changes while the sensor moves without turning is taken as a step whether
+  /// it turns with the body or not, and only a turn tells them apart, so a magnet brought near is
+  /// removed as if it were on the sensor (the demo's tour: parallel KF 0.34 -> 18.7 deg,
+  /// docs/ESTIMATORS.md "Steps of the offset"). On where the disturbances are the sensor's own (a
+  /// motor, a speaker, a magnet fixed to it).
+  bool step_detection = false;
   double max_dt_s = 0.1;              ///< a longer gap between samples restarts the comparison, s
   double max_mag_ut = 5000.0;         ///< |m| above this (or non-finite) is refused, uT
   double max_gyro_rps = 100.0;        ///< |w| above this (or non-finite) is refused, rad/s
@@ -97,6 +106,7 @@ struct HardIronParams {
     r.get("max_dt_s", max_dt_s);
     r.get("max_mag_ut", max_mag_ut);
     r.get("max_gyro_rps", max_gyro_rps);
+    r.get("step_detection", step_detection);
   }
 };
 
@@ -108,6 +118,9 @@ enum class HardIronStep {
   kNotEnoughRotation,///< rotation over lag_s below min_rotation_rad: b not observable
   kGated,            ///< innovation refused by the chi-square gate
   kReset,            ///< refused for reset_after_s: the covariance reopened (offset changed)
+  /// the offset stepped (a magnet attached, moved or taken off): a comparison the estimate did not
+  /// fit, confirmed by the next reading against the same earlier one; b moved by the step
+  kStep,
   kGap,              ///< stamp gap beyond max_dt_s (or not increasing): the interval starts again
   kRejectedInput,    ///< non-finite or out-of-range reading or stamp (< 0, > kMaxStampNs): nothing used, counted
   kNoMagnetometer,   ///< the sample has no magnetometer (or no gyro)
@@ -156,8 +169,11 @@ class HardIronEstimator {
   /// at this sample (body -> any frame fixed over lag_s, e.g. the parallel KF's R_ib), so the gyro
   /// is not integrated a second time here; the rotation between two readings is r_k^T r_j, taken
   /// once per comparison. `gyro_rps` only sizes the reading's timing variance.
+  /// `at_rest`: the caller's rest detector says the body is at rest; no step of the offset is taken
+  /// from readings at rest (kStep): a field that moves there may as well be a magnet brought near,
+  /// and the caller's own test holds it (FieldMovedAtRest) until a turn has judged it.
   const HardIronReport& update(int64_t stamp_ns, const Eigen::Matrix3d& r_body, const Eigen::Vector3d& gyro_rps,
-                               const Eigen::Vector3d& mag_ut);
+                               const Eigen::Vector3d& mag_ut, bool at_rest = false);
   /// The body-frame offset estimate, uT, and its covariance, uT^2.
   [[nodiscard]] const Eigen::Vector3d& offset_ut() const { return b_; }
   [[nodiscard]] const Eigen::Matrix3d& covariance() const { return P_; }
@@ -191,6 +207,9 @@ class HardIronEstimator {
     Eigen::Vector3d m = Eigen::Vector3d::Zero();
     double var_ut2 = 0.0;  ///< per-axis variance of this reading against the model
     Eigen::Matrix3d r = Eigen::Matrix3d::Identity();  ///< the caller's orientation at the reading
+    /// the estimate fitted its comparison with the reading before it (or none was made): a reading a
+    /// step candidate may start from
+    bool fitted = true;
   };
   const HardIronReport& finish(HardIronStep s);
   /// Adds one comparison's |m| and |m - b| changes (consistency_tau_s) and refreshes.
@@ -201,6 +220,19 @@ class HardIronEstimator {
   /// the field with k; true when the sum reached the threshold (the offset is gone).
   bool removed(const Eigen::Matrix3d& r_k, const Eigen::Vector3d& m_k, double var_ut2, double interval_s);
   void clear_field();  ///< the field followed in the gyro frame starts again (removed_tau_s)
+  /// Whether reading k confirms the step candidate: compared with the candidate's earlier reading
+  /// it shows the same step as the candidate's later reading (the field settled and stayed); then b
+  /// moves by it and P takes its noise. Not yet settled, k becomes the later reading, for at most
+  /// kStepReadings grid intervals from the earlier one.
+  bool step_confirmed(const Entry& k);
+  /// Starts a step candidate when the estimate does not fit reading k against j (the comparison's
+  /// NIS, `nis`) or against the reading before j (a step split between two intervals: a change
+  /// over a few samples that straddles the grid instant j, a magnet put on by hand).
+  void step_candidate(const Entry* before, const Entry& j, const Entry& k, const Eigen::Vector3d& y,
+                      const Eigen::Matrix3d& c, double nis);
+  /// The longest a step candidate is followed, grid intervals (lag_s each) from its earlier reading:
+  /// the step plus a reading taken while the offset changed plus the two that agree.
+  static constexpr int64_t kStepReadings = 4;
   /// The Kalman update of b and P with one comparison (H = I - C, innovation r, its noise, S's LDLT).
   void correct(const Eigen::Matrix3d& h, const Eigen::Vector3d& r, const Eigen::Matrix3d& noise,
                const Eigen::LDLT<Eigen::Matrix3d>& s_ldlt);
@@ -225,6 +257,8 @@ class HardIronEstimator {
   Eigen::Vector3d b_ = Eigen::Vector3d::Zero();
   Eigen::Matrix3d P_;
   Entry start_;  ///< the reading that starts the current interval
+  Entry before_;  ///< the earlier reading of the last comparison (a step split over two intervals)
+  bool have_before_ = false;
   bool have_start_ = false;
   Entry prev_;   ///< the last usable sample (a grid reading is interpolated between it and the next)
   int64_t next_grid_ns_ = 0;  ///< the next instant (a multiple of lag_s) a reading is taken at
@@ -236,6 +270,18 @@ class HardIronEstimator {
   int64_t last_w_ns_ = 0;
   bool have_w_ = false;
   double refused_s_ = 0.0;  ///< time of consecutive refused comparisons
+  /// A step candidate: the earlier reading of the last comparison the estimate did not fit and that
+  /// comparison's innovation (the step, if the field stays moved; step_confirmed())
+  Entry step_from_;
+  Eigen::Vector3d step_y_ = Eigen::Vector3d::Zero();  ///< that comparison's y = m_k - C m_j
+  Eigen::Matrix3d step_c_ = Eigen::Matrix3d::Identity();  ///< that comparison's C = R_k^T R_j
+  double step_var_k_ = 0.0;
+  bool have_step_ = false;
+  /// A step taken and not yet judged by a comparison that turned: it is undone (b and P as before
+  /// it) if that comparison does not fit
+  bool step_provisional_ = false;
+  Eigen::Vector3d step_undo_b_ = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d step_undo_p_ = Eigen::Matrix3d::Identity();
   Eigen::Matrix3d P_err_;     ///< error_covariance()
   Eigen::Matrix3d gain_ = Eigen::Matrix3d::Zero();    ///< the last comparison's gain K
   Eigen::Matrix3d shared_ = Eigen::Matrix3d::Zero();  ///< E[(b_hat - b) n^T], n the interval's start reading's noise

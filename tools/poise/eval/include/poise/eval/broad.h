@@ -99,6 +99,18 @@ BroadTrial resample_trial(const BroadTrial& trial, double rate_hz);
 /// was), rate_hz / every. Throws std::invalid_argument for every == 0 or fewer than 2 samples left.
 BroadTrial decimate_trial(const BroadTrial& trial, size_t every);
 
+/// An attached magnet emulated on a recorded trial (robustness on inputs BROAD's own magnet trials
+/// do not cover): from `from_s` seconds into the trial on, the constant body-frame field `offset_ut`
+/// (uT) is added to every magnetometer row, as a small permanent magnet fixed to the sensor adds
+/// (a hard-iron offset that turns with the body). Rows before `from_s` are left as recorded.
+/// Throws std::invalid_argument for a non-finite offset or time.
+BroadTrial attach_magnet(const BroadTrial& trial, const Eigen::Vector3d& offset_ut, double from_s);
+
+/// The offset attach_magnet() is given for trial `number` by `poise eval broad --attach-magnet-ut`:
+/// magnitude `magnitude_ut` along a direction drawn uniformly on the sphere from the trial's number
+/// (the same direction on every run, a different one per trial).
+Eigen::Vector3d attached_magnet_offset(int number, double magnitude_ut);
+
 /// Leading integer of a file stem ("24_disturbed_tapping_A" -> 24), 0 if none.
 int trial_number_from_stem(const std::string& stem);
 
