@@ -232,6 +232,31 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::V
   return update(stamp_ns, q_.toRotationMatrix(), gyro_rps, mag_ut);
 }
 
+HardIronStep HardIronEstimator::start_grid(int64_t stamp_ns, const Eigen::Matrix3d& r_body,
+                                           const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut) {
+  const bool gap = have_last_;
+  if (!r_body.allFinite()) {
+    return HardIronStep::kRejectedInput;
+  }
+  have_last_ = true;
+  last_ns_ = stamp_ns;
+  have_start_ = false;
+  have_before_ = false;
+  clear_field();  // the frame across a gap is not known
+  prev_ = {stamp_ns, mag_ut, 0.0, r_body};
+  int64_t q = stamp_ns / lag_ns_;  // the first multiple of lag_s at or after this stamp
+  if (q * lag_ns_ < stamp_ns) {
+    ++q;
+  }
+  next_grid_ns_ = q * lag_ns_;
+  if (next_grid_ns_ == stamp_ns) {
+    start_ = {stamp_ns, mag_ut, reading_var(gyro_rps, mag_ut), r_body};
+    have_start_ = true;
+    next_grid_ns_ += lag_ns_;
+  }
+  return gap ? HardIronStep::kGap : HardIronStep::kWarmingUp;
+}
+
 const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::Matrix3d& r_body,
                                                 const Eigen::Vector3d& gyro_rps, const Eigen::Vector3d& mag_ut,
                                                 bool at_rest) {
@@ -240,27 +265,7 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   }
   const double dt = have_last_ ? static_cast<double>(stamp_ns - last_ns_) * 1e-9 : 0.0;
   if (!have_last_ || !(dt > 0.0) || dt > p_.max_dt_s) {
-    const bool gap = have_last_;
-    if (!r_body.allFinite()) {
-      return finish(HardIronStep::kRejectedInput);
-    }
-    have_last_ = true;
-    last_ns_ = stamp_ns;
-    have_start_ = false;
-    have_before_ = false;
-    clear_field();  // the frame across a gap is not known
-    prev_ = {stamp_ns, mag_ut, 0.0, r_body};
-    int64_t q = stamp_ns / lag_ns_;  // the first multiple of lag_s at or after this stamp
-    if (q * lag_ns_ < stamp_ns) {
-      ++q;
-    }
-    next_grid_ns_ = q * lag_ns_;
-    if (next_grid_ns_ == stamp_ns) {
-      start_ = {stamp_ns, mag_ut, reading_var(gyro_rps, mag_ut), r_body};
-      have_start_ = true;
-      next_grid_ns_ += lag_ns_;
-    }
-    return finish(gap ? HardIronStep::kGap : HardIronStep::kWarmingUp);
+    return finish(start_grid(stamp_ns, r_body, gyro_rps, mag_ut));
   }
   last_ns_ = stamp_ns;
   if (stamp_ns < next_grid_ns_) {
@@ -316,12 +321,7 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   const Eigen::LDLT<Eigen::Matrix3d> ldlt(S);
   const double nis = r.dot(ldlt.solve(r));
   start_.fitted = nis <= p_.gate_chi2;  // k's: a later candidate may start from it only if it fitted
-  const bool steps = p_.step_detection && !at_rest;  // at rest the caller's own test judges a moved field
-  if (!steps) {
-    have_step_ = false;
-  }
-  const bool followed = have_step_;
-  if (step_confirmed(k)) {
+  if (track_steps(have_i ? &i : nullptr, j, k, y, C, nis, at_rest)) {
     return finish(HardIronStep::kStep);
   }
   // whether the offset is gone is judged at every grid reading, the body turning or not
@@ -329,29 +329,12 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
     reopen(true);  // the readings fit no offset better than the estimate, beyond chance: the magnet is gone
     return finish(HardIronStep::kReset);
   }
-  if (!followed && steps) {
-    step_candidate(have_i ? &i : nullptr, j, k, y, C, nis);
-  }
   if (report_.rotation_rad < p_.min_rotation_rad) {
     return finish(HardIronStep::kNotEnoughRotation);
   }
   report_.nis = nis;
-  if (step_provisional_) {
-    // the first comparison that turns after a step judges it: a field that moved with the world
-    // (a magnet near the sensor, not on it) does not turn with the body, and the step is undone
-    step_provisional_ = false;
-    if (!(nis <= p_.gate_chi2)) {
-      b_ = step_undo_b_;
-      P_ = step_undo_p_;
-      P_err_ = P_;
-      shared_.setZero();
-      raw_change2_ = 0.0;
-      cor_change2_ = 0.0;
-      change_weight_ = 0.0;
-      clear_field();
-      refresh();
-      return finish(HardIronStep::kGated);
-    }
+  if (step_refuted(nis)) {
+    return finish(HardIronStep::kGated);
   }
   consistency(j.m, k.m, interval_s);
   if (!(report_.nis <= p_.gate_chi2)) {
@@ -368,12 +351,41 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   return finish(HardIronStep::kUpdated);
 }
 
+bool HardIronEstimator::track_steps(const Entry* before, const Entry& j, const Entry& k, const Eigen::Vector3d& y,
+                                    const Eigen::Matrix3d& c, double nis, bool at_rest) {
+  if (!p_.step_detection || at_rest) {  // at rest the caller's own test judges a moved field
+    have_step_ = false;
+    return false;
+  }
+  if (have_step_) {
+    return step_confirmed(k);  // a candidate being followed keeps its earlier reading
+  }
+  step_candidate(before, j, k, y, c, nis);
+  return false;
+}
+
+bool HardIronEstimator::step_refuted(double nis) {
+  // the first comparison that turns after a step judges it: a field that moved with the world (a
+  // magnet near the sensor, not on it) does not turn with the body, and the step is undone
+  if (!step_provisional_) {
+    return false;
+  }
+  step_provisional_ = false;
+  if (nis <= p_.gate_chi2) {
+    return false;
+  }
+  b_ = step_undo_b_;
+  P_ = step_undo_p_;
+  restart_after_step();
+  return true;
+}
+
 void HardIronEstimator::step_candidate(const Entry* before, const Entry& j, const Entry& k,
                                        const Eigen::Vector3d& y, const Eigen::Matrix3d& c, double nis) {
   // A comparison the estimate does not fit, the body turning or not, starts a step candidate from
   // its earlier reading j (the last one that fitted): if the offset stepped after j (b_old -> b_new,
   // b_hat = b_old), r = b_new - b_old + n_k - C n_j whatever C; the next readings tell
-  // (step_confirmed). A candidate being followed keeps its reading.
+  // (step_confirmed).
   if (!(nis <= p_.gate_chi2)) {
     if (!j.fitted) {
       return;  // j did not fit the reading before it either: no reading to measure a step from
@@ -456,7 +468,7 @@ bool HardIronEstimator::step_confirmed(const Entry& k) {
   // b_ref + the step's mean; its error: -(C1 + C2) / 2 (b_old - b_ref) where b_ref is the estimate
   // (none where the readings were used raw), and the readings' noise
   // (n_j once, the two later readings' averaged)
-  const Eigen::Matrix3d P_undo = P_;
+  const Eigen::Matrix3d p_undo = P_;
   const Eigen::Matrix3d cm = 0.5 * (c1 + c2);
   if (raw) {
     P_.setZero();
@@ -466,19 +478,23 @@ bool HardIronEstimator::step_confirmed(const Entry& k) {
   P_.diagonal().array() += j.var_ut2 + 0.25 * (k.var_ut2 + step_var_k_);
   P_ = 0.5 * (P_ + P_.transpose());
   step_undo_b_ = b_;
-  step_undo_p_ = P_undo;
+  step_undo_p_ = p_undo;
   step_provisional_ = true;
   b_ = b_ref + 0.5 * (r1 + r2);
+  refused_s_ = 0.0;
+  restart_after_step();
+  return true;
+}
+
+void HardIronEstimator::restart_after_step() {
   P_err_ = P_;
   shared_.setZero();
-  refused_s_ = 0.0;
   clear_field();  // f(b) holds for one offset over the window: it changed
   // whether removing b makes |m| more constant is judged again from the comparisons that turn
   raw_change2_ = 0.0;
   cor_change2_ = 0.0;
   change_weight_ = 0.0;
   refresh();
-  return true;
 }
 
 void HardIronEstimator::correct(const Eigen::Matrix3d& h, const Eigen::Vector3d& r, const Eigen::Matrix3d& noise,
@@ -524,6 +540,7 @@ void HardIronEstimator::track_error(const Eigen::Matrix3d& h, const Eigen::Matri
 
 void HardIronEstimator::reopen(bool zero) {
   refused_s_ = 0.0;
+  have_step_ = false;
   step_provisional_ = false;
   clear_field();  // f(b) = mean(z) - mean(R) b holds for one offset over the window: it changed
   if (zero) {

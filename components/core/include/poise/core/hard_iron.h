@@ -230,6 +230,19 @@ class HardIronEstimator {
   /// over a few samples that straddles the grid instant j, a magnet put on by hand).
   void step_candidate(const Entry* before, const Entry& j, const Entry& k, const Eigen::Vector3d& y,
                       const Eigen::Matrix3d& c, double nis);
+  /// The first sample, or the first after a gap: the comparisons start again on the grid of lag_s
+  /// from it (kWarmingUp or kGap; kRejectedInput for a non-finite orientation, nothing kept).
+  HardIronStep start_grid(int64_t stamp_ns, const Eigen::Matrix3d& r_body, const Eigen::Vector3d& gyro_rps,
+                          const Eigen::Vector3d& mag_ut);
+  /// The steps of the offset at grid reading k (step_detection, not at rest): the candidate being
+  /// followed judged (step_confirmed), else one started (step_candidate); true when a step was taken.
+  bool track_steps(const Entry* before, const Entry& j, const Entry& k, const Eigen::Vector3d& y,
+                   const Eigen::Matrix3d& c, double nis, bool at_rest);
+  /// Whether the first comparison that turns after a step (NIS `nis`) refutes it: then it is undone.
+  bool step_refuted(double nis);
+  /// After a step taken or undone (b and P set): the error covariance, the field followed in the
+  /// gyro frame and the consistency sums start again from them.
+  void restart_after_step();
   /// The longest a step candidate is followed, grid intervals (lag_s each) from its earlier reading:
   /// the step plus a reading taken while the offset changed plus the two that agree.
   static constexpr int64_t kStepReadings = 4;
