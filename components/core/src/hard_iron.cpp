@@ -300,10 +300,14 @@ const HardIronReport& HardIronEstimator::update(int64_t stamp_ns, const Eigen::M
   // and the model errors that persist over an interval are not counted many times over.
   const Entry j = start_;
   start_ = k;
-  const Entry i = before_;  // the reading before j, if one is
-  const bool have_i = have_before_;
-  before_ = j;
-  have_before_ = true;
+  // the reading before j, if one is (kept for the steps only: step_detection)
+  const bool have_i = p_.step_detection && have_before_;
+  if (p_.step_detection) {
+    std::swap(before_, start_before_);
+    before_ = j;
+    have_before_ = true;
+  }
+  const Entry& i = start_before_;
   const double interval_s = static_cast<double>(k.stamp_ns - j.stamp_ns) * 1e-9;
   // E[(b_hat - b) n_j^T] (k's noise is in b_hat once this comparison is used)
   const Eigen::Matrix3d shared = std::exchange(shared_, Eigen::Matrix3d::Zero());

@@ -271,6 +271,7 @@ class HardIronEstimator {
   Eigen::Matrix3d P_;
   Entry start_;  ///< the reading that starts the current interval
   Entry before_;  ///< the earlier reading of the last comparison (a step split over two intervals)
+  Entry start_before_;  ///< the one before it, during a comparison (swapped with before_, not copied)
   bool have_before_ = false;
   bool have_start_ = false;
   Entry prev_;   ///< the last usable sample (a grid reading is interpolated between it and the next)
