@@ -384,8 +384,10 @@ TEST(ParallelKfHardIron, GivenTheHardIronKeysInYamlWhenLoadedThenTheyAreReadAndH
   EXPECT_FALSE(load_parallel_kf_params(dir + "parallel_kf_paper.yaml").hard_iron);
   EXPECT_TRUE(load_parallel_kf_params(dir + "parallel_kf.yaml").hard_iron);
   write("parallel_kf:\n  hard_iron: false\n  hard_iron_estimator:\n    min_applied_ut: 8\n    noise_ut: 2\n"
-        "    consistency_tau_s: 0\n    removed_log_lr: 0\n    removed_tau_s: 2\n");
+        "    consistency_tau_s: 0\n    removed_log_lr: 0\n    removed_tau_s: 2\n    step_detection: true\n");
   const ParallelKfParams p = load_parallel_kf_params(path);
+  EXPECT_FALSE(ParallelKfParams::defaults().hard_iron_estimator.step_detection);  // opt-in
+  EXPECT_TRUE(p.hard_iron_estimator.step_detection);
   EXPECT_FALSE(p.hard_iron);
   EXPECT_EQ(p.hard_iron_estimator.min_applied_ut, 8.0);
   EXPECT_EQ(p.hard_iron_estimator.noise_ut, 2.0);
@@ -419,6 +421,10 @@ TEST(ParallelKfHardIron, GivenTheHardIronKeysInYamlWhenLoadedThenTheyAreReadAndH
       {"  hard_iron_estimator:\n    noise_tau_s: .nan\n", "noise_tau_s"},
       {"  hard_iron_estimator:\n    no_such_key: 1\n", "no_such_key"},
       {"  hard_iron_estimator:\n    prior_sigma_ut: [1, 2]\n", "prior_sigma_ut"},
+      {"  hard_iron_estimator:\n    step_detection: maybe\n", "step_detection"},
+      {"  hard_iron_estimator:\n    step_detection: 1e308\n", "step_detection"},
+      {"  hard_iron_estimator:\n    step_detection: [true]\n", "step_detection"},
+      {"  hard_iron_estimator:\n    step_detection: true\n    step_detection: false\n", "step_detection"},
   };
   for (const auto& b : bad) {
     write(std::string("parallel_kf:\n") + b.yaml);

@@ -391,34 +391,42 @@ void HardIronEstimator::step_candidate(const Entry* before, const Entry& j, cons
   // b_hat = b_old), r = b_new - b_old + n_k - C n_j whatever C; the next readings tell
   // (step_confirmed).
   if (!(nis <= p_.gate_chi2)) {
-    if (!j.fitted) {
-      return;  // j did not fit the reading before it either: no reading to measure a step from
+    if (j.fitted) {  // else j did not fit the reading before it either: no reading to measure from
+      start_candidate(j, k, y, c);
     }
-    have_step_ = true;
-    step_from_ = j;
-    step_y_ = y;
-    step_c_ = c;
-    step_var_k_ = k.var_ut2;
     return;
   }
   // the same over the two intervals before k (once per comparison: its cost is a comparison's)
   if (before == nullptr || !before->fitted || k.stamp_ns - before->stamp_ns > 2 * lag_ns_) {
     return;
   }
-  const Entry& i = *before;
-  const Eigen::Matrix3d c2 = Eigen::Quaterniond(Eigen::Matrix3d(k.r.transpose() * i.r)).normalized().toRotationMatrix();
-  const Eigen::Matrix3d h = Eigen::Matrix3d::Identity() - c2;
-  const Eigen::Vector3d y2 = k.m - c2 * i.m;
-  const Eigen::Vector3d r2 = y2 - h * b_;
-  Eigen::Matrix3d s = h * P_ * h.transpose();
-  s.diagonal().array() += k.var_ut2 + i.var_ut2;
-  if (!(r2.dot(s.ldlt().solve(r2)) <= p_.gate_chi2)) {
-    have_step_ = true;
-    step_from_ = i;
-    step_y_ = y2;
-    step_c_ = c2;
-    step_var_k_ = k.var_ut2;
+  const Eigen::Matrix3d c2 = turn_between(k, *before);
+  const Eigen::Vector3d y2 = k.m - c2 * before->m;
+  if (!fits(c2, y2, k.var_ut2 + before->var_ut2)) {
+    start_candidate(*before, k, y2, c2);
   }
+}
+
+void HardIronEstimator::start_candidate(const Entry& from, const Entry& k, const Eigen::Vector3d& y,
+                                        const Eigen::Matrix3d& c) {
+  have_step_ = true;
+  step_from_ = from;
+  step_y_ = y;
+  step_c_ = c;
+  step_var_k_ = k.var_ut2;
+}
+
+Eigen::Matrix3d HardIronEstimator::turn_between(const Entry& later, const Entry& earlier) {
+  // R_k^T R_j, made a rotation again (the caller's orientation is renormalised only now and then)
+  return Eigen::Quaterniond(Eigen::Matrix3d(later.r.transpose() * earlier.r)).normalized().toRotationMatrix();
+}
+
+bool HardIronEstimator::fits(const Eigen::Matrix3d& c, const Eigen::Vector3d& y, double var_ut2) const {
+  const Eigen::Matrix3d h = Eigen::Matrix3d::Identity() - c;
+  const Eigen::Vector3d r = y - h * b_;
+  Eigen::Matrix3d s = h * P_ * h.transpose();
+  s.diagonal().array() += var_ut2;
+  return r.dot(s.ldlt().solve(r)) <= p_.gate_chi2;
 }
 
 bool HardIronEstimator::step_confirmed(const Entry& k) {
@@ -440,18 +448,14 @@ bool HardIronEstimator::step_confirmed(const Entry& k) {
   // readings' noise and what the two rotations make of b_ref's error and j's noise, r2 - r1 =
   // n_k2 - n_k + (C1 - C2) (b_old - b_ref + n_j); a transient (a tap, a magnet passing by) or a
   // field that keeps moving does not.
-  const Eigen::Quaterniond rel = Eigen::Quaterniond(Eigen::Matrix3d(k.r.transpose() * j.r)).normalized();
-  const Eigen::Matrix3d c2 = rel.toRotationMatrix();
+  const Eigen::Matrix3d c2 = turn_between(k, j);
   const Eigen::Matrix3d& c1 = step_c_;
+  const Eigen::Vector3d y2 = k.m - c2 * j.m;
   const Eigen::Vector3d r1 = step_y_ - b_ref + c1 * b_ref;
-  const Eigen::Vector3d r2 = k.m - c2 * j.m - b_ref + c2 * b_ref;
+  const Eigen::Vector3d r2 = y2 - b_ref + c2 * b_ref;
   // k fits the estimate against j (the field came back: a tap, a magnet passing by, a lone
   // outlier): no step
-  const Eigen::Matrix3d h2 = Eigen::Matrix3d::Identity() - c2;
-  Eigen::Matrix3d s2 = h2 * P_ * h2.transpose();
-  s2.diagonal().array() += k.var_ut2 + j.var_ut2;
-  const Eigen::Vector3d r2_hat = k.m - c2 * j.m - h2 * b_;
-  if (r2_hat.dot(s2.ldlt().solve(r2_hat)) <= p_.gate_chi2) {
+  if (fits(c2, y2, k.var_ut2 + j.var_ut2)) {
     return false;
   }
   const Eigen::Matrix3d dc = c1 - c2;
@@ -463,10 +467,7 @@ bool HardIronEstimator::step_confirmed(const Entry& k) {
   if (!(d.dot(s.ldlt().solve(d)) <= p_.gate_chi2)) {
     // not settled yet (a reading taken while the offset changed, a magnet on its way): k is the
     // candidate's later reading now, j stays the last reading before the change
-    have_step_ = true;
-    step_y_ = k.m - c2 * j.m;
-    step_c_ = c2;
-    step_var_k_ = k.var_ut2;
+    start_candidate(j, k, y2, c2);
     return false;
   }
   // b_ref + the step's mean; its error: -(C1 + C2) / 2 (b_old - b_ref) where b_ref is the estimate

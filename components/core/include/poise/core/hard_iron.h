@@ -230,6 +230,14 @@ class HardIronEstimator {
   /// over a few samples that straddles the grid instant j, a magnet put on by hand).
   void step_candidate(const Entry* before, const Entry& j, const Entry& k, const Eigen::Vector3d& y,
                       const Eigen::Matrix3d& c, double nis);
+  /// A step candidate from reading `from` (the last that fitted) to k: y = m_k - C m_from, C.
+  void start_candidate(const Entry& from, const Entry& k, const Eigen::Vector3d& y, const Eigen::Matrix3d& c);
+  /// R_later^T R_earlier, made a rotation again (the caller's orientation is renormalised only now
+  /// and then).
+  static Eigen::Matrix3d turn_between(const Entry& later, const Entry& earlier);
+  /// Whether the estimate fits a comparison y = m_k - C m_j of two readings whose variances per
+  /// axis sum to var_ut2 (its NIS within gate_chi2).
+  [[nodiscard]] bool fits(const Eigen::Matrix3d& c, const Eigen::Vector3d& y, double var_ut2) const;
   /// The first sample, or the first after a gap: the comparisons start again on the grid of lag_s
   /// from it (kWarmingUp or kGap; kRejectedInput for a non-finite orientation, nothing kept).
   HardIronStep start_grid(int64_t stamp_ns, const Eigen::Matrix3d& r_body, const Eigen::Vector3d& gyro_rps,
