@@ -7,6 +7,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
+#include <vector>
 
 namespace poise {
 namespace {
@@ -134,6 +136,143 @@ TEST(FieldGate, GivenAConfiguredReferenceWhenResetThenNothingIsLearnt) {
   EXPECT_TRUE(g.learnt);
   EXPECT_EQ(g.step(p, field(45.0, 55.0), kUp, kDt), FieldVerdict::kAccepted);
   EXPECT_EQ(g.step(p, field(50.0, 55.0), kUp, kDt), FieldVerdict::kGated);
+}
+
+// FieldGate::offset_removed (session 27): a reference learnt at start-up on a field with a
+// body-fixed offset in it (a magnet on the sensor at power-on) is moved to the field without it
+// once the filter removes the offset, and kept when the offset came later. Oracle: the Earth's
+// field and the offset are the test's; the reference without the offset is the Earth field's own
+// magnitude and dip, in closed form.
+constexpr double kEarthUt = 44.0;
+constexpr double kEarthDipDeg = 65.0;
+constexpr double kRefTolUt = 1e-9;    // the reference is computed, not estimated: rounding, uT
+constexpr double kRefTolDeg = 1e-7;   // deg
+const Eigen::Vector3d kMagnetUt(-8.0, 6.0, 3.0);  // 10.4 uT, across the horizontal field
+
+double dip_deg_of(const Eigen::Vector3d& f) { return std::asin(-kUp.dot(f) / f.norm()) * kDegPerRad; }
+
+/// The gate's reference is the magnitude and dip of the field `f` (body, up +z).
+void expect_reference(const FieldGate& g, const Eigen::Vector3d& f) {
+  EXPECT_NEAR(g.m_ut, f.norm(), kRefTolUt);
+  EXPECT_NEAR(g.dip_rad * kDegPerRad, dip_deg_of(f), kRefTolDeg);
+}
+
+/// A gate learnt on `startup` (body = the test's frame, up +z), then given `later` with `offset`
+/// removed for `seconds`; the judgements returned in order of change.
+std::vector<OffsetJudgement> judge(FieldGate& g, const FieldGateParams& p, const Eigen::Vector3d& startup,
+                                   const Eigen::Vector3d& offset, const Eigen::Vector3d& later, double seconds) {
+  g.reset(p);
+  g.step(p, startup, kUp, 0.0);
+  while (!g.learnt) {
+    g.step(p, startup, kUp, kDt);
+  }
+  std::vector<OffsetJudgement> seen;
+  for (double t = 0.0; t < seconds; t += kDt) {
+    const OffsetJudgement j = g.offset_removed(p, offset, later, kUp, kDt);
+    if (seen.empty() || seen.back() != j) {
+      seen.push_back(j);
+    }
+  }
+  return seen;
+}
+
+TEST(FieldGateOffset, GivenAMagnetOnTheSensorAtStartUpWhenItsOffsetIsRemovedThenTheReferenceIsTheEarthFieldsAndTheHeadingRestarts) {
+  const FieldGateParams p;  // start-up 1 s, 5 % and 10 deg
+  const Eigen::Vector3d earth = field(kEarthUt, kEarthDipDeg);
+  FieldGate g;
+  // GIVEN a start-up on the Earth's field plus the magnet's (learnt as a field of its own)
+  // WHEN the filter removes the magnet's offset and the field left is the Earth's
+  const auto seen = judge(g, p, earth + kMagnetUt, kMagnetUt, earth, 3.0);
+  // THEN it is judged once, after one start-up span, and moved to the Earth field's magnitude and dip
+  ASSERT_EQ(seen, (std::vector<OffsetJudgement>{OffsetJudgement::kOpen, OffsetJudgement::kMoved,
+                                                OffsetJudgement::kNone}));
+  expect_reference(g, earth);
+  EXPECT_EQ(g.offset_moves, 1u);
+  // the next sample restarts the heading on the field, and the field is accepted from then on
+  EXPECT_EQ(g.step(p, earth, kUp, kDt), FieldVerdict::kRelearnt);
+  EXPECT_EQ(g.step(p, earth, kUp, kDt), FieldVerdict::kAccepted);
+  // AND when the filter stops removing the offset, the start-up's reference is back
+  g.offset_not_removed();
+  expect_reference(g, earth + kMagnetUt);
+  EXPECT_EQ(g.step(p, earth + kMagnetUt, kUp, kDt), FieldVerdict::kAccepted);
+}
+
+TEST(FieldGateOffset, GivenAStartUpWithoutTheMagnetWhenItsOffsetIsRemovedLaterThenTheReferenceStays) {
+  const FieldGateParams p;
+  const Eigen::Vector3d earth = field(kEarthUt, kEarthDipDeg);
+  FieldGate g;
+  // GIVEN a start-up on the Earth's field alone, WHEN a magnet's offset is removed later
+  const auto seen = judge(g, p, earth, kMagnetUt, earth, 3.0);
+  // THEN the learnt reference fits the field without it: kept, and not judged again
+  ASSERT_EQ(seen, (std::vector<OffsetJudgement>{OffsetJudgement::kOpen, OffsetJudgement::kKept,
+                                                OffsetJudgement::kNone}));
+  expect_reference(g, earth);
+  EXPECT_EQ(g.offset_moves, 0u);
+  EXPECT_EQ(g.step(p, earth, kUp, kDt), FieldVerdict::kAccepted);
+}
+
+TEST(FieldGateOffset, GivenAFieldThatFitsNeitherReferenceWhenJudgedThenNothingMovesUntilOneFits) {
+  const FieldGateParams p;
+  const Eigen::Vector3d earth = field(kEarthUt, kEarthDipDeg);
+  FieldGate g;
+  // GIVEN a start-up with the magnet, WHEN the field without it is 20 % stronger than either
+  // reference (an offset's estimate off, or another place's field)
+  const auto seen = judge(g, p, earth + kMagnetUt, kMagnetUt, 1.2 * earth, 3.0);
+  // THEN every span stays open and the reference is the start-up's
+  ASSERT_EQ(seen, (std::vector<OffsetJudgement>{OffsetJudgement::kOpen}));
+  EXPECT_NEAR(g.m_ut, (earth + kMagnetUt).norm(), kRefTolUt);
+  // AND a span that fits the reference without the offset still moves it
+  for (double t = 0.0; t < 1.5; t += kDt) {
+    g.offset_removed(p, kMagnetUt, earth, kUp, kDt);
+  }
+  EXPECT_NEAR(g.m_ut, kEarthUt, kRefTolUt);
+}
+
+TEST(FieldGateOffset, GivenAFieldThatMovedAtRestOrAConfiguredReferenceThenNothingIsJudged) {
+  const Eigen::Vector3d earth = field(kEarthUt, kEarthDipDeg);
+  {
+    const FieldGateParams p;
+    FieldGate g;
+    judge(g, p, earth + kMagnetUt, kMagnetUt, earth + kMagnetUt, 0.5);  // half a span
+    g.field_changed();  // the field moved at rest: the offset came later
+    EXPECT_EQ(g.offset_removed(p, kMagnetUt, earth, kUp, kDt), OffsetJudgement::kNone);
+    EXPECT_NEAR(g.m_ut, (earth + kMagnetUt).norm(), kRefTolUt);
+  }
+  {
+    FieldGateParams p;  // the World Magnetic Model's reference: the Earth's, whatever the start-up saw
+    p.field_magnitude_ut = 50.0;
+    p.dip_deg = 60.0;
+    FieldGate g;
+    g.reset(p);
+    for (double t = 0.0; t < 3.0; t += kDt) {
+      EXPECT_EQ(g.offset_removed(p, kMagnetUt, earth, kUp, kDt), OffsetJudgement::kNone);
+    }
+    EXPECT_EQ(g.m_ut, 50.0);
+  }
+}
+
+TEST(FieldGateOffset, GivenHostileInputsWhenJudgedThenNothingIsSummedAndTheReferenceStaysFinite) {
+  const FieldGateParams p;
+  const Eigen::Vector3d earth = field(kEarthUt, kEarthDipDeg);
+  const double nan = std::nan("");
+  const double inf = std::numeric_limits<double>::infinity();
+  FieldGate g;
+  judge(g, p, earth + kMagnetUt, kMagnetUt, earth, 0.5);  // half a span summed
+  const double m_before = g.m_ut;
+  for (int k = 0; k < 300; ++k) {  // 3 s of each
+    EXPECT_EQ(g.offset_removed(p, Eigen::Vector3d(nan, 0.0, 0.0), earth, kUp, kDt), OffsetJudgement::kOpen);
+    EXPECT_EQ(g.offset_removed(p, kMagnetUt, Eigen::Vector3d(inf, 1.0, 1.0), kUp, kDt), OffsetJudgement::kOpen);
+    EXPECT_EQ(g.offset_removed(p, kMagnetUt, earth, Eigen::Vector3d::Zero(), kDt), OffsetJudgement::kOpen);
+    EXPECT_EQ(g.offset_removed(p, kMagnetUt, earth, kUp, nan), OffsetJudgement::kOpen);
+    EXPECT_EQ(g.offset_removed(p, kMagnetUt, earth, kUp, -kDt), OffsetJudgement::kOpen);
+  }
+  EXPECT_EQ(g.m_ut, m_before);
+  // an offset of 1e308 uT: its reference is not finite, so the span stays open
+  for (double t = 0.0; t < 3.0; t += kDt) {
+    EXPECT_EQ(g.offset_removed(p, Eigen::Vector3d(1e308, 0.0, 0.0), earth, kUp, kDt), OffsetJudgement::kOpen);
+  }
+  EXPECT_EQ(g.m_ut, m_before);
+  EXPECT_TRUE(std::isfinite(g.dip_rad));
 }
 
 // FieldMovedAtRest::hold (session 20): a field that moved at rest stays refused in the motion after

@@ -34,10 +34,16 @@ void FieldGate::reset(const FieldGateParams& p) {
   verified = learnt;  // configured or from the magnetic model: trusted
 }
 
-void FieldGate::learn(const FieldGateParams& p, double norm, double dip, double dt_s) {
-  // Mean |s_M| and mean dip over the start-up window.
+void FieldGate::learn(const FieldGateParams& p, const Eigen::Vector3d& mag, const Eigen::Vector3d& up, double dt_s) {
+  // Mean |s_M| and mean dip over the start-up window; and the moments offset_removed() needs.
+  const double norm = mag.norm();
   learn_norm_sum += norm;
-  learn_dip_sum += dip;
+  learn_dip_sum += angle_between_vectors(up, mag) - 0.5 * kPi;
+  const Eigen::Vector3d u = up.normalized();
+  learn_field_sum += mag;
+  learn_field2_sum += norm * norm;
+  learn_up_field_sum += u.dot(mag);
+  learn_up_sum += u;
   ++learn_n;
   learn_time_s += dt_s;
   if (!std::isfinite(p.field_magnitude_ut)) {
@@ -50,6 +56,81 @@ void FieldGate::learn(const FieldGateParams& p, double norm, double dip, double 
     learnt = true;
     verified = !(p.verify_s > 0.0);
     consistent_s = 0.0;
+    startup_reference = !std::isfinite(p.field_magnitude_ut) && !std::isfinite(p.dip_deg);
+  }
+}
+
+double FieldGate::gate_ratio(const FieldGateParams& p, double norm, double sin_dip, double m, double dip) {
+  const double dip_dev = std::abs(std::asin(std::clamp(sin_dip, -1.0, 1.0)) - dip) / (p.dip_tol_deg * kRadPerDeg);
+  const double norm_dev = p.norm_tol > 0.0 ? std::abs(norm - m) / (p.norm_tol * m) : 0.0;
+  return std::max(dip_dev, norm_dev);
+}
+
+OffsetJudgement FieldGate::offset_removed(const FieldGateParams& p, const Eigen::Vector3d& offset_ut,
+                                          const Eigen::Vector3d& mag, const Eigen::Vector3d& up, double dt_s) {
+  if (!startup_reference || offset_moved || !learnt || learn_n <= 0 || !p.enabled) {
+    return OffsetJudgement::kNone;
+  }
+  const double norm = mag.norm();
+  const double up_norm = up.norm();
+  if (!(norm > 0.0) || !(up_norm > 0.0) || !(dt_s > 0.0) || !mag.allFinite() || !up.allFinite() ||
+      !offset_ut.allFinite()) {
+    return OffsetJudgement::kOpen;
+  }
+  offset_span_s += dt_s;
+  offset_norm_sum += norm * dt_s;
+  offset_sin_dip_sum += -up.dot(mag) / (norm * up_norm) * dt_s;
+  if (offset_span_s < p.startup_s) {
+    return OffsetJudgement::kOpen;
+  }
+  const double mean_norm = offset_norm_sum / offset_span_s;
+  const double mean_sin_dip = offset_sin_dip_sum / offset_span_s;
+  offset_span_s = 0.0;  // a span judged: the next starts from here
+  offset_norm_sum = 0.0;
+  offset_sin_dip_sum = 0.0;
+  // the reference the start-up would have learnt without the offset: its mean of |s_M - b|^2 and
+  // of -up . (s_M - b) (b fixed in the body)
+  const double n = static_cast<double>(learn_n);
+  const Eigen::Vector3d f0 = learn_field_sum / n;
+  const double m2 = learn_field2_sum / n - 2.0 * f0.dot(offset_ut) + offset_ut.squaredNorm();
+  const Eigen::Vector3d up0 = learn_up_sum / n;
+  if (!(m2 > 0.0) || !std::isfinite(m2) || !(up0.norm() > 0.0)) {
+    return OffsetJudgement::kOpen;
+  }
+  const double m_b = std::sqrt(m2);
+  const double dip_b = std::asin(std::clamp(-(learn_up_field_sum / n - up0.dot(offset_ut)) / m_b, -1.0, 1.0));
+  const double keep = gate_ratio(p, mean_norm, mean_sin_dip, m_ut, dip_rad);
+  const double move = gate_ratio(p, mean_norm, mean_sin_dip, m_b, dip_b);
+  if (!(std::min(keep, move) <= 1.0)) {
+    return OffsetJudgement::kOpen;  // neither passes the gate: the field, or the offset's estimate, is off now
+  }
+  startup_reference = false;
+  if (keep <= move) {
+    return OffsetJudgement::kKept;  // the field without the offset is the one the start-up learnt
+  }
+  learnt_m_ut = m_ut;
+  learnt_dip_rad = dip_rad;
+  replace_reference(m_b, dip_b);
+  offset_moved = true;
+  moved_by_offset = true;
+  ++offset_moves;
+  // what the reference was following held the offset
+  window_s = 0.0;
+  accepted_s = 0.0;
+  norm_sum = 0.0;
+  sin_dip_sum = 0.0;
+  return OffsetJudgement::kMoved;
+}
+
+void FieldGate::offset_not_removed() {
+  offset_span_s = 0.0;
+  offset_norm_sum = 0.0;
+  offset_sin_dip_sum = 0.0;
+  if (offset_moved) {
+    replace_reference(learnt_m_ut, learnt_dip_rad);
+    offset_moved = false;
+    moved_by_offset = false;
+    startup_reference = true;
   }
 }
 
@@ -57,8 +138,12 @@ FieldVerdict FieldGate::step(const FieldGateParams& p, const Eigen::Vector3d& ma
                              double dt_s) {
   last_norm_ut = std::nan("");
   if (!learnt) {
-    learn(p, mag.norm(), angle_between_vectors(up, mag) - 0.5 * kPi, dt_s);
+    learn(p, mag, up, dt_s);
     return FieldVerdict::kLearning;
+  }
+  if (moved_by_offset) {
+    moved_by_offset = false;  // the heading restarts on this field (offset_removed judged the span before it)
+    return FieldVerdict::kRelearnt;
   }
   if (!p.enabled) {
     if (!verified) {  // every field is accepted: a provisional reference is verified all the same
@@ -139,8 +224,14 @@ FieldVerdict FieldGate::step(const FieldGateParams& p, const Eigen::Vector3d& ma
 }
 
 void FieldGate::adopt_candidate() {
-  m_ut = cand_norm;
-  dip_rad = cand_dip;
+  startup_reference = false;
+  offset_moved = false;
+  replace_reference(cand_norm, cand_dip);
+}
+
+void FieldGate::replace_reference(double m, double dip) {
+  m_ut = m;
+  dip_rad = dip;
   rejected_s = 0.0;
   cand_stable_s = 0.0;
   cand_norm = 0.0;

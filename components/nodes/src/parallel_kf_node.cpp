@@ -91,6 +91,7 @@ class ParallelKfStep : public AttitudeStep {
     diag.counters["mag_hard_iron_corrected"] = kf_.mag_hard_iron_corrected_count();
     diag.counters["field_reacquired"] = kf_.field_reacquired_count();
     diag.counters["field_relearnt"] = kf_.field_relearnt_count();
+    diag.counters["field_moved_by_offset"] = kf_.field_offset_moves_count();
     diag.counters["rest_turns_reverted"] = kf_.rest_turns_reverted_count();
     diag.counters["state_resets"] = kf_.state_resets();
     diag.metrics = {{"field_magnitude", out.field_magnitude_ut, "uT"},

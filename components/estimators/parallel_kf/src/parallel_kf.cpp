@@ -390,11 +390,18 @@ Eigen::Vector3d ParallelKf::hard_iron_corrected(int64_t stamp_ns, const Eigen::V
   s_.hard_iron.update(stamp_ns, s_.r_ib, gyro, mag, p_.bias_estimation && s_.rest_det.rest);
   s_.mag_offset_pending = s_.hard_iron.pending();
   if (!s_.hard_iron.applied()) {
+    s_.gate.offset_not_removed();
     return mag;
   }
   s_.mag_corrected = true;
   ++s_.mag_corrected_count;
-  return mag - s_.hard_iron.offset_ut();
+  const Eigen::Vector3d corrected = mag - s_.hard_iron.offset_ut();
+  if (s_.gate.startup_reference) {
+    // the reference learnt at start-up on the raw field: was the offset in it? (a magnet on the
+    // sensor at power-on; FieldGate::offset_removed)
+    s_.gate.offset_removed(gp_, s_.hard_iron.offset_ut(), corrected, s_.kf1.up_body(), s_.last_dt_s);
+  }
+  return corrected;
 }
 
 bool ParallelKf::field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, double dt) {
@@ -419,6 +426,9 @@ bool ParallelKf::field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, do
   const double tol = p_.mag_norm_tol * s_.gate.m_ut;
   const bool was_held = s_.rest_field.held;
   const bool moved = s_.rest_field.step(f, rest, dt, p_.rest_filter_tau_s, gp_.reference_tau_s, tol);
+  if (moved) {
+    s_.gate.field_changed();  // an offset removed from now on came after the start-up
+  }
   // At rest the body does not turn, so the heading turns KF2's fields gave since the reading last
   // agreed with the rest's field (within the same tolerance) came from the move the low-pass has
   // only now seen: taken back, about the vertical, when it sees it. Turns from before (KF2 settling
@@ -1153,7 +1163,7 @@ double ParallelKf::field_dip_reference(double dip, double dt) {
   // the present dip. It starts on the gate's reference (learnt or configured) and forgets as the
   // gate's reference follows (mag_reference_tau_s). The gate's own reference, and so the
   // estimate, is untouched.
-  const uint64_t epoch = s_.gate.reacquired + s_.gate.relearnt;
+  const uint64_t epoch = s_.gate.reacquired + s_.gate.relearnt + s_.gate.offset_moves;
   if (!s_.initialized) {
     return s_.gate.dip_rad;
   }

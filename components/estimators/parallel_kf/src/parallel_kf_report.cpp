@@ -47,6 +47,7 @@ void ParallelKf::reset_unhealthy() {
   s_.gate.gated = gate.gated;
   s_.gate.forced = gate.forced;
   s_.gate.reacquired = gate.reacquired;
+  s_.gate.offset_moves = gate.offset_moves;
   for (SourceReport* r : {&s_.gyro_src, &s_.accel_src, &s_.mag_src}) {
     r->mark_rejected(kStateResetReason);
   }

@@ -576,6 +576,13 @@ void SelectiveEkf::field_offsets(ImuInput& in) {
     if (x_.hard_iron.applied()) {
       in.mag = raw - x_.hard_iron.offset_ut();
       x_.mag_corrected = true;
+      if (x_.field_gate.startup_reference) {
+        // was the offset in the reference learnt at start-up? (FieldGate::offset_removed)
+        x_.field_gate.offset_removed(gp_, x_.hard_iron.offset_ut(), in.mag,
+                                     x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ(), in.dt_s);
+      }
+    } else {
+      x_.field_gate.offset_not_removed();
     }
   }
   // the raw field: the offset turns with the body, the Earth's field not (at rest neither does)
@@ -586,6 +593,9 @@ void SelectiveEkf::field_offsets(ImuInput& in) {
   }
   const double tol = gp_.norm_tol * g.m_ut;
   const bool moved = x_.rest_field.step(r_ib * raw, in.rest, in.dt_s, p_.rest_filter_tau_s, gp_.reference_tau_s, tol);
+  if (moved) {
+    x_.field_gate.field_changed();  // an offset removed from now on came after the start-up
+  }
   // held into the motion after it until the hard-iron estimate has judged it (hard_iron) or the
   // field is back within the tolerance of the rest's field before it moved (FieldMovedAtRest::hold)
   x_.mag_moved_at_rest = x_.rest_field.hold(moved, in.rest || !p_.hard_iron, x_.hard_iron.report().judged(), tol);

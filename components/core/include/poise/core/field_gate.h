@@ -26,6 +26,14 @@
 //     be accepted for verify_s. A configured
 //     (or World Magnetic Model) reference is verified from the start. 0: a learnt reference is
 //     verified when learnt (the behaviour before verify_s).
+//   - A hard-iron offset removed (offset_removed): a reference learnt at start-up on fields with
+//     the offset in (a magnet on the sensor at power-on) describes the field plus the offset and
+//     gates the field without it. The start-up's moments give the reference the start-up would
+//     have learnt without the offset. Over startup_s of the field with the offset removed, the
+//     reference that fits its mean norm and dip better decides, if that one passes the gate: the
+//     reference moves (and the heading restarts on the field) or stays. A move is undone when the
+//     offset stops being removed. A field that moved at rest since the start-up (field_changed())
+//     settles it: the offset came later.
 // Times in seconds of sample time (the dt given to step), never per sample. A value type: its
 // state is copied with the filter's state (VQF-style getState/setState, replays).
 #pragma once
@@ -83,7 +91,16 @@ enum class FieldVerdict : uint8_t {
   kAccepted,  ///< within the gate (or the gate is off)
   kGated,     ///< disturbed: do not use it for heading
   kForced,    ///< disturbed, but gated for max_reject_s already: use it anyway
-  kRelearnt,  ///< the provisional reference was replaced by this consistent field: restart the heading on it
+  kRelearnt,  ///< the provisional reference was replaced by this consistent field, or moved by an
+              ///< offset that was there at start-up (offset_removed): restart the heading on it
+};
+
+/// What offset_removed() decided about the start-up reference.
+enum class OffsetJudgement : uint8_t {
+  kNone,   ///< nothing to judge (no start-up reference, or already judged)
+  kOpen,   ///< neither reference accepts this field: judged again on the next
+  kKept,   ///< the learnt reference fits the field without the offset: the offset came later
+  kMoved,  ///< the offset was there at start-up: the reference without it replaces the learnt one
 };
 
 struct FieldGate {
@@ -98,6 +115,23 @@ struct FieldGate {
   double learn_norm_sum = 0.0;
   double learn_dip_sum = 0.0;
   int learn_n = 0;
+  // the start-up field's moments, in the body frame of each sample (offset_removed): the mean of
+  // s_M, of |s_M|^2, of up . s_M and of up (up unit)
+  Eigen::Vector3d learn_field_sum = Eigen::Vector3d::Zero();
+  double learn_field2_sum = 0.0;
+  double learn_up_field_sum = 0.0;
+  Eigen::Vector3d learn_up_sum = Eigen::Vector3d::Zero();
+  /// the reference is the start-up's (not configured, not adopted since), no offset has been
+  /// judged against it yet and the field has not moved at rest since: offset_removed() may move it
+  bool startup_reference = false;
+  bool moved_by_offset = false;  ///< offset_removed() moved it: the next step() says kRelearnt
+  bool offset_moved = false;     ///< the reference is the one moved by the offset (undone when it goes)
+  double learnt_m_ut = 0.0;      ///< the start-up's reference, restored when a move is undone
+  double learnt_dip_rad = 0.0;
+  // the field with the offset removed, summed over time while it is judged (offset_removed)
+  double offset_span_s = 0.0;
+  double offset_norm_sum = 0.0;     ///< uT s
+  double offset_sin_dip_sum = 0.0;  ///< s
   // re-acquisition candidate
   double cand_norm = 0.0;
   double cand_dip = 0.0;
@@ -117,6 +151,7 @@ struct FieldGate {
   uint64_t forced = 0;
   uint64_t reacquired = 0;
   uint64_t relearnt = 0;    ///< provisional references replaced (kRelearnt)
+  uint64_t offset_moves = 0;  ///< start-up references moved by an offset there at start-up (kRelearnt)
   // the last sample tested (reporting): |s_M| (NaN when not tested) and sin(dip)
   double last_norm_ut = std::nan("");
   double last_sin_dip = 0.0;
@@ -128,6 +163,30 @@ struct FieldGate {
   /// re-acquires; returns what to do with the sample.
   FieldVerdict step(const FieldGateParams& p, const Eigen::Vector3d& mag, const Eigen::Vector3d& up,
                     double dt_s);
+  /// The filter removes the body-fixed offset `offset_ut` (uT, body) from the fields it gives the
+  /// gate (call on every sample while it does, dt_s after the previous one). `mag` is this
+  /// sample's field with the offset removed, `up` the filter's up axis (body). Judges, on the
+  /// field's mean norm and dip over startup_s (as the start-up learnt the reference), whether the
+  /// offset was there at start-up: each hypothesis is scored by gate_ratio() against its
+  /// reference (the learnt one: it came later; the one the start-up would have learnt without it:
+  /// it was there). kMoved: "there" scores lower and passes the gate; the reference becomes that
+  /// one and the next step() says kRelearnt (the heading restarts on the field). kKept: "later"
+  /// scores no higher and passes. kOpen while the span is shorter than startup_s, or when neither
+  /// passes (a new span starts: the field, or the offset's estimate, is off now). kNone when there
+  /// is nothing to judge (not the start-up's reference, judged already, the field moved at rest
+  /// since). Non-finite inputs: kOpen, nothing summed.
+  OffsetJudgement offset_removed(const FieldGateParams& p, const Eigen::Vector3d& offset_ut, const Eigen::Vector3d& mag,
+                                 const Eigen::Vector3d& up, double dt_s);
+  /// The filter no longer removes an offset: a span being judged starts again when it does, and a
+  /// reference moved by the offset goes back to the start-up's (judged again on the next offset).
+  void offset_not_removed();
+  /// The field moved while the sensor was at rest (FieldMovedAtRest): whatever offset the filter
+  /// removes from now on came after the start-up, which is not judged any more.
+  void field_changed() {
+    if (!offset_moved) {
+      startup_reference = false;
+    }
+  }
   /// Advances the reference-following window by dt_s (call once per filter sample, magnetometer
   /// or not); the reference moves once per kFieldGateWindowS.
   void tick(const FieldGateParams& p, double dt_s);
@@ -137,9 +196,13 @@ struct FieldGate {
   [[nodiscard]] double dip_ratio() const;
 
  private:
-  void learn(const FieldGateParams& p, double norm, double dip, double dt_s);
+  void learn(const FieldGateParams& p, const Eigen::Vector3d& mag, const Eigen::Vector3d& up, double dt_s);
+  /// How far `mag` (norm, body) with `sin_dip` lies from a reference (m, dip): the larger of the
+  /// norm and dip deviations over their tolerances (<= 1: the gate passes it).
+  [[nodiscard]] static double gate_ratio(const FieldGateParams& p, double norm, double sin_dip, double m, double dip);
   void follow(const FieldGateParams& p);
   void adopt_candidate();  ///< the candidate becomes the reference; rejection and candidate restart
+  void replace_reference(double m, double dip);  ///< a new reference; rejection and candidate restart
 };
 
 /// A field that moves while the sensor is at rest (shared by the filters whose heading uses the

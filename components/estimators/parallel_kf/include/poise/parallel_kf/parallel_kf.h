@@ -638,6 +638,9 @@ class ParallelKf {
   [[nodiscard]] uint64_t field_reacquired_count() const { return s_.gate.reacquired; }
   /// Provisional (not yet verified) references replaced by a consistent field (mag_verify_s).
   [[nodiscard]] uint64_t field_relearnt_count() const { return s_.gate.relearnt; }
+  /// Start-up references moved by a hard-iron offset that was there at start-up (a magnet on the
+  /// sensor at power-on; FieldGate::offset_removed).
+  [[nodiscard]] uint64_t field_offset_moves_count() const { return s_.gate.offset_moves; }
   /// Magnetometer samples used although gated, because rejection lasted mag_max_reject_s.
   [[nodiscard]] uint64_t mag_forced_count() const { return s_.gate.forced; }
   /// Magnetometer samples whose reading had the hard-iron offset removed (hard_iron).
