@@ -234,7 +234,7 @@ TEST(FieldGateOffset, GivenAFieldThatMovedAtRestOrAConfiguredReferenceThenNothin
     const FieldGateParams p;
     FieldGate g;
     judge(g, p, earth + kMagnetUt, kMagnetUt, earth + kMagnetUt, 0.5);  // half a span
-    g.field_changed();  // the field moved at rest: the offset came later
+    g.offset_after_startup();  // e.g. the field moved at rest: the offset came later
     EXPECT_EQ(g.offset_removed(p, kMagnetUt, earth, kUp, kDt), OffsetJudgement::kNone);
     EXPECT_NEAR(g.m_ut, (earth + kMagnetUt).norm(), kRefTolUt);
   }

@@ -389,6 +389,10 @@ Eigen::Vector3d ParallelKf::hard_iron_corrected(int64_t stamp_ns, const Eigen::V
   // the filter's gyro-only orientation: integrated once; at rest no step is taken (field_moved_at_rest)
   s_.hard_iron.update(stamp_ns, s_.r_ib, gyro, mag, p_.bias_estimation && s_.rest_det.rest);
   s_.mag_offset_pending = s_.hard_iron.pending();
+  const HardIronReport& r = s_.hard_iron.report();
+  if (r.step == HardIronStep::kStep || (r.converged && !r.present && r.step == HardIronStep::kUpdated)) {
+    s_.gate.offset_after_startup();  // an offset removed from now on came later (stepped, or none at first)
+  }
   if (!s_.hard_iron.applied()) {
     s_.gate.offset_not_removed();
     return mag;
@@ -427,7 +431,7 @@ bool ParallelKf::field_moved_at_rest(const Eigen::Vector3d& mag, bool mag_ok, do
   const bool was_held = s_.rest_field.held;
   const bool moved = s_.rest_field.step(f, rest, dt, p_.rest_filter_tau_s, gp_.reference_tau_s, tol);
   if (moved) {
-    s_.gate.field_changed();  // an offset removed from now on came after the start-up
+    s_.gate.offset_after_startup();  // an offset removed from now on came after the start-up
   }
   // At rest the body does not turn, so the heading turns KF2's fields gave since the reading last
   // agreed with the rest's field (within the same tolerance) came from the move the low-pass has

@@ -573,6 +573,10 @@ void SelectiveEkf::field_offsets(ImuInput& in) {
       x_.heading_per_removed_offset.setZero();
     }
     x_.mag_offset_pending = x_.hard_iron.pending();
+    const HardIronReport& r = x_.hard_iron.report();
+    if (step == HardIronStep::kStep || (r.converged && !r.present && step == HardIronStep::kUpdated)) {
+      x_.field_gate.offset_after_startup();  // an offset removed from now on came later (stepped, or none at first)
+    }
     if (x_.hard_iron.applied()) {
       in.mag = raw - x_.hard_iron.offset_ut();
       x_.mag_corrected = true;
@@ -594,7 +598,7 @@ void SelectiveEkf::field_offsets(ImuInput& in) {
   const double tol = gp_.norm_tol * g.m_ut;
   const bool moved = x_.rest_field.step(r_ib * raw, in.rest, in.dt_s, p_.rest_filter_tau_s, gp_.reference_tau_s, tol);
   if (moved) {
-    x_.field_gate.field_changed();  // an offset removed from now on came after the start-up
+    x_.field_gate.offset_after_startup();  // an offset removed from now on came after the start-up
   }
   // held into the motion after it until the hard-iron estimate has judged it (hard_iron) or the
   // field is back within the tolerance of the rest's field before it moved (FieldMovedAtRest::hold)

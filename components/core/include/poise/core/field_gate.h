@@ -32,8 +32,9 @@
 //     have learnt without the offset. Over startup_s of the field with the offset removed, the
 //     reference that fits its mean norm and dip better decides, if that one passes the gate: the
 //     reference moves (and the heading restarts on the field) or stays. A move is undone when the
-//     offset stops being removed. A field that moved at rest since the start-up (field_changed())
-//     settles it: the offset came later.
+//     offset stops being removed. Evidence that the offset came later settles it
+//     (offset_after_startup()): the field moved at rest, the offset stepped, or the hard-iron
+//     estimate converged on no offset since the start-up.
 // Times in seconds of sample time (the dt given to step), never per sample. A value type: its
 // state is copied with the filter's state (VQF-style getState/setState, replays).
 #pragma once
@@ -180,9 +181,10 @@ struct FieldGate {
   /// The filter no longer removes an offset: a span being judged starts again when it does, and a
   /// reference moved by the offset goes back to the start-up's (judged again on the next offset).
   void offset_not_removed();
-  /// The field moved while the sensor was at rest (FieldMovedAtRest): whatever offset the filter
-  /// removes from now on came after the start-up, which is not judged any more.
-  void field_changed() {
+  /// Evidence that whatever offset the filter removes from now on came after the start-up (the
+  /// field moved while the sensor was at rest, the hard-iron estimate stepped, or it converged on
+  /// no offset): the start-up's reference is not judged any more.
+  void offset_after_startup() {
     if (!offset_moved) {
       startup_reference = false;
     }
