@@ -122,7 +122,7 @@ OffsetJudgement FieldGate::offset_removed(const FieldGateParams& p, const Eigen:
   return OffsetJudgement::kMoved;
 }
 
-void FieldGate::offset_not_removed() {
+void FieldGate::undo_offset() {
   offset_span_s = 0.0;
   offset_norm_sum = 0.0;
   offset_sin_dip_sum = 0.0;

@@ -389,9 +389,11 @@ Eigen::Vector3d ParallelKf::hard_iron_corrected(int64_t stamp_ns, const Eigen::V
   // the filter's gyro-only orientation: integrated once; at rest no step is taken (field_moved_at_rest)
   s_.hard_iron.update(stamp_ns, s_.r_ib, gyro, mag, p_.bias_estimation && s_.rest_det.rest);
   s_.mag_offset_pending = s_.hard_iron.pending();
-  const HardIronReport& r = s_.hard_iron.report();
-  if (r.step == HardIronStep::kStep || (r.converged && !r.present && r.step == HardIronStep::kUpdated)) {
-    s_.gate.offset_after_startup();  // an offset removed from now on came later (stepped, or none at first)
+  if (s_.gate.startup_reference) {
+    const HardIronReport& r = s_.hard_iron.report();
+    if (r.step == HardIronStep::kStep || (r.converged && !r.present && r.step == HardIronStep::kUpdated)) {
+      s_.gate.offset_after_startup();  // an offset removed from now on came later (stepped, or none at first)
+    }
   }
   if (!s_.hard_iron.applied()) {
     s_.gate.offset_not_removed();

@@ -574,7 +574,8 @@ void SelectiveEkf::field_offsets(ImuInput& in) {
     }
     x_.mag_offset_pending = x_.hard_iron.pending();
     const HardIronReport& r = x_.hard_iron.report();
-    if (step == HardIronStep::kStep || (r.converged && !r.present && step == HardIronStep::kUpdated)) {
+    if (x_.field_gate.startup_reference &&
+        (step == HardIronStep::kStep || (r.converged && !r.present && step == HardIronStep::kUpdated))) {
       x_.field_gate.offset_after_startup();  // an offset removed from now on came later (stepped, or none at first)
     }
     if (x_.hard_iron.applied()) {

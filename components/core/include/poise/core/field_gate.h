@@ -180,7 +180,11 @@ struct FieldGate {
                                  const Eigen::Vector3d& up, double dt_s);
   /// The filter no longer removes an offset: a span being judged starts again when it does, and a
   /// reference moved by the offset goes back to the start-up's (judged again on the next offset).
-  void offset_not_removed();
+  void offset_not_removed() {
+    if (offset_span_s > 0.0 || offset_moved) {  // per sample without an offset: nothing to undo, mostly
+      undo_offset();
+    }
+  }
   /// Evidence that whatever offset the filter removes from now on came after the start-up (the
   /// field moved while the sensor was at rest, the hard-iron estimate stepped, or it converged on
   /// no offset): the start-up's reference is not judged any more.
@@ -205,6 +209,7 @@ struct FieldGate {
   void follow(const FieldGateParams& p);
   void adopt_candidate();  ///< the candidate becomes the reference; rejection and candidate restart
   void replace_reference(double m, double dip);  ///< a new reference; rejection and candidate restart
+  void undo_offset();  ///< offset_not_removed()'s work: the span restarts, a move is undone
 };
 
 /// A field that moves while the sensor is at rest (shared by the filters whose heading uses the
