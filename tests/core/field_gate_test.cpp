@@ -188,12 +188,14 @@ TEST(FieldGateOffset, GivenAMagnetOnTheSensorAtStartUpWhenItsOffsetIsRemovedThen
                                                 OffsetJudgement::kNone}));
   expect_reference(g, earth);
   EXPECT_EQ(g.offset_moves, 1u);
+  EXPECT_EQ(g.reference_epoch, 1u);  // what a filter derived from the reference starts again
   // the next sample restarts the heading on the field, and the field is accepted from then on
   EXPECT_EQ(g.step(p, earth, kUp, kDt), FieldVerdict::kRelearnt);
   EXPECT_EQ(g.step(p, earth, kUp, kDt), FieldVerdict::kAccepted);
   // AND when the filter stops removing the offset, the start-up's reference is back
   g.offset_not_removed();
   expect_reference(g, earth + kMagnetUt);
+  EXPECT_EQ(g.reference_epoch, 2u);
   EXPECT_EQ(g.step(p, earth + kMagnetUt, kUp, kDt), FieldVerdict::kAccepted);
 }
 

@@ -230,6 +230,7 @@ void FieldGate::adopt_candidate() {
 }
 
 void FieldGate::replace_reference(double m, double dip) {
+  ++reference_epoch;
   m_ut = m;
   dip_rad = dip;
   rejected_s = 0.0;

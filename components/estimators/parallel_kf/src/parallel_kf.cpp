@@ -389,24 +389,16 @@ Eigen::Vector3d ParallelKf::hard_iron_corrected(int64_t stamp_ns, const Eigen::V
   // the filter's gyro-only orientation: integrated once; at rest no step is taken (field_moved_at_rest)
   s_.hard_iron.update(stamp_ns, s_.r_ib, gyro, mag, p_.bias_estimation && s_.rest_det.rest);
   s_.mag_offset_pending = s_.hard_iron.pending();
-  if (s_.gate.startup_reference) {
-    const HardIronReport& r = s_.hard_iron.report();
-    if (r.step == HardIronStep::kStep || (r.converged && !r.present && r.step == HardIronStep::kUpdated)) {
-      s_.gate.offset_after_startup();  // an offset removed from now on came later (stepped, or none at first)
-    }
-  }
+  // the gate's reference, learnt at start-up on the raw field: was an offset removed now in it?
+  // (a magnet on the sensor at power-on; FieldGate::hard_iron_reading)
   if (!s_.hard_iron.applied()) {
-    s_.gate.offset_not_removed();
+    s_.gate.hard_iron_reading(gp_, s_.hard_iron, mag, s_.kf1.up_body(), s_.last_dt_s);
     return mag;
   }
   s_.mag_corrected = true;
   ++s_.mag_corrected_count;
   const Eigen::Vector3d corrected = mag - s_.hard_iron.offset_ut();
-  if (s_.gate.startup_reference) {
-    // the reference learnt at start-up on the raw field: was the offset in it? (a magnet on the
-    // sensor at power-on; FieldGate::offset_removed)
-    s_.gate.offset_removed(gp_, s_.hard_iron.offset_ut(), corrected, s_.kf1.up_body(), s_.last_dt_s);
-  }
+  s_.gate.hard_iron_reading(gp_, s_.hard_iron, corrected, s_.kf1.up_body(), s_.last_dt_s);
   return corrected;
 }
 
@@ -1169,7 +1161,7 @@ double ParallelKf::field_dip_reference(double dip, double dt) {
   // the present dip. It starts on the gate's reference (learnt or configured) and forgets as the
   // gate's reference follows (mag_reference_tau_s). The gate's own reference, and so the
   // estimate, is untouched.
-  const uint64_t epoch = s_.gate.reacquired + s_.gate.relearnt + s_.gate.offset_moves;
+  const uint64_t epoch = s_.gate.reference_epoch;
   if (!s_.initialized) {
     return s_.gate.dip_rad;
   }

@@ -573,22 +573,16 @@ void SelectiveEkf::field_offsets(ImuInput& in) {
       x_.heading_per_removed_offset.setZero();
     }
     x_.mag_offset_pending = x_.hard_iron.pending();
-    const HardIronReport& r = x_.hard_iron.report();
-    if (x_.field_gate.startup_reference &&
-        (step == HardIronStep::kStep || (r.converged && !r.present && step == HardIronStep::kUpdated))) {
-      x_.field_gate.offset_after_startup();  // an offset removed from now on came later (stepped, or none at first)
-    }
     if (x_.hard_iron.applied()) {
       in.mag = raw - x_.hard_iron.offset_ut();
       x_.mag_corrected = true;
-      if (x_.field_gate.startup_reference) {
-        // was the offset in the reference learnt at start-up? (FieldGate::offset_removed)
-        x_.field_gate.offset_removed(gp_, x_.hard_iron.offset_ut(), in.mag,
-                                     x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ(), in.dt_s);
-      }
-    } else {
-      x_.field_gate.offset_not_removed();
     }
+    // the gate's reference, learnt at start-up on the raw field: was an offset removed now in it?
+    // (FieldGate::hard_iron_reading; the up axis is read only while that is still judged)
+    const Eigen::Vector3d up = x_.field_gate.startup_reference
+                                   ? Eigen::Vector3d(x_.q_world_body.conjugate() * Eigen::Vector3d::UnitZ())
+                                   : Eigen::Vector3d::UnitZ();
+    x_.field_gate.hard_iron_reading(gp_, x_.hard_iron, in.mag, up, in.dt_s);
   }
   // the raw field: the offset turns with the body, the Earth's field not (at rest neither does)
   const FieldGate& g = x_.field_gate;

@@ -39,6 +39,8 @@
 // state is copied with the filter's state (VQF-style getState/setState, replays).
 #pragma once
 
+#include "poise/core/hard_iron.h"
+
 #include <Eigen/Core>
 
 #include <cmath>
@@ -153,6 +155,9 @@ struct FieldGate {
   uint64_t reacquired = 0;
   uint64_t relearnt = 0;    ///< provisional references replaced (kRelearnt)
   uint64_t offset_moves = 0;  ///< start-up references moved by an offset there at start-up (kRelearnt)
+  /// every replacement of the reference (reacquired, relearnt, moved by an offset or moved back):
+  /// what a filter's own state derived from the reference starts again on
+  uint64_t reference_epoch = 0;
   // the last sample tested (reporting): |s_M| (NaN when not tested) and sin(dip)
   double last_norm_ut = std::nan("");
   double last_sin_dip = 0.0;
@@ -183,6 +188,26 @@ struct FieldGate {
   void offset_not_removed() {
     if (offset_span_s > 0.0 || offset_moved) {  // per sample without an offset: nothing to undo, mostly
       undo_offset();
+    }
+  }
+  /// The gate's side of a filter's hard-iron estimate, on every reading after the estimate's
+  /// update: `corrected` is the reading the filter goes on with (the offset removed when
+  /// hi.applied()), `up` its up axis (body), dt_s since the last reading. The estimate's verdicts
+  /// that the offset came later (it stepped, or it converged on no offset) end the start-up
+  /// reference's judging (offset_after_startup); while the offset is removed, offset_removed()
+  /// judges it; when not, offset_not_removed().
+  void hard_iron_reading(const FieldGateParams& p, const HardIronEstimator& hi, const Eigen::Vector3d& corrected,
+                         const Eigen::Vector3d& up, double dt_s) {
+    if (startup_reference) {
+      const HardIronReport& r = hi.report();
+      if (r.step == HardIronStep::kStep || (r.converged && !r.present && r.step == HardIronStep::kUpdated)) {
+        offset_after_startup();
+      }
+    }
+    if (!hi.applied()) {
+      offset_not_removed();
+    } else if (startup_reference) {
+      offset_removed(p, hi.offset_ut(), corrected, up, dt_s);
     }
   }
   /// Evidence that whatever offset the filter removes from now on came after the start-up (the

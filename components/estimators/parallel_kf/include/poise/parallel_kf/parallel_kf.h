@@ -496,7 +496,7 @@ struct ParallelKfState {
   /// published tilt variance about magnetic east (field_dip_reference), rad; NaN = not started
   double field_dip_ref = std::nan("");
   double field_dip_weight = 0.0;  ///< its sum of weights, s/rad^2
-  uint64_t field_dip_epoch = 0;   ///< the gate's reacquired + relearnt when it started
+  uint64_t field_dip_epoch = 0;   ///< the gate's reference_epoch when it started
   /// the published tilt variance about magnetic east those weights use, rad^2 (NaN = not taken
   /// yet), and the time since it was taken, s: refreshed once per bias window
   double field_dip_tilt_var = std::nan("");
